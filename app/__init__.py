@@ -1,0 +1,1 @@
+"""LTAA allocation service."""

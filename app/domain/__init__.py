@@ -1,0 +1,1 @@
+"""The allocation problem itself: no HTTP, no LangGraph, no database."""

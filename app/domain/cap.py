@@ -1,0 +1,90 @@
+"""The workload cap: every robot's final load must lie in [ceil(W - cap), floor(W + cap)]."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from fractions import Fraction
+
+from app.domain.errors import InfeasibleCapError
+
+
+def _exact(value: float) -> Fraction:
+    # Decimal text, not binary float: a cap of 0.1 means one tenth of a task.
+    return Fraction(str(value))
+
+
+@dataclass(frozen=True)
+class WorkloadCap:
+    n_tasks: int
+    n_robots: int
+    max_deviation: float | None
+
+    @property
+    def target(self) -> float:
+        return self.n_tasks / self.n_robots
+
+    @property
+    def lower(self) -> int:
+        if self.max_deviation is None:
+            return 0
+        w = Fraction(self.n_tasks, self.n_robots)
+        return max(0, math.ceil(w - _exact(self.max_deviation)))
+
+    @property
+    def upper(self) -> int:
+        if self.max_deviation is None:
+            return self.n_tasks
+        w = Fraction(self.n_tasks, self.n_robots)
+        return min(self.n_tasks, math.floor(w + _exact(self.max_deviation)))
+
+    def infeasibility(self) -> str | None:
+        """A sentence explaining why no allocation fits the cap, or None if one does."""
+        lo, hi, r, n = self.lower, self.upper, self.n_robots, self.n_tasks
+        w = f"{self.target:g}"
+        if lo > hi:
+            return (
+                f"max_deviation={self.max_deviation:g} around the target load {w} leaves no "
+                f"whole number of tasks for a robot (it would need at least {lo} and at most "
+                f"{hi}); raise max_deviation"
+            )
+        if r * hi < n:
+            return (
+                f"max_deviation={self.max_deviation:g} lets each of the {r} robots take at most "
+                f"{hi} tasks ({r * hi} in all), fewer than the {n} tasks queued; raise "
+                "max_deviation"
+            )
+        if r * lo > n:
+            return (
+                f"max_deviation={self.max_deviation:g} requires each of the {r} robots to take "
+                f"at least {lo} tasks ({r * lo} in all), more than the {n} tasks queued; "
+                "raise max_deviation"
+            )
+        return None
+
+    def ensure_feasible(self) -> None:
+        reason = self.infeasibility()
+        if reason is not None:
+            raise InfeasibleCapError(reason)
+
+    def can_complete(self, loads: Sequence[int], remaining: int) -> bool:
+        """Can `remaining` more tasks be spread so every final load fits the cap?"""
+        lo, hi = self.lower, self.upper
+        if any(load > hi for load in loads):
+            return False
+        shortfall = sum(max(0, lo - load) for load in loads)
+        room = sum(hi - load for load in loads)
+        return shortfall <= remaining <= room
+
+    def allows(self, loads: Sequence[int], robot: int, remaining_after: int) -> bool:
+        """Does giving the current task to `robot` keep a cap-respecting completion possible?"""
+        after = list(loads)
+        after[robot] += 1
+        return self.can_complete(after, remaining_after)
+
+    def feasible_robots(self, loads: Sequence[int], remaining_after: int) -> list[int]:
+        return [r for r in range(len(loads)) if self.allows(loads, r, remaining_after)]
+
+    def respected_by(self, loads: Sequence[int]) -> bool:
+        return all(self.lower <= load <= self.upper for load in loads)

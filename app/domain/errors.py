@@ -1,0 +1,26 @@
+"""Errors the domain raises; the API turns them into 4xx JSON naming the field."""
+
+from __future__ import annotations
+
+
+class DomainError(ValueError):
+    """A request that cannot be served as sent. `field` is a dotted path into the request."""
+
+    status_code = 422
+
+    def __init__(self, field: str, message: str, *, code: str = "invalid") -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+        self.message = message
+        self.code = code
+
+
+class InfeasibleCapError(DomainError):
+    """No allocation can keep every robot's load inside the workload cap."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__("max_deviation", message, code="infeasible_cap")
+
+
+class TooLargeError(DomainError):
+    """The request is bigger than a solver (or the service) accepts."""

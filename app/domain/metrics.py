@@ -1,0 +1,121 @@
+"""Quality measures of an allocation (SPEC §1): success, balance, fairness, simulation."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from app.domain.models import Instance
+
+DEFAULT_TRIALS = 1000
+
+
+class Severity(StrEnum):
+    LOW = "low"
+    MODERATE = "moderate"
+    HIGH = "high"
+    CRITICAL = "critical"
+
+
+def workload(assignment: Sequence[int], n_robots: int) -> list[int]:
+    loads = [0] * n_robots
+    for r in assignment:
+        loads[r] += 1
+    return loads
+
+
+def max_abs_deviation(loads: Sequence[int], target: float) -> float:
+    return max(abs(load - target) for load in loads)
+
+
+def balance_score(loads: Sequence[int], target: float) -> float:
+    """Paper Eq. 2, clamped: 100 * (1 - max|d_r| / W)."""
+    if target <= 0:
+        return 100.0
+    return min(100.0, max(0.0, 100.0 * (1.0 - max_abs_deviation(loads, target) / target)))
+
+
+def severity(loads: Sequence[int], target: float) -> Severity:
+    x = max_abs_deviation(loads, target) / target if target > 0 else 0.0
+    if x <= 0.25:
+        return Severity.LOW
+    if x <= 0.5:
+        return Severity.MODERATE
+    if x <= 1.0:
+        return Severity.HIGH
+    return Severity.CRITICAL
+
+
+def jain_index(loads: Sequence[int]) -> float:
+    squares = sum(x * x for x in loads)
+    if squares == 0:
+        return 1.0
+    return sum(loads) ** 2 / (len(loads) * squares)
+
+
+def expected_success(instance: Instance, assignment: Sequence[int]) -> float:
+    s = instance.success
+    return float(np.mean([s[t, r] for t, r in enumerate(assignment)]))
+
+
+def feature_success(instance: Instance, assignment: Sequence[int]) -> dict[str, float]:
+    s = instance.success
+    out: dict[str, float] = {}
+    for feature in instance.features:
+        values = [s[t, assignment[t]] for t, task in enumerate(instance.tasks)
+                  if feature in task.features]
+        out[feature] = float(np.mean(values))
+    return out
+
+
+@dataclass(frozen=True)
+class Completion:
+    mean: float
+    ci95: tuple[float, float]
+    trials: int
+
+
+def simulate_completion(
+    instance: Instance, assignment: Sequence[int], *, seed: int, trials: int = DEFAULT_TRIALS
+) -> Completion:
+    """K seeded Monte-Carlo executions; each task succeeds with probability S."""
+    p = instance.success[np.arange(len(assignment)), np.asarray(assignment, dtype=int)]
+    rng = np.random.default_rng(seed)
+    rates = (rng.random((trials, p.size)) < p).mean(axis=1)
+    mean = float(rates.mean())
+    half = 1.96 * float(rates.std(ddof=1)) / math.sqrt(trials) if trials > 1 else 0.0
+    return Completion(mean, (max(0.0, mean - half), min(1.0, mean + half)), trials)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    expected_success: float
+    balance_score: float
+    max_deviation: float
+    imbalance_severity: Severity
+    workload: dict[str, int]
+    feature_success: dict[str, float]
+    jain_index: float
+    simulated_completion: Completion
+
+
+def compute_metrics(
+    instance: Instance, assignment: Sequence[int], *, seed: int = 0,
+    trials: int = DEFAULT_TRIALS,
+) -> Metrics:
+    loads = workload(assignment, instance.n_robots)
+    w = instance.target_load
+    return Metrics(
+        expected_success=expected_success(instance, assignment),
+        balance_score=balance_score(loads, w),
+        max_deviation=max_abs_deviation(loads, w),
+        imbalance_severity=severity(loads, w),
+        workload={robot.name: load for robot, load in zip(instance.robots, loads, strict=True)},
+        feature_success=feature_success(instance, assignment),
+        jain_index=jain_index(loads),
+        simulated_completion=simulate_completion(instance, assignment, seed=seed, trials=trials),
+    )

@@ -1,0 +1,135 @@
+"""Tasks, robots and the instance they form, with the success model S(r, t)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from app.domain.errors import DomainError
+
+MAX_TASKS = 10_000
+MAX_ROBOTS = 100
+
+TaskId = int | str
+
+
+@dataclass(frozen=True)
+class Task:
+    id: TaskId
+    name: str
+    features: tuple[str, ...]
+    type: str = "Custom"
+
+
+@dataclass(frozen=True)
+class Robot:
+    name: str
+    success: Mapping[str, float]
+    label: str = ""
+    description: str = ""
+
+    @property
+    def display(self) -> str:
+        return self.label or self.name
+
+
+@dataclass(frozen=True)
+class Instance:
+    """An ordered task queue and a robot fleet. Validated on construction."""
+
+    tasks: tuple[Task, ...]
+    robots: tuple[Robot, ...]
+
+    def __post_init__(self) -> None:
+        validate_instance(self.tasks, self.robots)
+
+    @property
+    def n_tasks(self) -> int:
+        return len(self.tasks)
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.robots)
+
+    @property
+    def target_load(self) -> float:
+        return self.n_tasks / self.n_robots
+
+    @cached_property
+    def features(self) -> tuple[str, ...]:
+        """Every feature some task needs, in first-seen order."""
+        seen: dict[str, None] = {}
+        for task in self.tasks:
+            for f in task.features:
+                seen.setdefault(f, None)
+        return tuple(seen)
+
+    @cached_property
+    def success(self) -> np.ndarray:
+        """S[t, r] = mean over the task's features of the robot's success rate."""
+        s = np.empty((self.n_tasks, self.n_robots), dtype=float)
+        for r, robot in enumerate(self.robots):
+            for t, task in enumerate(self.tasks):
+                s[t, r] = sum(robot.success[f] for f in task.features) / len(task.features)
+        s.setflags(write=False)
+        return s
+
+    def robot_index(self, name_or_label: str) -> int | None:
+        """Find a robot by key or display label, case-insensitively."""
+        wanted = name_or_label.strip().lower()
+        for i, robot in enumerate(self.robots):
+            if wanted in (robot.name.lower(), robot.display.lower()):
+                return i
+        return None
+
+
+def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
+    if not tasks:
+        raise DomainError("tasks", "the task queue is empty; send at least one task")
+    if len(tasks) > MAX_TASKS:
+        raise DomainError(
+            "tasks", f"{len(tasks)} tasks exceeds the limit of {MAX_TASKS:,} per request",
+            code="too_large",
+        )
+    if not robots:
+        raise DomainError("robots", "the fleet is empty; send at least one robot")
+    if len(robots) > MAX_ROBOTS:
+        raise DomainError(
+            "robots", f"{len(robots)} robots exceeds the limit of {MAX_ROBOTS} per request",
+            code="too_large",
+        )
+    names: set[str] = set()
+    for i, robot in enumerate(robots):
+        key = robot.name.strip().lower()
+        if not key:
+            raise DomainError(f"robots.{i}.name", "robot name must not be empty")
+        if key in names:
+            raise DomainError(f"robots.{i}.name", f"duplicate robot name '{robot.name}'")
+        names.add(key)
+        if not robot.success:
+            raise DomainError(f"robots.{i}.success", "rate at least one feature")
+        for feature, p in robot.success.items():
+            if not (isinstance(p, int | float) and 0.0 <= float(p) <= 1.0):
+                raise DomainError(
+                    f"robots.{i}.success.{feature}",
+                    f"success probability {p!r} is outside [0, 1]",
+                )
+    ids: set[str] = set()
+    for i, task in enumerate(tasks):
+        key = str(task.id)
+        if key in ids:
+            raise DomainError(f"tasks.{i}.id", f"duplicate task id {task.id!r}")
+        ids.add(key)
+        if not task.features:
+            raise DomainError(f"tasks.{i}.features", "a task needs at least one feature")
+        for feature in task.features:
+            missing = [r.name for r in robots if feature not in r.success]
+            if missing:
+                raise DomainError(
+                    f"tasks.{i}.features",
+                    f"unknown feature '{feature}': not rated by robot(s) {', '.join(missing)}; "
+                    "every robot must rate every feature a task needs",
+                )

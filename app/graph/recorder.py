@@ -1,0 +1,78 @@
+"""Where the graph's side effects go. Graph state stays O(robots); everything that grows
+with the run (prompts, replies, attempts, decisions) is written through a Recorder.
+
+Every method must be idempotent: LangGraph re-runs the node that was executing at a
+crash from its top, so the same record may be saved twice (upsert by its keys).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from app.reasoners.base import ReasonerReply
+
+
+class RunCancelled(Exception):
+    """Raised from a node when the run was cancelled; the run service marks it cancelled."""
+
+
+@dataclass
+class AttemptRecord:
+    """One prompt -> reply -> validation cycle. Key: (task_index, attempt)."""
+
+    task_index: int
+    attempt: int  # 1-based
+    tier: int  # 0 first try, 1-3 retry tiers
+    system_prompt: str
+    user_prompt: str
+    reply: ReasonerReply | None = None
+    parsed: dict[str, Any] | None = None
+    scores: dict[str, float] = field(default_factory=dict)
+    quality: float | None = None
+    accepted: bool | None = None
+    hard_invalid: str | None = None  # why Q was forced to 0, if it was
+    feedback: str | None = None
+
+
+@dataclass
+class DecisionRecord:
+    """The finalised decision for one task. Key: task_index (one per run and task)."""
+
+    task_index: int
+    task_id: int | str
+    task_name: str
+    robot: int
+    robot_name: str
+    phase: str
+    expected_success: float  # true S of the chosen robot
+    reasoning: str
+    confidence: str
+    tradeoff: str
+    quality: float
+    fallback: bool
+    attempts: int
+    failure_log: list[str]
+    loads_before: list[int]
+    loads_after: list[int]
+    balance_before: float
+    balance_after: float
+    severity_after: str
+    regret: float | None = None
+
+
+class Recorder(Protocol):
+    def check_cancelled(self) -> None:
+        """Raise RunCancelled if the run has been cancelled (called at the top of every node)."""
+
+    def before_reason(self, task_index: int, attempt: int) -> None:
+        """Hook before a reasoner call (progress reporting; a test-only pause point)."""
+
+    def save_attempt(self, record: AttemptRecord) -> None: ...
+
+    def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None: ...
+
+    def save_decision(self, record: DecisionRecord) -> None: ...
+
+    def decisions(self) -> list[DecisionRecord]:
+        """All finalised decisions, in task order."""

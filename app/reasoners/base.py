@@ -1,0 +1,47 @@
+"""What a reasoner is: something that answers a decision prompt in the required format."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from app.domain.modes import Mode, Weights
+from app.domain.phases import Phase
+
+
+@dataclass(frozen=True)
+class DecisionContext:
+    """The true facts of one decision, for reasoners that compute rather than read prompts."""
+
+    task_index: int
+    total_tasks: int
+    task_name: str
+    features: tuple[str, ...]
+    robot_names: tuple[str, ...]
+    robot_labels: tuple[str, ...]
+    success: tuple[float, ...]  # S per robot for this task
+    loads: tuple[int, ...]  # before this decision
+    target: float
+    feasible: tuple[int, ...]  # robots whose choice keeps the cap satisfiable
+    phase: Phase
+    mode: Mode
+    weights: Weights
+    tier: int = 0  # 0 first try; 1-3 retry tiers
+    guided_robot: int | None = None  # optimizer guidance (issue 4), when enabled
+
+
+@dataclass(frozen=True)
+class ReasonerReply:
+    text: str
+    input_tokens: int = 0
+    output_tokens: int = 0
+    latency_ms: float = 0.0
+    model: str | None = None
+    transport_retries: int = 0
+    extra: dict[str, object] = field(default_factory=dict)
+
+
+class Reasoner(Protocol):
+    name: str
+
+    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply: ...

@@ -1,0 +1,50 @@
+"""Brute force: score every possible assignment. Exact; only for small instances."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from app.domain.errors import TooLargeError
+from app.domain.problem import Problem
+from app.solvers.base import Solution, Solver, SolverInfo
+from app.solvers.tiebreak import SUM_TOLERANCE
+
+MAX_ASSIGNMENTS = 3**12
+
+
+class BruteForceSolver(Solver):
+    info = SolverInfo(
+        name="brute_force",
+        description="Enumerates every assignment and keeps the best that respects the cap.",
+        exact=True,
+        limits=f"robots^tasks <= 3^12 = {MAX_ASSIGNMENTS:,} assignments",
+    )
+
+    def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        s, cap = problem.instance.success, problem.cap
+        n, r = s.shape
+        count = r**n
+        if count > MAX_ASSIGNMENTS:
+            raise TooLargeError(
+                "tasks",
+                f"brute_force would enumerate {r}^{n} = {count:,} assignments, above its limit "
+                f"of 3^12 = {MAX_ASSIGNMENTS:,}; use 'dp' or 'optimal' for this size",
+                code="too_large",
+            )
+        # Row k is assignment number k in lexicographic order (task 0 most significant),
+        # so the first best row is also the robot-order tie-break.
+        codes = np.arange(count, dtype=np.int64)
+        powers = r ** np.arange(n - 1, -1, -1, dtype=np.int64)
+        choices = (codes[:, None] // powers[None, :]) % r
+        values = s[np.arange(n)[None, :], choices].sum(axis=1)
+        loads = np.stack([(choices == i).sum(axis=1) for i in range(r)], axis=1)
+        ok = ((loads >= cap.lower) & (loads <= cap.upper)).all(axis=1)
+        dev = np.abs(r * loads - n).sum(axis=1)
+        values = np.where(ok, values, -np.inf)
+        top = values.max()
+        tied = ok & (values >= top - SUM_TOLERANCE)
+        best_dev = dev[tied].min()
+        winner = int(np.flatnonzero(tied & (dev == best_dev))[0])
+        return Solution([int(c) for c in choices[winner]], details={"enumerated": count})

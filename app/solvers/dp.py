@@ -1,0 +1,76 @@
+"""Dynamic programme over (task index, load vector): the paper's exact DP baseline."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from app.domain.errors import TooLargeError
+from app.domain.problem import Problem
+from app.solvers.base import Solution, Solver, SolverInfo
+from app.solvers.tiebreak import better, deviation_units
+
+MAX_STATES = 400_000
+
+Loads = tuple[int, ...]
+
+
+def _state_bound(n: int, r: int) -> int:
+    """Load vectors with t tasks placed number C(t+r-1, r-1); sum over t."""
+    return math.comb(n + r, r)
+
+
+class DynamicProgrammingSolver(Solver):
+    info = SolverInfo(
+        name="dp",
+        description="Exact dynamic programme over (task index, load vector).",
+        exact=True,
+        limits=f"at most {MAX_STATES:,} (task, load-vector) states, about C(tasks+robots, robots)",
+    )
+
+    def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        s, cap = problem.instance.success, problem.cap
+        n, r = s.shape
+        bound = _state_bound(n, r)
+        if bound > MAX_STATES:
+            raise TooLargeError(
+                "tasks",
+                f"dp would visit up to {bound:,} states for {n} tasks and {r} robots, above its "
+                f"limit of {MAX_STATES:,}; use 'optimal' for this size",
+                code="too_large",
+            )
+        # Forward: the load vectors from which a cap-respecting completion exists.
+        layers: list[set[Loads]] = [{(0,) * r}]
+        for t in range(n):
+            nxt: set[Loads] = set()
+            for loads in layers[t]:
+                for i in cap.feasible_robots(loads, n - t - 1):
+                    nxt.add(loads[:i] + (loads[i] + 1,) + loads[i + 1 :])
+            layers.append(nxt)
+        # Backward: best (sum of S, deviation) from each state, and the move achieving it.
+        value: dict[Loads, tuple[float, int]] = {
+            loads: (0.0, deviation_units(loads, n)) for loads in layers[n]
+        }
+        moves: list[dict[Loads, int]] = [{} for _ in range(n)]
+        for t in range(n - 1, -1, -1):
+            current: dict[Loads, tuple[float, int]] = {}
+            for loads in layers[t]:
+                best: tuple[float, int] | None = None
+                for i in range(r):
+                    child = loads[:i] + (loads[i] + 1,) + loads[i + 1 :]
+                    if child not in value:
+                        continue
+                    v, d = value[child]
+                    v += s[t, i]
+                    if best is None or better(v, d, *best):
+                        best, moves[t][loads] = (v, d), i
+                if best is not None:
+                    current[loads] = best
+            value = current
+        assignment: list[int] = []
+        loads = (0,) * r
+        for t in range(n):
+            i = moves[t][loads]
+            assignment.append(i)
+            loads = loads[:i] + (loads[i] + 1,) + loads[i + 1 :]
+        return Solution(assignment, details={"states": sum(len(x) for x in layers)})

@@ -1,0 +1,131 @@
+"""Exact optimum at any size: the capped problem is a transportation problem.
+
+Tasks with identical success rows are interchangeable, so they are grouped into
+classes; flow goes class -> robot -> sink, and each robot's lower/upper load bounds
+become node demand plus arc capacity. OR-Tools' min-cost flow returns an integral
+optimum. Costs are integers: S scaled to an integer (1e-9 resolution on small
+instances), multiplied by a factor larger than any deviation difference, plus the
+deviation term R*|L - W| — so one solve gives "max success, then least deviation".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from ortools.graph.python import min_cost_flow
+
+from app.domain.cap import WorkloadCap
+from app.domain.errors import InfeasibleCapError
+from app.domain.problem import Problem
+from app.solvers.base import Solution, Solver, SolverInfo
+
+_MAX_SCALE = 10**9
+_COST_BUDGET = 10**17  # keeps every cost sum far inside int64
+
+
+def _deviation_arcs(load_from: int, load_to: int, r: int, n: int) -> list[tuple[int, int]]:
+    """(capacity, unit cost) arcs for raising a load from load_from to load_to.
+
+    Marginal cost of the k -> k+1 step is |R(k+1) - n| - |Rk - n|: -R below the target,
+    +R above, something between at the crossing. Convex, so min-cost flow fills in order.
+    """
+    arcs: dict[int, int] = {}
+    for k in range(load_from, load_to):
+        step = abs(r * (k + 1) - n) - abs(r * k - n)
+        arcs[step] = arcs.get(step, 0) + 1
+    return sorted(((cap, cost) for cost, cap in arcs.items()), key=lambda a: a[1])
+
+
+def best_completion(
+    success: np.ndarray,
+    cap: WorkloadCap,
+    initial_loads: Sequence[int] | None = None,
+) -> tuple[list[int], float]:
+    """Optimal robots for the rows of `success`, given loads already placed.
+
+    Returns (assignment, sum of S over these rows). `cap` is the whole run's cap, so its
+    target and bounds refer to the final loads (initial + new).
+    """
+    m, r = success.shape
+    n = cap.n_tasks
+    init = list(initial_loads) if initial_loads is not None else [0] * r
+    lo, hi = cap.lower, cap.upper
+    need = [max(0, lo - x) for x in init]
+    room = [hi - x for x in init]
+    if min(room) < 0 or sum(need) > m or sum(room) < m:
+        raise InfeasibleCapError(
+            f"no completion of the remaining {m} tasks keeps every robot within "
+            f"[{lo}, {hi}] tasks from loads {init}"
+        )
+    if m == 0:
+        return [], 0.0
+
+    # Group identical rows: their tasks are interchangeable.
+    _, first, inverse = np.unique(success, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    order = np.argsort(first)  # classes in first-appearance order, for a stable tie-break
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    cls = rank[inverse]
+    n_classes = order.size
+    rows = success[first[order]]
+    counts = np.bincount(cls, minlength=n_classes)
+
+    factor = 2 * r * max(n, 1) + 1  # exceeds any difference in total deviation units
+    scale = max(1, min(_MAX_SCALE, _COST_BUDGET // (factor * max(m, 1))))
+    weight = np.rint(rows * scale).astype(np.int64)
+
+    robot0, sink = n_classes, n_classes + r
+    tails, heads, caps, costs = [], [], [], []
+    for c in range(n_classes):
+        for i in range(r):
+            tails.append(c)
+            heads.append(robot0 + i)
+            caps.append(int(counts[c]))
+            costs.append(-int(weight[c, i]) * factor)
+    for i in range(r):
+        for capacity, cost in _deviation_arcs(init[i] + need[i], hi, r, n):
+            tails.append(robot0 + i)
+            heads.append(sink)
+            caps.append(capacity)
+            costs.append(cost)
+
+    flow = min_cost_flow.SimpleMinCostFlow()
+    arcs = flow.add_arcs_with_capacity_and_unit_cost(
+        np.array(tails), np.array(heads), np.array(caps), np.array(costs)
+    )
+    supplies = [int(x) for x in counts] + [-x for x in need] + [-(m - sum(need))]
+    flow.set_nodes_supplies(np.arange(n_classes + r + 1), np.array(supplies))
+    status = flow.solve()
+    if status != flow.OPTIMAL:
+        raise InfeasibleCapError(
+            f"the min-cost flow found no allocation within [{lo}, {hi}] tasks per robot "
+            f"(solver status {status})"
+        )
+    x = flow.flows(arcs[: n_classes * r]).reshape(n_classes, r)
+
+    # Within a class, earlier tasks get lower-numbered robots: the robot-order tie-break.
+    queues = [[i for i in range(r) for _ in range(int(x[c, i]))] for c in range(n_classes)]
+    cursor = [0] * n_classes
+    assignment: list[int] = []
+    for c in cls:
+        assignment.append(queues[c][cursor[c]])
+        cursor[c] += 1
+    total = float(success[np.arange(m), assignment].sum())
+    return assignment, total
+
+
+class OptimalSolver(Solver):
+    info = SolverInfo(
+        name="optimal",
+        description="Exact optimum at any size: capped transportation problem solved by "
+        "OR-Tools min-cost flow (max expected success, then least deviation).",
+        exact=True,
+        limits="any size within the request limits",
+    )
+
+    def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        assignment, _ = best_completion(problem.instance.success, problem.cap)
+        return Solution(assignment)
