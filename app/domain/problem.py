@@ -20,7 +20,7 @@ class Problem:
     def build(
         cls, instance: Instance, mode: Mode = Mode.BALANCED, max_deviation: float | None = None
     ) -> Problem:
-        """Use the mode's default cap unless `max_deviation` overrides it; reject infeasible caps."""
+        """Apply the mode's default cap unless `max_deviation` overrides it; reject infeasible."""
         if max_deviation is None:
             max_deviation = default_max_deviation(mode, instance.n_tasks, instance.n_robots)
         elif max_deviation < 0:

@@ -15,6 +15,10 @@ MAX_STATES = 400_000
 Loads = tuple[int, ...]
 
 
+def _plus_one(loads: Loads, i: int) -> Loads:
+    return (*loads[:i], loads[i] + 1, *loads[i + 1 :])
+
+
 def _state_bound(n: int, r: int) -> int:
     """Load vectors with t tasks placed number C(t+r-1, r-1); sum over t."""
     return math.comb(n + r, r)
@@ -45,7 +49,7 @@ class DynamicProgrammingSolver(Solver):
             nxt: set[Loads] = set()
             for loads in layers[t]:
                 for i in cap.feasible_robots(loads, n - t - 1):
-                    nxt.add(loads[:i] + (loads[i] + 1,) + loads[i + 1 :])
+                    nxt.add(_plus_one(loads, i))
             layers.append(nxt)
         # Backward: best (sum of S, deviation) from each state, and the move achieving it.
         value: dict[Loads, tuple[float, int]] = {
@@ -57,7 +61,7 @@ class DynamicProgrammingSolver(Solver):
             for loads in layers[t]:
                 best: tuple[float, int] | None = None
                 for i in range(r):
-                    child = loads[:i] + (loads[i] + 1,) + loads[i + 1 :]
+                    child = _plus_one(loads, i)
                     if child not in value:
                         continue
                     v, d = value[child]
@@ -72,5 +76,5 @@ class DynamicProgrammingSolver(Solver):
         for t in range(n):
             i = moves[t][loads]
             assignment.append(i)
-            loads = loads[:i] + (loads[i] + 1,) + loads[i + 1 :]
+            loads = _plus_one(loads, i)
         return Solution(assignment, details={"states": sum(len(x) for x in layers)})
