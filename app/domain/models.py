@@ -70,10 +70,14 @@ class Instance:
     @cached_property
     def success(self) -> np.ndarray:
         """S[t, r] = mean over the task's features of the robot's success rate."""
-        s = np.empty((self.n_tasks, self.n_robots), dtype=float)
-        for r, robot in enumerate(self.robots):
-            for t, task in enumerate(self.tasks):
-                s[t, r] = sum(robot.success[f] for f in task.features) / len(task.features)
+        column = {f: i for i, f in enumerate(self.features)}
+        rates = np.array([[robot.success[f] for robot in self.robots] for f in self.features],
+                         dtype=float)
+        need = np.zeros((self.n_tasks, len(self.features)))
+        for t, task in enumerate(self.tasks):
+            for f in task.features:
+                need[t, column[f]] = 1.0 / len(task.features)
+        s = need @ rates
         s.setflags(write=False)
         return s
 

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
+from app.domain.cap import CapTracker
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
 
@@ -18,13 +21,13 @@ class GreedySolver(Solver):
     )
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
-        s, cap = problem.instance.success, problem.cap
-        n, r = s.shape
-        loads = [0] * r
+        s = problem.instance.success
+        tracker = CapTracker(problem.cap)
+        # Robots by descending S per task (stable sort keeps robot order among ties).
+        ranked = np.argsort(-s, axis=1, kind="stable").tolist()
         assignment: list[int] = []
-        for t in range(n):
-            feasible = cap.feasible_robots(loads, n - t - 1)
-            choice = max(feasible, key=lambda i: (s[t, i], -i))
-            loads[choice] += 1
+        for t in range(s.shape[0]):
+            choice = next(i for i in ranked[t] if tracker.allows(i))
+            tracker.assign(choice)
             assignment.append(choice)
         return Solution(assignment)

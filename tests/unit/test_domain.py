@@ -108,3 +108,24 @@ def test_instance_validation_names_the_field(
     with pytest.raises(DomainError) as err:
         Instance(tasks=tasks, robots=robots)
     assert err.value.field == field
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_cap_tracker_agrees_with_the_cap(seed: int) -> None:
+    import random
+
+    from app.domain.cap import CapTracker
+
+    rng = random.Random(seed)
+    n, r = rng.randint(1, 30), rng.randint(1, 5)
+    cap = WorkloadCap(n, r, rng.choice([0, 0.5, 1, 2, 3]))
+    if cap.infeasibility():
+        return
+    tracker, loads = CapTracker(cap), [0] * r
+    for t in range(n):
+        allowed = [i for i in range(r) if tracker.allows(i)]
+        assert allowed == cap.feasible_robots(loads, n - t - 1)
+        choice = rng.choice(allowed)
+        tracker.assign(choice)
+        loads[choice] += 1
+    assert cap.respected_by(loads)
