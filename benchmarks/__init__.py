@@ -1,0 +1,1 @@
+"""Scripts that measure the service and write docs/benchmarks.md (run: make bench)."""

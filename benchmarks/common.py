@@ -1,0 +1,78 @@
+"""Shared helpers: seeded synthetic instances, timing, markdown tables."""
+
+from __future__ import annotations
+
+import platform
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.domain.models import Instance, Robot, Task
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+IMG = DOCS / "img"
+
+
+@dataclass
+class Section:
+    """One part of the report: a heading, markdown body, and the plots it drew."""
+
+    title: str
+    body: str
+    images: list[str] = field(default_factory=list)
+
+
+def synthetic_instance(n_tasks: int, n_robots: int, *, n_features: int = 3,
+                       seed: int = 0) -> Instance:
+    """Random robots (rates in [0.3, 1]) and tasks needing 1-3 random features."""
+    rng = np.random.default_rng(seed)
+    features = [f"f{i}" for i in range(n_features)]
+    robots = tuple(
+        Robot(name=f"robot{r}", success={f: float(round(rng.uniform(0.3, 1.0), 3))
+                                         for f in features})
+        for r in range(n_robots)
+    )
+    tasks = []
+    for t in range(n_tasks):
+        k = int(rng.integers(1, min(3, n_features) + 1))
+        picked = tuple(sorted(rng.choice(features, size=k, replace=False).tolist()))
+        tasks.append(Task(id=t, name=f"task{t}", features=picked))
+    return Instance(tasks=tuple(tasks), robots=robots)
+
+
+def median_seconds(fn: Callable[[], Any], repeats: int, warmup: int = 1) -> float:
+    for _ in range(warmup):
+        fn()
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        samples.append(time.perf_counter() - start)
+    return statistics.median(samples)
+
+
+def fmt_time(seconds: float) -> str:
+    if seconds < 1e-3:
+        return f"{seconds * 1e6:.0f} µs"
+    if seconds < 1:
+        return f"{seconds * 1e3:.2f} ms"
+    return f"{seconds:.2f} s"
+
+
+def table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def machine() -> str:
+    import os
+
+    return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+            f"Python {platform.python_version()}")
