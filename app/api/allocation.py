@@ -1,0 +1,114 @@
+"""From request body to response body. The one place an allocation response is built:
+`POST /allocate` and `ltaa allocate --json` both call `allocate()`.
+"""
+
+from __future__ import annotations
+
+import time
+
+from app.api.schemas import (
+    AllocateRequest,
+    AllocateResponse,
+    Assignment,
+    InstanceRequest,
+    MetricsOut,
+    RobotIn,
+    TaskIn,
+    UsageOut,
+)
+from app.domain import catalog
+from app.domain.errors import DomainError
+from app.domain.metrics import compute_metrics
+from app.domain.models import Instance, Robot, Task
+from app.domain.problem import Problem
+from app.solvers.base import Solution, Solver
+from app.solvers.registry import get_solver
+
+_FORMS = "send either a built-in 'scenario' (see GET /scenarios) or your own 'tasks' and 'robots'"
+
+
+def _task(t: TaskIn) -> Task:
+    return Task(id=t.id, name=t.name if t.name is not None else str(t.id), type=t.type,
+                features=tuple(t.features))
+
+
+def _robot(r: RobotIn) -> Robot:
+    return Robot(name=r.name, label=r.label, description=r.description, success=dict(r.success))
+
+
+def resolve_instance(request: InstanceRequest) -> Instance:
+    """The instance a request describes; DomainError naming the field if it describes none."""
+    custom = request.tasks is not None or request.robots is not None
+    if request.scenario is not None:
+        if custom:
+            raise DomainError("scenario", f"'scenario' was sent together with 'tasks'/'robots'; "
+                              f"{_FORMS}, not both", code="conflicting_fields")
+        return catalog.scenario(request.scenario).instance
+    if request.tasks is None:
+        raise DomainError("tasks" if custom else "scenario",
+                          f"{'tasks missing' if custom else 'no instance given'}; {_FORMS}",
+                          code="missing")
+    if request.robots is None:
+        raise DomainError("robots", f"robots missing; {_FORMS}", code="missing")
+    return Instance(tasks=tuple(map(_task, request.tasks)),
+                    robots=tuple(map(_robot, request.robots)))
+
+
+def build_problem(request: InstanceRequest) -> Problem:
+    return Problem.build(resolve_instance(request), request.mode, request.max_deviation)
+
+
+def load_solver(name: str) -> Solver:
+    """The registered solver, or a 4xx-mapped error when its optional dependencies are missing."""
+    try:
+        return get_solver(name)
+    except ImportError as exc:
+        raise DomainError(
+            "solver", f"solver '{name}' is not available in this installation ({exc}); its "
+            "optional dependencies may be missing (pip install 'ltaa[rl]')",
+            code="solver_unavailable",
+        ) from exc
+
+
+def build_response(
+    problem: Problem, solver: str, solution: Solution, *, seed: int, elapsed_ms: float
+) -> AllocateResponse:
+    instance = problem.instance
+    s = instance.success
+    return AllocateResponse(
+        solver=solver,
+        mode=problem.mode,
+        max_deviation=problem.cap.max_deviation,
+        assignments=[
+            Assignment(task_id=task.id, task_name=task.name, robot=instance.robots[r].name,
+                       success=float(s[t, r]))
+            for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
+        ],
+        metrics=MetricsOut.from_domain(compute_metrics(instance, solution.assignment, seed=seed)),
+        usage=UsageOut(llm_calls=solution.usage.llm_calls, input_tokens=solution.usage.input_tokens,
+                       output_tokens=solution.usage.output_tokens),
+        elapsed_ms=elapsed_ms,
+    )
+
+
+def allocate(request: AllocateRequest) -> AllocateResponse:
+    """Validate, solve and measure. CPU-bound: callers on an event loop use a thread."""
+    started = time.perf_counter()
+    solver = load_solver(request.solver)  # unknown solver reported before instance errors
+    problem = build_problem(request)
+    solution = solver.solve(problem, seed=request.seed, options=request.options)
+    _check_solution(problem, solution, request.solver)
+    elapsed_ms = (time.perf_counter() - started) * 1000
+    return build_response(problem, request.solver, solution, seed=request.seed,
+                          elapsed_ms=round(elapsed_ms, 3))
+
+
+def _check_solution(problem: Problem, solution: Solution, solver: str) -> None:
+    """Never return an allocation that is incomplete or breaks the cap (SPEC §1)."""
+    n, r = problem.instance.n_tasks, problem.instance.n_robots
+    a = solution.assignment
+    if len(a) != n or any(not 0 <= robot < r for robot in a):
+        raise RuntimeError(f"solver '{solver}' returned {len(a)} robot indices for {n} tasks")
+    loads = [a.count(i) for i in range(r)]
+    if not problem.cap.respected_by(loads):
+        raise RuntimeError(f"solver '{solver}' returned an invalid allocation (loads {loads})")

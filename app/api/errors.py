@@ -1,0 +1,154 @@
+"""One shape for every 4xx body: FastAPI's own `{"detail": [{"loc", "msg", "type"}]}`.
+
+Clients then parse validation errors, domain errors (infeasible cap, unknown solver,
+...), 404s and 413s the same way, and `loc` always points into the request.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from app.domain.errors import DomainError
+
+Loc = Sequence[str | int]
+
+
+def error_item(loc: Loc, msg: str, type_: str) -> dict[str, Any]:
+    return {"loc": list(loc), "msg": msg, "type": type_}
+
+
+def error_body(loc: Loc, msg: str, type_: str) -> dict[str, Any]:
+    return {"detail": [error_item(loc, msg, type_)]}
+
+
+def field_loc(field: str, root: str = "body") -> list[str | int]:
+    """'tasks.3.features' -> ['body', 'tasks', 3, 'features']: list indices as ints, like pydantic.
+
+    A key under `success` is a feature name and stays a string even if it looks like a number.
+    """
+    loc: list[str | int] = [root]
+    for part in filter(None, field.split(".")):
+        loc.append(int(part) if part.isdigit() and loc[-1] != "success" else part)
+    return loc
+
+
+def domain_error_body(exc: DomainError) -> dict[str, Any]:
+    return error_body(field_loc(exc.field), exc.message, exc.code)
+
+
+def validation_error_body(errors: Iterable[Any], root: Loc = ()) -> dict[str, Any]:
+    """Pydantic/FastAPI error dicts reduced to loc/msg/type.
+
+    `input` is dropped on purpose: for a 10,001-task list it would echo the whole body.
+    """
+    detail = []
+    for err in errors:
+        msg = str(err.get("msg", "invalid value"))
+        ctx = err.get("ctx") or {}
+        if err.get("type") == "json_invalid" and ctx.get("error"):
+            msg = f"{msg}: {ctx['error']}"  # say *what* is wrong with the JSON, not just that it is
+        elif tuple(err.get("loc", ())) == ("body",) and err.get("type") == "missing":
+            msg = "a JSON object request body is required"
+        loc = [*root, *err.get("loc", ())]
+        detail.append(error_item(loc, msg, str(err.get("type", "invalid"))))
+    return {"detail": detail}
+
+
+class ApiError(HTTPException):
+    """An HTTP error that names the part of the request at fault, e.g. 404 on ('path', 'run_id').
+
+    A FastAPI HTTPException so that, raised while FastAPI reads the body, it passes through
+    unchanged instead of becoming a generic 400.
+    """
+
+    def __init__(self, status_code: int, loc: Loc, msg: str, type_: str) -> None:
+        super().__init__(status_code, detail=msg)
+        self.loc = list(loc)
+        self.type = type_
+
+
+# FastAPI raises a bare 400 only when it cannot read the body (e.g. a 5,000-digit integer).
+_DEFAULT_LOC = {400: ["body"], 404: ["path"], 405: ["method"], 413: ["body"]}
+_DEFAULT_TYPE = {400: "body_unreadable", 404: "not_found", 405: "method_not_allowed",
+                 409: "conflict", 413: "too_large"}
+
+
+async def _on_validation(_: Request, exc: RequestValidationError) -> JSONResponse:
+    return JSONResponse(validation_error_body(exc.errors()), status_code=422)
+
+
+async def _on_domain(_: Request, exc: DomainError) -> JSONResponse:
+    return JSONResponse(domain_error_body(exc), status_code=exc.status_code)
+
+
+async def _on_http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+    code = exc.status_code
+    if isinstance(exc, ApiError):
+        body = error_body(exc.loc, str(exc.detail), exc.type)
+    elif isinstance(exc.detail, list):  # already in list form
+        body = {"detail": exc.detail}
+    else:
+        body = error_body(_DEFAULT_LOC.get(code, ["request"]), str(exc.detail),
+                          _DEFAULT_TYPE.get(code, "http_error"))
+    return JSONResponse(body, status_code=code, headers=exc.headers)
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    app.add_exception_handler(RequestValidationError, _on_validation)  # type: ignore[arg-type]
+    app.add_exception_handler(DomainError, _on_domain)  # type: ignore[arg-type]
+    app.add_exception_handler(StarletteHTTPException, _on_http)  # type: ignore[arg-type]
+
+
+class BodySizeLimit:
+    """Answer 413 for bodies above `max_bytes`, whether declared (Content-Length) or streamed.
+
+    Pure ASGI so the limit is enforced while reading, before anything is buffered or parsed.
+    """
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        declared = dict(scope.get("headers") or []).get(b"content-length")
+        if declared is not None and declared.isdigit() and int(declared) > self.max_bytes:
+            await self._reject(scope, receive, send, int(declared))
+            return
+
+        seen = 0
+
+        async def counting_receive() -> Message:
+            # Streamed (chunked) bodies carry no Content-Length: count while reading.
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.max_bytes:
+                    raise self._too_large(None)
+            return message
+
+        await self.app(scope, counting_receive, send)
+
+    def _too_large(self, size: int | None) -> ApiError:
+        amount = f"{size:,} bytes" if size is not None else "too large"
+        return ApiError(
+            413, ["body"],
+            f"request body is {amount}: the limit is {self.max_bytes:,} bytes "
+            "(LTAA_MAX_BODY_BYTES); send fewer tasks or raise the limit",
+            "body_too_large",
+        )
+
+    async def _reject(self, scope: Scope, receive: Receive, send: Send, size: int) -> None:
+        exc = self._too_large(size)
+        body = error_body(exc.loc, str(exc.detail), exc.type)
+        await JSONResponse(body, status_code=413)(scope, receive, send)

@@ -1,0 +1,49 @@
+"""What the service offers: its solvers and its built-in scenarios."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import APIRouter
+
+from app.api.allocation import load_solver
+from app.api.schemas import RobotOut, ScenarioOut, SolverOut, TaskOut
+from app.domain import catalog
+from app.domain.errors import DomainError
+from app.solvers.registry import solver_names
+
+router = APIRouter(tags=["catalog"])
+log = logging.getLogger(__name__)
+
+
+@router.get("/solvers", response_model=list[SolverOut])
+def list_solvers() -> list[SolverOut]:
+    """List the allocation methods usable in POST /allocate, with exactness and size limits."""
+    out: list[SolverOut] = []
+    for name in solver_names():
+        try:
+            info = load_solver(name).info
+        except DomainError as exc:
+            # An optional dependency is missing (e.g. torch for dqn): list what actually works.
+            log.warning("solver %s left out of GET /solvers: %s", name, exc.message)
+            continue
+        out.append(SolverOut(name=info.name, description=info.description, exact=info.exact,
+                             kind="exact" if info.exact else "approximate", limits=info.limits))
+    return out
+
+
+@router.get("/scenarios", response_model=list[ScenarioOut])
+def list_scenarios() -> list[ScenarioOut]:
+    """List the built-in scenarios: the 36 TEACh tasks and each scenario's robot success rates."""
+    return [
+        ScenarioOut(
+            name=sc.name,
+            description=sc.description,
+            tasks=[TaskOut(id=t.id, name=t.name, type=t.type, features=list(t.features))
+                   for t in sc.instance.tasks],
+            robots=[RobotOut(name=r.name, label=r.label, description=r.description,
+                             success=dict(r.success))
+                    for r in sc.instance.robots],
+        )
+        for sc in catalog.scenarios().values()
+    ]

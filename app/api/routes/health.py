@@ -1,0 +1,18 @@
+"""Liveness: is the service up, which version, what it can do."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request
+
+from app.api.deps import SettingsDep
+from app.api.schemas import HealthOut
+from app.solvers.registry import solver_names
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/health", response_model=HealthOut)
+def health(request: Request, settings: SettingsDep) -> HealthOut:
+    """Report that the service is up, its version, solvers and default reasoner."""
+    return HealthOut(version=request.app.version, solvers=solver_names(),
+                     default_reasoner=settings.default_reasoner)

@@ -1,0 +1,181 @@
+"""Request and response bodies of the HTTP API (and of `ltaa allocate --json`)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    AliasChoices,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    StrictFloat,
+    StrictStr,
+)
+from pydantic_core import PydanticCustomError
+
+from app.domain.metrics import Metrics
+from app.domain.models import MAX_ROBOTS, MAX_TASKS
+from app.domain.modes import Mode
+
+Name = Annotated[StrictStr, Field(min_length=1, max_length=200)]
+_JSON_TYPES = {bool: "a boolean", float: "a number", list: "an array", dict: "an object",
+               type(None): "null"}
+
+
+def _task_id(value: object) -> int | str:
+    # One error naming the field, rather than one per member of an int | str union.
+    if isinstance(value, int | str) and not isinstance(value, bool) and str(value).strip():
+        return value
+    raise PydanticCustomError(
+        "task_id_type", "task id must be an integer or a non-empty string, not {got}",
+        {"got": _JSON_TYPES.get(type(value), "an empty string")},
+    )
+
+
+TaskId = Annotated[
+    int | str,
+    PlainValidator(_task_id, json_schema_input_type=int | str),
+    Field(description="Integer or string, unique in the queue"),
+]
+Probability = Annotated[StrictFloat, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+MAX_SEED = 2**32 - 1  # the widest seed every RNG we use (numpy, torch, random) accepts
+
+
+class TaskIn(BaseModel):
+    """One queued task. TEACh keys (`action_id`, `action_name`, `action_type`) are accepted."""
+
+    # Unknown keys are ignored so TEACh action definitions can be pasted as they are.
+    model_config = ConfigDict(extra="ignore")
+
+    id: TaskId = Field(validation_alias=AliasChoices("id", "action_id"))
+    name: Name | None = Field(
+        None, validation_alias=AliasChoices("name", "action_name"),
+        description="Defaults to the id as text",
+    )
+    type: Name = Field("Custom", validation_alias=AliasChoices("type", "action_type"))
+    features: list[Name] = Field(
+        max_length=100, description="Features the task needs; every robot must rate each one"
+    )
+
+
+class RobotIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: Name = Field(description="Key used in assignments and workloads; unique")
+    label: StrictStr = Field("", max_length=200, description="Display name, e.g. 'Light Robot'")
+    description: StrictStr = Field("", max_length=2000)
+    success: dict[Name, Probability] = Field(
+        description="Success probability per feature, each in [0, 1]"
+    )
+
+
+class InstanceRequest(BaseModel):
+    """What to allocate: a built-in `scenario`, or your own `tasks` and `robots` (not both)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    scenario: Name | None = Field(None, description="A built-in scenario, see GET /scenarios")
+    tasks: list[TaskIn] | None = Field(None, max_length=MAX_TASKS)
+    robots: list[RobotIn] | None = Field(None, max_length=MAX_ROBOTS)
+    mode: Mode = Mode.BALANCED
+    max_deviation: float | None = Field(
+        None, ge=0, allow_inf_nan=False, strict=True,
+        description="Workload cap in tasks either side of the target load; omit for the "
+        "mode's default (null in the response means no cap)",
+    )
+
+
+class AllocateRequest(InstanceRequest):
+    solver: Name = Field(description="See GET /solvers")
+    seed: int = Field(0, ge=0, le=MAX_SEED, strict=True)
+    options: dict[str, Any] = Field(default_factory=dict, description="Solver-specific options")
+
+
+class Assignment(BaseModel):
+    task_id: int | str
+    task_name: str
+    robot: str
+    success: float
+
+
+class CompletionOut(BaseModel):
+    mean: float
+    ci95: tuple[float, float]
+    trials: int
+
+
+class MetricsOut(BaseModel):
+    expected_success: float
+    balance_score: float
+    max_deviation: float = Field(description="Largest |load - target| actually reached")
+    imbalance_severity: Literal["low", "moderate", "high", "critical"]
+    workload: dict[str, int]
+    feature_success: dict[str, float]
+    jain_index: float
+    simulated_completion: CompletionOut
+
+    @classmethod
+    def from_domain(cls, m: Metrics) -> MetricsOut:
+        c = m.simulated_completion
+        return cls(
+            expected_success=m.expected_success, balance_score=m.balance_score,
+            max_deviation=m.max_deviation, imbalance_severity=m.imbalance_severity.value,
+            workload=m.workload, feature_success=m.feature_success, jain_index=m.jain_index,
+            simulated_completion=CompletionOut(mean=c.mean, ci95=c.ci95, trials=c.trials),
+        )
+
+
+class UsageOut(BaseModel):
+    llm_calls: int = 0
+    input_tokens: int = 0
+    output_tokens: int = 0
+
+
+class AllocateResponse(BaseModel):
+    solver: str
+    mode: Mode
+    max_deviation: int | float | None = Field(
+        description="The workload cap applied (request override or mode default); null = no cap"
+    )
+    assignments: list[Assignment] = Field(description="One per task, in queue order")
+    metrics: MetricsOut
+    usage: UsageOut
+    elapsed_ms: float
+
+
+class HealthOut(BaseModel):
+    status: Literal["ok"] = "ok"
+    version: str
+    solvers: list[str]
+    default_reasoner: str
+
+
+class SolverOut(BaseModel):
+    name: str
+    description: str
+    exact: bool
+    kind: Literal["exact", "approximate"]
+    limits: str
+
+
+class TaskOut(BaseModel):
+    id: int | str
+    name: str
+    type: str
+    features: list[str]
+
+
+class RobotOut(BaseModel):
+    name: str
+    label: str
+    description: str
+    success: dict[str, float]
+
+
+class ScenarioOut(BaseModel):
+    name: str
+    description: str
+    tasks: list[TaskOut]
+    robots: list[RobotOut]

@@ -1,0 +1,74 @@
+"""Service settings, read from `LTAA_*` environment variables (pydantic-settings)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import AliasChoices, Field, SecretStr, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+DEFAULT_MAX_BODY_BYTES = 10 * 1024 * 1024  # 10,000 tasks with TEACh metadata fit comfortably
+
+
+class Settings(BaseSettings):
+    """Every knob of the service. Paths left unset are derived from `data_dir`."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="LTAA_",
+        # Tests and the CLI build Settings(field=...) directly, aliases notwithstanding.
+        populate_by_name=True,
+        extra="ignore",
+    )
+
+    data_dir: Path = Path("data")
+    database_url: str | None = Field(
+        None, description="SQLAlchemy URL; default sqlite:///{data_dir}/ltaa.db"
+    )
+    checkpoint_path: Path | None = Field(
+        None, description="LangGraph SQLite checkpointer; default {data_dir}/checkpoints.sqlite"
+    )
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=1, le=65535)
+
+    max_concurrent_runs: int = Field(4, ge=1)
+    auto_resume: bool = True
+    default_reasoner: str = "rules"
+    default_model: str = "claude-sonnet-4-5"
+
+    # The Anthropic SDK's own variable is honoured so an existing key just works.
+    anthropic_api_key: SecretStr | None = Field(
+        None, validation_alias=AliasChoices("LTAA_ANTHROPIC_API_KEY", "ANTHROPIC_API_KEY")
+    )
+    anthropic_base_url: str | None = Field(
+        None, validation_alias=AliasChoices("LTAA_ANTHROPIC_BASE_URL", "ANTHROPIC_BASE_URL")
+    )
+    anthropic_timeout_s: float = Field(60.0, gt=0)
+    anthropic_max_transport_retries: int = Field(3, ge=0)
+
+    # Test-only: a durable run pauses before reasoning about this task index, so
+    # end-to-end tests can kill the server at a known point.
+    test_pause_at_task: int | None = Field(None, ge=0)
+
+    max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
+
+    @model_validator(mode="after")
+    def _derive_paths(self) -> Settings:
+        # Filled in place so model_dump() and logs show the paths actually used.
+        self.database_url = self.db_url
+        self.checkpoint_path = self.checkpoint_file
+        return self
+
+    @property
+    def db_url(self) -> str:
+        """`database_url`, typed as a plain str (derived from data_dir when unset)."""
+        return self.database_url or f"sqlite:///{self.data_dir.as_posix()}/ltaa.db"
+
+    @property
+    def checkpoint_file(self) -> Path:
+        """`checkpoint_path`, typed as a plain Path (derived from data_dir when unset)."""
+        return self.checkpoint_path or self.data_dir / "checkpoints.sqlite"
+
+
+def get_settings() -> Settings:
+    """Read settings from the environment now (deliberately uncached: tests change the env)."""
+    return Settings()

@@ -1,0 +1,73 @@
+"""GET /health, /solvers, /scenarios, and the OpenAPI document."""
+
+from __future__ import annotations
+
+from fastapi.testclient import TestClient
+
+from app.config import Settings
+from app.main import app_version, create_app
+
+
+def test_health_reports_ok_version_and_solvers(client: TestClient) -> None:
+    r = client.get("/health")
+    assert r.status_code == 200
+    body = r.json()
+    assert body["status"] == "ok"
+    assert body["version"] == app_version() != "unknown"
+    assert {"greedy", "brute_force", "dp", "optimal"} <= set(body["solvers"])
+    assert body["default_reasoner"] == "rules"
+
+
+def test_solvers_describe_exactness_and_limits(client: TestClient) -> None:
+    r = client.get("/solvers")
+    assert r.status_code == 200
+    solvers = {s["name"]: s for s in r.json()}
+    assert {"greedy", "brute_force", "dp", "optimal"} <= set(solvers)
+    for s in solvers.values():
+        assert set(s) == {"name", "description", "exact", "kind", "limits"}
+        assert s["kind"] == ("exact" if s["exact"] else "approximate")
+        assert s["description"] and s["limits"]
+    assert solvers["greedy"]["exact"] is False
+    assert all(solvers[n]["exact"] for n in ("brute_force", "dp", "optimal"))
+    assert "3^12" in solvers["brute_force"]["limits"]
+
+
+def test_scenarios_include_tasks_and_robots(client: TestClient) -> None:
+    r = client.get("/scenarios")
+    assert r.status_code == 200
+    scenarios = {s["name"]: s for s in r.json()}
+    assert set(scenarios) == {"baseline", "heavy_excels", "medium_excels", "light_excels"}
+    baseline = scenarios["baseline"]
+    assert baseline["description"]
+    assert len(baseline["tasks"]) == 36
+    assert baseline["tasks"][14] == {"id": 300, "name": "Navigation", "type": "MapGoal",
+                                     "features": ["heavy"]}
+    robots = {r["name"]: r for r in baseline["robots"]}
+    assert list(robots) == ["light", "medium", "heavy"]
+    assert robots["light"]["label"] == "Light Robot"
+    assert robots["light"]["description"]
+    assert robots["light"]["success"] == {"careful": 0.9, "dexterous": 0.8, "heavy": 0.5}
+    assert robots["heavy"]["success"]["heavy"] == 0.9
+    assert scenarios["heavy_excels"]["robots"][2]["success"]["heavy"] == 0.95
+
+
+def test_openapi_documents_every_route_and_allocate_examples(client: TestClient) -> None:
+    doc = client.get("/openapi.json").json()
+    for path in ("/health", "/solvers", "/scenarios", "/allocate"):
+        for op in doc["paths"][path].values():
+            assert op.get("description"), path
+            assert "200" in op["responses"]
+    body = doc["paths"]["/allocate"]["post"]["requestBody"]["content"]["application/json"]
+    assert {"baseline", "custom"} <= set(body["examples"])
+    assert client.get("/docs").status_code == 200
+
+
+def test_create_app_keeps_the_given_settings_and_creates_the_data_dir(
+    settings: Settings,
+) -> None:
+    app = create_app(settings)
+    assert app.state.settings is settings
+    assert not settings.data_dir.exists()
+    with TestClient(app) as c:
+        assert c.get("/health").status_code == 200
+        assert settings.data_dir.is_dir()

@@ -1,0 +1,15 @@
+"""Fixtures shared by every test directory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from app.config import Settings
+
+
+@pytest.fixture
+def settings(tmp_path: Path) -> Settings:
+    """Settings isolated from the developer's environment: a fresh data_dir and no API key."""
+    return Settings(data_dir=tmp_path / "data", anthropic_api_key=None, anthropic_base_url=None)
