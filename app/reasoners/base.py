@@ -28,6 +28,8 @@ class DecisionContext:
     weights: Weights
     tier: int = 0  # 0 first try; 1-3 retry tiers
     guided_robot: int | None = None  # optimizer guidance (issue 4), when enabled
+    task_type: str = ""
+    load_bounds: tuple[int, int] | None = None  # final-load range the cap allows; None = no cap
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,14 @@ class ReasonerReply:
     model: str | None = None
     transport_retries: int = 0
     extra: dict[str, object] = field(default_factory=dict)
+
+
+class ReasonerError(RuntimeError):
+    """A reasoner gave no reply after its own transport retries (timeouts, 429, 5xx).
+
+    The graph records it as a failed attempt and escalates, like an unusable answer;
+    any other exception from a reasoner (bad key, unknown model) ends the run.
+    """
 
 
 class Reasoner(Protocol):

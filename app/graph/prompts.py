@@ -1,0 +1,191 @@
+"""Prompts for the reason node: one constant system prompt, a compact dynamic user prompt,
+and three genuinely different retry tiers.
+
+Tier 0 carries only facts, guidance and the format. Tier 1 adds the validator's specific
+feedback. Tier 2 replaces brevity with a full scoring guide and a worked example. Tier 3
+drops explanation in favour of a step-by-step fill-in template.
+"""
+
+from __future__ import annotations
+
+from app.domain.modes import MODE_DESCRIPTIONS, tradeoff_threshold
+from app.domain.phases import Phase
+from app.graph.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
+from app.graph.validation import CRITERION_TITLES, WEIGHTS
+from app.reasoners.base import DecisionContext
+
+TARGET_USER_PROMPT_CHARS = 2_500
+
+SYSTEM_PROMPT = (
+    "You are the reasoning step of LTAA, a construction-site task allocator. Each message "
+    "describes one task and a fleet of robots. Choose exactly one robot, weighing task success "
+    "against workload balance as the operational mode and workflow phase direct, and never a "
+    "robot the workload cap forbids. Use only the numbers given; do not invent data. Reply in "
+    "the required markdown format and nothing else."
+)
+
+_PHASE_GUIDANCE = {
+    Phase.EARLY: "early: secure high success while loads are still even",
+    Phase.MIDDLE: "middle: weigh success and balance; start closing load gaps",
+    Phase.LATE: "late: balance is urgent; correct deviations before the queue ends",
+}
+
+_FORMAT = """Reply in exactly this format:
+**Decision**: <robot label>
+**Expected Success**: <S of the chosen robot, e.g. 70.0%>
+**Reasoning**: <2-4 sentences citing S values, loads and the phase>
+**Workload After Assignment**: <Label: count, for every robot>
+**Confidence Level**: <High|Medium|Low>
+**Trade-Off Summary**: <best vs least-loaded robot, gap in points, rule applied>
+**Robot Analysis**: <optional: one line per robot>"""
+
+
+def _pct(x: float) -> str:
+    return f"{x * 100:.1f}%"
+
+
+def _labels(ctx: DecisionContext) -> tuple[str, ...]:
+    return tuple(
+        label or name for label, name in zip(ctx.robot_labels, ctx.robot_names, strict=True)
+    )
+
+
+def _facts(ctx: DecisionContext) -> str:
+    labels = _labels(ctx)
+    allocated = sum(ctx.loads)
+    task_type = f" ({ctx.task_type})" if ctx.task_type else ""
+    rows = [
+        f"- {labels[r]} [{ctx.robot_names[r]}]: S {_pct(ctx.success[r])}, load {ctx.loads[r]} "
+        f"(dev {ctx.loads[r] - ctx.target:+.1f})" + ("" if r in ctx.feasible else ", NOT allowed")
+        for r in range(len(labels))
+    ]
+    if ctx.load_bounds is None:
+        cap = "no workload cap"
+    else:
+        cap = f"cap: final loads in [{ctx.load_bounds[0]}, {ctx.load_bounds[1]}]"
+    return "\n".join(
+        [
+            f"Task {ctx.task_index + 1}/{ctx.total_tasks}: {ctx.task_name}{task_type}; "
+            f"features: {', '.join(ctx.features)}",
+            "Robots (S = mean success over the task's features; load = tasks so far):",
+            *rows,
+            f"Target load W = {ctx.target:.1f}; allocated {allocated}/{ctx.total_tasks}; {cap}.",
+        ]
+    )
+
+
+def _guidance(ctx: DecisionContext) -> str:
+    threshold = tradeoff_threshold(ctx.mode, ctx.phase)
+    progress = ctx.task_index / ctx.total_tasks if ctx.total_tasks else 1.0
+    lines = [
+        f"Phase: {ctx.phase.value} (progress {progress:.0%}); {_PHASE_GUIDANCE[ctx.phase]}.",
+        f"Mode: {ctx.mode.value}, {MODE_DESCRIPTIONS[ctx.mode]}; weights success:balance "
+        f"{ctx.weights} now.",
+        "Decision framework, among allowed robots: best = highest S, fewest = lowest load, "
+        f"gap = S(best) - S(fewest) in points. Gap > {DECISIVE_GAP:g}: best. Gap < "
+        f"{NEGLIGIBLE_GAP:g}: fewest. Otherwise best if gap > {threshold:g} (this mode and "
+        "phase), else fewest.",
+        f"Confidence: High if the gap is {CLEAR_MARGIN:g}+ points from the deciding cut-off, "
+        "Medium if closer, Low if you depart from the rule.",
+    ]
+    if ctx.guided_robot is not None:
+        lines.append(
+            f"Optimizer guidance: {_labels(ctx)[ctx.guided_robot]} lies on the optimal "
+            "completion; prefer it unless the rule clearly disagrees."
+        )
+    return "\n".join(lines)
+
+
+def user_prompt(ctx: DecisionContext) -> str:
+    """Tier 0: the first try."""
+    return "\n\n".join([_facts(ctx), _guidance(ctx), _FORMAT])
+
+
+def _feedback_block(feedback: str, quality: float | None, threshold: float) -> str:
+    score = f"scored Q={quality:.2f}, needed {threshold:.2f}" if quality is not None else "failed"
+    return f"Your previous answer {score}. Problems:\n{feedback.strip()}"
+
+
+def _criteria_guide() -> str:
+    lines = [f"- {CRITERION_TITLES[k]} ({w:.2f})" for k, w in WEIGHTS.items()]
+    return (
+        "How answers are scored (weights):\n" + "\n".join(lines) + "\n"
+        "Expected Success must equal S of your robot; workload counts must add your task to "
+        "its current load; name the current phase; the Trade-Off Summary must compare the "
+        "best and least-loaded robots with the gap in points."
+    )
+
+
+_WORKED_EXAMPLE = """Worked example (different data): robots A (S 90%, load 5), B (S 70%, \
+load 3), C (S 60%, load 4); middle phase, threshold 13. best = A, fewest = B, gap = 20 points: \
+not > 25, not < 5, and 20 > 13, so choose A; 20 is 7 points from 13, so confidence High.
+**Decision**: A
+**Expected Success**: 90.0%
+**Reasoning**: A has the highest success at 90.0% against 70.0% for B, the least-loaded robot \
+with 3 tasks. The gap of 20 points exceeds the middle-phase threshold of 13, so success wins \
+over balance.
+**Workload After Assignment**: A: 6, B: 3, C: 4
+**Confidence Level**: High
+**Trade-Off Summary**: best A 90.0% vs least-loaded B 70.0% (3 tasks): gap 20 > 13 points, \
+so A takes the task."""
+
+
+def retry_prompt(
+    ctx: DecisionContext, tier: int, feedback: str, quality: float | None, threshold: float
+) -> str:
+    """Tiers 1-3; a tier above 3 uses tier 3."""
+    fb = _feedback_block(feedback, quality, threshold)
+    if tier <= 1:
+        return "\n\n".join([user_prompt(ctx), fb, "Answer again, fixing every problem listed."])
+    if tier == 2:
+        return "\n\n".join(
+            [_facts(ctx), _guidance(ctx), fb, _criteria_guide(), _WORKED_EXAMPLE, _FORMAT]
+        )
+    return "\n\n".join([_facts(ctx), fb, _step_template(ctx)])
+
+
+def _step_template(ctx: DecisionContext) -> str:
+    labels = _labels(ctx)
+    allowed = ", ".join(labels[r] for r in ctx.feasible)
+    threshold = tradeoff_threshold(ctx.mode, ctx.phase)
+    counts = ", ".join(
+        f"{labels[r]}: <{ctx.loads[r]} or {ctx.loads[r] + 1}>" for r in range(len(labels))
+    )
+    return f"""Work through these steps, then fill in the template. Replace every <...>.
+1. Allowed robots: {allowed}.
+2. best = the allowed robot with the highest S; fewest = the allowed robot with the lowest load.
+3. gap = S(best) - S(fewest) in points.
+4. If gap > {DECISIVE_GAP:g} choose best; if gap < {NEGLIGIBLE_GAP:g} choose fewest; otherwise \
+choose best if gap > {threshold:g}, else fewest.
+5. Workload after: add 1 to the chosen robot only.
+6. Confidence: High if the gap is {CLEAR_MARGIN:g}+ points from the cut-off used in step 4, else \
+Medium.
+
+**Decision**: <robot from step 4>
+**Expected Success**: <its S from the table>%
+**Reasoning**: <robot> has S <S>% versus <other robot> at <S>%. The gap is <gap> points, so \
+rule <step 4 clause> applies in the {ctx.phase.value} phase of {ctx.mode.value} mode.
+**Workload After Assignment**: {counts}
+**Confidence Level**: <High|Medium>
+**Trade-Off Summary**: best <best> <S>% vs least-loaded <fewest> (<load> tasks): gap <gap> \
+points, so <robot> takes the task."""
+
+
+def prompt_for(
+    ctx: DecisionContext,
+    tier: int = 0,
+    feedback: str = "",
+    quality: float | None = None,
+    threshold: float = 0.6,
+) -> str:
+    return user_prompt(ctx) if tier == 0 else retry_prompt(ctx, tier, feedback, quality, threshold)
+
+
+def prompt_size(ctx: DecisionContext, tier: int = 0) -> dict[str, int]:
+    """Characters in the system and user prompt (feedback-free for retry tiers)."""
+    user = prompt_for(ctx, tier, feedback="-", quality=0.0)
+    return {
+        "system_chars": len(SYSTEM_PROMPT),
+        "user_chars": len(user),
+        "total_chars": len(SYSTEM_PROMPT) + len(user),
+    }

@@ -1,0 +1,260 @@
+"""The eight validation criteria (paper weights) scored against the TRUE decision context.
+
+Every q_i is a deterministic function of the parsed answer and the context, so the same
+answer always gets the same Q (a resumed run re-validates to the same verdict).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from app.graph.parsing import (
+    ParsedResponse,
+    count_sentences,
+    mentioned_robots,
+    parse_response,
+)
+from app.graph.tradeoff import TradeOff, expected_confidence, rule_for
+from app.reasoners.base import DecisionContext
+
+DEFAULT_QUALITY_THRESHOLD = 0.6
+
+WEIGHTS: dict[str, float] = {
+    "explanation": 0.20,
+    "success_accuracy": 0.20,
+    "tradeoff_analysis": 0.15,
+    "workload_awareness": 0.15,
+    "mode_compliance": 0.10,
+    "phase_consistency": 0.10,
+    "logical_consistency": 0.05,
+    "confidence_justification": 0.05,
+}
+
+CRITERION_TITLES: dict[str, str] = {
+    "explanation": "explanation quality",
+    "success_accuracy": "success-rate accuracy",
+    "tradeoff_analysis": "trade-off analysis",
+    "workload_awareness": "workload awareness",
+    "mode_compliance": "mode compliance",
+    "phase_consistency": "phase consistency",
+    "logical_consistency": "logical consistency",
+    "confidence_justification": "confidence justification",
+}
+
+# Stated success within this of the true S is exact (rounding); beyond the outer bound, 0.
+ACCURACY_EXACT = 0.015
+ACCURACY_ZERO = 0.15
+_CONFIDENCE_RANK = {"low": 0, "medium": 1, "high": 2}
+_PHASE_WORD = re.compile(r"\b(early|middle|mid|late)\b", re.IGNORECASE)
+_NUMBER_CITED = re.compile(
+    r"\d+(?:\.\d+)?\s*%|\b0?\.\d+\b|\b\d+(?:\.\d+)?\s*points?\b", re.IGNORECASE
+)
+_SUCCESS_TERMS = re.compile(r"success|\d\s*%|\bpoints?\b|\bgap\b", re.IGNORECASE)
+_LOAD_TERMS = re.compile(r"load|balance|\btasks?\b|least[- ]loaded|fewest", re.IGNORECASE)
+
+
+@dataclass
+class Validation:
+    robot: int | None
+    scores: dict[str, float]
+    notes: dict[str, str]  # why a criterion lost points, in words the feedback can reuse
+    quality: float
+    accepted: bool
+    hard_invalid: str | None = None
+    parsed: ParsedResponse = field(default_factory=ParsedResponse)
+
+
+def _labels(ctx: DecisionContext) -> tuple[str, ...]:
+    return tuple(
+        label or name for label, name in zip(ctx.robot_labels, ctx.robot_names, strict=True)
+    )
+
+
+def _pct(x: float) -> str:
+    return f"{x * 100:.1f}%"
+
+
+def hard_invalid_reason(parsed: ParsedResponse, ctx: DecisionContext) -> str | None:
+    labels = _labels(ctx)
+    if parsed.decision_text is None:
+        return "no parseable decision: the answer has no **Decision** line"
+    if parsed.robot is None:
+        return (
+            f"unknown robot '{parsed.decision_text}' in **Decision**; name one of: "
+            f"{', '.join(labels)}"
+        )
+    if parsed.robot not in ctx.feasible:
+        allowed = ", ".join(labels[r] for r in ctx.feasible)
+        return (
+            f"{labels[parsed.robot]} would make the workload cap infeasible; allowed now: {allowed}"
+        )
+    return None
+
+
+def _explanation(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
+    text = p.reasoning or ""
+    if not text.strip():
+        return 0.0, "the **Reasoning** section is missing"
+    problems: list[str] = []
+    q = 0.0
+    if len(text) >= 60:
+        q += 0.25
+    else:
+        problems.append("it is too short to explain anything")
+    n = count_sentences(text)
+    if 2 <= n <= 4:
+        q += 0.25
+    else:
+        q += 0.1 if n in (1, 5, 6) else 0.0
+        problems.append(f"it has {n} sentence(s) instead of 2-4")
+    if choice in mentioned_robots(text, ctx.robot_names, _labels(ctx)):
+        q += 0.25
+    else:
+        problems.append("it does not name the chosen robot")
+    if _NUMBER_CITED.search(text):
+        q += 0.25
+    else:
+        problems.append("it cites no success rates or loads as numbers")
+    return q, "; ".join(problems)
+
+
+def _accuracy(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
+    true_s = ctx.success[choice]
+    label = _labels(ctx)[choice]
+    if p.expected_success is None:
+        return 0.0, f"no **Expected Success** value (S of {label} is {_pct(true_s)})"
+    err = abs(p.expected_success - true_s)
+    if err <= ACCURACY_EXACT:
+        return 1.0, ""
+    q = max(0.0, 1.0 - (err - ACCURACY_EXACT) / (ACCURACY_ZERO - ACCURACY_EXACT))
+    return q, f"stated {_pct(p.expected_success)} but S of {label} is {_pct(true_s)}"
+
+
+def _tradeoff_analysis(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
+    text = p.tradeoff or ""
+    if not text.strip():
+        return 0.0, "the **Trade-Off Summary** section is missing"
+    q, problems = 0.25, []
+    if _SUCCESS_TERMS.search(text):
+        q += 0.25
+    else:
+        problems.append("it does not quantify the success side (S or the gap in points)")
+    if _LOAD_TERMS.search(text):
+        q += 0.25
+    else:
+        problems.append("it does not mention loads or balance")
+    others = mentioned_robots(text, ctx.robot_names, _labels(ctx)) - {choice}
+    if others or len(ctx.feasible) <= 1:
+        q += 0.25
+    else:
+        problems.append("it names no alternative robot to compare against")
+    return q, "; ".join(problems)
+
+
+def _workload(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
+    after = list(ctx.loads)
+    after[choice] += 1
+    labels = _labels(ctx)
+    truth = ", ".join(f"{labels[r]}: {after[r]}" for r in range(len(after)))
+    if not p.workload_after:
+        return 0.0, f"no **Workload After Assignment** counts (true: {truth})"
+    right = sum(1 for r, n in enumerate(after) if p.workload_after.get(r) == n)
+    if right == len(after):
+        return 1.0, ""
+    return right / len(after), f"{right} of {len(after)} counts are right (true: {truth})"
+
+
+def _mode(ctx: DecisionContext, choice: int, rule: TradeOff) -> tuple[float, str]:
+    if choice == rule.choice or choice == ctx.guided_robot:
+        return 1.0, ""
+    labels = _labels(ctx)
+    why = (
+        f"the trade-off rule picks {labels[rule.choice]} ({rule.rule_text}; best "
+        f"{labels[rule.best]}, least-loaded {labels[rule.fewest]})"
+    )
+    if choice in (rule.best, rule.fewest):
+        return 0.5, why
+    return 0.0, why
+
+
+def _phase(p: ParsedResponse, ctx: DecisionContext) -> tuple[float, str]:
+    text = " ".join(x for x in (p.reasoning, p.tradeoff, p.robot_analysis) if x)
+    named = {"middle" if w.lower() == "mid" else w.lower() for w in _PHASE_WORD.findall(text)}
+    true = ctx.phase.value
+    if named == {true}:
+        return 1.0, ""
+    if true in named:
+        return 0.5, f"it names other phases besides the true one ({true})"
+    if not named:
+        return 0.2, f"it does not name the phase ({true})"
+    return 0.0, f"it names the {'/'.join(sorted(named))} phase but this is the {true} phase"
+
+
+def _logic(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
+    q, problems = 0.0, []
+    if choice in mentioned_robots(p.reasoning or "", ctx.robot_names, _labels(ctx)):
+        q += 0.5
+    else:
+        problems.append("the reasoning does not discuss the robot it chose")
+    stated = p.expected_success
+    if (
+        stated is not None
+        and abs(stated - ctx.success[choice]) <= min(abs(stated - s) for s in ctx.success) + 1e-9
+    ):
+        q += 0.5
+    else:
+        problems.append("the expected success does not belong to the chosen robot")
+    return q, "; ".join(problems)
+
+
+def _confidence(
+    p: ParsedResponse, ctx: DecisionContext, choice: int, rule: TradeOff
+) -> tuple[float, str]:
+    expected = expected_confidence(rule, choice, ctx.guided_robot)
+    if p.confidence is None:
+        return 0.0, f"no **Confidence Level** (High/Medium/Low); {expected} fits this decision"
+    distance = abs(_CONFIDENCE_RANK[p.confidence] - _CONFIDENCE_RANK[expected])
+    if distance == 0:
+        return 1.0, ""
+    note = f"stated {p.confidence}, but {expected} fits ({rule.rule_text})"
+    return (0.5 if distance == 1 else 0.0), note
+
+
+def score(
+    parsed: ParsedResponse, ctx: DecisionContext, threshold: float = DEFAULT_QUALITY_THRESHOLD
+) -> Validation:
+    invalid = hard_invalid_reason(parsed, ctx)
+    if invalid is not None:
+        zeros = dict.fromkeys(WEIGHTS, 0.0)
+        return Validation(parsed.robot, zeros, {}, 0.0, False, invalid, parsed)
+    choice = parsed.robot
+    assert choice is not None  # hard_invalid_reason guarantees it
+    rule = rule_for(ctx)
+    results = {
+        "explanation": _explanation(parsed, ctx, choice),
+        "success_accuracy": _accuracy(parsed, ctx, choice),
+        "tradeoff_analysis": _tradeoff_analysis(parsed, ctx, choice),
+        "workload_awareness": _workload(parsed, ctx, choice),
+        "mode_compliance": _mode(ctx, choice, rule),
+        "phase_consistency": _phase(parsed, ctx),
+        "logical_consistency": _logic(parsed, ctx, choice),
+        "confidence_justification": _confidence(parsed, ctx, choice, rule),
+    }
+    scores = {k: round(q, 4) for k, (q, _) in results.items()}
+    notes = {k: note for k, (_, note) in results.items() if note}
+    quality = round(sum(WEIGHTS[k] * q for k, q in scores.items()), 4)
+    return Validation(choice, scores, notes, quality, quality >= threshold, None, parsed)
+
+
+def reasoner_failed(error: str) -> Validation:
+    """The verdict on an attempt whose reasoner call produced no reply."""
+    return Validation(
+        None, dict.fromkeys(WEIGHTS, 0.0), {}, 0.0, False, f"the reasoner gave no reply ({error})"
+    )
+
+
+def validate_text(
+    text: str, ctx: DecisionContext, threshold: float = DEFAULT_QUALITY_THRESHOLD
+) -> Validation:
+    return score(parse_response(text, ctx.robot_names, _labels(ctx)), ctx, threshold)

@@ -1,0 +1,85 @@
+"""The embedded default reasoner: the trade-off rule, written out in the required format.
+
+Deterministic, offline, zero tokens. Its answers say they are rule-based; it reads the
+true DecisionContext rather than the prompt, so it is also the graph's fallback.
+"""
+
+from __future__ import annotations
+
+from app.graph.tradeoff import TradeOff, expected_confidence, rule_for
+from app.reasoners.base import DecisionContext, ReasonerReply
+
+
+def _pct(x: float) -> str:
+    return f"{x * 100:.1f}%"
+
+
+def _labels(ctx: DecisionContext) -> tuple[str, ...]:
+    return tuple(
+        label or name for label, name in zip(ctx.robot_labels, ctx.robot_names, strict=True)
+    )
+
+
+def choose(ctx: DecisionContext) -> tuple[int, TradeOff]:
+    """The rules reasoner's robot: optimizer guidance when given and allowed, else the rule."""
+    rule = rule_for(ctx)
+    if ctx.guided_robot is not None and ctx.guided_robot in ctx.feasible:
+        return ctx.guided_robot, rule
+    return rule.choice, rule
+
+
+def compose_answer(ctx: DecisionContext) -> str:
+    choice, rule = choose(ctx)
+    names, s, loads = _labels(ctx), ctx.success, ctx.loads
+    others = sorted((r for r in range(len(s)) if r != choice), key=lambda r: (-s[r], r))
+    alternatives = ", ".join(f"{names[r]} {_pct(s[r])} with {loads[r]} tasks" for r in others[:2])
+    features = ", ".join(ctx.features)
+    sentences = [
+        f"Rule-based choice (the trade-off rule, not a language model): {names[choice]} has "
+        f"success {_pct(s[choice])} on {ctx.task_name} ({features}) with {loads[choice]} tasks so "
+        f"far" + (f", against {alternatives}." if alternatives else "."),
+        f"Among the robots the cap allows, the best is {names[rule.best]} at "
+        f"{_pct(s[rule.best])} and the least loaded is {names[rule.fewest]} with "
+        f"{loads[rule.fewest]} tasks (target {ctx.target:.1f}); {rule.rule_text}.",
+        f"This is the {ctx.phase.value} phase of {ctx.mode.value} mode, weighting success to "
+        f"balance {ctx.weights}, with a threshold of {rule.threshold:g} points.",
+    ]
+    guided = ctx.guided_robot is not None and choice == ctx.guided_robot
+    if guided:
+        sentences.append(
+            f"The optimizer's guidance names {names[choice]}, and this choice follows it"
+            + ("." if choice == rule.choice else f" instead of the rule's {names[rule.choice]}.")
+        )
+    after = list(loads)
+    after[choice] += 1
+    confidence = expected_confidence(rule, choice, ctx.guided_robot if guided else None)
+    runner_up = f"; runner-up {names[others[0]]} at {_pct(s[others[0]])}" if others else ""
+    tradeoff = (
+        f"Best {names[rule.best]} {_pct(s[rule.best])} vs least-loaded {names[rule.fewest]} "
+        f"({loads[rule.fewest]} tasks): {rule.rule_text}; {names[choice]} takes the task"
+        f"{runner_up}."
+    )
+    analysis = "; ".join(
+        f"{names[r]} {_pct(s[r])}, load {loads[r]}"
+        + ("" if r in ctx.feasible else " (cap: not allowed)")
+        for r in range(len(s))
+    )
+    return "\n".join(
+        [
+            f"**Decision**: {names[choice]}",
+            f"**Expected Success**: {_pct(s[choice])}",
+            f"**Reasoning**: {' '.join(sentences)}",
+            "**Workload After Assignment**: "
+            + ", ".join(f"{names[r]}: {after[r]}" for r in range(len(after))),
+            f"**Confidence Level**: {confidence.capitalize()}",
+            f"**Trade-Off Summary**: {tradeoff}",
+            f"**Robot Analysis**: {analysis}",
+        ]
+    )
+
+
+class RulesReasoner:
+    name = "rules"
+
+    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+        return ReasonerReply(text=compose_answer(context))
