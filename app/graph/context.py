@@ -1,0 +1,42 @@
+"""The true facts of the current decision, derived from the problem and the graph state."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from app.domain.modes import strategic_weights
+from app.domain.phases import Phase
+from app.domain.problem import Problem
+from app.reasoners.base import DecisionContext
+
+
+def decision_context(
+    problem: Problem, state: Mapping[str, Any], *, tier: int = 0
+) -> DecisionContext:
+    inst, cap = problem.instance, problem.cap
+    t = state["task_index"]
+    loads = tuple(state["loads"])
+    task = inst.tasks[t]
+    view = state["view"]
+    phase = Phase(view["phase"])
+    bounds = None if cap.max_deviation is None else (cap.lower, cap.upper)
+    return DecisionContext(
+        task_index=t,
+        total_tasks=inst.n_tasks,
+        task_name=task.name,
+        features=task.features,
+        robot_names=tuple(r.name for r in inst.robots),
+        robot_labels=tuple(r.display for r in inst.robots),
+        success=tuple(float(x) for x in inst.success[t]),
+        loads=loads,
+        target=inst.target_load,
+        feasible=tuple(view["feasible"]),
+        phase=phase,
+        mode=problem.mode,
+        weights=strategic_weights(problem.mode, phase),
+        tier=tier,
+        guided_robot=view["guided_robot"],
+        task_type=task.type,
+        load_bounds=bounds,
+    )

@@ -1,0 +1,74 @@
+"""An in-memory Recorder: for the synchronous `ltaa` solver and for tests.
+
+Records are copied in and out, as a database would, so a node that mutates what it read
+changes nothing until it saves.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+
+from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
+
+BeforeReasonHook = Callable[[int, int], None]
+
+
+def _copy_attempt(record: AttemptRecord) -> AttemptRecord:
+    # Shallow copy plus the mutable containers: strings and the frozen reply are shared.
+    out = copy.copy(record)
+    out.scores = dict(record.scores)
+    out.parsed = copy.deepcopy(record.parsed) if record.parsed is not None else None
+    return out
+
+
+def _copy_decision(record: DecisionRecord) -> DecisionRecord:
+    out = copy.copy(record)
+    out.failure_log = list(record.failure_log)
+    out.loads_before = list(record.loads_before)
+    out.loads_after = list(record.loads_after)
+    return out
+
+
+class MemoryRecorder:
+    def __init__(self, *, before_reason_hook: BeforeReasonHook | None = None) -> None:
+        self._attempts: dict[tuple[int, int], AttemptRecord] = {}
+        self._decisions: dict[int, DecisionRecord] = {}
+        self._cancelled = False
+        self._hook = before_reason_hook
+        self.attempt_saves = 0
+        self.decision_saves = 0
+
+    def cancel(self) -> None:
+        self._cancelled = True
+
+    def check_cancelled(self) -> None:
+        if self._cancelled:
+            raise RunCancelled("the run was cancelled")
+
+    def before_reason(self, task_index: int, attempt: int) -> None:
+        if self._hook is not None:
+            self._hook(task_index, attempt)
+
+    def save_attempt(self, record: AttemptRecord) -> None:
+        self.attempt_saves += 1
+        self._attempts[(record.task_index, record.attempt)] = _copy_attempt(record)
+
+    def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None:
+        record = self._attempts.get((task_index, attempt))
+        return _copy_attempt(record) if record is not None else None
+
+    def attempts(self, task_index: int | None = None) -> list[AttemptRecord]:
+        """Every recorded attempt (of one task, or all), in (task, attempt) order."""
+        keys = sorted(k for k in self._attempts if task_index is None or k[0] == task_index)
+        return [_copy_attempt(self._attempts[k]) for k in keys]
+
+    def save_decision(self, record: DecisionRecord) -> None:
+        self.decision_saves += 1
+        self._decisions[record.task_index] = _copy_decision(record)
+
+    def decisions(self) -> list[DecisionRecord]:
+        return [_copy_decision(self._decisions[t]) for t in sorted(self._decisions)]
+
+    def assignment(self) -> list[int]:
+        return [d.robot for d in self.decisions()]

@@ -1,0 +1,62 @@
+"""Node 7, finalize: the decision (accepted answer, or the rules fallback) and its record."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from langgraph.runtime import Runtime
+
+from app.graph.context import decision_context
+from app.graph.recorder import AttemptRecord
+from app.graph.state import GraphContext, LTAAState
+from app.graph.validation import validate_text
+from app.reasoners.rules import compose_answer
+
+
+def failure_line(record: AttemptRecord, threshold: float) -> str:
+    if record.feedback:
+        why = record.feedback.splitlines()[0]
+    elif record.hard_invalid:
+        why = f"Hard invalid (Q=0): {record.hard_invalid}."
+    else:
+        why = f"Q={(record.quality or 0.0):.2f} below the threshold {threshold:.2f}."
+    return f"attempt {record.attempt} (tier {record.tier}): {why}"
+
+
+def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+    ctx = runtime.context
+    rec = ctx.recorder
+    rec.check_cancelled()
+    t, a = state["task_index"], state["attempt"]
+    dctx = decision_context(ctx.problem, state)
+    records = [r for k in range(1, a + 1) if (r := rec.attempt(t, k)) is not None]
+    failures = [failure_line(r, ctx.quality_threshold) for r in records if not r.accepted]
+    # The answer's text stays in the recorder when it is there already (the accepted
+    # attempt): copying it into state would put it into several checkpoints per task.
+    text: dict[str, Any]
+    if state.get("accepted") and state.get("robot") is not None:
+        robot, fallback = state["robot"], False
+        accepted = next(r for r in reversed(records) if r.accepted)
+        quality = accepted.quality or 0.0
+        confidence = (accepted.parsed or {}).get("confidence")
+        text = {"text_attempt": accepted.attempt}
+    else:
+        # The conservative fallback: the rules reasoner's answer, validated like any other.
+        verdict = validate_text(compose_answer(dctx), dctx, ctx.quality_threshold)
+        assert verdict.robot is not None
+        robot, fallback, quality = verdict.robot, True, verdict.quality
+        confidence = verdict.parsed.confidence
+        text = {"reasoning": verdict.parsed.reasoning, "tradeoff": verdict.parsed.tradeoff}
+    decision = {
+        **text,
+        "expected_success": dctx.success[robot],
+        "confidence": confidence or "",
+        "quality": quality,
+        "fallback": fallback,
+        "attempts": a,
+        "failure_log": failures,
+        "phase": state["view"]["phase"],
+        "loads_before": list(state["loads"]),
+        "balance_before": state["view"]["balance"],
+    }
+    return {"robot": robot, "fallback": fallback, "decision": decision}

@@ -1,0 +1,17 @@
+"""Node 1, detect_phase: progress, phase, balance, severity and strategic weights."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from langgraph.runtime import Runtime
+
+from app.graph.state import GraphContext, LTAAState, task_view
+
+
+def detect_phase(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+    ctx = runtime.context
+    ctx.recorder.check_cancelled()
+    t, loads = state["task_index"], state["loads"]
+    guided = ctx.guidance(t, tuple(loads)) if ctx.guidance is not None else None
+    return {"view": task_view(ctx.problem, t, loads, guided)}

@@ -1,0 +1,22 @@
+"""Node 2, build_prompt: the tier-0 prompt of the task's first attempt."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from langgraph.runtime import Runtime
+
+from app.graph.context import decision_context
+from app.graph.nodes.common import save_prompt
+from app.graph.prompts import user_prompt
+from app.graph.state import GraphContext, LTAAState
+
+
+def build_prompt(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+    ctx = runtime.context
+    ctx.recorder.check_cancelled()
+    dctx = decision_context(ctx.problem, state, tier=0)
+    save_prompt(ctx.recorder, state["task_index"], 1, 0, user_prompt(dctx))
+    # A task's flags are reset where the task starts, not where the previous one ended:
+    # fewer writes per task (each is a checkpoint row).
+    return {"attempt": 1, "tier": 0, "fallback": False}

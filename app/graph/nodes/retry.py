@@ -1,0 +1,32 @@
+"""Node 6, retry: escalate to the next prompt tier, or give up and ask for the fallback."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from langgraph.runtime import Runtime
+
+from app.graph.context import decision_context
+from app.graph.nodes.common import require_attempt, save_prompt
+from app.graph.prompts import retry_prompt
+from app.graph.state import GraphContext, LTAAState
+
+MAX_TIER = 3
+
+
+def retry(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+    ctx = runtime.context
+    rec = ctx.recorder
+    rec.check_cancelled()
+    t, a = state["task_index"], state["attempt"]
+    if a >= ctx.max_attempts:
+        return {"fallback": True}
+    previous = require_attempt(rec, t, a)
+    attempt = a + 1
+    tier = min(attempt - 1, MAX_TIER)
+    dctx = decision_context(ctx.problem, state, tier=tier)
+    user = retry_prompt(
+        dctx, tier, previous.feedback or "", previous.quality, ctx.quality_threshold
+    )
+    save_prompt(rec, t, attempt, tier, user)
+    return {"attempt": attempt, "tier": tier}

@@ -1,0 +1,52 @@
+"""Node 9, store_and_route: persist the decision, then move to the next task (or finish)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from langgraph.runtime import Runtime
+
+from app.graph.nodes.common import require_attempt
+from app.graph.recorder import DecisionRecord
+from app.graph.state import GraphContext, LTAAState
+
+
+def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+    ctx = runtime.context
+    rec = ctx.recorder
+    rec.check_cancelled()
+    inst = ctx.problem.instance
+    t, robot, d = state["task_index"], state["robot"], state["decision"]
+    if robot is None or d is None:
+        raise RuntimeError(f"task index {t} reached store_and_route without a decision")
+    task = inst.tasks[t]
+    reasoning, tradeoff = d.get("reasoning"), d.get("tradeoff")
+    if d.get("text_attempt") is not None:
+        parsed = require_attempt(rec, t, d["text_attempt"]).parsed or {}
+        reasoning, tradeoff = parsed.get("reasoning"), parsed.get("tradeoff")
+    rec.save_decision(
+        DecisionRecord(
+            task_index=t,
+            task_id=task.id,
+            task_name=task.name,
+            robot=robot,
+            robot_name=inst.robots[robot].name,
+            phase=d["phase"],
+            expected_success=d["expected_success"],
+            reasoning=reasoning or "",
+            confidence=d["confidence"],
+            tradeoff=tradeoff or "",
+            quality=d["quality"],
+            fallback=d["fallback"],
+            attempts=d["attempts"],
+            failure_log=list(d["failure_log"]),
+            loads_before=list(d["loads_before"]),
+            loads_after=list(state["loads"]),
+            balance_before=d["balance_before"],
+            balance_after=state["view"]["balance"],
+            severity_after=state["view"]["severity"],
+        )
+    )
+    # build_prompt resets the per-task flags; clearing the text scratch keeps the next
+    # task's checkpoints small.
+    return {"task_index": t + 1, "done": t + 1 >= inst.n_tasks, "decision": None}

@@ -1,0 +1,102 @@
+"""Graph state (O(robots), checkpointed at every super-step) and the run-scoped context.
+
+SqliteSaver rewrites the whole state at every step, so nothing here may grow with the run:
+prompts, replies, attempts and decisions go through the Recorder. The only text is the
+`decision` scratch, which lives from finalize to store_and_route and is then cleared.
+Every channel adds a version string to each checkpoint and a row per write, so values
+derived together share one channel (`view`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, TypedDict
+
+from app.domain.metrics import balance_score, severity
+from app.domain.modes import strategic_weights
+from app.domain.phases import balance_urgency, detect_phase
+from app.domain.problem import Problem
+from app.graph.recorder import Recorder
+from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
+from app.reasoners.base import Reasoner
+
+DEFAULT_MAX_RETRIES = 3
+# Optimizer guidance: (task index, loads before) -> the robot to prefer, or None.
+Guidance = Callable[[int, Sequence[int]], int | None]
+
+
+class TaskView(TypedDict):
+    """What detect_phase derives for the current task (one channel: fewer checkpoint rows)."""
+
+    phase: str
+    progress: float
+    balance: float  # balance score of the state's loads
+    severity: str
+    weights: list[float]  # strategic success, balance weights for this phase
+    feasible: list[int]  # robots whose choice keeps the cap satisfiable
+    guided_robot: int | None
+
+
+class LTAAState(TypedDict, total=False):
+    task_index: int  # the task being decided; == n_tasks when the run is done
+    done: bool  # set by store_and_route after the last task (the end router reads only this)
+    loads: list[int]  # per robot, before the current decision until update_workload
+    view: TaskView
+    attempt: int  # 1-based attempt of the current task; 0 between tasks
+    tier: int  # retry tier of the current attempt
+    accepted: bool
+    fallback: bool
+    robot: int | None  # the robot chosen for the current task (accepted or fallback)
+    decision: dict[str, Any] | None  # finalize -> store_and_route scratch, then cleared
+
+
+@dataclass
+class GraphContext:
+    """Run-scoped inputs passed as LangGraph runtime context (never checkpointed)."""
+
+    problem: Problem
+    reasoner: Reasoner
+    recorder: Recorder
+    quality_threshold: float = DEFAULT_QUALITY_THRESHOLD
+    max_retries: int = DEFAULT_MAX_RETRIES
+    guidance: Guidance | None = None
+
+    @property
+    def max_attempts(self) -> int:
+        return 1 + self.max_retries
+
+
+def initial_state(problem: Problem) -> dict[str, Any]:
+    loads = [0] * problem.instance.n_robots
+    return {
+        "task_index": 0,
+        "done": False,
+        "loads": loads,
+        "view": task_view(problem, 0, loads, None),
+        "attempt": 0,
+        "tier": 0,
+        "accepted": False,
+        "fallback": False,
+        "robot": None,
+        "decision": None,
+    }
+
+
+def task_view(
+    problem: Problem, task_index: int, loads: Sequence[int], guided_robot: int | None
+) -> TaskView:
+    inst = problem.instance
+    n, target = inst.n_tasks, inst.target_load
+    phase = detect_phase(task_index, n)
+    weights = strategic_weights(problem.mode, phase)
+    remaining_after = max(0, n - task_index - 1)
+    return {
+        "phase": phase.value,
+        "progress": balance_urgency(task_index, n),
+        "balance": balance_score(loads, target),
+        "severity": severity(loads, target).value,
+        "weights": [weights.success, weights.balance],
+        "feasible": problem.cap.feasible_robots(loads, remaining_after),
+        "guided_robot": guided_robot,
+    }
