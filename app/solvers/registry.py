@@ -14,6 +14,7 @@ _SOLVERS: dict[str, str] = {
     "optimal": "app.solvers.optimal:OptimalSolver",
     "q_learning": "app.solvers.q_learning:QLearningSolver",
     "dqn": "app.solvers.dqn:DQNSolver",
+    "ltaa": "app.solvers.ltaa:LTAASolver",
 }
 
 

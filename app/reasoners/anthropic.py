@@ -1,0 +1,87 @@
+"""Claude through the official `anthropic` SDK.
+
+The SDK is the transport layer: it retries timeouts, 429 and 5xx itself, with backoff
+and `retry-after`. Only what it finally gives up on reaches the graph, as ReasonerError,
+which the graph counts as a failed attempt (validation retries are a separate budget).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import anthropic
+
+from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
+
+DEFAULT_MODEL = "claude-sonnet-4-5"
+DEFAULT_TEMPERATURE = 0.1
+DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
+DEFAULT_TIMEOUT_S = 60.0
+DEFAULT_TRANSPORT_RETRIES = 3
+# Statuses worth another try later (after the SDK's own retries): the rest are our fault.
+_TRANSIENT_STATUSES = {408, 409, 429}
+
+
+def _transient(exc: anthropic.APIStatusError) -> bool:
+    return exc.status_code in _TRANSIENT_STATUSES or exc.status_code >= 500
+
+
+class AnthropicReasoner:
+    name = "anthropic"
+
+    def __init__(
+        self,
+        *,
+        api_key: str,
+        model: str = DEFAULT_MODEL,
+        temperature: float = DEFAULT_TEMPERATURE,
+        max_tokens: int = DEFAULT_MAX_TOKENS,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        max_retries: int = DEFAULT_TRANSPORT_RETRIES,
+        base_url: str | None = None,
+    ) -> None:
+        self.model = model
+        self.temperature = temperature
+        self.max_tokens = max_tokens
+        self.max_retries = max_retries
+        self._client = anthropic.Anthropic(
+            api_key=api_key, base_url=base_url, timeout=timeout, max_retries=max_retries
+        )
+
+    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+        started = time.perf_counter()
+        try:
+            raw = self._client.messages.with_raw_response.create(
+                model=self.model,
+                max_tokens=self.max_tokens,
+                temperature=self.temperature,
+                system=system,
+                messages=[{"role": "user", "content": user}],
+            )
+            message = raw.parse()
+        except anthropic.APIConnectionError as exc:  # includes APITimeoutError
+            raise ReasonerError(
+                f"{type(exc).__name__} after {self.max_retries} transport retries: {exc}"
+            ) from exc
+        except anthropic.APIStatusError as exc:
+            if not _transient(exc):
+                raise
+            raise ReasonerError(
+                f"HTTP {exc.status_code} after {self.max_retries} transport retries: {exc}"
+            ) from exc
+        latency_ms = (time.perf_counter() - started) * 1000.0
+        text = "".join(getattr(block, "text", "") for block in message.content)
+        extra: dict[str, Any] = {"stop_reason": message.stop_reason, "message_id": message.id}
+        return ReasonerReply(
+            text=text,
+            input_tokens=message.usage.input_tokens,
+            output_tokens=message.usage.output_tokens,
+            latency_ms=latency_ms,
+            model=message.model or self.model,
+            transport_retries=raw.retries_taken,
+            extra=extra,
+        )
+
+    def close(self) -> None:
+        self._client.close()

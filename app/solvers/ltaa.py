@@ -1,0 +1,114 @@
+"""The `ltaa` entry of POST /allocate: the LTAA graph run synchronously, in memory.
+
+No durable run record: an InMemorySaver and the in-memory recorder live for one solve.
+Durable, resumable runs are POST /runs (app.runs).
+"""
+
+from __future__ import annotations
+
+import statistics
+import uuid
+from typing import Any
+
+from langgraph.checkpoint.memory import InMemorySaver
+from pydantic import Field, SecretStr
+
+from app.domain.errors import DomainError
+from app.domain.problem import Problem
+from app.graph.builder import build_graph
+from app.graph.memory_recorder import MemoryRecorder
+from app.graph.runner import run_graph
+from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
+from app.graph.usage import usage_from_attempts
+from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
+from app.reasoners.factory import make_reasoner
+from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions, Usage
+
+
+class LTAAOptions(SolverOptions):
+    reasoner: str = "rules"
+    quality_threshold: float = Field(DEFAULT_QUALITY_THRESHOLD, ge=0.0, le=1.0)
+    max_retries: int = Field(DEFAULT_MAX_RETRIES, ge=0, le=10)
+    model: str | None = None
+    temperature: float | None = Field(None, ge=0.0, le=1.0)
+    api_key: SecretStr | None = None
+    base_url: str | None = None
+    timeout: float | None = Field(None, gt=0.0)
+
+
+def _settings() -> Any:
+    # Read at solve time (not import): LTAA_* / ANTHROPIC_* variables may change in tests.
+    from app.config import get_settings
+
+    return get_settings()
+
+
+class LTAASolver(Solver):
+    info = SolverInfo(
+        name="ltaa",
+        description="The LTAA graph (phase detection, reasoning, 8-criterion validation, tiered "
+        "retries, rules fallback), run synchronously; reasoner 'rules' (default) or "
+        "'anthropic'.",
+        exact=False,
+        limits="any size within the request limits; 'anthropic' makes 1-4 API calls per task",
+    )
+    Options = LTAAOptions
+
+    def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        opts: LTAAOptions = options
+        try:
+            reasoner = make_reasoner(
+                opts.reasoner,
+                settings=_settings() if opts.reasoner != "rules" else None,
+                model=opts.model,
+                temperature=opts.temperature,
+                api_key=opts.api_key,
+                base_url=opts.base_url,
+                timeout=opts.timeout,
+            )
+        except DomainError as exc:
+            raise DomainError("options.reasoner", exc.message, code=exc.code) from None
+        recorder = MemoryRecorder()
+        context = GraphContext(
+            problem=problem,
+            reasoner=reasoner,
+            recorder=recorder,
+            quality_threshold=opts.quality_threshold,
+            max_retries=opts.max_retries,
+        )
+        try:
+            run_graph(build_graph(InMemorySaver()), context, uuid.uuid4().hex, resume=False)
+        finally:
+            close = getattr(reasoner, "close", None)
+            if callable(close):
+                close()
+        decisions = recorder.decisions()
+        if [d.task_index for d in decisions] != list(range(problem.instance.n_tasks)):
+            raise RuntimeError(
+                f"the LTAA graph ended with {len(decisions)} of {problem.instance.n_tasks} "
+                "decisions"
+            )
+        used = usage_from_attempts(recorder.attempts())
+        return Solution(
+            [d.robot for d in decisions],
+            usage=Usage(used.llm_calls, used.input_tokens, used.output_tokens),
+            details={
+                "reasoner": reasoner.name,
+                "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),
+                "fallbacks": sum(d.fallback for d in decisions),
+                "retries": sum(d.attempts - 1 for d in decisions),
+                "transport_retries": used.transport_retries,
+                "decisions": [
+                    {
+                        "task_index": d.task_index,
+                        "robot": d.robot_name,
+                        "phase": d.phase,
+                        "quality": d.quality,
+                        "attempts": d.attempts,
+                        "fallback": d.fallback,
+                        "confidence": d.confidence,
+                    }
+                    for d in decisions
+                ],
+            },
+        )
