@@ -3,6 +3,12 @@
 The SDK is the transport layer: it retries timeouts, 429 and 5xx itself, with backoff
 and `retry-after`. Only what it finally gives up on reaches the graph, as ReasonerError,
 which the graph counts as a failed attempt (validation retries are a separate budget).
+
+Temperature: the pinned SDK (2.x) sends `anthropic-version: 2026-10-21` and no longer has a
+`temperature` argument; that API version rejects sampling parameters with HTTP 400. The
+SPEC asks for 0.1, so a set temperature is sent in the body (`extra_body`) on the API
+version that accepts it, 2023-06-01. `temperature=None` sends no sampling parameter and
+keeps the SDK's own API version (for models that refuse temperature altogether).
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ DEFAULT_TEMPERATURE = 0.1
 DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
 DEFAULT_TIMEOUT_S = 60.0
 DEFAULT_TRANSPORT_RETRIES = 3
+SAMPLING_API_VERSION = "2023-06-01"  # the last API version accepting `temperature`
 # Statuses worth another try later (after the SDK's own retries): the rest are our fault.
 _TRANSIENT_STATUSES = {408, 409, 429}
 
@@ -35,7 +42,7 @@ class AnthropicReasoner:
         *,
         api_key: str,
         model: str = DEFAULT_MODEL,
-        temperature: float = DEFAULT_TEMPERATURE,
+        temperature: float | None = DEFAULT_TEMPERATURE,
         max_tokens: int = DEFAULT_MAX_TOKENS,
         timeout: float = DEFAULT_TIMEOUT_S,
         max_retries: int = DEFAULT_TRANSPORT_RETRIES,
@@ -50,14 +57,20 @@ class AnthropicReasoner:
         )
 
     def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+        sampling: dict[str, Any] = {}
+        if self.temperature is not None:
+            sampling = {
+                "extra_body": {"temperature": self.temperature},
+                "extra_headers": {"anthropic-version": SAMPLING_API_VERSION},
+            }
         started = time.perf_counter()
         try:
             raw = self._client.messages.with_raw_response.create(
                 model=self.model,
                 max_tokens=self.max_tokens,
-                temperature=self.temperature,
                 system=system,
                 messages=[{"role": "user", "content": user}],
+                **sampling,
             )
             message = raw.parse()
         except anthropic.APIConnectionError as exc:  # includes APITimeoutError
@@ -72,7 +85,11 @@ class AnthropicReasoner:
             ) from exc
         latency_ms = (time.perf_counter() - started) * 1000.0
         text = "".join(getattr(block, "text", "") for block in message.content)
-        extra: dict[str, Any] = {"stop_reason": message.stop_reason, "message_id": message.id}
+        extra: dict[str, Any] = {
+            "stop_reason": message.stop_reason,
+            "message_id": message.id,
+            "temperature": self.temperature,
+        }
         return ReasonerReply(
             text=text,
             input_tokens=message.usage.input_tokens,

@@ -1,0 +1,336 @@
+"""A fake Anthropic Messages API on 127.0.0.1, for driving the real SDK without the network.
+
+Serves POST /v1/messages from a scripted queue of replies (answers, HTTP errors with
+`retry-after`, delayed replies that trip the client timeout); when the queue is empty it
+falls back to a default responder (by default: a good answer computed from the prompt, so
+end-to-end runs of any length work unscripted). Every request and every delivered reply
+is recorded, with the token counts it reported.
+
+    with FakeMessagesAPI() as api:
+        api.script(Reply.error(429), Reply.answer("**Decision**: ..."))
+        client = anthropic.Anthropic(api_key="test", base_url=api.base_url)
+
+Run standalone for manual or subprocess use:  python -m tests.fakes.fake_messages_api --port 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import re
+import select
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+from app.domain.modes import Mode, strategic_weights
+from app.domain.phases import Phase
+from app.reasoners.base import DecisionContext
+from app.reasoners.rules import compose_answer
+
+Responder = Callable[[dict[str, Any]], "Reply"]
+
+_ERROR_TYPES = {
+    400: "invalid_request_error",
+    401: "authentication_error",
+    404: "not_found_error",
+    429: "rate_limit_error",
+    500: "api_error",
+    529: "overloaded_error",
+}
+
+
+def estimate_tokens(text: str) -> int:
+    return max(1, len(text) // 4)
+
+
+@dataclass
+class Reply:
+    """One scripted response. `text=None` with status 200 means "answer from the prompt"."""
+
+    status: int = 200
+    text: str | None = None
+    headers: dict[str, str] = field(default_factory=dict)
+    delay_s: float = 0.0
+    input_tokens: int | None = None  # default: estimated from the request
+    output_tokens: int | None = None  # default: estimated from the text
+
+    @classmethod
+    def answer(cls, text: str, **kw: Any) -> Reply:
+        return cls(text=text, **kw)
+
+    @classmethod
+    def from_prompt(cls, **kw: Any) -> Reply:
+        """A good answer computed from the prompt (see answer_from_prompt)."""
+        return cls(text=None, **kw)
+
+    @classmethod
+    def error(cls, status: int = 429, *, retry_after: float | None = 0.05) -> Reply:
+        headers = {} if retry_after is None else {"retry-after": f"{retry_after:g}"}
+        return cls(status=status, headers=headers)
+
+    @classmethod
+    def slow(cls, delay_s: float, text: str | None = None) -> Reply:
+        """Answers only after `delay_s`: longer than the client's timeout, it is a timeout."""
+        return cls(text=text, delay_s=delay_s)
+
+
+@dataclass
+class Served:
+    status: int
+    input_tokens: int = 0
+    output_tokens: int = 0
+    delivered: bool = True  # False when the client had gone (e.g. it timed out first)
+
+
+# ---------------------------------------------------------------- prompt -> good answer
+
+_TASK = re.compile(r"^Task (\d+)/(\d+): (.*?)(?: \(([^()]*)\))?; features: (.+)$", re.M)
+_ROBOT = re.compile(
+    r"^- (.+?) \[([^\]]+)\]: S ([\d.]+)%, load (\d+) \(dev [^)]*\)(, NOT allowed)?$", re.M
+)
+_TARGET = re.compile(r"^Target load W = ([\d.]+);.*?(?:final loads in \[(\d+), (\d+)\])?", re.M)
+_PHASE = re.compile(r"^Phase: (early|middle|late)\b|the (early|middle|late) phase of", re.M)
+_MODE = re.compile(r"^Mode: (\w+),|phase of (\w+) mode", re.M)
+_GUIDED = re.compile(r"^Optimizer guidance: (.+?) lies on", re.M)
+
+
+def context_from_prompt(prompt: str) -> DecisionContext:
+    """Rebuild the decision facts from a prompt written by app.graph.prompts (any tier)."""
+    task = _TASK.search(prompt)
+    robots = _ROBOT.findall(prompt)
+    target = _TARGET.search(prompt)
+    phase_m, mode_m = _PHASE.search(prompt), _MODE.search(prompt)
+    if not (task and robots and target and phase_m and mode_m):
+        raise ValueError("not an LTAA decision prompt")
+    phase = Phase(phase_m.group(1) or phase_m.group(2))
+    mode = Mode(mode_m.group(1) or mode_m.group(2))
+    labels = tuple(r[0] for r in robots)
+    guided = _GUIDED.search(prompt)
+    return DecisionContext(
+        task_index=int(task.group(1)) - 1,
+        total_tasks=int(task.group(2)),
+        task_name=task.group(3),
+        task_type=task.group(4) or "",
+        features=tuple(f.strip() for f in task.group(5).split(",")),
+        robot_names=tuple(r[1] for r in robots),
+        robot_labels=labels,
+        success=tuple(float(r[2]) / 100 for r in robots),
+        loads=tuple(int(r[3]) for r in robots),
+        target=float(target.group(1)),
+        feasible=tuple(i for i, r in enumerate(robots) if not r[4]),
+        phase=phase,
+        mode=mode,
+        weights=strategic_weights(mode, phase),
+        guided_robot=labels.index(guided.group(1)) if guided else None,
+    )
+
+
+def answer_from_prompt(prompt: str) -> str:
+    """The answer the rules reasoner would give to the decision this prompt describes."""
+    return compose_answer(context_from_prompt(prompt))
+
+
+def prompt_of(request: dict[str, Any]) -> str:
+    content = request["messages"][-1]["content"]
+    if isinstance(content, str):
+        return content
+    return "".join(block.get("text", "") for block in content)
+
+
+def good_responder(request: dict[str, Any]) -> Reply:
+    return Reply.answer(answer_from_prompt(prompt_of(request)))
+
+
+# ------------------------------------------------------------------------------ server
+
+
+class FakeMessagesAPI:
+    def __init__(self, *, default: Responder | None = good_responder, port: int = 0) -> None:
+        self._queue: deque[Reply | Responder] = deque()
+        self._default = default
+        self._lock = threading.Lock()
+        self._ids = itertools.count(1)
+        self.requests: list[dict[str, Any]] = []  # bodies, plus "_headers"
+        self.served: list[Served] = []
+        self._server = ThreadingHTTPServer(("127.0.0.1", port), self._handler_class())
+        self._server.daemon_threads = True
+        self._thread: threading.Thread | None = None
+
+    # -- script
+    def script(self, *replies: Reply | Responder) -> None:
+        with self._lock:
+            self._queue.extend(replies)
+
+    def pending(self) -> int:
+        with self._lock:
+            return len(self._queue)
+
+    # -- accounting
+    def tokens(self) -> tuple[int, int]:
+        """(input, output) tokens reported by delivered 200 replies."""
+        ok = [s for s in self.served if s.status == 200 and s.delivered]
+        return sum(s.input_tokens for s in ok), sum(s.output_tokens for s in ok)
+
+    def answered(self) -> int:
+        return sum(1 for s in self.served if s.status == 200 and s.delivered)
+
+    # -- lifecycle
+    @property
+    def base_url(self) -> str:
+        host, port = self._server.server_address[:2]
+        return f"http://{host}:{port}"
+
+    def start(self) -> FakeMessagesAPI:
+        self._thread = threading.Thread(
+            target=self._server.serve_forever, daemon=True, name="fake-messages-api"
+        )
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._server.shutdown()
+        self._server.server_close()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+    def __enter__(self) -> FakeMessagesAPI:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- request handling
+    def _next(self, request: dict[str, Any]) -> Reply:
+        with self._lock:
+            item = self._queue.popleft() if self._queue else None
+        if item is None:
+            if self._default is None:
+                return Reply(
+                    status=500,
+                    headers={"x-should-retry": "false"},
+                    text="fake Messages API: script exhausted",
+                )
+            return self._default(request)
+        return item(request) if callable(item) else item
+
+    def _respond(self, request: dict[str, Any]) -> tuple[Reply, int, dict[str, Any]]:
+        reply = self._next(request)
+        if reply.status != 200:
+            kind = _ERROR_TYPES.get(reply.status, "api_error")
+            body = {
+                "type": "error",
+                "error": {"type": kind, "message": reply.text or f"fake {reply.status}"},
+            }
+            return reply, reply.status, body
+        text = reply.text if reply.text is not None else answer_from_prompt(prompt_of(request))
+        prompt = (request.get("system") or "") + prompt_of(request)
+        in_tokens = (
+            reply.input_tokens if reply.input_tokens is not None else estimate_tokens(prompt)
+        )
+        out_tokens = (
+            reply.output_tokens if reply.output_tokens is not None else estimate_tokens(text)
+        )
+        body = {
+            "id": f"msg_fake_{next(self._ids):05d}",
+            "type": "message",
+            "role": "assistant",
+            "model": request.get("model", "fake-model"),
+            "content": [{"type": "text", "text": text}],
+            "stop_reason": "end_turn",
+            "stop_sequence": None,
+            "usage": {"input_tokens": in_tokens, "output_tokens": out_tokens},
+        }
+        return reply, 200, body
+
+    def _handler_class(self) -> type[BaseHTTPRequestHandler]:
+        api = self
+
+        class Handler(BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"
+
+            def log_message(self, format: str, *args: Any) -> None:  # quiet test output
+                return
+
+            def do_POST(self) -> None:
+                length = int(self.headers.get("content-length") or 0)
+                raw = self.rfile.read(length)
+                if self.path.split("?")[0] != "/v1/messages":
+                    self._send(
+                        404,
+                        {
+                            "type": "error",
+                            "error": {"type": "not_found_error", "message": self.path},
+                        },
+                        {},
+                    )
+                    return
+                request = json.loads(raw or b"{}")
+                request["_headers"] = {k.lower(): v for k, v in self.headers.items()}
+                with api._lock:
+                    api.requests.append(request)
+                reply, status, body = api._respond(request)
+                if reply.delay_s:
+                    time.sleep(reply.delay_s)
+                delivered = not self._peer_closed() and self._send(status, body, reply.headers)
+                usage = body.get("usage", {})
+                with api._lock:
+                    api.served.append(
+                        Served(
+                            status,
+                            usage.get("input_tokens", 0),
+                            usage.get("output_tokens", 0),
+                            delivered,
+                        )
+                    )
+
+            def _peer_closed(self) -> bool:
+                # A client that timed out has closed its end: the reply would go nowhere.
+                readable, _, _ = select.select([self.connection], [], [], 0)
+                if not readable:
+                    return False
+                try:
+                    return self.connection.recv(1, socket.MSG_PEEK) == b""
+                except OSError:
+                    return True
+
+            def _send(self, status: int, body: dict[str, Any], headers: dict[str, str]) -> bool:
+                data = json.dumps(body).encode()
+                try:
+                    self.send_response(status)
+                    self.send_header("content-type", "application/json")
+                    self.send_header("content-length", str(len(data)))
+                    self.send_header("request-id", f"req_fake_{time.monotonic_ns()}")
+                    for k, v in headers.items():
+                        self.send_header(k, v)
+                    self.end_headers()
+                    self.wfile.write(data)
+                    self.wfile.flush()
+                except (BrokenPipeError, ConnectionResetError):
+                    return False
+                return True
+
+        return Handler
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--port", type=int, default=0)
+    args = parser.parse_args()
+    api = FakeMessagesAPI(port=args.port).start()
+    print(api.base_url, flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        api.stop()
+
+
+if __name__ == "__main__":
+    main()
