@@ -18,7 +18,8 @@ class AttemptUsage:
 
 
 def usage_from_attempts(attempts: Iterable[AttemptRecord]) -> AttemptUsage:
-    """Replies that name a model came from an LLM; the rules reasoner's carry no model."""
+    """Replies that name a model came from an LLM. The rules reasoner's carry no model, nor
+    do calls the transport gave up on (nothing answered, nothing billed)."""
     usage = AttemptUsage()
     for record in attempts:
         reply = record.reply

@@ -20,7 +20,9 @@ import anthropic
 
 from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
 
-DEFAULT_MODEL = "claude-sonnet-4-5"
+# claude-sonnet-4-5 reaches end-of-life on 2026-11-30 (the SDK warns); 4.6 still takes
+# a temperature on API version 2023-06-01.
+DEFAULT_MODEL = "claude-sonnet-4-6"
 DEFAULT_TEMPERATURE = 0.1
 DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
 DEFAULT_TIMEOUT_S = 60.0

@@ -30,10 +30,9 @@ def reason(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
         reply = ctx.reasoner.reason(record.system_prompt, record.user_prompt, dctx)
     except ReasonerError as exc:
         # Transport gave up (after its own retries): a failed attempt, not a failed run.
+        # No model answered, so the reply names none and is not counted as an LLM call.
         reply = ReasonerReply(
-            text="",
-            model=getattr(ctx.reasoner, "model", None),
-            extra={"error": str(exc) or type(exc).__name__},
+            text="", extra={"error": str(exc) or type(exc).__name__, "reasoner": ctx.reasoner.name}
         )
     record.reply = reply
     rec.save_attempt(record)
