@@ -3,16 +3,24 @@
 from __future__ import annotations
 
 import importlib.metadata
+import logging
 import tomllib
 from collections.abc import AsyncIterator
 from contextlib import AsyncExitStack, asynccontextmanager
 from pathlib import Path
 
 from fastapi import FastAPI
+from fastapi.concurrency import run_in_threadpool
 
 from app.api.errors import BodySizeLimit, install_error_handlers
-from app.api.routes import allocate, catalog, health
+from app.api.deps import RunsContext
+from app.api.routes import allocate, catalog, health, runs
 from app.config import Settings, get_settings
+from app.runs.worker import RunWorker
+from app.store.db import make_engine, make_session_factory
+from app.store.migrate import upgrade_head
+
+log = logging.getLogger("ltaa")
 
 
 def app_version() -> str:
@@ -35,6 +43,18 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     # when a later one fails to start.
     async with AsyncExitStack() as resources:
         app.state.resources = resources
+        # Migrations before serving (idempotent; `make run` has applied them already).
+        await run_in_threadpool(upgrade_head, settings.db_url)
+        engine = make_engine(settings.db_url)
+        resources.callback(engine.dispose)
+        sessions = make_session_factory(engine)
+        worker = await run_in_threadpool(RunWorker, settings=settings, sessions=sessions)
+        # Drain on shutdown: runs stop at a node boundary and are marked interrupted.
+        resources.push_async_callback(run_in_threadpool, worker.close)
+        app.state.runs = RunsContext(sessions=sessions, worker=worker)
+        resumed = await run_in_threadpool(worker.recover)
+        if resumed:
+            log.info("resuming %d interrupted run(s): %s", len(resumed), ", ".join(resumed))
         yield
 
 
@@ -49,6 +69,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     install_error_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, catalog, allocate):
+    for module in (health, catalog, allocate, runs):
         app.include_router(module.router)
     return app

@@ -40,7 +40,7 @@ def field_loc(field: str, root: str = "body") -> list[str | int]:
 
 
 def domain_error_body(exc: DomainError) -> dict[str, Any]:
-    return error_body(field_loc(exc.field), exc.message, exc.code)
+    return error_body(field_loc(exc.field, exc.location), exc.message, exc.code)
 
 
 def validation_error_body(errors: Iterable[Any], root: Loc = ()) -> dict[str, Any]:

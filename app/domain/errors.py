@@ -7,6 +7,7 @@ class DomainError(ValueError):
     """A request that cannot be served as sent. `field` is a dotted path into the request."""
 
     status_code = 422
+    location = "body"  # which part of the HTTP request `field` points into
 
     def __init__(self, field: str, message: str, *, code: str = "invalid") -> None:
         super().__init__(f"{field}: {message}")

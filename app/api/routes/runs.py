@@ -1,0 +1,150 @@
+"""Durable LTAA runs: create, poll, audit, resume, cancel."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Query, Response, status
+
+from app.api.allocation import build_problem
+from app.api.deps import RunsDep, SettingsDep
+from app.api.run_schemas import (
+    AttemptOut,
+    DecisionOut,
+    EventOut,
+    Progress,
+    RunAssignment,
+    RunCreated,
+    RunOut,
+    RunRequest,
+    RunStatus,
+    RunSummary,
+    TraceOut,
+)
+from app.api.schemas import MetricsOut, UsageOut
+from app.runs import service
+from app.runs.spec import RunSpec
+from app.store.models import Attempt
+
+router = APIRouter(prefix="/runs", tags=["runs"])
+
+
+@router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=RunCreated)
+def create_run(body: RunRequest, runs: RunsDep, settings: SettingsDep,
+               response: Response) -> RunCreated:
+    """Start an LTAA run in the background; poll the Location for progress."""
+    problem = build_problem(body)
+    spec = RunSpec.for_instance(
+        problem.instance, mode=problem.mode.value, max_deviation=body.max_deviation,
+        seed=body.seed, reasoner=body.reasoner or settings.default_reasoner,
+        quality_threshold=body.quality_threshold, max_retries=body.max_retries,
+        model=body.model, temperature=body.temperature, guidance=body.guidance,
+    )
+    run = service.create_run(sessions=runs.sessions, worker=runs.worker, settings=settings,
+                             spec=spec)
+    response.headers["Location"] = f"/runs/{run.id}"
+    return RunCreated(id=run.id, status=run.status, location=f"/runs/{run.id}")
+
+
+@router.get("", response_model=list[RunSummary])
+def list_runs(
+    runs: RunsDep,
+    status_: Annotated[RunStatus | None, Query(alias="status")] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> list[RunSummary]:
+    """List runs, newest first, optionally only those with one status."""
+    rows = service.list_run_rows(sessions=runs.sessions, status=status_, limit=limit,
+                                 offset=offset)
+    return [RunSummary(id=r.id, status=r.status, reasoner=r.reasoner, mode=r.mode,
+                       n_tasks=r.n_tasks, n_robots=r.n_robots, resumes=r.resumes,
+                       created_at=r.created_at) for r in rows]
+
+
+def _run_out(view: service.RunView) -> RunOut:
+    run, spec = view.run, view.spec
+    instance = spec.problem.instance
+    names = [r.name for r in instance.robots]
+    return RunOut(
+        id=run.id, status=run.status, reasoner=run.reasoner, mode=run.mode,
+        max_deviation=run.max_deviation, progress=Progress(**view.progress),
+        workload=view.workload,
+        assignments=[
+            RunAssignment(task_index=d.task_index, task_id=instance.tasks[d.task_index].id,
+                          task_name=d.task_name, robot=names[d.robot],
+                          success=d.expected_success, fallback=d.fallback)
+            for d in view.decisions
+        ],
+        metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
+        usage=UsageOut(**vars(view.usage)), resumes=run.resumes, error=run.error,
+        created_at=run.created_at, updated_at=run.updated_at, finished_at=run.finished_at,
+    )
+
+
+@router.get("/{run_id}", response_model=RunOut)
+def get_run(run_id: str, runs: RunsDep) -> RunOut:
+    """A run's status, progress, workload, assignments so far, metrics and usage."""
+    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
+
+
+def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
+    return AttemptOut(
+        attempt=a.attempt, tier=a.tier, parsed=a.parsed, scores=a.scores or {},
+        quality=a.quality, accepted=a.accepted, hard_invalid=a.hard_invalid,
+        feedback=a.feedback, input_tokens=a.input_tokens, output_tokens=a.output_tokens,
+        latency_ms=a.latency_ms, transport_retries=a.transport_retries, model=a.reply_model,
+        system_prompt=a.system_prompt if prompts else None,
+        user_prompt=a.user_prompt if prompts else None,
+        reply=a.reply_text if prompts else None,
+    )
+
+
+@router.get("/{run_id}/trace", response_model=TraceOut)
+def get_trace(
+    run_id: str, runs: RunsDep,
+    include: Annotated[Literal["prompts"] | None, Query()] = None,
+) -> TraceOut:
+    """For supervisors: run events and every decision with its validated attempts."""
+    trace = service.run_trace(sessions=runs.sessions, run_id=run_id)
+    spec = RunSpec.from_json(trace.run.request)
+    instance = spec.problem.instance
+    names = [r.name for r in instance.robots]
+    prompts = include == "prompts"
+    return TraceOut(
+        id=trace.run.id, status=trace.run.status, reasoner=trace.run.reasoner,
+        mode=trace.run.mode, max_deviation=trace.run.max_deviation, robots=names,
+        events=[EventOut(seq=e.seq, kind=e.kind, detail=e.detail, at=e.created_at)
+                for e in trace.events],
+        decisions=[
+            DecisionOut(
+                task_index=d.task_index, task_id=instance.tasks[d.task_index].id,
+                task_name=d.task_name, robot=names[d.robot],
+                expected_success=d.expected_success, phase=d.phase,
+                loads_before=d.loads_before, loads_after=d.loads_after,
+                balance_before=d.balance_before, balance_after=d.balance_after,
+                severity_after=d.severity_after, reasoning=d.reasoning,
+                confidence=d.confidence, tradeoff=d.tradeoff, quality=d.quality,
+                fallback=d.fallback, failure_log=d.failure_log, regret=d.regret,
+                attempts=[_attempt_out(a, prompts) for a in trace.attempts.get(d.task_index, [])],
+            )
+            for d in trace.decisions
+        ],
+    )
+
+
+def _summary(run_id: str, runs: RunsDep) -> RunOut:
+    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
+
+
+@router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut)
+def resume_run(run_id: str, runs: RunsDep) -> RunOut:
+    """Resume an interrupted (or failed) run from its last checkpoint."""
+    service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
+    return _summary(run_id, runs)
+
+
+@router.post("/{run_id}/cancel", response_model=RunOut)
+def cancel_run(run_id: str, runs: RunsDep) -> RunOut:
+    """Cancel a queued or running run; a running one stops within one node."""
+    service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
+    return _summary(run_id, runs)

@@ -1,0 +1,138 @@
+"""Bodies of the /runs endpoints: the durable LTAA runs and their audit trace."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
+
+RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "cancelled"]
+
+
+class RunRequest(InstanceRequest):
+    """An LTAA run on an instance, executed durably in the background."""
+
+    reasoner: Name | None = Field(None, description="'rules' (default, offline) or 'anthropic'")
+    quality_threshold: float = Field(0.6, ge=0, le=1, strict=True, allow_inf_nan=False,
+                                     description="Accept a reply when Q >= this")
+    max_retries: int = Field(3, ge=0, le=10, strict=True,
+                             description="Validation retries (tiers 1-3) before the fallback")
+    model: Name | None = Field(None, description="Claude model (anthropic reasoner)")
+    temperature: float | None = Field(None, ge=0, le=1, strict=True, allow_inf_nan=False,
+                                      description="Sampling temperature (default 0.1)")
+    guidance: Literal["optimizer"] | None = Field(
+        None, description="'optimizer': the prompt carries the optimal completion's choice")
+    seed: int = Field(0, ge=0, le=MAX_SEED, strict=True,
+                      description="Seed of the simulated-completion metric")
+
+
+class RunCreated(BaseModel):
+    id: str
+    status: RunStatus
+    location: str
+
+
+class Progress(BaseModel):
+    allocated: int
+    total: int
+    phase: Literal["early", "middle", "late"]
+
+
+class RunAssignment(BaseModel):
+    task_index: int
+    task_id: int | str
+    task_name: str
+    robot: str
+    success: float
+    fallback: bool
+
+
+class RunOut(BaseModel):
+    id: str
+    status: RunStatus
+    reasoner: str
+    mode: str
+    max_deviation: float | None
+    progress: Progress
+    workload: dict[str, int]
+    assignments: list[RunAssignment] = Field(description="Decisions so far, in queue order")
+    metrics: MetricsOut | None = Field(description="Set once the run has completed")
+    usage: UsageOut
+    resumes: int
+    error: str | None
+    created_at: datetime
+    updated_at: datetime
+    finished_at: datetime | None
+
+
+class RunSummary(BaseModel):
+    id: str
+    status: RunStatus
+    reasoner: str
+    mode: str
+    n_tasks: int
+    n_robots: int
+    resumes: int
+    created_at: datetime
+
+
+class EventOut(BaseModel):
+    seq: int
+    kind: str
+    detail: dict[str, Any]
+    at: datetime
+
+
+class AttemptOut(BaseModel):
+    attempt: int
+    tier: int
+    parsed: dict[str, Any] | None = Field(description="The decision as parsed from the reply")
+    scores: dict[str, float] = Field(description="Per validation criterion, each in [0, 1]")
+    quality: float | None = Field(description="Q = weighted sum of the scores")
+    accepted: bool | None
+    hard_invalid: str | None
+    feedback: str | None
+    input_tokens: int
+    output_tokens: int
+    latency_ms: float
+    transport_retries: int
+    model: str | None
+    system_prompt: str | None = Field(None, description="With ?include=prompts")
+    user_prompt: str | None = Field(None, description="With ?include=prompts")
+    reply: str | None = Field(None, description="Raw reply, with ?include=prompts")
+
+
+class DecisionOut(BaseModel):
+    task_index: int
+    task_id: int | str
+    task_name: str
+    robot: str
+    expected_success: float
+    phase: str
+    loads_before: list[int]
+    loads_after: list[int]
+    balance_before: float
+    balance_after: float
+    severity_after: str
+    reasoning: str
+    confidence: str
+    tradeoff: str
+    quality: float
+    fallback: bool
+    failure_log: list[str]
+    regret: float | None
+    attempts: list[AttemptOut]
+
+
+class TraceOut(BaseModel):
+    id: str
+    status: RunStatus
+    reasoner: str
+    mode: str
+    max_deviation: float | None
+    robots: list[str]
+    events: list[EventOut]
+    decisions: list[DecisionOut]

@@ -1,0 +1,23 @@
+"""Run-level errors, shaped like domain errors so the API reports them the same way."""
+
+from __future__ import annotations
+
+from app.domain.errors import DomainError
+
+
+class RunNotFoundError(DomainError):
+    status_code = 404
+    location = "path"
+
+    def __init__(self, run_id: str) -> None:
+        super().__init__("run_id", f"no run with id '{run_id}'; list runs with GET /runs",
+                         code="not_found")
+
+
+class RunStateConflictError(DomainError):
+    status_code = 409
+    location = "path"
+
+    def __init__(self, run_id: str, status: str, action: str, hint: str) -> None:
+        super().__init__("run_id", f"run '{run_id}' is {status}; cannot {action}. {hint}",
+                         code="conflict")

@@ -1,0 +1,68 @@
+"""The durable Recorder: the graph's side effects written to the app tables."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
+from app.store import repository as repo
+from app.store.db import transaction
+
+
+class RunStop:
+    """Why a run should stop at the next node boundary: a cancel, or the process draining."""
+
+    def __init__(self) -> None:
+        self.cancelled = threading.Event()
+        self.shutting_down = threading.Event()
+
+    def requested(self) -> bool:
+        return self.cancelled.is_set() or self.shutting_down.is_set()
+
+
+class SqlRecorder:
+    def __init__(
+        self,
+        *,
+        run_id: str,
+        sessions: sessionmaker[Session],
+        stop: RunStop,
+        pause_at_task: int | None = None,
+    ) -> None:
+        self.run_id = run_id
+        self._sessions = sessions
+        self._stop = stop
+        self._pause_at = pause_at_task
+
+    def check_cancelled(self) -> None:
+        if self._stop.requested():
+            raise RunCancelled(self.run_id)
+
+    def before_reason(self, task_index: int, attempt: int) -> None:
+        # Test-only: hold the run inside the reasoning node so a SIGKILL lands exactly there.
+        if self._pause_at is not None and task_index == self._pause_at:
+            while not self._stop.requested():
+                time.sleep(0.05)
+            raise RunCancelled(self.run_id)
+
+    def save_attempt(self, record: AttemptRecord) -> None:
+        with transaction(self._sessions) as session:
+            repo.upsert_attempt(session=session, run_id=self.run_id, record=record)
+
+    def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None:
+        with self._sessions() as session:
+            row = repo.get_attempt(session=session, run_id=self.run_id, task_index=task_index,
+                                   attempt=attempt)
+            return repo.attempt_record(row) if row is not None else None
+
+    def save_decision(self, record: DecisionRecord) -> None:
+        with transaction(self._sessions) as session:
+            repo.upsert_decision(session=session, run_id=self.run_id, record=record)
+
+    def decisions(self) -> list[DecisionRecord]:
+        with self._sessions() as session:
+            return [repo.decision_record(row)
+                    for row in repo.decisions(session=session, run_id=self.run_id)]

@@ -1,0 +1,173 @@
+"""Run commands and views, as keyword-only functions the routes (and the CLI) call."""
+
+from __future__ import annotations
+
+import uuid
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.config import Settings
+from app.domain.metrics import Metrics, compute_metrics
+from app.domain.phases import detect_phase
+from app.graph.recorder import DecisionRecord
+from app.reasoners.factory import make_reasoner
+from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.spec import RunSpec
+from app.runs.worker import RunWorker
+from app.store import repository as repo
+from app.store.db import transaction
+from app.store.models import Attempt, Run, RunEvent
+
+TERMINAL = ("completed", "failed", "cancelled")
+
+
+def create_run(
+    *, sessions: sessionmaker[Session], worker: RunWorker, settings: Settings, spec: RunSpec
+) -> Run:
+    """Validate everything first, so a bad request never leaves a half-written run."""
+    problem = spec.problem  # raises DomainError for an infeasible cap, bad instance...
+    make_reasoner(spec.reasoner, settings=settings, model=spec.model,
+                  temperature=spec.temperature)  # raises for unknown reasoner / missing key
+    run_id = uuid.uuid4().hex
+    with transaction(sessions) as session:
+        run = Run(
+            id=run_id, status="queued", request=spec.to_json(), reasoner=spec.reasoner,
+            mode=spec.mode, max_deviation=problem.cap.max_deviation,
+            n_tasks=problem.instance.n_tasks, n_robots=problem.instance.n_robots, resumes=0,
+            cancel_requested=False,
+        )
+        session.add(run)
+        session.flush()
+        repo.add_event(session=session, run_id=run_id, kind="created",
+                       detail={"reasoner": spec.reasoner, "mode": spec.mode,
+                               "tasks": problem.instance.n_tasks,
+                               "robots": problem.instance.n_robots,
+                               "max_deviation": problem.cap.max_deviation})
+    worker.submit(run_id)
+    return run
+
+
+def _require(session: Session, run_id: str) -> Run:
+    run = repo.get_run(session=session, run_id=run_id)
+    if run is None:
+        raise RunNotFoundError(run_id)
+    return run
+
+
+def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: str) -> Run:
+    with transaction(sessions) as session:
+        run = _require(session, run_id)
+        if run.status == "completed":
+            raise RunStateConflictError(run_id, run.status, "resume",
+                                        "A completed run has nothing left to do.")
+        if run.status == "cancelled":
+            raise RunStateConflictError(run_id, run.status, "resume",
+                                        "Create a new run instead.")
+        if run.status in ("queued", "running") or worker.is_active(run_id):
+            raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
+        if run.status == "failed":
+            run.status = "interrupted"
+    worker.submit(run_id)
+    with sessions() as session:
+        return _require(session, run_id)
+
+
+def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: str) -> Run:
+    with transaction(sessions) as session:
+        run = _require(session, run_id)
+        if run.status in TERMINAL:
+            raise RunStateConflictError(run_id, run.status, "cancel", "It has already ended.")
+        run.cancel_requested = True
+        if not worker.is_active(run_id):
+            repo.set_status(session=session, run=run, status="cancelled")
+            repo.add_event(session=session, run_id=run_id, kind="cancelled",
+                           detail={"reason": "cancel requested before it ran"})
+    worker.cancel(run_id)
+    with sessions() as session:
+        return _require(session, run_id)
+
+
+@dataclass
+class Usage:
+    llm_calls: int = 0
+    input_tokens: int = 0
+    output_tokens: int = 0
+
+
+def usage_of(attempts: list[Attempt]) -> Usage:
+    """LLM calls are attempts answered by a model (the rules reasoner records none)."""
+    usage = Usage()
+    for a in attempts:
+        if a.reply_model is not None:
+            usage.llm_calls += 1
+        usage.input_tokens += a.input_tokens
+        usage.output_tokens += a.output_tokens
+    return usage
+
+
+@dataclass
+class RunView:
+    run: Run
+    spec: RunSpec
+    decisions: list[DecisionRecord]
+    usage: Usage
+    metrics: Metrics | None
+
+    @property
+    def progress(self) -> dict[str, Any]:
+        allocated = len(self.decisions)
+        return {"allocated": allocated, "total": self.run.n_tasks,
+                "phase": detect_phase(min(allocated, self.run.n_tasks), self.run.n_tasks).value}
+
+    @property
+    def workload(self) -> dict[str, int]:
+        names = [r["name"] for r in self.spec.instance_data["robots"]]
+        loads = dict.fromkeys(names, 0)
+        for d in self.decisions:
+            loads[names[d.robot]] += 1
+        return loads
+
+
+def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
+    with sessions() as session:
+        run = _require(session, run_id)
+        spec = RunSpec.from_json(run.request)
+        decisions = [repo.decision_record(d) for d in repo.decisions(session=session,
+                                                                     run_id=run_id)]
+        usage = usage_of(repo.attempts(session=session, run_id=run_id))
+    metrics = None
+    if run.status == "completed" and len(decisions) == run.n_tasks:
+        metrics = compute_metrics(spec.problem.instance, [d.robot for d in decisions],
+                                  seed=spec.seed)
+    return RunView(run=run, spec=spec, decisions=decisions, usage=usage, metrics=metrics)
+
+
+def list_run_rows(*, sessions: sessionmaker[Session], status: str | None, limit: int,
+                  offset: int) -> list[Run]:
+    with sessions() as session:
+        return repo.list_runs(session=session, status=status, limit=limit, offset=offset)
+
+
+@dataclass
+class Trace:
+    run: Run
+    events: list[RunEvent]
+    decisions: list[DecisionRecord]
+    attempts: dict[int, list[Attempt]]
+
+
+def run_trace(*, sessions: sessionmaker[Session], run_id: str) -> Trace:
+    with sessions() as session:
+        run = _require(session, run_id)
+        by_task: dict[int, list[Attempt]] = {}
+        for a in repo.attempts(session=session, run_id=run_id):
+            by_task.setdefault(a.task_index, []).append(a)
+        return Trace(
+            run=run,
+            events=repo.events(session=session, run_id=run_id),
+            decisions=[repo.decision_record(d) for d in repo.decisions(session=session,
+                                                                       run_id=run_id)],
+            attempts=by_task,
+        )

@@ -1,0 +1,45 @@
+"""What a durable run was asked to do, stored as JSON so a restart can rebuild it exactly."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from functools import cached_property
+from typing import Any
+
+from app.domain.models import Instance
+from app.domain.modes import Mode
+from app.domain.problem import Problem
+from app.domain.serialize import instance_from_dict, instance_to_dict
+
+DEFAULT_QUALITY_THRESHOLD = 0.6
+DEFAULT_MAX_RETRIES = 3
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    instance_data: dict[str, Any]
+    mode: str = Mode.BALANCED.value
+    max_deviation: float | None = None
+    seed: int = 0
+    reasoner: str = "rules"
+    quality_threshold: float = DEFAULT_QUALITY_THRESHOLD
+    max_retries: int = DEFAULT_MAX_RETRIES
+    model: str | None = None
+    temperature: float | None = None
+    guidance: str | None = None
+
+    @classmethod
+    def for_instance(cls, instance: Instance, **params: Any) -> RunSpec:
+        return cls(instance_data=instance_to_dict(instance), **params)
+
+    @cached_property
+    def problem(self) -> Problem:
+        return Problem.build(instance_from_dict(self.instance_data), Mode(self.mode),
+                             self.max_deviation)
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> RunSpec:
+        return cls(**data)

@@ -1,0 +1,206 @@
+"""Executes durable runs: one compiled graph, one checkpointer, a bounded pool of threads.
+
+Each run is an app-owned task, not tied to an HTTP request. The LangGraph SQLite
+checkpointer (durability "sync") makes the graph resumable; the app tables hold the
+record. A run found `running` at start-up belonged to a process that died: it is marked
+interrupted and, with auto-resume on, resumed from its last checkpoint.
+"""
+
+from __future__ import annotations
+
+import logging
+import sqlite3
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from langgraph.checkpoint.sqlite import SqliteSaver
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.config import Settings
+from app.graph.builder import build_graph
+from app.graph.recorder import RunCancelled
+from app.graph.runner import run_graph
+from app.graph.state import GraphContext
+from app.reasoners.factory import make_reasoner
+from app.runs.integrity import check_integrity
+from app.runs.recorder import RunStop, SqlRecorder
+from app.runs.spec import RunSpec
+from app.store import repository as repo
+from app.store.db import transaction
+
+log = logging.getLogger("ltaa.runs")
+
+
+class RunWorker:
+    def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
+        self._settings = settings
+        self._sessions = sessions
+        path = Path(settings.checkpoint_file)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # One connection for the process (SqliteSaver serialises on its own lock);
+        # a generous busy timeout instead of "database is locked" under load.
+        self._conn = sqlite3.connect(str(path), check_same_thread=False, timeout=30)
+        self.checkpointer = SqliteSaver(self._conn)
+        self.checkpointer.setup()
+        self.graph = build_graph(self.checkpointer)
+        self._pool = ThreadPoolExecutor(
+            max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
+        )
+        self._lock = threading.Lock()
+        self._stops: dict[str, RunStop] = {}
+        self._futures: dict[str, Future[None]] = {}
+        self._closing = False
+
+    # -- lifecycle ---------------------------------------------------------------------
+
+    def recover(self) -> list[str]:
+        """Start-up: mark runs orphaned by a dead process interrupted; resume or restart them."""
+        with transaction(self._sessions) as session:
+            orphans = repo.runs_with_status(session=session, statuses=["running"])
+            for run in orphans:
+                repo.set_status(session=session, run=run, status="interrupted")
+                repo.add_event(session=session, run_id=run.id, kind="interrupted",
+                               detail={"reason": "found running at start-up; the process "
+                                                 "that ran it stopped"})
+            queued = [r.id for r in repo.runs_with_status(session=session, statuses=["queued"])]
+            interrupted = [r.id for r in repo.runs_with_status(session=session,
+                                                                 statuses=["interrupted"])]
+        for run_id in queued:
+            self.submit(run_id)
+        if self._settings.auto_resume:
+            for run_id in interrupted:
+                self.submit(run_id)
+        return interrupted if self._settings.auto_resume else []
+
+    def close(self) -> None:
+        """Drain: running runs stop at their next node boundary and are marked interrupted."""
+        with self._lock:
+            self._closing = True
+            for stop in self._stops.values():
+                stop.shutting_down.set()
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._conn.close()
+
+    # -- commands ----------------------------------------------------------------------
+
+    def submit(self, run_id: str) -> None:
+        with self._lock:
+            if self._closing or run_id in self._futures:
+                return
+            stop = RunStop()
+            self._stops[run_id] = stop
+            self._futures[run_id] = self._pool.submit(self._execute, run_id, stop)
+
+    def is_active(self, run_id: str) -> bool:
+        with self._lock:
+            return run_id in self._futures
+
+    def cancel(self, run_id: str) -> None:
+        with self._lock:
+            stop = self._stops.get(run_id)
+        if stop is not None:
+            stop.cancelled.set()
+
+    def wait(self, run_id: str, timeout: float | None = None) -> None:
+        with self._lock:
+            future = self._futures.get(run_id)
+        if future is not None:
+            future.result(timeout=timeout)
+
+    # -- execution ---------------------------------------------------------------------
+
+    def _config(self, run_id: str) -> dict[str, Any]:
+        return {"configurable": {"thread_id": run_id}}
+
+    def _execute(self, run_id: str, stop: RunStop) -> None:
+        try:
+            self._run(run_id, stop)
+        except Exception:  # a bug must not kill the worker thread silently
+            log.exception("run %s crashed", run_id)
+            with transaction(self._sessions) as session:
+                run = repo.get_run(session=session, run_id=run_id)
+                if run is not None and run.status == "running":
+                    repo.set_status(session=session, run=run, status="failed",
+                                    error="internal error; see the server log")
+                    repo.add_event(session=session, run_id=run_id, kind="failed",
+                                   detail={"error": "internal error"})
+        finally:
+            with self._lock:
+                self._futures.pop(run_id, None)
+                self._stops.pop(run_id, None)
+
+    def _run(self, run_id: str, stop: RunStop) -> None:
+        checkpoint = self.checkpointer.get_tuple(self._config(run_id))
+        with transaction(self._sessions) as session:
+            run = repo.get_run(session=session, run_id=run_id)
+            if run is None or run.status not in ("queued", "interrupted"):
+                return
+            if run.cancel_requested:
+                stop.cancelled.set()
+            spec = RunSpec.from_json(run.request)
+            problem = spec.problem
+            if checkpoint is not None or run.status == "interrupted":
+                stored = [repo.decision_record(d)
+                          for d in repo.decisions(session=session, run_id=run_id)]
+                values = checkpoint.checkpoint["channel_values"] if checkpoint else None
+                report = check_integrity(decisions=stored, n_tasks=problem.instance.n_tasks,
+                                         n_robots=problem.instance.n_robots, checkpoint=values)
+                run.resumes += 1
+                repo.add_event(session=session, run_id=run_id, kind="resumed",
+                               detail={"integrity": report.as_dict(),
+                                       "from_checkpoint": checkpoint is not None})
+            else:
+                repo.add_event(session=session, run_id=run_id, kind="started",
+                               detail={"reasoner": spec.reasoner, "mode": spec.mode,
+                                       "tasks": problem.instance.n_tasks})
+            repo.set_status(session=session, run=run, status="running")
+
+        recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop,
+                               pause_at_task=self._settings.test_pause_at_task)
+        context = GraphContext(
+            problem=problem,
+            reasoner=make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
+                                   temperature=spec.temperature),
+            recorder=recorder,
+            quality_threshold=spec.quality_threshold,
+            max_retries=spec.max_retries,
+            guidance=spec.guidance,
+        )
+        try:
+            run_graph(self.graph, context, run_id, resume=checkpoint is not None)
+        except RunCancelled:
+            self._finish_stopped(run_id, stop)
+            return
+        except Exception as exc:
+            log.exception("run %s failed", run_id)
+            self._finish(run_id, "failed", {"error": f"{type(exc).__name__}: {exc}"},
+                         error=str(exc))
+            return
+        stored = recorder.decisions()
+        if [d.task_index for d in stored] != list(range(problem.instance.n_tasks)):
+            # A graph can end without routing (a raising router, LangGraph #8834):
+            # completion is judged by our own record, never by the graph returning.
+            self._finish(run_id, "failed",
+                         {"error": f"graph ended with {len(stored)} of "
+                                   f"{problem.instance.n_tasks} decisions stored"},
+                         error="graph ended early")
+            return
+        self._finish(run_id, "completed", {"decisions": len(stored)})
+
+    def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
+        if stop.cancelled.is_set():
+            self._finish(run_id, "cancelled", {"reason": "cancel requested"})
+        else:
+            self._finish(run_id, "interrupted", {"reason": "server shutting down"},
+                         event="interrupted")
+
+    def _finish(self, run_id: str, status: str, detail: dict[str, Any], *,
+                error: str | None = None, event: str | None = None) -> None:
+        with transaction(self._sessions) as session:
+            run = repo.get_run(session=session, run_id=run_id)
+            if run is None:
+                return
+            repo.set_status(session=session, run=run, status=status, error=error)
+            repo.add_event(session=session, run_id=run_id, kind=event or status, detail=detail)

@@ -1,0 +1,130 @@
+"""The /runs endpoints in-process: create, poll, trace, resume, cancel, and bad input."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.api.conftest import ClientFactory
+
+BASELINE = {"scenario": "baseline", "mode": "balanced"}
+
+
+def wait_until(client: TestClient, run_id: str, statuses: tuple[str, ...],
+               timeout: float = 60) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        state = client.get(f"/runs/{run_id}").json()
+        if state["status"] in statuses:
+            return state
+        time.sleep(0.02)
+    raise AssertionError(f"run {run_id} never reached {statuses}: {state}")
+
+
+def test_a_rules_run_completes_with_metrics_and_a_full_trace(client: TestClient) -> None:
+    created = client.post("/runs", json=BASELINE)
+    assert created.status_code == 202
+    run_id = created.json()["id"]
+    assert created.headers["location"] == f"/runs/{run_id}"
+
+    state = wait_until(client, run_id, ("completed", "failed"))
+    assert state["status"] == "completed", state
+    assert state["progress"] == {"allocated": 36, "total": 36, "phase": "late"}
+    assert sum(state["workload"].values()) == 36
+    assert all(8 <= load <= 16 for load in state["workload"].values())
+    assert len(state["assignments"]) == 36
+    assert state["metrics"]["workload"] == state["workload"]
+    assert state["usage"] == {"llm_calls": 0, "input_tokens": 0, "output_tokens": 0}
+    assert state["resumes"] == 0
+
+    trace = client.get(f"/runs/{run_id}/trace").json()
+    assert [d["task_index"] for d in trace["decisions"]] == list(range(36))
+    kinds = [e["kind"] for e in trace["events"]]
+    assert kinds == ["created", "started", "completed"]
+    first = trace["decisions"][0]
+    assert first["phase"] == "early" and first["loads_before"] == [0, 0, 0]
+    attempt = first["attempts"][0]
+    assert attempt["accepted"] is True and attempt["quality"] >= 0.9
+    assert set(attempt["scores"]) == {
+        "explanation", "success_accuracy", "tradeoff_analysis",
+        "workload_awareness", "mode_compliance", "phase_consistency",
+        "logical_consistency", "confidence_justification"}
+    assert attempt["user_prompt"] is None and attempt["reply"] is None
+
+    with_prompts = client.get(f"/runs/{run_id}/trace", params={"include": "prompts"}).json()
+    attempt = with_prompts["decisions"][0]["attempts"][0]
+    assert "Stop" in attempt["user_prompt"] and "**Decision**" in attempt["reply"]
+
+    assert client.get("/runs", params={"status": "completed"}).json()[0]["id"] == run_id
+    assert client.get("/runs", params={"status": "failed"}).json() == []
+
+
+def test_resuming_a_completed_run_is_a_conflict(client: TestClient) -> None:
+    run_id = client.post("/runs", json=BASELINE).json()["id"]
+    wait_until(client, run_id, ("completed",))
+    for action in ("resume", "cancel"):
+        response = client.post(f"/runs/{run_id}/{action}")
+        assert response.status_code == 409
+        assert response.json()["detail"][0]["loc"] == ["path", "run_id"]
+
+
+def test_cancel_stops_a_running_run(make_client: ClientFactory) -> None:
+    client = make_client(test_pause_at_task=5)
+    run_id = client.post("/runs", json=BASELINE).json()["id"]
+    deadline = time.monotonic() + 30
+    while client.get(f"/runs/{run_id}").json()["progress"]["allocated"] < 5:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    assert client.post(f"/runs/{run_id}/cancel").status_code == 200
+    state = wait_until(client, run_id, ("cancelled",))
+    assert state["progress"]["allocated"] == 5
+    trace = client.get(f"/runs/{run_id}/trace").json()
+    assert trace["events"][-1]["kind"] == "cancelled"
+
+
+@pytest.mark.parametrize("path", ["/runs/nope", "/runs/nope/trace"])
+def test_unknown_run_is_404_naming_the_id(client: TestClient, path: str) -> None:
+    response = client.get(path)
+    assert response.status_code == 404
+    assert response.json()["detail"][0]["loc"] == ["path", "run_id"]
+
+
+@pytest.mark.parametrize("action", ["resume", "cancel"])
+def test_commands_on_an_unknown_run_are_404(client: TestClient, action: str) -> None:
+    assert client.post(f"/runs/nope/{action}").status_code == 404
+
+
+@pytest.mark.parametrize(
+    ("body", "field"),
+    [
+        ({**BASELINE, "reasoner": "oracle"}, "reasoner"),
+        ({**BASELINE, "reasoner": "anthropic"}, "reasoner"),
+        ({**BASELINE, "mode": "fastest"}, "mode"),
+        ({"scenario": "moon_base"}, "scenario"),
+        ({"tasks": [{"id": i, "features": ["heavy"]} for i in range(4)],
+          "robots": [{"name": n, "success": {"heavy": 0.5}} for n in "abc"],
+          "max_deviation": 0}, "max_deviation"),
+        ({**BASELINE, "quality_threshold": 1.5}, "quality_threshold"),
+        ({**BASELINE, "max_retries": -1}, "max_retries"),
+        ({**BASELINE, "temperature": "hot"}, "temperature"),
+        ({**BASELINE, "guidance": "oracle"}, "guidance"),
+        ({**BASELINE, "surprise": 1}, "surprise"),
+    ],
+)
+def test_bad_run_requests_are_4xx_and_write_nothing(
+    client: TestClient, body: dict[str, Any], field: str
+) -> None:
+    response = client.post("/runs", json=body)
+    assert 400 <= response.status_code < 500, response.text
+    detail = response.json()["detail"]
+    assert any(field in item["loc"] or field in item["msg"] for item in detail), detail
+    assert client.get("/runs").json() == []
+
+
+def test_status_filter_must_be_a_known_status(client: TestClient) -> None:
+    response = client.get("/runs", params={"status": "sleeping"})
+    assert response.status_code == 422
+    assert response.json()["detail"][0]["loc"] == ["query", "status"]
