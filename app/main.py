@@ -12,8 +12,8 @@ from pathlib import Path
 from fastapi import FastAPI
 from fastapi.concurrency import run_in_threadpool
 
-from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.deps import RunsContext
+from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.routes import allocate, catalog, health, runs
 from app.config import Settings, get_settings
 from app.runs.worker import RunWorker

@@ -6,7 +6,6 @@ from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Request
-
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings

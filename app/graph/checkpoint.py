@@ -30,7 +30,8 @@ class CompactSqliteSaver(SqliteSaver):
 
 
 def open_sqlite_saver(
-    path: str | Path, *, compact: bool = True, synchronous: str | None = None
+    path: str | Path, *, compact: bool = True, synchronous: str | None = None,
+    busy_timeout_s: float = 30.0,
 ) -> SqliteSaver:
     """A saver over its own connection (check_same_thread=False, as SqliteSaver requires).
 
@@ -38,7 +39,7 @@ def open_sqlite_saver(
     still loses nothing committed, a power loss may lose the last steps. setup() leaves
     SQLite's default FULL, which fsyncs twice per super-step.
     """
-    conn = sqlite3.connect(str(path), check_same_thread=False)
+    conn = sqlite3.connect(str(path), check_same_thread=False, timeout=busy_timeout_s)
     saver: SqliteSaver = CompactSqliteSaver(conn) if compact else SqliteSaver(conn)
     saver.setup()
     if synchronous is not None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import threading
 import time
 
@@ -36,6 +37,9 @@ class SqlRecorder:
         self._sessions = sessions
         self._stop = stop
         self._pause_at = pause_at_task
+        # Write-through cache: this process wrote these rows, so reads need no query.
+        # After a restart the cache starts empty and reads fall through to the table.
+        self._attempts: dict[tuple[int, int], AttemptRecord] = {}
 
     def check_cancelled(self) -> None:
         if self._stop.requested():
@@ -51,8 +55,15 @@ class SqlRecorder:
     def save_attempt(self, record: AttemptRecord) -> None:
         with transaction(self._sessions) as session:
             repo.upsert_attempt(session=session, run_id=self.run_id, record=record)
+        self._attempts[(record.task_index, record.attempt)] = copy.deepcopy(record)
+        # Only the current task's attempts are ever read back.
+        for key in [k for k in self._attempts if k[0] < record.task_index]:
+            del self._attempts[key]
 
     def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None:
+        cached = self._attempts.get((task_index, attempt))
+        if cached is not None:
+            return copy.deepcopy(cached)
         with self._sessions() as session:
             row = repo.get_attempt(session=session, run_id=self.run_id, task_index=task_index,
                                    attempt=attempt)

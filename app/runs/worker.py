@@ -9,17 +9,16 @@ interrupted and, with auto-resume on, resumed from its last checkpoint.
 from __future__ import annotations
 
 import logging
-import sqlite3
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from langgraph.checkpoint.sqlite import SqliteSaver
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
 from app.graph.builder import build_graph
+from app.graph.checkpoint import open_sqlite_saver
 from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
 from app.graph.state import GraphContext
@@ -39,11 +38,12 @@ class RunWorker:
         self._sessions = sessions
         path = Path(settings.checkpoint_file)
         path.parent.mkdir(parents=True, exist_ok=True)
-        # One connection for the process (SqliteSaver serialises on its own lock);
-        # a generous busy timeout instead of "database is locked" under load.
-        self._conn = sqlite3.connect(str(path), check_same_thread=False, timeout=30)
-        self.checkpointer = SqliteSaver(self._conn)
-        self.checkpointer.setup()
+        # One connection for the process (SqliteSaver serialises on its own lock), a
+        # generous busy timeout instead of "database is locked" under load, integer channel
+        # versions (half the bytes per checkpoint) and synchronous=NORMAL: in WAL mode a
+        # kill -9 loses nothing committed; only an OS crash could lose the last steps.
+        self.checkpointer = open_sqlite_saver(path, compact=True, synchronous="NORMAL")
+        self._conn = self.checkpointer.conn
         self.graph = build_graph(self.checkpointer)
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"

@@ -5,14 +5,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict
+from functools import cache
 from typing import Any
 
 from sqlalchemy import func, select
+from sqlalchemy.dialects.postgresql import insert as postgresql_insert
+from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
 from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
-from app.store.models import Attempt, Decision, Run, RunEvent, utcnow
+from app.store.models import Attempt, Base, Decision, Run, RunEvent, utcnow
 
 ACTIVE = ("queued", "running")
 
@@ -62,16 +65,28 @@ def attempts(*, session: Session, run_id: str) -> list[Attempt]:
                                 .order_by(Attempt.task_index, Attempt.attempt)))
 
 
+@cache
+def _upsert_statement(dialect: str, model: type[Base], keys: tuple[str, ...]) -> Any:
+    # Built once and executed with parameters, so SQLAlchemy's compiled cache is hit.
+    insert = {"sqlite": sqlite_insert, "postgresql": postgresql_insert}[dialect]
+    stmt = insert(model.__table__)
+    updates = {c.name: stmt.excluded[c.name] for c in model.__table__.columns
+               if c.name not in keys and not c.primary_key}
+    return stmt.on_conflict_do_update(index_elements=list(keys), set_=updates)
+
+
+def _upsert(session: Session, model: type[Base], values: dict[str, Any],
+            keys: tuple[str, ...]) -> None:
+    """INSERT ... ON CONFLICT (keys) DO UPDATE, in one statement (SQLite and PostgreSQL)."""
+    stmt = _upsert_statement(session.get_bind().dialect.name, model, keys)
+    session.execute(stmt, values)
+
+
 def upsert_decision(*, session: Session, run_id: str, record: DecisionRecord) -> None:
     values = asdict(record)
     values["task_id"] = str(record.task_id)
-    row = session.scalar(select(Decision).where(Decision.run_id == run_id,
-                                                Decision.task_index == record.task_index))
-    if row is None:
-        session.add(Decision(run_id=run_id, **values))
-    else:
-        for key, value in values.items():
-            setattr(row, key, value)
+    _upsert(session, Decision, {"run_id": run_id, **values, "created_at": utcnow()},
+            ("run_id", "task_index"))
 
 
 def _attempt_values(record: AttemptRecord) -> dict[str, Any]:
@@ -97,16 +112,9 @@ def _attempt_values(record: AttemptRecord) -> dict[str, Any]:
 
 
 def upsert_attempt(*, session: Session, run_id: str, record: AttemptRecord) -> None:
-    values = _attempt_values(record)
-    row = session.scalar(select(Attempt).where(Attempt.run_id == run_id,
-                                               Attempt.task_index == record.task_index,
-                                               Attempt.attempt == record.attempt))
-    if row is None:
-        session.add(Attempt(run_id=run_id, task_index=record.task_index,
-                            attempt=record.attempt, **values))
-    else:
-        for key, value in values.items():
-            setattr(row, key, value)
+    values = {"run_id": run_id, "task_index": record.task_index, "attempt": record.attempt,
+              **_attempt_values(record), "created_at": utcnow()}
+    _upsert(session, Attempt, values, ("run_id", "task_index", "attempt"))
 
 
 def attempt_record(row: Attempt) -> AttemptRecord:

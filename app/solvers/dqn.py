@@ -1,0 +1,135 @@
+"""Deep Q-Network: Stable-Baselines3 DQN trained on `AllocationEnv`, approximate and seeded.
+
+Rewards are expected success (S minus the task's best S; see `allocation_env`), not
+sampled outcomes: a network needs far fewer transitions to learn from a noise-free signal,
+and the optimum is the same. Cap-breaking robots are masked in exploration, in the TD
+target and when the trained policy acts (argmax of the Q-values over allowed robots), so
+the allocation always respects the cap.
+
+torch, SB3 and gymnasium are the optional `rl` extra: they are imported only when a DQN
+solve runs, so importing this module or listing solvers never loads torch.
+
+Reproducibility: training runs on one torch thread with SB3, torch, numpy and the action
+space seeded from `seed`, so the same seed gives the same allocation. Seeding SB3 touches
+process-wide generators (random, numpy, torch) and the torch thread count; they are
+restored afterwards, and a lock keeps two concurrent solves from interleaving on them.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+from pydantic import Field
+
+from app.domain.errors import DomainError
+from app.domain.problem import Problem
+from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
+
+INSTALL_HINT = "install the rl extra: pip install torch==2.13.0 && pip install -e '.[rl]'"
+
+# Process-wide RNG and thread state are only safe to borrow one training at a time.
+_TRAINING_LOCK = threading.Lock()
+
+
+class DQNOptions(SolverOptions):
+    timesteps: int = Field(
+        40_000, ge=100, le=1_000_000, description="environment steps of training"
+    )
+    learning_rate: float = Field(1e-3, gt=0.0, le=1.0)
+    gamma: float = Field(1.0, ge=0.0, le=1.0, description="discount; 1 suits the fixed horizon")
+    batch_size: int = Field(64, ge=1, le=4096)
+    buffer_size: int = Field(50_000, ge=100, le=1_000_000)
+    learning_starts: int = Field(1_000, ge=0)
+    target_update_interval: int = Field(500, ge=1)
+    train_freq: int = Field(4, ge=1)
+    exploration_fraction: float = Field(0.5, gt=0.0, le=1.0)
+    exploration_final_eps: float = Field(0.05, ge=0.0, le=1.0)
+    net_arch: list[int] = Field(default_factory=lambda: [128, 128], min_length=1, max_length=4)
+
+
+def _import_rl() -> tuple[ModuleType, ModuleType, ModuleType]:
+    try:
+        import torch
+
+        from app.solvers import allocation_env, masked_dqn
+    except ImportError as exc:
+        raise DomainError(
+            "solver", f"dqn needs torch, stable-baselines3 and gymnasium ({exc.name} is "
+            f"missing); {INSTALL_HINT}", code="solver_unavailable",
+        ) from None
+    return torch, allocation_env, masked_dqn
+
+
+@contextmanager
+def _borrowed_global_state(torch: ModuleType) -> Iterator[None]:
+    with _TRAINING_LOCK:
+        threads = torch.get_num_threads()
+        saved = random.getstate(), np.random.get_state(), torch.get_rng_state()
+        torch.set_num_threads(1)
+        try:
+            yield
+        finally:
+            torch.set_num_threads(threads)
+            random.setstate(saved[0])
+            np.random.set_state(saved[1])
+            torch.set_rng_state(saved[2])
+
+
+class DQNSolver(Solver):
+    info = SolverInfo(
+        name="dqn",
+        description="Deep Q-Network (Stable-Baselines3 DQN, PyTorch) over a Gymnasium "
+        "allocation environment with cap-breaking robots masked; approximate (not "
+        "guaranteed optimal), seeded and reproducible. Needs the rl extra.",
+        exact=False,
+        limits="any size within the request limits; training time grows with timesteps",
+    )
+    Options = DQNOptions
+
+    def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        opts: DQNOptions = options
+        torch, allocation_env, masked_dqn = _import_rl()
+        success = problem.instance.success
+        with _borrowed_global_state(torch):
+            env = allocation_env.AllocationEnv(success, problem.cap)
+            model = masked_dqn.MaskedDQN(
+                masked_dqn.MaskedDQNPolicy,
+                env,
+                learning_rate=opts.learning_rate,
+                gamma=opts.gamma,
+                batch_size=opts.batch_size,
+                buffer_size=min(opts.buffer_size, opts.timesteps),
+                learning_starts=opts.learning_starts,
+                target_update_interval=opts.target_update_interval,
+                train_freq=opts.train_freq,
+                exploration_fraction=opts.exploration_fraction,
+                exploration_final_eps=opts.exploration_final_eps,
+                policy_kwargs={"net_arch": list(opts.net_arch)},
+                seed=seed,
+                device="cpu",
+                verbose=0,
+            )
+            model.learn(total_timesteps=opts.timesteps)
+            assignment = _act(model, allocation_env.AllocationEnv(success, problem.cap),
+                              masked_dqn.q_values)
+        return Solution(assignment, details={"timesteps": opts.timesteps})
+
+
+def _act(model: Any, env: Any, q_values: Any) -> list[int]:
+    """Greedy rollout: argmax of the Q-values over the robots the cap still allows."""
+    obs, _ = env.reset()
+    assignment: list[int] = []
+    done = False
+    while not done:
+        allowed = env.action_masks()
+        q = np.where(allowed, q_values(model, obs), -np.inf)
+        robot = int(np.argmax(q))
+        assignment.append(robot)
+        obs, _, done, _, _ = env.step(robot)
+    return assignment
