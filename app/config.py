@@ -33,7 +33,7 @@ class Settings(BaseSettings):
     max_concurrent_runs: int = Field(4, ge=1)
     auto_resume: bool = True
     default_reasoner: str = "rules"
-    default_model: str = "claude-sonnet-4-5"
+    default_model: str = "claude-sonnet-4-6"
 
     # The Anthropic SDK's own variable is honoured so an existing key just works.
     anthropic_api_key: SecretStr | None = Field(

@@ -8,7 +8,6 @@ from typing import Any, Protocol
 from pydantic import SecretStr
 
 from app.domain.errors import DomainError
-from app.reasoners import anthropic as anthropic_reasoner
 from app.reasoners.base import Reasoner
 from app.reasoners.rules import RulesReasoner
 
@@ -69,6 +68,9 @@ def make_reasoner(
             "the offline 'rules' reasoner",
             code="missing_api_key",
         )
+
+    # Imported here: the SDK takes ~2 s to import and offline deployments never need it.
+    from app.reasoners import anthropic as anthropic_reasoner
 
     def pick(explicit: Any, setting: str, default: Any) -> Any:
         if explicit is not None:
