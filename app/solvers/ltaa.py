@@ -11,7 +11,7 @@ import uuid
 from typing import Any
 
 from langgraph.checkpoint.memory import InMemorySaver
-from pydantic import Field, SecretStr
+from pydantic import Field
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
@@ -31,9 +31,9 @@ class LTAAOptions(SolverOptions):
     max_retries: int = Field(DEFAULT_MAX_RETRIES, ge=0, le=10)
     model: str | None = None
     temperature: float | None = Field(None, ge=0.0, le=1.0)
-    api_key: SecretStr | None = None
-    base_url: str | None = None
     timeout: float | None = Field(None, gt=0.0)
+    # No api_key / base_url here: a request must not choose where the server sends its
+    # key (SSRF) nor carry secrets into logs; both come from the server's settings.
 
 
 def _settings() -> Any:
@@ -62,8 +62,6 @@ class LTAASolver(Solver):
                 settings=_settings() if opts.reasoner != "rules" else None,
                 model=opts.model,
                 temperature=opts.temperature,
-                api_key=opts.api_key,
-                base_url=opts.base_url,
                 timeout=opts.timeout,
             )
         except DomainError as exc:

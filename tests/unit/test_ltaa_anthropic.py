@@ -138,16 +138,15 @@ def test_the_fake_answers_every_prompt_tier_well() -> None:
         assert validate_text(answer_from_prompt(text), ctx).quality >= 0.9
 
 
-def test_ltaa_solver_with_anthropic_options(api: FakeMessagesAPI) -> None:
+def test_ltaa_solver_with_anthropic_options(
+    api: FakeMessagesAPI, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The key and endpoint come from the server's settings, never from the request.
+    monkeypatch.setenv("LTAA_ANTHROPIC_API_KEY", "test")
+    monkeypatch.setenv("LTAA_ANTHROPIC_BASE_URL", api.base_url)
     solution = get_solver("ltaa").solve(
         problem(n_tasks=3),
-        options={
-            "reasoner": "anthropic",
-            "api_key": "test",
-            "base_url": api.base_url,
-            "model": "claude-test",
-            "temperature": 0.2,
-        },
+        options={"reasoner": "anthropic", "model": "claude-test", "temperature": 0.2},
     )
     assert solution.usage.llm_calls == 3
     assert (solution.usage.input_tokens, solution.usage.output_tokens) == api.tokens()
