@@ -184,5 +184,40 @@ def _print_report(r: AllocateResponse, *, show_tasks: bool) -> None:
     console.print(metrics)
 
 
+@cli.command()
+def run(
+    scenario: Annotated[str, typer.Option(help="Built-in scenario")] = "baseline",
+    mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
+    reasoner: Annotated[str, typer.Option(help="'rules' (offline) or 'anthropic'")] = "rules",
+    max_deviation: Annotated[float | None, typer.Option(
+        help="Workload cap, in tasks either side of the target (default: the mode's)")] = None,
+    guidance: Annotated[str | None, typer.Option(
+        help="'optimizer' to give the reasoner the optimal completion's choice")] = None,
+) -> None:
+    """Run the LTAA graph durably in the local data directory, with a progress bar."""
+    from app.cli_run import print_summary, run_locally
+
+    console = Console()
+    try:
+        view = run_locally(get_settings(), scenario=scenario, mode=mode, reasoner=reasoner,
+                           max_deviation=max_deviation, guidance=guidance, console=console)
+    except DomainError as exc:
+        _fail(domain_error_body(exc), as_json=False)
+    print_summary(view, console)
+    if view.run.status != "completed":
+        raise typer.Exit(1)
+
+
+@cli.command()
+def bench(
+    section: Annotated[list[str] | None, typer.Argument(
+        help="Only these benchmark modules (e.g. benchmarks.solvers)")] = None,
+) -> None:
+    """Measure every method and write docs/benchmarks.md and docs/img/*.png."""
+    from benchmarks.report import main as write_report
+
+    write_report(section or None)
+
+
 def main() -> None:
     cli()

@@ -1,0 +1,86 @@
+"""`ltaa run`: a durable LTAA run in the local data directory, with a progress bar.
+
+The same run service the HTTP API uses (migrations, worker, checkpointer), so a run
+started here shows up in GET /runs of a server on the same data directory.
+"""
+
+from __future__ import annotations
+
+import time
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from app.config import Settings
+from app.domain.catalog import scenario as builtin_scenario
+from app.domain.modes import Mode
+from app.domain.problem import Problem
+from app.runs import service
+from app.runs.spec import RunSpec
+from app.runs.worker import RunWorker
+from app.store.db import make_engine, make_session_factory
+from app.store.migrate import upgrade_head
+
+
+def run_locally(
+    settings: Settings, *, scenario: str, mode: Mode, reasoner: str,
+    max_deviation: float | None, guidance: str | None, console: Console,
+) -> service.RunView:
+    problem = Problem.build(builtin_scenario(scenario).instance, mode, max_deviation)
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    upgrade_head(settings.db_url)
+    engine = make_engine(settings.db_url)
+    sessions = make_session_factory(engine)
+    worker = RunWorker(settings=settings, sessions=sessions)
+    try:
+        spec = RunSpec.for_instance(problem.instance, mode=mode.value,
+                                    max_deviation=max_deviation, reasoner=reasoner,
+                                    guidance=guidance)
+        run = service.create_run(sessions=sessions, worker=worker, settings=settings,
+                                 spec=spec)
+        columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                   TextColumn("{task.fields[phase]}"), TimeElapsedColumn())
+        with Progress(*columns, console=console) as bar:
+            task = bar.add_task(f"run {run.id[:8]}", total=problem.instance.n_tasks,
+                                phase="early")
+            while True:
+                view = service.run_view(sessions=sessions, run_id=run.id)
+                bar.update(task, completed=view.progress["allocated"],
+                           phase=view.progress["phase"])
+                if view.run.status not in ("queued", "running"):
+                    break
+                time.sleep(0.05)
+        return view
+    finally:
+        worker.close()
+        engine.dispose()
+
+
+def print_summary(view: service.RunView, console: Console) -> None:
+    table = Table(title=f"Run {view.run.id}: {view.run.status}")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    table.add_row("reasoner / mode", f"{view.run.reasoner} / {view.run.mode}")
+    table.add_row("decisions", f"{len(view.decisions)} of {view.run.n_tasks}")
+    table.add_row("workload", ", ".join(f"{k} {v}" for k, v in view.workload.items()))
+    if view.metrics is not None:
+        m = view.metrics
+        table.add_row("expected success", f"{m.expected_success:.4f}")
+        table.add_row("balance score", f"{m.balance_score:.1f} ({m.imbalance_severity})")
+        table.add_row("simulated completion",
+                      f"{m.simulated_completion.mean:.4f} "
+                      f"[{m.simulated_completion.ci95[0]:.4f}, "
+                      f"{m.simulated_completion.ci95[1]:.4f}]")
+    fallbacks = sum(d.fallback for d in view.decisions)
+    retries = sum(d.attempts - 1 for d in view.decisions)
+    table.add_row("retries / fallbacks", f"{retries} / {fallbacks}")
+    if view.decisions:
+        mean_q = sum(d.quality for d in view.decisions) / len(view.decisions)
+        table.add_row("mean validation quality Q", f"{mean_q:.3f}")
+    table.add_row("LLM calls / tokens in / out",
+                  f"{view.usage.llm_calls} / {view.usage.input_tokens} / "
+                  f"{view.usage.output_tokens}")
+    if view.run.error:
+        table.add_row("error", view.run.error)
+    console.print(table)
