@@ -37,6 +37,7 @@ def decision_context(
         weights=strategic_weights(problem.mode, phase),
         tier=tier,
         guided_robot=view["guided_robot"],
+        guided_costs=tuple(costs) if (costs := view.get("guided_costs")) is not None else None,
         task_type=task.type,
         load_bounds=bounds,
     )

@@ -91,8 +91,14 @@ def _guidance(ctx: DecisionContext) -> str:
     if ctx.guided_robot is not None:
         lines.append(
             f"Optimizer guidance: {_labels(ctx)[ctx.guided_robot]} lies on the optimal "
-            "completion; prefer it unless the rule clearly disagrees."
+            "completion of the queue; follow it, or explain in the reasoning why you depart."
         )
+        if ctx.guided_costs is not None:
+            costs = ", ".join(
+                f"{label} {'not allowed' if c is None else f'{c:.1f}'}"
+                for label, c in zip(_labels(ctx), ctx.guided_costs, strict=True)
+            )
+            lines.append(f"Success points each choice gives away over the queue: {costs}.")
     return "\n".join(lines)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, TypedDict
+from typing import Any, Protocol, TypedDict
 
 from app.domain.metrics import balance_score, severity
 from app.domain.modes import strategic_weights
@@ -22,8 +22,18 @@ from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 
 DEFAULT_MAX_RETRIES = 3
-# Optimizer guidance: (task index, loads before) -> the robot to prefer, or None.
-Guidance = Callable[[int, Sequence[int]], int | None]
+
+
+class GuidedChoice(Protocol):
+    robot: int
+    costs: tuple[float | None, ...]  # success points each robot would give away
+
+
+# Optimizer guidance: (task index, loads before) -> the robot to prefer (optionally with
+# what each alternative would cost), or None.
+Guidance = Callable[[int, Sequence[int]], "int | GuidedChoice | None"]
+# Regret: (task index, loads before, robot) -> expected success the decision gave away.
+Regret = Callable[[int, Sequence[int], int], float]
 
 
 class TaskView(TypedDict):
@@ -36,6 +46,7 @@ class TaskView(TypedDict):
     weights: list[float]  # strategic success, balance weights for this phase
     feasible: list[int]  # robots whose choice keeps the cap satisfiable
     guided_robot: int | None
+    guided_costs: list[float | None] | None  # success points each robot would give away
 
 
 class LTAAState(TypedDict, total=False):
@@ -61,6 +72,7 @@ class GraphContext:
     quality_threshold: float = DEFAULT_QUALITY_THRESHOLD
     max_retries: int = DEFAULT_MAX_RETRIES
     guidance: Guidance | None = None
+    regret: Regret | None = None
 
     @property
     def max_attempts(self) -> int:
@@ -84,7 +96,8 @@ def initial_state(problem: Problem) -> dict[str, Any]:
 
 
 def task_view(
-    problem: Problem, task_index: int, loads: Sequence[int], guided_robot: int | None
+    problem: Problem, task_index: int, loads: Sequence[int], guided_robot: int | None,
+    guided_costs: Sequence[float | None] | None = None,
 ) -> TaskView:
     inst = problem.instance
     n, target = inst.n_tasks, inst.target_load
@@ -99,4 +112,5 @@ def task_view(
         "weights": [weights.success, weights.balance],
         "feasible": problem.cap.feasible_robots(loads, remaining_after),
         "guided_robot": guided_robot,
+        "guided_costs": list(guided_costs) if guided_costs is not None else None,
     }

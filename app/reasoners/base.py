@@ -27,7 +27,9 @@ class DecisionContext:
     mode: Mode
     weights: Weights
     tier: int = 0  # 0 first try; 1-3 retry tiers
-    guided_robot: int | None = None  # optimizer guidance (issue 4), when enabled
+    guided_robot: int | None = None  # optimizer guidance, when enabled
+    # With guidance: success points each robot would give away (None: cap forbids it).
+    guided_costs: tuple[float | None, ...] | None = None
     task_type: str = ""
     load_bounds: tuple[int, int] | None = None  # final-load range the cap allows; None = no cap
 

@@ -21,11 +21,11 @@ from app.graph.builder import build_graph
 from app.graph.checkpoint import open_sqlite_saver
 from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
-from app.graph.state import GraphContext
 from app.reasoners.factory import make_reasoner
 from app.runs.integrity import check_integrity
 from app.runs.recorder import RunStop, SqlRecorder
 from app.runs.spec import RunSpec
+from app.solvers.ltaa import graph_context
 from app.store import repository as repo
 from app.store.db import transaction
 
@@ -159,8 +159,8 @@ class RunWorker:
 
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop,
                                pause_at_task=self._settings.test_pause_at_task)
-        context = GraphContext(
-            problem=problem,
+        context = graph_context(
+            problem,
             reasoner=make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
                                    temperature=spec.temperature),
             recorder=recorder,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import statistics
 import uuid
-from typing import Any
+from typing import Any, Literal
 
 from langgraph.checkpoint.memory import InMemorySaver
 from pydantic import Field
@@ -17,12 +17,15 @@ from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.graph.builder import build_graph
 from app.graph.memory_recorder import MemoryRecorder
+from app.graph.recorder import Recorder
 from app.graph.runner import run_graph
 from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
 from app.graph.usage import usage_from_attempts
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
+from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions, Usage
+from app.solvers.oracle import CompletionOracle
 
 
 class LTAAOptions(SolverOptions):
@@ -32,8 +35,23 @@ class LTAAOptions(SolverOptions):
     model: str | None = None
     temperature: float | None = Field(None, ge=0.0, le=1.0)
     timeout: float | None = Field(None, gt=0.0)
+    guidance: Literal["optimizer"] | None = None
     # No api_key / base_url here: a request must not choose where the server sends its
     # key (SSRF) nor carry secrets into logs; both come from the server's settings.
+
+
+def graph_context(
+    problem: Problem, *, reasoner: Reasoner, recorder: Recorder, quality_threshold: float,
+    max_retries: int, guidance: str | None,
+) -> GraphContext:
+    """The LTAA graph's run context, with exact regret always and guidance on request."""
+    oracle = CompletionOracle(problem)
+    return GraphContext(
+        problem=problem, reasoner=reasoner, recorder=recorder,
+        quality_threshold=quality_threshold, max_retries=max_retries,
+        guidance=oracle.guidance if guidance == "optimizer" else None,
+        regret=oracle.regret,
+    )
 
 
 def _settings() -> Any:
@@ -67,12 +85,10 @@ class LTAASolver(Solver):
         except DomainError as exc:
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
         recorder = MemoryRecorder()
-        context = GraphContext(
-            problem=problem,
-            reasoner=reasoner,
-            recorder=recorder,
-            quality_threshold=opts.quality_threshold,
-            max_retries=opts.max_retries,
+        context = graph_context(
+            problem, reasoner=reasoner, recorder=recorder,
+            quality_threshold=opts.quality_threshold, max_retries=opts.max_retries,
+            guidance=opts.guidance,
         )
         try:
             run_graph(build_graph(InMemorySaver()), context, uuid.uuid4().hex, resume=False)
@@ -96,6 +112,8 @@ class LTAASolver(Solver):
                 "fallbacks": sum(d.fallback for d in decisions),
                 "retries": sum(d.attempts - 1 for d in decisions),
                 "transport_retries": used.transport_retries,
+                "guidance": opts.guidance,
+                "regret": sum(d.regret or 0.0 for d in decisions),
                 "decisions": [
                     {
                         "task_index": d.task_index,
@@ -104,6 +122,7 @@ class LTAASolver(Solver):
                         "quality": d.quality,
                         "attempts": d.attempts,
                         "fallback": d.fallback,
+                        "regret": d.regret,
                         "confidence": d.confidence,
                     }
                     for d in decisions

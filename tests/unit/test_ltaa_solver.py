@@ -31,6 +31,7 @@ def test_registered_and_runs_the_graph_with_rules_by_default() -> None:
         "attempts",
         "fallback",
         "confidence",
+        "regret",
     }
 
 

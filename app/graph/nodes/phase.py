@@ -14,4 +14,6 @@ def detect_phase(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, 
     ctx.recorder.check_cancelled()
     t, loads = state["task_index"], state["loads"]
     guided = ctx.guidance(t, tuple(loads)) if ctx.guidance is not None else None
-    return {"view": task_view(ctx.problem, t, loads, guided)}
+    if guided is None or isinstance(guided, int):
+        return {"view": task_view(ctx.problem, t, loads, guided)}
+    return {"view": task_view(ctx.problem, t, loads, guided.robot, guided.costs)}

@@ -1,0 +1,77 @@
+"""The best expected success still reachable from a partial allocation, exactly.
+
+Used for per-decision regret (how much of the optimum a decision gave away) and for
+optimizer guidance (the optimal completion's choice for the current task, and what each
+alternative would cost). Values are sums of S over the remaining tasks, computed by the
+same min-cost flow as the `optimal` solver, so regrets telescope: summed over a run they
+equal optimal's expected success minus the run's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from app.domain.errors import InfeasibleCapError
+from app.domain.problem import Problem
+from app.solvers.optimal import best_completion
+
+
+@dataclass(frozen=True)
+class GuidedChoice:
+    robot: int
+    # Success points (sum of S x 100 over the rest of the queue) each robot would give away;
+    # None where choosing it would make the cap unsatisfiable.
+    costs: tuple[float | None, ...]
+
+
+class CompletionOracle:
+    def __init__(self, problem: Problem) -> None:
+        self._problem = problem
+        self._success = problem.instance.success
+        self._cache: dict[tuple[int, tuple[int, ...]], tuple[list[int], float]] = {}
+
+    def _best(self, task_index: int, loads: Sequence[int]) -> tuple[list[int], float] | None:
+        key = (task_index, tuple(loads))
+        if key not in self._cache:
+            try:
+                self._cache[key] = best_completion(self._success[task_index:],
+                                                   self._problem.cap, loads)
+            except InfeasibleCapError:
+                return None
+            if len(self._cache) > 4096:  # runs move forward; old states are never asked again
+                self._cache.pop(next(iter(self._cache)))
+        return self._cache[key]
+
+    def value(self, task_index: int, loads: Sequence[int]) -> float | None:
+        """Largest sum of S over tasks task_index.. reachable from `loads` within the cap."""
+        best = self._best(task_index, loads)
+        return None if best is None else best[1]
+
+    def loss(self, task_index: int, loads: Sequence[int], robot: int) -> float | None:
+        """Sum of S given away by giving task `task_index` to `robot` (None: infeasible)."""
+        before = self.value(task_index, loads)
+        after_loads = list(loads)
+        after_loads[robot] += 1
+        after = self.value(task_index + 1, after_loads)
+        if before is None or after is None:
+            return None
+        return before - (float(self._success[task_index, robot]) + after)
+
+    def regret(self, task_index: int, loads: Sequence[int], robot: int) -> float:
+        """Expected success (mean over all tasks) given away by this decision."""
+        loss = self.loss(task_index, loads, robot)
+        if loss is None:
+            raise InfeasibleCapError(f"task {task_index} to robot {robot} from loads "
+                                     f"{list(loads)} leaves no cap-respecting completion")
+        return loss / self._problem.instance.n_tasks
+
+    def guidance(self, task_index: int, loads: Sequence[int]) -> GuidedChoice | None:
+        best = self._best(task_index, loads)
+        if best is None or not best[0]:
+            return None
+        costs = []
+        for robot in range(self._problem.instance.n_robots):
+            loss = self.loss(task_index, loads, robot)
+            costs.append(None if loss is None else round(max(0.0, loss) * 100, 6))
+        return GuidedChoice(robot=best[0][0], costs=tuple(costs))
