@@ -60,6 +60,9 @@ class RunOut(BaseModel):
     workload: dict[str, int]
     assignments: list[RunAssignment] = Field(description="Decisions so far, in queue order")
     metrics: MetricsOut | None = Field(description="Set once the run has completed")
+    regret: float | None = Field(
+        description="Sum of the per-decision regrets so far: expected success given away "
+        "against the exact optimum (once completed, equals optimal's minus the run's)")
     usage: UsageOut
     resumes: int
     error: str | None

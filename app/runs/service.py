@@ -122,6 +122,13 @@ class RunView:
                 "phase": detect_phase(min(allocated, self.run.n_tasks), self.run.n_tasks).value}
 
     @property
+    def regret(self) -> float | None:
+        values = [d.regret for d in self.decisions]
+        if any(v is None for v in values):
+            return None
+        return float(sum(v for v in values if v is not None))
+
+    @property
     def workload(self) -> dict[str, int]:
         names = [r["name"] for r in self.spec.instance_data["robots"]]
         loads = dict.fromkeys(names, 0)

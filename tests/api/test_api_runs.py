@@ -62,6 +62,24 @@ def test_a_rules_run_completes_with_metrics_and_a_full_trace(client: TestClient)
     assert client.get("/runs", params={"status": "failed"}).json() == []
 
 
+def test_optimizer_guided_run_has_zero_regret_and_unguided_shows_its_gap(
+    client: TestClient,
+) -> None:
+    guided = client.post("/runs", json={**BASELINE, "mode": "aggressive_balance",
+                                        "guidance": "optimizer"}).json()["id"]
+    plain = client.post("/runs", json={**BASELINE, "mode": "aggressive_balance"}).json()["id"]
+    g = wait_until(client, guided, ("completed",))
+    p = wait_until(client, plain, ("completed",))
+    assert g["regret"] == pytest.approx(0.0, abs=1e-9)
+    assert g["metrics"]["expected_success"] == pytest.approx(0.769444, abs=1e-6)
+    gap = g["metrics"]["expected_success"] - p["metrics"]["expected_success"]
+    assert p["regret"] == pytest.approx(gap, abs=1e-9) and gap > 0.01
+    trace = client.get(f"/runs/{plain}/trace").json()
+    assert sum(d["regret"] for d in trace["decisions"]) == pytest.approx(gap, abs=1e-9)
+    prompt = client.get(f"/runs/{guided}/trace", params={"include": "prompts"}).json()
+    assert "Optimizer guidance:" in prompt["decisions"][0]["attempts"][0]["user_prompt"]
+
+
 def test_resuming_a_completed_run_is_a_conflict(client: TestClient) -> None:
     run_id = client.post("/runs", json=BASELINE).json()["id"]
     wait_until(client, run_id, ("completed",))

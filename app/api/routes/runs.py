@@ -76,7 +76,8 @@ def _run_out(view: service.RunView) -> RunOut:
             for d in view.decisions
         ],
         metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
-        usage=UsageOut(**vars(view.usage)), resumes=run.resumes, error=run.error,
+        regret=view.regret, usage=UsageOut(**vars(view.usage)), resumes=run.resumes,
+        error=run.error,
         created_at=run.created_at, updated_at=run.updated_at, finished_at=run.finished_at,
     )
 
@@ -132,19 +133,15 @@ def get_trace(
     )
 
 
-def _summary(run_id: str, runs: RunsDep) -> RunOut:
-    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
-
-
 @router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut)
 def resume_run(run_id: str, runs: RunsDep) -> RunOut:
     """Resume an interrupted (or failed) run from its last checkpoint."""
     service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
-    return _summary(run_id, runs)
+    return get_run(run_id, runs)
 
 
 @router.post("/{run_id}/cancel", response_model=RunOut)
 def cancel_run(run_id: str, runs: RunsDep) -> RunOut:
     """Cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
-    return _summary(run_id, runs)
+    return get_run(run_id, runs)
