@@ -24,8 +24,9 @@ install: $(VENV)/.installed
 migrate: install
 	$(BIN)/alembic upgrade head
 
-run: migrate
-	$(BIN)/uvicorn app.main:create_app --factory --host $(HOST) --port $(PORT)
+# scripts/serve.sh is also the Docker image's command and what the end-to-end tests start.
+run: install
+	LTAA_BIN=$(BIN)/ HOST=$(HOST) PORT=$(PORT) sh scripts/serve.sh
 
 test: install
 	$(BIN)/ruff check app tests benchmarks

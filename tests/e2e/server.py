@@ -1,5 +1,5 @@
-"""A real server for end-to-end tests: migrations applied, uvicorn in a subprocess on a free
-loopback port, exactly as the README's `make run` starts it; stoppable with SIGKILL."""
+"""A real server for end-to-end tests: scripts/serve.sh (migrations, then uvicorn) in a
+subprocess on a free loopback port, exactly as `make run` starts it; stoppable with SIGKILL."""
 
 from __future__ import annotations
 
@@ -42,13 +42,13 @@ class Server:
 
     def start(self, timeout: float = 60.0, **env: str) -> Server:
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        full_env = {**self.env, **env}
-        subprocess.run([str(BIN / "alembic"), "upgrade", "head"], cwd=ROOT, env=full_env,
-                       check=True, capture_output=True)
+        full_env = {**self.env, **env, "LTAA_BIN": f"{BIN}/", "HOST": "127.0.0.1",
+                    "PORT": str(self.port)}
         with self.log.open("ab") as log:
+            # The script `make run` and the Docker image use; it execs uvicorn, so this
+            # process is the server and SIGKILL reaches it directly.
             self.proc = subprocess.Popen(
-                [str(BIN / "uvicorn"), "app.main:create_app", "--factory",
-                 "--host", "127.0.0.1", "--port", str(self.port)],
+                ["sh", str(ROOT / "scripts" / "serve.sh")],
                 cwd=ROOT, env=full_env, stdout=log, stderr=subprocess.STDOUT,
             )
         deadline = time.monotonic() + timeout

@@ -1,0 +1,9 @@
+#!/bin/sh
+# Apply migrations, then serve. `make run` and the Docker image both start the service
+# through this script, so there is one way to start it.
+set -eu
+HOST="${HOST:-127.0.0.1}"
+PORT="${PORT:-8000}"
+BIN="${LTAA_BIN:-}"
+"${BIN}alembic" upgrade head
+exec "${BIN}uvicorn" app.main:create_app --factory --host "$HOST" --port "$PORT"
