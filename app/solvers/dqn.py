@@ -22,7 +22,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import ModuleType
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import Field
@@ -39,18 +39,25 @@ _TRAINING_LOCK = threading.Lock()
 
 class DQNOptions(SolverOptions):
     timesteps: int = Field(
-        40_000, ge=100, le=1_000_000, description="environment steps of training"
+        20_000, ge=100, le=1_000_000, description="environment steps of training"
     )
     learning_rate: float = Field(1e-3, gt=0.0, le=1.0)
     gamma: float = Field(1.0, ge=0.0, le=1.0, description="discount; 1 suits the fixed horizon")
     batch_size: int = Field(64, ge=1, le=4096)
     buffer_size: int = Field(50_000, ge=100, le=1_000_000)
-    learning_starts: int = Field(1_000, ge=0)
+    learning_starts: int = Field(
+        1_000, ge=0, description="random steps before training; at most a tenth of timesteps"
+    )
     target_update_interval: int = Field(500, ge=1)
     train_freq: int = Field(4, ge=1)
     exploration_fraction: float = Field(0.5, gt=0.0, le=1.0)
     exploration_final_eps: float = Field(0.05, ge=0.0, le=1.0)
-    net_arch: list[int] = Field(default_factory=lambda: [128, 128], min_length=1, max_length=4)
+    net_arch: list[Annotated[int, Field(ge=1, le=1024)]] = Field(
+        default_factory=lambda: [128, 128],
+        min_length=1,
+        max_length=4,
+        description="hidden layer widths of the Q-network",
+    )
 
 
 def _import_rl() -> tuple[ModuleType, ModuleType, ModuleType]:
@@ -59,9 +66,12 @@ def _import_rl() -> tuple[ModuleType, ModuleType, ModuleType]:
 
         from app.solvers import allocation_env, masked_dqn
     except ImportError as exc:
+        missing = exc.name or str(exc)
         raise DomainError(
-            "solver", f"dqn needs torch, stable-baselines3 and gymnasium ({exc.name} is "
-            f"missing); {INSTALL_HINT}", code="solver_unavailable",
+            "solver",
+            f"dqn needs torch, stable-baselines3 and gymnasium ({missing} is "
+            f"missing); {INSTALL_HINT}",
+            code="solver_unavailable",
         ) from None
     return torch, allocation_env, masked_dqn
 
@@ -105,7 +115,7 @@ class DQNSolver(Solver):
                 gamma=opts.gamma,
                 batch_size=opts.batch_size,
                 buffer_size=min(opts.buffer_size, opts.timesteps),
-                learning_starts=opts.learning_starts,
+                learning_starts=min(opts.learning_starts, opts.timesteps // 10),
                 target_update_interval=opts.target_update_interval,
                 train_freq=opts.train_freq,
                 exploration_fraction=opts.exploration_fraction,
@@ -116,8 +126,9 @@ class DQNSolver(Solver):
                 verbose=0,
             )
             model.learn(total_timesteps=opts.timesteps)
-            assignment = _act(model, allocation_env.AllocationEnv(success, problem.cap),
-                              masked_dqn.q_values)
+            assignment = _act(
+                model, allocation_env.AllocationEnv(success, problem.cap), masked_dqn.q_values
+            )
         return Solution(assignment, details={"timesteps": opts.timesteps})
 
 

@@ -78,7 +78,7 @@ def enumerate_states(problem: Problem) -> StateSpace:
         robots = cap.feasible_robots(loads, n - t - 1) if t < n else []
         row = []
         for robot in robots:
-            child = loads[:robot] + (loads[robot] + 1,) + loads[robot + 1 :]
+            child = (*loads[:robot], loads[robot] + 1, *loads[robot + 1 :])
             if child not in ids:
                 ids[child] = len(order)
                 order.append(child)
