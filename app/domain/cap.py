@@ -6,6 +6,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
+from functools import cached_property
 
 from app.domain.errors import InfeasibleCapError
 
@@ -25,14 +26,14 @@ class WorkloadCap:
     def target(self) -> float:
         return self.n_tasks / self.n_robots
 
-    @property
+    @cached_property  # read in every solver's inner loop; Fraction arithmetic is slow
     def lower(self) -> int:
         if self.max_deviation is None:
             return 0
         w = Fraction(self.n_tasks, self.n_robots)
         return max(0, math.ceil(w - _exact(self.max_deviation)))
 
-    @property
+    @cached_property
     def upper(self) -> int:
         if self.max_deviation is None:
             return self.n_tasks
