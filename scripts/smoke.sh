@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# CI smoke test against a live server, with nothing but curl (python3 only reads the JSON).
+#   BASE_URL=http://127.0.0.1:8000 SMOKE_CLIENT_KEY=... SMOKE_SUPERVISOR_KEY=... scripts/smoke.sh
+set -euo pipefail
+BASE_URL="${BASE_URL:-http://127.0.0.1:8000}"
+CLIENT=(); SUPERVISOR=()
+[ -n "${SMOKE_CLIENT_KEY:-}" ] && CLIENT=(-H "Authorization: Bearer ${SMOKE_CLIENT_KEY}")
+[ -n "${SMOKE_SUPERVISOR_KEY:-}" ] && SUPERVISOR=(-H "Authorization: Bearer ${SMOKE_SUPERVISOR_KEY}")
+TMP="$(mktemp -d)"; trap 'rm -rf "$TMP"' EXIT
+fail() { echo "smoke: FAIL: $*" >&2; exit 1; }
+
+# call METHOD PATH [BODY] [auth...] -> body in $TMP/out, status echoed
+call() {
+  local method="$1" path="$2" body="${3:-}"; shift 3 || shift $#
+  local args=(-sS -o "$TMP/out" -w '%{http_code}' -X "$method" "$@")
+  [ -n "$body" ] && args+=(-H 'content-type: application/json' --data "$body")
+  curl "${args[@]}" "$BASE_URL$path"
+}
+# check PYTHON-EXPRESSION-over-`d` MESSAGE
+check() { python3 -c "import json,sys; d=json.load(open('$TMP/out')); sys.exit(0 if ($1) else 1)" \
+          || fail "$2: $(head -c 400 "$TMP/out")"; }
+
+[ "$(call GET /health '')" = 200 ] || fail "/health"
+check 'd["status"] == "ok"' "health status"
+
+[ "$(call GET /solvers '' "${CLIENT[@]}")" = 200 ] || fail "/solvers"
+solvers=$(python3 -c "import json; print(' '.join(s['name'] for s in json.load(open('$TMP/out'))))")
+echo "smoke: solvers: $solvers"
+for solver in greedy dp optimal q_learning dqn ltaa brute_force; do
+  case " $solvers " in *" $solver "*) ;; *) fail "solver $solver not listed";; esac
+done
+
+for solver in $solvers; do
+  case "$solver" in
+    brute_force) body='{"solver":"brute_force","tasks":[{"id":1,"features":["heavy"]},{"id":2,"features":["careful"]},{"id":3,"features":["dexterous"]}],"robots":[{"name":"a","success":{"heavy":0.9,"careful":0.2,"dexterous":0.5}},{"name":"b","success":{"heavy":0.3,"careful":0.8,"dexterous":0.6}}]}' ;;
+    dqn) body='{"solver":"dqn","scenario":"baseline","options":{"timesteps":2000}}' ;;
+    q_learning) body='{"solver":"q_learning","scenario":"baseline","options":{"episodes":2000}}' ;;
+    *) body="{\"solver\":\"$solver\",\"scenario\":\"baseline\",\"mode\":\"balanced\"}" ;;
+  esac
+  code=$(call POST /allocate "$body" "${CLIENT[@]}")
+  [ "$code" = 200 ] || fail "/allocate $solver -> $code $(head -c 300 "$TMP/out")"
+  check 'len(d["assignments"]) in (3, 36) and 0 < d["metrics"]["expected_success"] <= 1' \
+        "/allocate $solver body"
+  echo "smoke: /allocate $solver ok ($(python3 -c "import json; d=json.load(open('$TMP/out')); print(round(d['metrics']['expected_success'], 4))"))"
+done
+
+code=$(call POST /allocate '{"solver":"dp","scenario":"baseline","max_deviation":-1}' "${CLIENT[@]}")
+[ "$code" = 422 ] || fail "bad input should be 422, got $code"
+check 'd["detail"][0]["loc"][-1] == "max_deviation"' "422 names the field"
+
+code=$(call POST /runs '{"scenario":"baseline","mode":"balanced","reasoner":"rules"}' "${CLIENT[@]}")
+[ "$code" = 202 ] || fail "POST /runs -> $code"
+run_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
+echo "smoke: run $run_id created"
+for _ in $(seq 1 300); do
+  [ "$(call GET "/runs/$run_id" '' "${CLIENT[@]}")" = 200 ] || fail "GET /runs/$run_id"
+  status=$(python3 -c "import json; print(json.load(open('$TMP/out'))['status'])")
+  case "$status" in completed) break;; failed|cancelled) fail "run ended $status";; esac
+  sleep 0.2
+done
+[ "$status" = completed ] || fail "run did not complete in time (status $status)"
+check 'd["progress"]["allocated"] == 36 and sum(d["workload"].values()) == 36 and d["metrics"]' \
+      "completed run"
+
+[ "$(call GET "/runs/$run_id/trace?include=prompts" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace"
+check '[x["task_index"] for x in d["decisions"]] == list(range(36))' "36 decision records"
+check 'all(x["attempts"] and x["attempts"][0]["scores"] and x["reasoning"] for x in d["decisions"])' \
+      "each decision has validated attempts and reasoning"
+check 'd["decisions"][0]["attempts"][0]["user_prompt"]' "prompts included"
+check '[e["kind"] for e in d["events"]][-1] == "completed"' "completed event"
+[ "$(call POST "/runs/$run_id/resume" '' "${SUPERVISOR[@]}")" = 409 ] || fail "resume completed run should be 409"
+echo "smoke: all checks passed"
