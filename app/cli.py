@@ -5,6 +5,7 @@ further commands (`ltaa run`, `ltaa bench`) are added with another `@cli.command
 from __future__ import annotations
 
 import json
+import os
 from collections import defaultdict
 from pathlib import Path
 from typing import Annotated, Any, NoReturn
@@ -43,6 +44,9 @@ def serve(
     """Apply database migrations, then serve the HTTP API with uvicorn."""
     import uvicorn  # only this command needs the server
 
+    if host is not None:
+        # create_app reads LTAA_HOST to refuse an exposed address without API keys.
+        os.environ["LTAA_HOST"] = host
     settings = get_settings()
     apply_migrations(settings)
     uvicorn.run("app.main:create_app", factory=True, host=host or settings.host,

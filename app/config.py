@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
-from pydantic import AliasChoices, Field, SecretStr, model_validator
+from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 DEFAULT_MAX_BODY_BYTES = 10 * 1024 * 1024  # 10,000 tasks with TEACh metadata fit comfortably
@@ -50,6 +51,27 @@ class Settings(BaseSettings):
     test_pause_at_task: int | None = Field(None, ge=0)
 
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
+
+    # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.api.auth. A SecretStr so
+    # repr(), model_dump() and validation errors never show a key.
+    api_keys: SecretStr | None = None
+    log_format: Literal["json", "text"] = "json"
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    # GET /runs/{id}/events polls the app tables at this interval (works across processes).
+    events_poll_s: float = Field(0.1, gt=0, le=10)
+    # A stream ends after this long even if the run has not; EventSource reconnects with
+    # Last-Event-ID and misses nothing. Bounds how long a graceful shutdown waits on watchers.
+    events_max_stream_s: float = Field(300.0, gt=0)
+
+    @field_validator("log_level", mode="before")
+    @classmethod
+    def _upper(cls, value: object) -> object:
+        return value.upper() if isinstance(value, str) else value
+
+    @field_validator("log_format", mode="before")
+    @classmethod
+    def _lower(cls, value: object) -> object:
+        return value.lower() if isinstance(value, str) else value
 
     @model_validator(mode="after")
     def _derive_paths(self) -> Settings:

@@ -12,10 +12,13 @@ from pathlib import Path
 from fastapi import FastAPI
 from fastapi.concurrency import run_in_threadpool
 
+from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
 from app.api.errors import BodySizeLimit, install_error_handlers
-from app.api.routes import allocate, catalog, health, runs
+from app.api.routes import allocate, catalog, events, health, metrics, runs
 from app.config import Settings, get_settings
+from app.observability.logs import configure_logging
+from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
 from app.runs.worker import RunWorker
 from app.store.db import make_engine, make_session_factory
 from app.store.migrate import upgrade_head
@@ -38,6 +41,7 @@ def app_version() -> str:
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
     settings.data_dir.mkdir(parents=True, exist_ok=True)
+    _log_access_mode(settings, app.state.keyring)
     # Long-lived resources (database engine, checkpointer, run worker) are opened here and
     # register their cleanup on the stack, so shutdown closes them in reverse order even
     # when a later one fails to start.
@@ -48,6 +52,9 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         engine = make_engine(settings.db_url)
         resources.callback(engine.dispose)
         sessions = make_session_factory(engine)
+        collector = RunTablesCollector(sessions)
+        app.state.metrics.registry.register(collector)
+        resources.callback(app.state.metrics.registry.unregister, collector)
         worker = await run_in_threadpool(RunWorker, settings=settings, sessions=sessions)
         # Drain on shutdown: runs stop at a node boundary and are marked interrupted.
         resources.push_async_callback(run_in_threadpool, worker.close)
@@ -58,8 +65,26 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         yield
 
 
+def _log_access_mode(settings: Settings, keyring: KeyRing) -> None:
+    if keyring.open:
+        log.warning("access control is off: no API keys are configured (LTAA_API_KEYS), so "
+                    "every endpoint is open to anyone who can reach %s:%s. Allowed on "
+                    "loopback only; set LTAA_API_KEYS before listening elsewhere.",
+                    settings.host, settings.port)
+    else:
+        log.info("access control on: API keys by role: %s", keyring.summary())
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or get_settings()
+    configure_logging(settings)
+    keyring = KeyRing.from_settings(settings)
+    try:
+        # Checked before anything is opened, so an exposed, keyless server never starts.
+        check_bind(settings, keyring)
+    except InsecureBindError as exc:
+        log.critical("%s", exc)  # as a log line too, for whoever reads only the logs
+        raise
     app = FastAPI(
         title="LTAA allocation service",
         summary="Phase-adaptive task allocation for heterogeneous construction robots",
@@ -67,8 +92,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     app.state.settings = settings
+    app.state.keyring = keyring
+    app.state.metrics = Metrics()
     install_error_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, catalog, allocate, runs):
+    # Outermost, so rejected bodies (413) are timed too.
+    app.add_middleware(RequestMetrics, metrics=app.state.metrics)
+    for module in (health, catalog, allocate, runs, events, metrics):
         app.include_router(module.router)
     return app

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Request
+from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.api.auth import Caller, KeyRing, Role
+from app.api.errors import ApiError
 from app.config import Settings
 from app.runs.worker import RunWorker
+
+log = logging.getLogger("ltaa.auth")
 
 
 def get_app_settings(request: Request) -> Settings:
@@ -35,3 +41,62 @@ def get_runs(request: Request) -> RunsContext:
 
 
 RunsDep = Annotated[RunsContext, Depends(get_runs)]
+
+
+# -- access control ----------------------------------------------------------------------
+# Declared as security schemes so /docs offers "Authorize"; auto_error=False because a
+# missing key is answered below, in the one error shape, and not at all when access is open.
+_bearer = HTTPBearer(auto_error=False, scheme_name="bearer",
+                     description="An API key from LTAA_API_KEYS: `Authorization: Bearer <key>`")
+_api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, scheme_name="apiKey",
+                               description="The same API key in an `X-API-Key` header")
+
+
+def _unauthenticated(loc: str, msg: str, type_: str, challenge: str) -> ApiError:
+    return ApiError(401, ["header", loc], msg, type_, headers={"WWW-Authenticate": challenge})
+
+
+def authenticate(
+    request: Request,
+    bearer: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+    header_key: Annotated[str | None, Depends(_api_key_header)],
+) -> Caller:
+    keyring: KeyRing = request.app.state.keyring
+    if keyring.open:
+        return Caller(role=Role.SUPERVISOR, anonymous=True)
+    presented, loc = (bearer.credentials, "authorization") if bearer else (header_key, "x-api-key")
+    if not presented:
+        hint = ("the Authorization header must use the Bearer scheme"
+                if request.headers.get("authorization") else "an API key is required")
+        raise _unauthenticated("authorization", f"{hint}: send 'Authorization: Bearer <key>' "
+                               "or 'X-API-Key: <key>'", "missing_api_key", "Bearer")
+    role = keyring.role_of(presented)
+    if role is None:
+        # Where and from whom, never what: the rejected value may be a real key mistyped.
+        log.warning("rejected an unknown API key on %s %s from %s", request.method,
+                    request.url.path, request.client.host if request.client else "?")
+        raise _unauthenticated(loc, "the API key is not valid", "invalid_api_key",
+                               'Bearer error="invalid_token"')
+    return Caller(role=role, anonymous=False)
+
+
+def _check_role(caller: Caller, required: Role) -> Caller:
+    if not caller.role.allows(required):
+        raise ApiError(403, ["header", "authorization"],
+                       f"this endpoint needs the {required.value} role; the API key sent "
+                       f"has the {caller.role.value} role", "insufficient_role")
+    return caller
+
+
+def require_client(caller: Annotated[Caller, Depends(authenticate)]) -> Caller:
+    return _check_role(caller, Role.CLIENT)
+
+
+def require_supervisor(caller: Annotated[Caller, Depends(authenticate)]) -> Caller:
+    return _check_role(caller, Role.SUPERVISOR)
+
+
+# Clients allocate and create and read runs; supervisors may also read traces, live events
+# and metrics, and resume or cancel runs.
+ClientDep = Annotated[Caller, Depends(require_client)]
+SupervisorDep = Annotated[Caller, Depends(require_supervisor)]

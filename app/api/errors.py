@@ -68,15 +68,18 @@ class ApiError(HTTPException):
     unchanged instead of becoming a generic 400.
     """
 
-    def __init__(self, status_code: int, loc: Loc, msg: str, type_: str) -> None:
-        super().__init__(status_code, detail=msg)
+    def __init__(self, status_code: int, loc: Loc, msg: str, type_: str,
+                 headers: dict[str, str] | None = None) -> None:
+        super().__init__(status_code, detail=msg, headers=headers)
         self.loc = list(loc)
         self.type = type_
 
 
 # FastAPI raises a bare 400 only when it cannot read the body (e.g. a 5,000-digit integer).
-_DEFAULT_LOC = {400: ["body"], 404: ["path"], 405: ["method"], 413: ["body"]}
-_DEFAULT_TYPE = {400: "body_unreadable", 404: "not_found", 405: "method_not_allowed",
+_DEFAULT_LOC = {400: ["body"], 401: ["header", "authorization"],
+                403: ["header", "authorization"], 404: ["path"], 405: ["method"], 413: ["body"]}
+_DEFAULT_TYPE = {400: "body_unreadable", 401: "not_authenticated", 403: "forbidden",
+                 404: "not_found", 405: "method_not_allowed",
                  409: "conflict", 413: "too_large"}
 
 

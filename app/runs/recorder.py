@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import copy
+import logging
 import threading
 import time
 
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
+from app.observability.logs import bind
 from app.store import repository as repo
 from app.store.db import transaction
+
+log = logging.getLogger("ltaa.runs")
 
 
 class RunStop:
@@ -46,6 +50,8 @@ class SqlRecorder:
             raise RunCancelled(self.run_id)
 
     def before_reason(self, task_index: int, attempt: int) -> None:
+        # Reasoner (and SDK) logs during this node's call name the run and task.
+        bind(run_id=self.run_id, task_index=task_index)
         # Test-only: hold the run inside the reasoning node so a SIGKILL lands exactly there.
         if self._pause_at is not None and task_index == self._pause_at:
             while not self._stop.requested():
@@ -72,6 +78,11 @@ class SqlRecorder:
     def save_decision(self, record: DecisionRecord) -> None:
         with transaction(self._sessions) as session:
             repo.upsert_decision(session=session, run_id=self.run_id, record=record)
+        log.log(logging.WARNING if record.fallback else logging.INFO,
+                "task %d -> %s (Q %.2f, %d attempt(s)%s)", record.task_index,
+                record.robot_name, record.quality, record.attempts,
+                ", rules fallback" if record.fallback else "",
+                extra={"run_id": self.run_id, "task_index": record.task_index})
 
     def decisions(self) -> list[DecisionRecord]:
         with self._sessions() as session:

@@ -8,6 +8,7 @@ from fastapi import APIRouter, Body
 from fastapi.openapi.models import Example
 
 from app.api.allocation import allocate as run_allocation
+from app.api.deps import ClientDep
 from app.api.schemas import AllocateRequest, AllocateResponse
 
 router = APIRouter(tags=["allocate"])
@@ -54,6 +55,7 @@ EXAMPLES: dict[str, Example] = {
 
 @router.post("/allocate", response_model=AllocateResponse)
 def allocate(
+    caller: ClientDep,
     body: Annotated[AllocateRequest, Body(openapi_examples=EXAMPLES)],
 ) -> AllocateResponse:
     """Allocate every task to a robot with the chosen solver, respecting the workload cap."""

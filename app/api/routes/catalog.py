@@ -7,6 +7,7 @@ import logging
 from fastapi import APIRouter
 
 from app.api.allocation import load_solver
+from app.api.deps import ClientDep
 from app.api.schemas import RobotOut, ScenarioOut, SolverOut, TaskOut
 from app.domain import catalog
 from app.domain.errors import DomainError
@@ -17,7 +18,7 @@ log = logging.getLogger(__name__)
 
 
 @router.get("/solvers", response_model=list[SolverOut])
-def list_solvers() -> list[SolverOut]:
+def list_solvers(caller: ClientDep) -> list[SolverOut]:
     """List the allocation methods usable in POST /allocate, with exactness and size limits."""
     out: list[SolverOut] = []
     for name in solver_names():
@@ -33,7 +34,7 @@ def list_solvers() -> list[SolverOut]:
 
 
 @router.get("/scenarios", response_model=list[ScenarioOut])
-def list_scenarios() -> list[ScenarioOut]:
+def list_scenarios(caller: ClientDep) -> list[ScenarioOut]:
     """List the built-in scenarios: the 36 TEACh tasks and each scenario's robot success rates."""
     return [
         ScenarioOut(

@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query, Response, status
 
 from app.api.allocation import build_problem
-from app.api.deps import RunsDep, SettingsDep
+from app.api.deps import ClientDep, RunsDep, SettingsDep, SupervisorDep
 from app.api.run_schemas import (
     AttemptOut,
     DecisionOut,
@@ -30,7 +30,7 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 
 
 @router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=RunCreated)
-def create_run(body: RunRequest, runs: RunsDep, settings: SettingsDep,
+def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: SettingsDep,
                response: Response) -> RunCreated:
     """Start an LTAA run in the background; poll the Location for progress."""
     problem = build_problem(body)
@@ -48,6 +48,7 @@ def create_run(body: RunRequest, runs: RunsDep, settings: SettingsDep,
 
 @router.get("", response_model=list[RunSummary])
 def list_runs(
+    caller: ClientDep,
     runs: RunsDep,
     status_: Annotated[RunStatus | None, Query(alias="status")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
@@ -83,7 +84,7 @@ def _run_out(view: service.RunView) -> RunOut:
 
 
 @router.get("/{run_id}", response_model=RunOut)
-def get_run(run_id: str, runs: RunsDep) -> RunOut:
+def get_run(caller: ClientDep, run_id: str, runs: RunsDep) -> RunOut:
     """A run's status, progress, workload, assignments so far, metrics and usage."""
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
 
@@ -102,7 +103,7 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
 
 @router.get("/{run_id}/trace", response_model=TraceOut)
 def get_trace(
-    run_id: str, runs: RunsDep,
+    caller: SupervisorDep, run_id: str, runs: RunsDep,
     include: Annotated[Literal["prompts"] | None, Query()] = None,
 ) -> TraceOut:
     """For supervisors: run events and every decision with its validated attempts."""
@@ -134,14 +135,14 @@ def get_trace(
 
 
 @router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut)
-def resume_run(run_id: str, runs: RunsDep) -> RunOut:
-    """Resume an interrupted (or failed) run from its last checkpoint."""
+def resume_run(caller: SupervisorDep, run_id: str, runs: RunsDep) -> RunOut:
+    """For supervisors: resume an interrupted (or failed) run from its last checkpoint."""
     service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
-    return get_run(run_id, runs)
+    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
 
 
 @router.post("/{run_id}/cancel", response_model=RunOut)
-def cancel_run(run_id: str, runs: RunsDep) -> RunOut:
-    """Cancel a queued or running run; a running one stops within one node."""
+def cancel_run(caller: SupervisorDep, run_id: str, runs: RunsDep) -> RunOut:
+    """For supervisors: cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
-    return get_run(run_id, runs)
+    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))

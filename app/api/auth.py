@@ -1,0 +1,122 @@
+"""API keys and roles: who may call what.
+
+`LTAA_API_KEYS` is a comma-separated list of `KEY:ROLE` entries, e.g.
+`LTAA_API_KEYS="k3y-for-the-site-app:client,an0ther-k3y:supervisor"`. A `client` may allocate
+and create and read runs; a `supervisor` may do everything (traces, resume, cancel, live
+events, metrics). With no keys configured the API is open, which is allowed on a loopback
+address only.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import ipaddress
+from dataclasses import dataclass
+from enum import StrEnum
+
+from app.config import Settings
+
+MIN_KEY_LENGTH = 16
+KEY_HINT = "generate one with: python -c 'import secrets; print(secrets.token_urlsafe(32))'"
+
+
+class Role(StrEnum):
+    CLIENT = "client"
+    SUPERVISOR = "supervisor"
+
+    def allows(self, required: Role) -> bool:
+        return self is Role.SUPERVISOR or required is Role.CLIENT
+
+
+@dataclass(frozen=True)
+class Caller:
+    role: Role
+    anonymous: bool  # open access (no keys configured), not an authenticated key
+
+
+class ApiKeysError(ValueError):
+    """LTAA_API_KEYS cannot be parsed. Messages never quote the setting: it holds secrets."""
+
+
+class InsecureBindError(RuntimeError):
+    """The server would listen beyond loopback with no API keys: refuse to start."""
+
+
+def _digest(key: str) -> bytes:
+    # Comparing fixed-length digests keeps compare_digest's timing independent of key length.
+    return hashlib.sha256(key.encode("utf-8")).digest()
+
+
+class KeyRing:
+    def __init__(self, keys: dict[str, Role]) -> None:
+        self._entries = [(_digest(key), role) for key, role in keys.items()]
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> KeyRing:
+        raw = settings.api_keys.get_secret_value() if settings.api_keys else ""
+        return cls(parse_api_keys(raw))
+
+    @property
+    def open(self) -> bool:
+        return not self._entries
+
+    def role_of(self, presented: str) -> Role | None:
+        """The role of a presented key, or None. Compares against every configured key (no
+        early exit), so the time taken does not reveal which key, if any, nearly matched."""
+        candidate = _digest(presented)
+        found: Role | None = None
+        for digest, role in self._entries:
+            if hmac.compare_digest(candidate, digest):
+                found = role
+        return found
+
+    def summary(self) -> str:
+        counts = {role: sum(1 for _, r in self._entries if r is role) for role in Role}
+        return ", ".join(f"{n} {role.value}" for role, n in counts.items())
+
+
+def parse_api_keys(raw: str) -> dict[str, Role]:
+    """'KEY:ROLE,KEY:ROLE' -> {KEY: ROLE}. Entries are numbered in errors, never quoted."""
+    keys: dict[str, Role] = {}
+    roles = ", ".join(r.value for r in Role)
+    for number, entry in enumerate((e.strip() for e in raw.split(",")), start=1):
+        if not entry:
+            continue
+        # The role is after the *last* colon, so a key may itself contain colons.
+        key, sep, role_name = entry.rpartition(":")
+        key = key.strip()
+        if not sep or not key:
+            raise ApiKeysError(f"LTAA_API_KEYS entry {number} is not KEY:ROLE (roles: {roles})")
+        try:
+            role = Role(role_name.strip().lower())
+        except ValueError:
+            raise ApiKeysError(
+                f"LTAA_API_KEYS entry {number} has an unknown role; use one of: {roles}"
+            ) from None
+        if len(key) < MIN_KEY_LENGTH:
+            raise ApiKeysError(f"LTAA_API_KEYS entry {number}: keys must be at least "
+                               f"{MIN_KEY_LENGTH} characters; {KEY_HINT}")
+        if key in keys:
+            raise ApiKeysError(f"LTAA_API_KEYS entry {number} repeats an earlier key")
+        keys[key] = role
+    return keys
+
+
+def is_loopback(host: str) -> bool:
+    if host.strip().lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False  # a hostname other than localhost may resolve to anything
+
+
+def check_bind(settings: Settings, keyring: KeyRing) -> None:
+    if keyring.open and not is_loopback(settings.host):
+        raise InsecureBindError(
+            f"refusing to start: the server would listen on {settings.host} (LTAA_HOST / "
+            "HOST), beyond this machine, with no API keys configured, so anyone who can reach "
+            "it could read every run and trace. Set LTAA_API_KEYS='KEY:supervisor,KEY:client' "
+            f"(README, 'Access control'; {KEY_HINT}), or listen on 127.0.0.1."
+        )
