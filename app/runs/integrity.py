@@ -66,11 +66,14 @@ def check_integrity(
             expected = [0] * n_robots
             for d in decisions[: min(cp_index, len(decisions))]:
                 expected[d.robot] += 1
-            # The checkpoint may already count the current task (after update_workload).
+            # The checkpoint may already count the current task (after update_workload),
+            # whose decision is stored only by the next node: its robot is then the
+            # checkpoint's own `robot`.
             current = decisions[cp_index] if cp_index < len(decisions) else None
+            robot = current.robot if current is not None else checkpoint.get("robot")
             counted = expected.copy()
-            if current is not None:
-                counted[current.robot] += 1
+            if isinstance(robot, int) and 0 <= robot < n_robots:
+                counted[robot] += 1
             loads_consistent = cp_loads in (expected, counted)
             if not loads_consistent:
                 problems.append(f"checkpoint loads {cp_loads} disagree with the stored "
