@@ -17,8 +17,8 @@ from app.domain.catalog import scenario as builtin_scenario
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.runs import service
+from app.runs.factory import make_worker
 from app.runs.spec import RunSpec
-from app.runs.worker import RunWorker
 from app.store.db import make_engine, make_session_factory
 from app.store.migrate import upgrade_head
 
@@ -32,7 +32,7 @@ def run_locally(
     upgrade_head(settings.db_url)
     engine = make_engine(settings.db_url)
     sessions = make_session_factory(engine)
-    worker = RunWorker(settings=settings, sessions=sessions)
+    worker = make_worker(settings=settings, sessions=sessions)
     try:
         spec = RunSpec.for_instance(problem.instance, mode=mode.value,
                                     max_deviation=max_deviation, reasoner=reasoner,

@@ -36,6 +36,18 @@ class Settings(BaseSettings):
     default_reasoner: str = "rules"
     default_model: str = "claude-sonnet-4-6"
 
+    # Scale-out (only with a postgresql:// database_url; SQLite keeps one process, no
+    # leases). A run belongs to the process holding its lease; the lease is renewed every
+    # lease_s / 3, so a process must be unresponsive for lease_s before another takes over.
+    lease_s: float = Field(30.0, gt=0, description="How long a run's lease lasts unrenewed")
+    claim_poll_s: float = Field(
+        2.0, gt=0, description="How often a process looks for queued runs and expired leases"
+    )
+    worker_name: str | None = Field(
+        None, max_length=64, description="Label of this process in leases and run events; "
+        "default hostname"
+    )
+
     # The Anthropic SDK's own variable is honoured so an existing key just works.
     anthropic_api_key: SecretStr | None = Field(
         None, validation_alias=AliasChoices("LTAA_ANTHROPIC_API_KEY", "ANTHROPIC_API_KEY")

@@ -19,7 +19,7 @@ from app.api.routes import allocate, catalog, events, health, metrics, runs
 from app.config import Settings, get_settings
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
-from app.runs.worker import RunWorker
+from app.runs.factory import make_worker
 from app.store.db import make_engine, make_session_factory
 from app.store.migrate import upgrade_head
 
@@ -55,7 +55,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         collector = RunTablesCollector(sessions)
         app.state.metrics.registry.register(collector)
         resources.callback(app.state.metrics.registry.unregister, collector)
-        worker = await run_in_threadpool(RunWorker, settings=settings, sessions=sessions)
+        worker = await run_in_threadpool(make_worker, settings=settings, sessions=sessions)
         # Drain on shutdown: runs stop at a node boundary and are marked interrupted.
         resources.push_async_callback(run_in_threadpool, worker.close)
         app.state.runs = RunsContext(sessions=sessions, worker=worker)

@@ -6,6 +6,7 @@ import copy
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -14,18 +15,28 @@ from app.observability.logs import bind
 from app.store import repository as repo
 from app.store.db import transaction
 
+# Called inside each write's transaction; raises LeaseLost when this process no longer
+# holds the run (PostgreSQL scale-out), so the write is rolled back.
+Fence = Callable[[Session], None]
 log = logging.getLogger("ltaa.runs")
 
 
+class LeaseLost(RunCancelled):
+    """Another process took this run (our lease expired): stop without writing anything."""
+
+
 class RunStop:
-    """Why a run should stop at the next node boundary: a cancel, or the process draining."""
+    """Why a run should stop at the next node boundary: a cancel, the process draining, or
+    (scale-out) the run's lease passing to another process."""
 
     def __init__(self) -> None:
         self.cancelled = threading.Event()
         self.shutting_down = threading.Event()
+        self.lease_lost = threading.Event()
 
     def requested(self) -> bool:
-        return self.cancelled.is_set() or self.shutting_down.is_set()
+        return (self.cancelled.is_set() or self.shutting_down.is_set()
+                or self.lease_lost.is_set())
 
 
 class SqlRecorder:
@@ -36,16 +47,20 @@ class SqlRecorder:
         sessions: sessionmaker[Session],
         stop: RunStop,
         pause_at_task: int | None = None,
+        fence: Fence | None = None,
     ) -> None:
         self.run_id = run_id
         self._sessions = sessions
         self._stop = stop
         self._pause_at = pause_at_task
+        self._fence = fence
         # Write-through cache: this process wrote these rows, so reads need no query.
         # After a restart the cache starts empty and reads fall through to the table.
         self._attempts: dict[tuple[int, int], AttemptRecord] = {}
 
     def check_cancelled(self) -> None:
+        if self._stop.lease_lost.is_set():
+            raise LeaseLost(self.run_id)
         if self._stop.requested():
             raise RunCancelled(self.run_id)
 
@@ -56,10 +71,12 @@ class SqlRecorder:
         if self._pause_at is not None and task_index == self._pause_at:
             while not self._stop.requested():
                 time.sleep(0.05)
-            raise RunCancelled(self.run_id)
+            self.check_cancelled()
 
     def save_attempt(self, record: AttemptRecord) -> None:
         with transaction(self._sessions) as session:
+            if self._fence is not None:
+                self._fence(session)
             repo.upsert_attempt(session=session, run_id=self.run_id, record=record)
         self._attempts[(record.task_index, record.attempt)] = copy.deepcopy(record)
         # Only the current task's attempts are ever read back.
@@ -77,6 +94,8 @@ class SqlRecorder:
 
     def save_decision(self, record: DecisionRecord) -> None:
         with transaction(self._sessions) as session:
+            if self._fence is not None:
+                self._fence(session)
             repo.upsert_decision(session=session, run_id=self.run_id, record=record)
         log.log(logging.WARNING if record.fallback else logging.INFO,
                 "task %d -> %s (Q %.2f, %d attempt(s)%s)", record.task_index,

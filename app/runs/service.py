@@ -49,8 +49,8 @@ def create_run(
     return run
 
 
-def _require(session: Session, run_id: str) -> Run:
-    run = repo.get_run(session=session, run_id=run_id)
+def _require(session: Session, run_id: str, *, lock: bool = False) -> Run:
+    run = repo.get_run(session=session, run_id=run_id, for_update=lock)
     if run is None:
         raise RunNotFoundError(run_id)
     return run
@@ -76,7 +76,8 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
 
 def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: str) -> Run:
     with transaction(sessions) as session:
-        run = _require(session, run_id)
+        # Locked: with several processes, none may claim the run while this decides.
+        run = _require(session, run_id, lock=True)
         if run.status in TERMINAL:
             raise RunStateConflictError(run_id, run.status, "cancel", "It has already ended.")
         run.cancel_requested = True

@@ -4,16 +4,22 @@ Each run is an app-owned task, not tied to an HTTP request. The LangGraph SQLite
 checkpointer (durability "sync") makes the graph resumable; the app tables hold the
 record. A run found `running` at start-up belonged to a process that died: it is marked
 interrupted and, with auto-resume on, resumed from its last checkpoint.
+
+This is the single-process worker of the embedded SQLite default. Several processes on
+one PostgreSQL database use `app.runs.leased.LeasedRunWorker`, which overrides the
+hooks marked "scale-out hook" below; `app.runs.factory.make_worker` picks one.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from langgraph.checkpoint.base import BaseCheckpointSaver
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
@@ -23,11 +29,12 @@ from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
 from app.reasoners.factory import make_reasoner
 from app.runs.integrity import check_integrity
-from app.runs.recorder import RunStop, SqlRecorder
+from app.runs.recorder import Fence, RunStop, SqlRecorder
 from app.runs.spec import RunSpec
 from app.solvers.ltaa import graph_context
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.models import Run
 
 log = logging.getLogger("ltaa.runs")
 
@@ -36,14 +43,7 @@ class RunWorker:
     def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
         self._settings = settings
         self._sessions = sessions
-        path = Path(settings.checkpoint_file)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        # One connection for the process (SqliteSaver serialises on its own lock), a
-        # generous busy timeout instead of "database is locked" under load, integer channel
-        # versions (half the bytes per checkpoint) and synchronous=NORMAL: in WAL mode a
-        # kill -9 loses nothing committed; only an OS crash could lose the last steps.
-        self.checkpointer = open_sqlite_saver(path, compact=True, synchronous="NORMAL")
-        self._conn = self.checkpointer.conn
+        self.checkpointer, self._close_checkpointer = self._open_checkpointer()
         self.graph = build_graph(self.checkpointer)
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
@@ -52,6 +52,17 @@ class RunWorker:
         self._stops: dict[str, RunStop] = {}
         self._futures: dict[str, Future[None]] = {}
         self._closing = False
+
+    def _open_checkpointer(self) -> tuple[BaseCheckpointSaver[Any], Callable[[], None]]:
+        """Scale-out hook: the saver and how to close it."""
+        path = Path(self._settings.checkpoint_file)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # One connection for the process (SqliteSaver serialises on its own lock), a
+        # generous busy timeout instead of "database is locked" under load, integer channel
+        # versions (half the bytes per checkpoint) and synchronous=NORMAL: in WAL mode a
+        # kill -9 loses nothing committed; only an OS crash could lose the last steps.
+        saver = open_sqlite_saver(path, compact=True, synchronous="NORMAL")
+        return saver, saver.conn.close
 
     # -- lifecycle ---------------------------------------------------------------------
 
@@ -81,17 +92,21 @@ class RunWorker:
             for stop in self._stops.values():
                 stop.shutting_down.set()
         self._pool.shutdown(wait=True, cancel_futures=True)
-        self._conn.close()
+        self._close_checkpointer()
 
     # -- commands ----------------------------------------------------------------------
 
     def submit(self, run_id: str) -> None:
+        self._start(run_id)
+
+    def _start(self, run_id: str) -> bool:
         with self._lock:
             if self._closing or run_id in self._futures:
-                return
+                return False
             stop = RunStop()
             self._stops[run_id] = stop
             self._futures[run_id] = self._pool.submit(self._execute, run_id, stop)
+            return True
 
     def is_active(self, run_id: str) -> bool:
         with self._lock:
@@ -114,13 +129,25 @@ class RunWorker:
     def _config(self, run_id: str) -> dict[str, Any]:
         return {"configurable": {"thread_id": run_id}}
 
+    def _owned_run(self, session: Session, run_id: str) -> Run | None:
+        """Scale-out hook: the run, if this process may write its status."""
+        return repo.get_run(session=session, run_id=run_id)
+
+    def _fence(self, run_id: str, stop: RunStop) -> Fence | None:
+        """Scale-out hook: a check made inside every recorder write."""
+        return None
+
+    def _event_detail(self) -> dict[str, Any]:
+        """Scale-out hook: added to started/resumed events (which process ran it)."""
+        return {}
+
     def _execute(self, run_id: str, stop: RunStop) -> None:
         try:
             self._run(run_id, stop)
         except Exception:  # a bug must not kill the worker thread silently
             log.exception("run %s crashed", run_id)
             with transaction(self._sessions) as session:
-                run = repo.get_run(session=session, run_id=run_id)
+                run = self._owned_run(session, run_id)
                 if run is not None and run.status == "running":
                     repo.set_status(session=session, run=run, status="failed",
                                     error="internal error; see the server log")
@@ -134,7 +161,7 @@ class RunWorker:
     def _run(self, run_id: str, stop: RunStop) -> None:
         checkpoint = self.checkpointer.get_tuple(self._config(run_id))
         with transaction(self._sessions) as session:
-            run = repo.get_run(session=session, run_id=run_id)
+            run = self._owned_run(session, run_id)
             if run is None or run.status not in ("queued", "interrupted"):
                 return
             if run.cancel_requested:
@@ -150,15 +177,18 @@ class RunWorker:
                 run.resumes += 1
                 repo.add_event(session=session, run_id=run_id, kind="resumed",
                                detail={"integrity": report.as_dict(),
-                                       "from_checkpoint": checkpoint is not None})
+                                       "from_checkpoint": checkpoint is not None,
+                                       **self._event_detail()})
             else:
                 repo.add_event(session=session, run_id=run_id, kind="started",
                                detail={"reasoner": spec.reasoner, "mode": spec.mode,
-                                       "tasks": problem.instance.n_tasks})
+                                       "tasks": problem.instance.n_tasks,
+                                       **self._event_detail()})
             repo.set_status(session=session, run=run, status="running")
 
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop,
-                               pause_at_task=self._settings.test_pause_at_task)
+                               pause_at_task=self._settings.test_pause_at_task,
+                               fence=self._fence(run_id, stop))
         context = graph_context(
             problem,
             reasoner=make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
@@ -190,6 +220,10 @@ class RunWorker:
         self._finish(run_id, "completed", {"decisions": len(stored)})
 
     def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
+        if stop.lease_lost.is_set():
+            # Another process owns the run now; its record is no longer ours to write.
+            log.warning("run %s stopped here: its lease passed to another process", run_id)
+            return
         if stop.cancelled.is_set():
             self._finish(run_id, "cancelled", {"reason": "cancel requested"})
         else:
@@ -199,7 +233,7 @@ class RunWorker:
     def _finish(self, run_id: str, status: str, detail: dict[str, Any], *,
                 error: str | None = None, event: str | None = None) -> None:
         with transaction(self._sessions) as session:
-            run = repo.get_run(session=session, run_id=run_id)
+            run = self._owned_run(session, run_id)
             if run is None:
                 return
             repo.set_status(session=session, run=run, status=status, error=error)

@@ -50,6 +50,12 @@ class Run(Base):
         DateTime(timezone=True), default=utcnow, onupdate=utcnow
     )
     finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    # Scale-out on PostgreSQL: the process executing the run and until when (database clock).
+    # An expired lease means that process stopped; any other process may then take the run.
+    # Unused on SQLite, where one process owns the database.
+    lease_owner: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    lease_expires_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True),
+                                                              nullable=True)
 
 
 class RunEvent(Base):

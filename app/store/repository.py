@@ -20,8 +20,10 @@ from app.store.models import Attempt, Base, Decision, Run, RunEvent, utcnow
 ACTIVE = ("queued", "running")
 
 
-def get_run(*, session: Session, run_id: str) -> Run | None:
-    return session.get(Run, run_id)
+def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run | None:
+    """`for_update` locks the row until the transaction ends (PostgreSQL; SQLite has no
+    row locks and serialises writers anyway)."""
+    return session.get(Run, run_id, with_for_update=for_update or None)
 
 
 def list_runs(*, session: Session, status: str | None, limit: int, offset: int) -> list[Run]:

@@ -1,0 +1,210 @@
+"""Several API processes sharing runs on one PostgreSQL database, through leases.
+
+- Claim: a process with a free slot leases runs that are `queued` (or `interrupted`, with
+  auto-resume) and unleased, with `SELECT ... FOR UPDATE SKIP LOCKED` (a background poll
+  every `claim_poll_s`; `POST /runs` and resume also claim at once). Only the lease
+  holder executes a run.
+- Renew: a heartbeat thread extends every held lease each `lease_s / 3`, and every
+  recorder write renews its run's lease in the write's own transaction. Both are
+  conditional on still owning the run: a process that lost a lease (it stalled past
+  expiry and another process took the run) stops that run at once, writing nothing.
+- Take over: a run `running` under an expired lease belonged to a process that died. Any
+  poller marks it `interrupted` (an event naming the lost owner) and it is claimed like
+  any interrupted run; the resume goes through the usual integrity check and `resumed`
+  event, from the Postgres checkpointer shared by all processes.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import threading
+import uuid
+from collections.abc import Callable
+from typing import Any
+
+from langgraph.checkpoint.base import BaseCheckpointSaver
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.config import Settings
+from app.runs.recorder import Fence, LeaseLost, RunStop
+from app.runs.worker import RunWorker
+from app.store import leases
+from app.store import repository as repo
+from app.store.db import transaction
+from app.store.models import Run
+
+log = logging.getLogger("ltaa.runs")
+
+
+def lease_owner_id(name: str | None) -> str:
+    """Unique per process start: a restarted process must not inherit its old leases, or
+    it would skip the integrity check for runs it never ran."""
+    return f"{name or socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+
+
+class Periodic:
+    """Calls `fn` every `interval_s` on a daemon thread until stopped; errors are logged,
+    never fatal (a database blip must not end the heartbeat)."""
+
+    def __init__(self, name: str, interval_s: float, fn: Callable[[], object]) -> None:
+        self._interval_s = interval_s
+        self._fn = fn
+        self._stopped = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stopped.set()
+        if self._thread.is_alive():
+            self._thread.join()
+
+    def _loop(self) -> None:
+        while not self._stopped.wait(self._interval_s):
+            try:
+                self._fn()
+            except Exception:
+                log.exception("%s failed; retrying in %.1f s", self._thread.name,
+                              self._interval_s)
+
+
+class LeasedRunWorker(RunWorker):
+    def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
+        self.owner = lease_owner_id(settings.worker_name)
+        self._lease_s = settings.lease_s
+        # Serialises this process's claims so that free slots are counted once.
+        self._claim_lock = threading.Lock()
+        super().__init__(settings=settings, sessions=sessions)
+        self._heartbeat = Periodic("ltaa-lease-heartbeat", settings.lease_s / 3, self._renew)
+        self._poller = Periodic("ltaa-run-claims", settings.claim_poll_s, self._poll)
+        # Started now, not in recover(): `ltaa run` claims runs without ever polling.
+        self._heartbeat.start()
+
+    def _open_checkpointer(self) -> tuple[BaseCheckpointSaver[Any], Callable[[], None]]:
+        from app.graph.checkpoint_postgres import open_postgres_saver
+
+        return open_postgres_saver(self._settings.db_url,
+                                   max_connections=self._settings.max_concurrent_runs)
+
+    # -- lifecycle ---------------------------------------------------------------------
+
+    def recover(self) -> list[str]:
+        """Start-up: take what is waiting now, then keep polling. Runs that other live
+        processes hold are left alone; their leases say so."""
+        resumed = self._poll()
+        self._poller.start()
+        return resumed
+
+    def close(self) -> None:
+        self._poller.stop()
+        # Draining runs mark themselves interrupted and release their leases, so a peer
+        # resumes them at its next poll instead of after lease expiry.
+        super().close()
+        self._heartbeat.stop()
+
+    # -- commands ----------------------------------------------------------------------
+
+    def submit(self, run_id: str) -> None:
+        with self._claim_lock:
+            if self._free_slots() > 0:
+                with transaction(self._sessions) as session:
+                    claimed = leases.claim_run(session=session, run_id=run_id,
+                                               owner=self.owner, lease_s=self._lease_s)
+                if claimed:
+                    self._start_claimed(run_id)
+                    return
+        # No room here, or another process has it: queued runs go to whichever process
+        # has a free slot first, so an explicitly resumed run is queued too.
+        with transaction(self._sessions) as session:
+            leases.requeue(session=session, run_id=run_id)
+
+    def is_active(self, run_id: str) -> bool:
+        if super().is_active(run_id):
+            return True
+        with self._sessions() as session:
+            return leases.is_leased(session=session, run_id=run_id)
+
+    # -- claim, renew, take over --------------------------------------------------------
+
+    def _free_slots(self) -> int:
+        with self._lock:
+            return self._settings.max_concurrent_runs - len(self._futures)
+
+    def _start_claimed(self, run_id: str) -> None:
+        if not self._start(run_id):  # closing: hand the run straight back
+            self._release(run_id)
+
+    def _poll(self) -> list[str]:
+        """Reap expired leases, then claim up to the free slots; returns resumed run ids."""
+        with transaction(self._sessions) as session:
+            for run, previous in leases.reap_expired(session=session):
+                repo.add_event(session=session, run_id=run.id, kind="interrupted",
+                               detail={"reason": f"the lease of {previous or 'no process'} "
+                                                 "expired: the process running it stopped",
+                                       "lease_owner": previous, "worker": self.owner})
+        statuses = ["queued", "interrupted"] if self._settings.auto_resume else ["queued"]
+        with self._claim_lock:
+            with transaction(self._sessions) as session:
+                claimed = leases.claim_runs(session=session, owner=self.owner,
+                                            lease_s=self._lease_s, limit=self._free_slots(),
+                                            statuses=statuses)
+            for run_id, _ in claimed:
+                self._start_claimed(run_id)
+        if claimed:
+            log.info("claimed %d run(s): %s", len(claimed), ", ".join(r for r, _ in claimed))
+        return [run_id for run_id, status in claimed if status == "interrupted"]
+
+    def _renew(self) -> None:
+        with self._lock:
+            held = dict(self._stops)
+        if not held:
+            return
+        with transaction(self._sessions) as session:
+            alive = leases.renew(session=session, owner=self.owner, run_ids=list(held),
+                                 lease_s=self._lease_s)
+        for run_id, stop in held.items():
+            if run_id not in alive:
+                if self._is_local(run_id) and not stop.lease_lost.is_set():
+                    log.warning("lost the lease of run %s; stopping it here", run_id)
+                stop.lease_lost.set()
+            elif alive[run_id]:
+                stop.cancelled.set()  # cancelled through another process
+
+    def _is_local(self, run_id: str) -> bool:
+        return super().is_active(run_id)
+
+    def _release(self, run_id: str) -> None:
+        with transaction(self._sessions) as session:
+            leases.release(session=session, run_id=run_id, owner=self.owner)
+
+    # -- scale-out hooks ---------------------------------------------------------------
+
+    def _execute(self, run_id: str, stop: RunStop) -> None:
+        try:
+            super()._execute(run_id, stop)
+        finally:
+            if not stop.lease_lost.is_set():
+                self._release(run_id)
+
+    def _owned_run(self, session: Session, run_id: str) -> Run | None:
+        # The row lock makes "still mine" hold until this transaction commits.
+        run = repo.get_run(session=session, run_id=run_id, for_update=True)
+        return run if run is not None and run.lease_owner == self.owner else None
+
+    def _fence(self, run_id: str, stop: RunStop) -> Fence:
+        def fence(session: Session) -> None:
+            alive = leases.renew(session=session, owner=self.owner, run_ids=[run_id],
+                                 lease_s=self._lease_s)
+            if run_id not in alive:
+                stop.lease_lost.set()
+                raise LeaseLost(run_id)
+            if alive[run_id]:
+                stop.cancelled.set()
+
+        return fence
+
+    def _event_detail(self) -> dict[str, Any]:
+        return {"worker": self.owner}
