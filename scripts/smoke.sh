@@ -69,4 +69,9 @@ check 'all(x["attempts"] and x["attempts"][0]["scores"] and x["reasoning"] for x
 check 'd["decisions"][0]["attempts"][0]["user_prompt"]' "prompts included"
 check '[e["kind"] for e in d["events"]][-1] == "completed"' "completed event"
 [ "$(call POST "/runs/$run_id/resume" '' "${SUPERVISOR[@]}")" = 409 ] || fail "resume completed run should be 409"
+if [ -n "${SMOKE_SUPERVISOR_KEY:-}" ]; then
+  [ "$(call GET "/runs/$run_id" '')" = 401 ] || fail "no key should be 401"
+  [ "$(call GET "/runs/$run_id/trace" '' "${CLIENT[@]}")" = 403 ] || fail "client key on a trace should be 403"
+  echo "smoke: access control ok (401 without a key, 403 for a client on the trace)"
+fi
 echo "smoke: all checks passed"
