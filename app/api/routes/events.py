@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from collections.abc import AsyncIterator
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Header
 from fastapi.concurrency import run_in_threadpool
-from fastapi.sse import EventSourceResponse, ServerSentEvent
+from fastapi.responses import StreamingResponse
 
 from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
@@ -39,17 +40,42 @@ def start_cursor(
         raise ApiError(422, ["header", "last-event-id"], str(exc), "value_error") from None
 
 
-@router.get("/{run_id}/events", response_class=EventSourceResponse)
+def sse(*, event: str | None = None, id: str | None = None, data: object = None,
+        retry: int | None = None, comment: str | None = None) -> str:
+    """One Server-Sent Event in the text/event-stream wire format."""
+    lines = [f": {comment}"] if comment is not None else []
+    if id is not None:
+        lines.append(f"id: {id}")
+    if event is not None:
+        lines.append(f"event: {event}")
+    if retry is not None:
+        lines.append(f"retry: {retry}")
+    if data is not None:
+        lines.append(f"data: {json.dumps(data, separators=(',', ':'), default=str)}")
+    return "\n".join(lines) + "\n\n"
+
+
+# A plain StreamingResponse rather than fastapi.sse.EventSourceResponse: the latter's
+# keep-alive task logs a BrokenResourceError traceback whenever a client hangs up.
+@router.get("/{run_id}/events", response_class=StreamingResponse,
+            responses={200: {"content": {"text/event-stream": {}}}})
 async def run_events(
     caller: SupervisorDep,  # first: who may ask is settled before whether the run exists
     run_id: Annotated[str, Depends(existing_run)],
     cursor: Annotated[Cursor, Depends(start_cursor)],
     runs: RunsDep,
     settings: SettingsDep,
-) -> AsyncIterator[ServerSentEvent]:
+) -> StreamingResponse:
     """For supervisors: one `run` event per run event and one `decision` event per
     finalised decision, in order; the stream ends when the run does. Reconnect with
     Last-Event-ID to continue where a stream stopped."""
+    headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
+    return StreamingResponse(_stream(run_id, cursor, runs, settings),
+                             media_type="text/event-stream", headers=headers)
+
+
+async def _stream(run_id: str, cursor: Cursor, runs: RunsDep,
+                  settings: SettingsDep) -> AsyncIterator[str]:
     deadline = time.monotonic() + settings.events_max_stream_s
     retry: int | None = RECONNECT_MS
     while True:
@@ -58,14 +84,13 @@ async def run_events(
         if batch is None:
             return
         for item in batch.items:
-            yield ServerSentEvent(event=item.kind, id=str(item.cursor), data=item.data,
-                                  retry=retry)
+            yield sse(event=item.kind, id=str(item.cursor), data=item.data, retry=retry)
             retry = None
         cursor = batch.cursor
         if batch.ended:
             return
         if time.monotonic() >= deadline:
-            yield ServerSentEvent(comment="stream time limit (LTAA_EVENTS_MAX_STREAM_S) "
-                                          "reached; reconnect with Last-Event-ID")
+            yield sse(comment="stream time limit (LTAA_EVENTS_MAX_STREAM_S) reached; "
+                          "reconnect with Last-Event-ID")
             return
         await asyncio.sleep(settings.events_poll_s)
