@@ -1,0 +1,100 @@
+"""Measure durable runs the way the server executes them: the real RunWorker, the app tables
+through SQLAlchemy (WAL, synchronous=NORMAL) and the compact SQLite checkpointer.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from app.config import Settings
+from app.domain.models import Instance
+from app.runs import service
+from app.runs.spec import RunSpec
+from app.runs.worker import RunWorker
+from app.store import repository as repo
+from app.store.db import make_engine, make_session_factory
+from app.store.migrate import upgrade_head
+
+
+@dataclass(frozen=True)
+class DurableMeasure:
+    n_tasks: int
+    warmup_seconds: list[float]  # runs before the timed ones (first run of a fresh worker)
+    seconds: list[float]  # wall time from create_run to the run's completion
+    # CPU seconds of this process (all threads) over the same span: wall time well above it
+    # means the run waited for a CPU other processes held, or for the disk.
+    cpu_seconds: list[float]
+    # Of the first run alone, in a fresh data directory:
+    checkpoint_main_bytes: int  # the checkpoint file as the run left it
+    checkpoint_wal_bytes: int  # its -wal file as the run left it
+    checkpoint_after_wal_checkpoint: int  # the file after PRAGMA wal_checkpoint(TRUNCATE)
+    app_db_bytes: int  # ltaa.db + its -wal as left (decisions, attempts, prompts, events)
+
+    @property
+    def per_task(self) -> float:
+        return self.checkpoint_after_wal_checkpoint / self.n_tasks
+
+
+def _size(path: Path) -> int:
+    return path.stat().st_size if path.exists() else 0
+
+
+def _wal(path: Path) -> Path:
+    return path.with_name(path.name + "-wal")
+
+
+def _checkpoint_wal(path: Path) -> None:
+    """Fold the -wal into the file. Our own connection: the worker is idle between runs,
+    and its saver's connection is an implementation detail."""
+    conn = sqlite3.connect(str(path))
+    try:
+        busy, _, _ = conn.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
+    finally:
+        conn.close()
+    if busy:
+        raise RuntimeError(f"could not checkpoint the WAL of {path}: a reader held it")
+
+
+def measure_durable(instance: Instance, *, mode: str = "balanced", runs: int = 1,
+                    warmup: int = 0) -> DurableMeasure:
+    """warmup + runs rules runs, one after another, in one fresh data directory."""
+    with tempfile.TemporaryDirectory(prefix="ltaa-bench-") as tmp:
+        settings = Settings(data_dir=Path(tmp), auto_resume=False)
+        upgrade_head(settings.db_url)
+        engine = make_engine(settings.db_url)
+        sessions = make_session_factory(engine)
+        worker = RunWorker(settings=settings, sessions=sessions)
+        cp = Path(settings.checkpoint_file)
+        db = Path(tmp) / "ltaa.db"
+        times: list[float] = []
+        cpu: list[float] = []
+        sizes: tuple[int, int, int, int] | None = None
+        try:
+            for _ in range(warmup + runs):
+                spec = RunSpec.for_instance(instance, mode=mode, reasoner="rules")
+                start, cpu_start = time.perf_counter(), time.process_time()
+                run = service.create_run(sessions=sessions, worker=worker, settings=settings,
+                                         spec=spec)
+                worker.wait(run.id)
+                times.append(time.perf_counter() - start)
+                cpu.append(time.process_time() - cpu_start)
+                with sessions() as session:
+                    stored = repo.get_run(session=session, run_id=run.id)
+                    status = stored.status if stored is not None else "missing"
+                if status != "completed":
+                    raise RuntimeError(f"benchmark run ended {status}, not completed")
+                if sizes is None:
+                    main, wal = _size(cp), _size(_wal(cp))
+                    app = _size(db) + _size(_wal(db))
+                    _checkpoint_wal(cp)
+                    sizes = (main, wal, _size(cp), app)
+        finally:
+            worker.close()
+            engine.dispose()
+    assert sizes is not None
+    return DurableMeasure(instance.n_tasks, times[:warmup], times[warmup:], cpu[warmup:],
+                          *sizes)

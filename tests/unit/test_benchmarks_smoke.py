@@ -1,0 +1,80 @@
+"""The benchmark modules stay importable and their helpers keep working on tiny inputs.
+
+Not the bench itself (minutes of training): each test runs one cheap helper, so an API
+change in app/ breaks here rather than at the next `make bench`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+import pytest
+
+from app.domain.modes import Mode
+from app.domain.problem import Problem
+from benchmarks import durable, learners, ltaa_runs, paper, plots, report, solvers
+from benchmarks.cache import solved
+
+
+def test_every_section_module_exposes_run() -> None:
+    for name in report.SECTIONS:
+        assert callable(importlib.import_module(name).run)
+
+
+def test_cached_solve_is_reused() -> None:
+    first = solved("greedy")
+    assert solved("greedy") is first
+    assert len(first.assignment) == 36
+    assert first.max_deviation == 4
+
+
+def test_exact_solvers_agree_on_a_small_prefix() -> None:
+    rows = solvers.exact_small_rows(n_tasks=6, repeats=1)
+    assert len({row[1] for row in rows}) == 1  # same expected success for all three
+
+
+def test_learner_summary_row() -> None:
+    summary = learners.summarise("q_learning", [78.0, 77.0], [1.0, 2.0], optimum=78.6)
+    assert summary.within == 2
+    assert "met" in learners.summary_row(summary)[4]
+
+
+def test_prompt_sizes_and_regret_formatting() -> None:
+    problem = Problem.build(solvers.first_tasks(4), Mode.BALANCED)
+    chars = ltaa_runs.sent_prompt_chars(problem)
+    assert len(chars) == 4 and min(chars) > len(ltaa_runs.SYSTEM_PROMPT)
+    assert ltaa_runs._points(-1e-16) == "0.00"
+
+
+def test_durable_measure_on_a_tiny_run() -> None:
+    measure = durable.measure_durable(solvers.first_tasks(3), runs=1)
+    assert measure.n_tasks == 3 and len(measure.seconds) == 1
+    assert measure.checkpoint_after_wal_checkpoint > 0
+
+
+def test_frontier_is_monotone() -> None:
+    points = paper.frontier_points()
+    balances = [b for _, b, _ in points]
+    successes = [e for _, _, e in points]
+    assert balances[0] == 100.0
+    assert successes == sorted(successes)
+
+
+def test_claude_part_without_a_key(monkeypatch: pytest.MonkeyPatch) -> None:
+    for var in ("ANTHROPIC_API_KEY", "LTAA_ANTHROPIC_API_KEY"):
+        monkeypatch.delenv(var, raising=False)
+    assert "not measured" in paper.claude_part()
+
+
+def test_figures_render(tmp_path: Path) -> None:
+    point = plots.MethodPoint("A", 78.0, (77.0, 79.0), 77.9, (77.5, 78.3))
+    plots.methods_figure([point], "t", "c", "m.png", tmp_path)
+    panel = plots.Panel(["x", "y"], {"A": [1.0, 2.0]}, "v", (0, 3), {"W": 1.5}, (1.0, 2.0))
+    plots.panels_figure([panel, panel], "t", "c", "p.png", tmp_path)
+    plots.frontier_figure([("cap 0", 100.0, 76.0), ("no cap", 0.0, 83.0)],
+                          [plots.PlacedPoint("A", 50.0, 79.0)], "t", "c", "f.png", tmp_path)
+    plots.seeds_figure({"A": [77.0, 78.0]}, 78.6, 3.0, "t", "c", "s.png", tmp_path)
+    plots.hbar_figure([("A", 10.0), ("B", 100.0)], "chars", "t", "c", "h.png", tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "f.png", "h.png", "m.png", "p.png", "s.png"]
