@@ -105,14 +105,8 @@ def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
             "robots", f"{len(robots)} robots exceeds the limit of {MAX_ROBOTS} per request",
             code="too_large",
         )
-    names: set[str] = set()
+    _check_robot_names(robots)
     for i, robot in enumerate(robots):
-        key = robot.name.strip().lower()
-        if not key:
-            raise DomainError(f"robots.{i}.name", "robot name must not be empty")
-        if key in names:
-            raise DomainError(f"robots.{i}.name", f"duplicate robot name '{robot.name}'")
-        names.add(key)
         if not robot.success:
             raise DomainError(f"robots.{i}.success", "rate at least one feature")
         for feature, p in robot.success.items():
@@ -129,6 +123,9 @@ def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
         ids.add(key)
         if not task.features:
             raise DomainError(f"tasks.{i}.features", "a task needs at least one feature")
+        if len(set(task.features)) != len(task.features):
+            raise DomainError(f"tasks.{i}.features",
+                              "a feature is listed twice; list each feature once")
         for feature in task.features:
             missing = [r.name for r in robots if feature not in r.success]
             if missing:
@@ -137,3 +134,30 @@ def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
                     f"unknown feature '{feature}': not rated by robot(s) {', '.join(missing)}; "
                     "every robot must rate every feature a task needs",
                 )
+
+
+# Reasoners name robots in markdown ("**Decision**: Light Robot", "Light Robot: 12"), so a
+# name or label must be unambiguous and free of the characters that structure the reply.
+_RESERVED = set("*`|:#[]\n\r")
+
+
+def _check_robot_names(robots: Sequence[Robot]) -> None:
+    owner: dict[str, int] = {}
+    for i, robot in enumerate(robots):
+        for field, value in (("name", robot.name), ("label", robot.label)):
+            key = value.strip().lower()
+            if field == "name" and not key:
+                raise DomainError(f"robots.{i}.name", "robot name must not be empty")
+            if not key:
+                continue
+            bad = sorted(_RESERVED & set(value))
+            if bad:
+                raise DomainError(f"robots.{i}.{field}",
+                                  f"{field} '{value}' contains {', '.join(map(repr, bad))}, "
+                                  "which reasoner replies use as markup; remove it")
+            if key in owner and owner[key] != i:
+                raise DomainError(f"robots.{i}.{field}",
+                                  f"duplicate robot {field} '{value}': robot {owner[key]} "
+                                  "already uses it as a name or label; names and labels "
+                                  "must identify one robot each")
+            owner[key] = i

@@ -9,7 +9,7 @@ import numpy as np
 from app.domain.errors import TooLargeError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
-from app.solvers.tiebreak import SUM_TOLERANCE
+from app.solvers.tiebreak import integer_weights, weight_scale
 
 MAX_ASSIGNMENTS = 3**12
 
@@ -38,13 +38,13 @@ class BruteForceSolver(Solver):
         codes = np.arange(count, dtype=np.int64)
         powers = r ** np.arange(n - 1, -1, -1, dtype=np.int64)
         choices = (codes[:, None] // powers[None, :]) % r
-        values = s[np.arange(n)[None, :], choices].sum(axis=1)
+        w = integer_weights(s, weight_scale(n, r))
+        values = w[np.arange(n)[None, :], choices].sum(axis=1)
         loads = np.stack([(choices == i).sum(axis=1) for i in range(r)], axis=1)
         ok = ((loads >= cap.lower) & (loads <= cap.upper)).all(axis=1)
         dev = np.abs(r * loads - n).sum(axis=1)
-        values = np.where(ok, values, -np.inf)
-        top = values.max()
-        tied = ok & (values >= top - SUM_TOLERANCE)
+        top = values[ok].max()
+        tied = ok & (values == top)
         best_dev = dev[tied].min()
         winner = int(np.flatnonzero(tied & (dev == best_dev))[0])
         return Solution([int(c) for c in choices[winner]], details={"enumerated": count})

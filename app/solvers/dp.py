@@ -8,7 +8,7 @@ from typing import Any
 from app.domain.errors import TooLargeError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
-from app.solvers.tiebreak import better, deviation_units
+from app.solvers.tiebreak import better, deviation_units, integer_weights, weight_scale
 
 MAX_STATES = 400_000
 
@@ -51,21 +51,22 @@ class DynamicProgrammingSolver(Solver):
                 for i in cap.feasible_robots(loads, n - t - 1):
                     nxt.add(_plus_one(loads, i))
             layers.append(nxt)
-        # Backward: best (sum of S, deviation) from each state, and the move achieving it.
-        value: dict[Loads, tuple[float, int]] = {
-            loads: (0.0, deviation_units(loads, n)) for loads in layers[n]
+        # Backward: best (sum of integer weights, deviation) from each state, and the move.
+        w = integer_weights(s, weight_scale(n, r)).tolist()
+        value: dict[Loads, tuple[int, int]] = {
+            loads: (0, deviation_units(loads, n)) for loads in layers[n]
         }
         moves: list[dict[Loads, int]] = [{} for _ in range(n)]
         for t in range(n - 1, -1, -1):
-            current: dict[Loads, tuple[float, int]] = {}
+            current: dict[Loads, tuple[int, int]] = {}
             for loads in layers[t]:
-                best: tuple[float, int] | None = None
+                best: tuple[int, int] | None = None
                 for i in range(r):
                     child = _plus_one(loads, i)
                     if child not in value:
                         continue
                     v, d = value[child]
-                    v += s[t, i]
+                    v += w[t][i]
                     if best is None or better(v, d, *best):
                         best, moves[t][loads] = (v, d), i
                 if best is not None:

@@ -25,7 +25,7 @@ from types import ModuleType
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
@@ -38,18 +38,23 @@ _TRAINING_LOCK = threading.Lock()
 
 
 class DQNOptions(SolverOptions):
+    # Bounded so one request cannot hold the (serialised) trainer for long: 200,000 steps
+    # is about 5 minutes here; train_freq and target_update_interval above `timesteps`
+    # would make SB3 collect forever without training.
     timesteps: int = Field(
-        20_000, ge=100, le=1_000_000, description="environment steps of training"
+        20_000, ge=100, le=200_000, description="environment steps of training"
     )
     learning_rate: float = Field(1e-3, gt=0.0, le=1.0)
     gamma: float = Field(1.0, ge=0.0, le=1.0, description="discount; 1 suits the fixed horizon")
     batch_size: int = Field(64, ge=1, le=4096)
     buffer_size: int = Field(50_000, ge=100, le=1_000_000)
     learning_starts: int = Field(
-        1_000, ge=0, description="random steps before training; at most a tenth of timesteps"
+        1_000, ge=0, le=200_000,
+        description="random steps before training; at most a tenth of timesteps",
     )
-    target_update_interval: int = Field(500, ge=1)
-    train_freq: int = Field(4, ge=1)
+    target_update_interval: int = Field(500, ge=1, le=200_000,
+                                        description="at most timesteps")
+    train_freq: int = Field(4, ge=1, le=1_000, description="at most timesteps")
     exploration_fraction: float = Field(0.5, gt=0.0, le=1.0)
     exploration_final_eps: float = Field(0.05, ge=0.0, le=1.0)
     net_arch: list[Annotated[int, Field(ge=1, le=1024)]] = Field(
@@ -58,6 +63,14 @@ class DQNOptions(SolverOptions):
         max_length=4,
         description="hidden layer widths of the Q-network",
     )
+
+    @model_validator(mode="after")
+    def _within_timesteps(self) -> DQNOptions:
+        for name in ("train_freq", "target_update_interval"):
+            if getattr(self, name) > self.timesteps:
+                raise ValueError(f"{name} ({getattr(self, name)}) must not exceed timesteps "
+                                 f"({self.timesteps})")
+        return self
 
 
 def _import_rl() -> tuple[ModuleType, ModuleType, ModuleType]:

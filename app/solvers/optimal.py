@@ -20,9 +20,7 @@ from app.domain.cap import WorkloadCap
 from app.domain.errors import InfeasibleCapError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
-
-_MAX_SCALE = 10**9
-_COST_BUDGET = 10**17  # keeps every cost sum far inside int64
+from app.solvers.tiebreak import deviation_factor, integer_weights, weight_scale
 
 
 def _deviation_arcs(load_from: int, load_to: int, r: int, n: int) -> list[tuple[int, int]]:
@@ -73,9 +71,8 @@ def best_completion(
     rows = success[first[order]]
     counts = np.bincount(cls, minlength=n_classes)
 
-    factor = 2 * r * max(n, 1) + 1  # exceeds any difference in total deviation units
-    scale = max(1, min(_MAX_SCALE, _COST_BUDGET // (factor * max(m, 1))))
-    weight = np.rint(rows * scale).astype(np.int64)
+    factor = deviation_factor(n, r)
+    weight = integer_weights(rows, weight_scale(n, r, m))
 
     robot0, sink = n_classes, n_classes + r
     tails, heads, caps, costs = [], [], [], []

@@ -1,16 +1,36 @@
 """One definition of "optimal" for every exact method.
 
 Maximise the sum of S subject to the cap; among equal sums prefer the lower sum of
-|d_r|; among those, the lexicographically smallest robot sequence in queue order.
-Deviation is kept as the integer R*|L_r - W| = |R*L_r - n| so comparisons are exact.
+|d_r|; among those, robot order. Every exact solver compares the same integers: S scaled
+to integer weights (1e-9 resolution on small instances, see `weight_scale`), and the
+deviation as R*|L_r - W| = |R*L_r - n|. So "equal" means the same thing in brute force,
+the DP and the min-cost flow, and they cannot disagree on near-ties.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-# Sums of S closer than this are the same sum (floating-point order of addition).
-SUM_TOLERANCE = 1e-9
+import numpy as np
+
+MAX_SCALE = 10**9
+COST_BUDGET = 10**17  # keeps every min-cost-flow cost sum far inside int64
+
+
+def deviation_factor(n_tasks: int, n_robots: int) -> int:
+    """Exceeds any difference in total deviation units, so weights dominate deviation."""
+    return 2 * n_robots * max(n_tasks, 1) + 1
+
+
+def weight_scale(n_tasks: int, n_robots: int, rows: int | None = None) -> int:
+    """Integer weight per unit of S: 1e9 unless int64 cost sums need it smaller."""
+    rows = n_tasks if rows is None else rows
+    factor = deviation_factor(n_tasks, n_robots)
+    return max(1, min(MAX_SCALE, COST_BUDGET // (factor * max(rows, 1))))
+
+
+def integer_weights(success: np.ndarray, scale: int) -> np.ndarray:
+    return np.rint(success * scale).astype(np.int64)
 
 
 def deviation_units(loads: Sequence[int], n_tasks: int) -> int:
@@ -18,8 +38,6 @@ def deviation_units(loads: Sequence[int], n_tasks: int) -> int:
     return sum(abs(r * load - n_tasks) for load in loads)
 
 
-def better(value: float, dev: int, best_value: float, best_dev: int) -> bool:
+def better(value: int, dev: int, best_value: int, best_dev: int) -> bool:
     """Is (value, dev) strictly preferable to the incumbent? Ties keep the incumbent."""
-    if value > best_value + SUM_TOLERANCE:
-        return True
-    return abs(value - best_value) <= SUM_TOLERANCE and dev < best_dev
+    return value > best_value or (value == best_value and dev < best_dev)

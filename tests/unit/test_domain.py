@@ -100,6 +100,14 @@ def test_metrics_are_consistent() -> None:
         ((Task(1, "t", ("y",)),), (Robot("a", {"x": 1}),), "tasks.0.features"),
         ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1.5}),), "robots.0.success.x"),
         ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}), Robot("A", {"x": 1})), "robots.1.name"),
+        ((Task(1, "t", ("x", "x")),), (Robot("a", {"x": 1}),), "tasks.0.features"),
+        # A label that is another robot's name would make "**Decision**: b" ambiguous.
+        ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}, label="b"), Robot("b", {"x": 1})),
+         "robots.1.name"),
+        ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}, label="X"),
+                                   Robot("b", {"x": 1}, label="x")), "robots.1.label"),
+        ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}, label="**bold**"),), "robots.0.label"),
+        ((Task(1, "t", ("x",)),), (Robot("a:b", {"x": 1}),), "robots.0.name"),
     ],
 )
 def test_instance_validation_names_the_field(
@@ -129,3 +137,7 @@ def test_cap_tracker_agrees_with_the_cap(seed: int) -> None:
         tracker.assign(choice)
         loads[choice] += 1
     assert cap.respected_by(loads)
+
+
+def test_a_label_equal_to_its_own_name_is_fine() -> None:
+    Instance(tasks=(Task(1, "t", ("x",)),), robots=(Robot("a", {"x": 1}, label="A"),))

@@ -104,9 +104,21 @@ def test_brute_force_refuses_large_spaces_with_the_count() -> None:
 def test_optimal_handles_large_instances() -> None:
     robots = tuple(Robot(f"r{i}", {f: ((i * 7 + j * 3) % 10) / 10 for j, f in enumerate(FEATURES)})
                    for i in range(50))
-    tasks = tuple(Task(id=t, name=str(t), features=(FEATURES[t % 3], FEATURES[(t // 3) % 3]))
+    tasks = tuple(Task(id=t, name=str(t),
+                       features=tuple(dict.fromkeys((FEATURES[t % 3], FEATURES[(t // 3) % 3]))))
                   for t in range(10_000))
     problem = Problem.build(Instance(tasks=tasks, robots=robots), Mode.BALANCED)
     assignment = get_solver("optimal").solve(problem).assignment
     assert len(assignment) == 10_000
     assert problem.cap.respected_by(workload(assignment, 50))
+
+
+def test_near_ties_are_judged_alike_by_every_exact_solver() -> None:
+    # 1e-9 apart: once a "tie" for dp/brute force but a win for the flow's integer costs.
+    instance = Instance(
+        tasks=(Task(1, "a", ("heavy",)), Task(2, "b", ("heavy",))),
+        robots=(Robot("r0", {"heavy": 0.0}), Robot("r1", {"heavy": 1e-9})),
+    )
+    problem = Problem.build(instance, Mode.SUCCESS_FOCUSED)
+    loads = {name: workload(get_solver(name).solve(problem).assignment, 2) for name in EXACT}
+    assert loads["brute_force"] == loads["dp"] == loads["optimal"]

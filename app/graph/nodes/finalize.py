@@ -10,7 +10,7 @@ from app.graph.context import decision_context
 from app.graph.recorder import AttemptRecord
 from app.graph.state import GraphContext, LTAAState
 from app.graph.validation import validate_text
-from app.reasoners.rules import compose_answer
+from app.reasoners.rules import choose, compose_answer
 
 
 def failure_line(record: AttemptRecord, threshold: float) -> str:
@@ -42,9 +42,10 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
         text = {"text_attempt": accepted.attempt}
     else:
         # The conservative fallback: the rules reasoner's answer, validated like any other.
+        # The robot comes from the rule itself, never from re-parsing its text.
+        robot = choose(dctx)[0]
         verdict = validate_text(compose_answer(dctx), dctx, ctx.quality_threshold)
-        assert verdict.robot is not None
-        robot, fallback, quality = verdict.robot, True, verdict.quality
+        fallback, quality = True, verdict.quality
         confidence = verdict.parsed.confidence
         text = {"reasoning": verdict.parsed.reasoning, "tradeoff": verdict.parsed.tradeoff}
     decision = {
