@@ -67,7 +67,7 @@ class DQNOptions(SolverOptions):
     @model_validator(mode="after")
     def _within_timesteps(self) -> DQNOptions:
         for name in ("train_freq", "target_update_interval"):
-            if getattr(self, name) > self.timesteps:
+            if name in self.model_fields_set and getattr(self, name) > self.timesteps:
                 raise ValueError(f"{name} ({getattr(self, name)}) must not exceed timesteps "
                                  f"({self.timesteps})")
         return self
