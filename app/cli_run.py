@@ -35,8 +35,8 @@ def run_locally(
     worker = make_worker(settings=settings, sessions=sessions)
     try:
         spec = RunSpec.for_instance(problem.instance, mode=mode.value,
-                                    max_deviation=max_deviation, reasoner=reasoner,
-                                    guidance=guidance)
+                                    max_deviation=problem.cap.max_deviation,
+                                    reasoner=reasoner, guidance=guidance)
         run = service.create_run(sessions=sessions, worker=worker, settings=settings,
                                  spec=spec)
         columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),

@@ -55,7 +55,10 @@ def resolve_instance(request: InstanceRequest) -> Instance:
 
 
 def build_problem(request: InstanceRequest) -> Problem:
-    return Problem.build(resolve_instance(request), request.mode, request.max_deviation)
+    # An explicit `"max_deviation": null` means no cap; leaving it out means the mode's.
+    uncapped = "max_deviation" in request.model_fields_set and request.max_deviation is None
+    return Problem.build(resolve_instance(request), request.mode, request.max_deviation,
+                         uncapped=uncapped)
 
 
 def load_solver(name: str) -> Solver:

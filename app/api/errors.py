@@ -6,6 +6,7 @@ Clients then parse validation errors, domain errors (infeasible cap, unknown sol
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -18,6 +19,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from app.domain.errors import DomainError
 
 Loc = Sequence[str | int]
+log = logging.getLogger("ltaa.api")
 
 
 def error_item(loc: Loc, msg: str, type_: str) -> dict[str, Any]:
@@ -103,10 +105,18 @@ async def _on_http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
     return JSONResponse(body, status_code=code, headers=exc.headers)
 
 
+async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
+    # A bug, not bad input: still JSON, with no internals; the traceback goes to the log.
+    log.exception("unhandled error on %s %s", request.method, request.url.path)
+    return JSONResponse(error_body(["server"], "internal error; the server log has the "
+                                   "details", "internal_error"), status_code=500)
+
+
 def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RequestValidationError, _on_validation)  # type: ignore[arg-type]
     app.add_exception_handler(DomainError, _on_domain)  # type: ignore[arg-type]
     app.add_exception_handler(StarletteHTTPException, _on_http)  # type: ignore[arg-type]
+    app.add_exception_handler(Exception, _on_unexpected)
 
 
 class BodySizeLimit:

@@ -82,8 +82,8 @@ class InstanceRequest(BaseModel):
     mode: Mode = Mode.BALANCED
     max_deviation: float | None = Field(
         None, ge=0, allow_inf_nan=False, strict=True,
-        description="Workload cap in tasks either side of the target load; omit for the "
-        "mode's default (null in the response means no cap)",
+        description="Workload cap in tasks either side of the target load; omit it for the "
+        "mode's default, send null for no cap",
     )
 
 

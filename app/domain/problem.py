@@ -18,10 +18,14 @@ class Problem:
 
     @classmethod
     def build(
-        cls, instance: Instance, mode: Mode = Mode.BALANCED, max_deviation: float | None = None
+        cls, instance: Instance, mode: Mode = Mode.BALANCED, max_deviation: float | None = None,
+        *, uncapped: bool = False,
     ) -> Problem:
-        """Apply the mode's default cap unless `max_deviation` overrides it; reject infeasible."""
-        if max_deviation is None:
+        """Apply the mode's default cap unless `max_deviation` overrides it (or `uncapped`
+        asks for no cap at all); reject infeasible caps."""
+        if uncapped:
+            max_deviation = None
+        elif max_deviation is None:
             max_deviation = default_max_deviation(mode, instance.n_tasks, instance.n_robots)
         elif max_deviation < 0:
             raise DomainError("max_deviation", f"must be >= 0 tasks, got {max_deviation:g}")

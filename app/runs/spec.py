@@ -19,7 +19,7 @@ DEFAULT_MAX_RETRIES = 3
 class RunSpec:
     instance_data: dict[str, Any]
     mode: str = Mode.BALANCED.value
-    max_deviation: float | None = None
+    max_deviation: float | None = None  # the effective cap; None = no cap
     seed: int = 0
     reasoner: str = "rules"
     quality_threshold: float = DEFAULT_QUALITY_THRESHOLD
@@ -30,12 +30,16 @@ class RunSpec:
 
     @classmethod
     def for_instance(cls, instance: Instance, **params: Any) -> RunSpec:
+        """Without `max_deviation`, the mode's default cap is stored (None stores no cap)."""
+        if "max_deviation" not in params:
+            mode = Mode(params.get("mode", Mode.BALANCED.value))
+            params["max_deviation"] = Problem.build(instance, mode).cap.max_deviation
         return cls(instance_data=instance_to_dict(instance), **params)
 
     @cached_property
     def problem(self) -> Problem:
         return Problem.build(instance_from_dict(self.instance_data), Mode(self.mode),
-                             self.max_deviation)
+                             self.max_deviation, uncapped=self.max_deviation is None)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

@@ -139,3 +139,18 @@ def test_fractional_cap_and_any_feature_names(client: TestClient) -> None:
 def test_allocate_route_runs_in_the_threadpool() -> None:
     # A sync (def) endpoint is what makes FastAPI run the CPU-bound solve off the event loop.
     assert not inspect.iscoroutinefunction(allocate_route.allocate)
+
+
+def test_explicit_null_max_deviation_means_no_cap(client: TestClient) -> None:
+    body = {"solver": "optimal", "scenario": "baseline", "mode": "balanced"}
+    default = client.post("/allocate", json=body).json()
+    uncapped = client.post("/allocate", json={**body, "max_deviation": None}).json()
+    assert default["max_deviation"] == 4
+    assert uncapped["max_deviation"] is None
+    assert uncapped["metrics"]["expected_success"] == pytest.approx(0.830556, abs=1e-6)
+
+
+def test_runs_offset_beyond_any_page_is_a_422_not_a_500(client: TestClient) -> None:
+    response = client.get("/runs", params={"offset": 2**63})
+    assert response.status_code == 422
+    assert response.json()["detail"][0]["loc"] == ["query", "offset"]

@@ -35,7 +35,7 @@ def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: Set
     """Start an LTAA run in the background; poll the Location for progress."""
     problem = build_problem(body)
     spec = RunSpec.for_instance(
-        problem.instance, mode=problem.mode.value, max_deviation=body.max_deviation,
+        problem.instance, mode=problem.mode.value, max_deviation=problem.cap.max_deviation,
         seed=body.seed, reasoner=body.reasoner or settings.default_reasoner,
         quality_threshold=body.quality_threshold, max_retries=body.max_retries,
         model=body.model, temperature=body.temperature, guidance=body.guidance,
@@ -52,7 +52,7 @@ def list_runs(
     runs: RunsDep,
     status_: Annotated[RunStatus | None, Query(alias="status")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
 ) -> list[RunSummary]:
     """List runs, newest first, optionally only those with one status."""
     rows = service.list_run_rows(sessions=runs.sessions, status=status_, limit=limit,
