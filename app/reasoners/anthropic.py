@@ -18,6 +18,7 @@ from typing import Any
 
 import anthropic
 
+from app.domain.errors import DomainError
 from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
 
 # claude-sonnet-4-5 reaches end-of-life on 2026-11-30 (the SDK warns); 4.6 still takes
@@ -81,7 +82,7 @@ class AnthropicReasoner:
             ) from exc
         except anthropic.APIStatusError as exc:
             if not _transient(exc):
-                raise
+                raise _rejected(exc, self.model) from exc
             raise ReasonerError(
                 f"HTTP {exc.status_code} after {self.max_retries} transport retries: {exc}"
             ) from exc
@@ -104,3 +105,23 @@ class AnthropicReasoner:
 
     def close(self) -> None:
         self._client.close()
+
+
+class ReasonerRejectedError(DomainError):
+    """The Messages API refused the call itself (bad key, unknown model): retrying cannot
+    help, so the run or request fails with this message instead of escalating tiers."""
+
+
+def _rejected(exc: anthropic.APIStatusError, model: str) -> DomainError:
+    if exc.status_code == 404:
+        err = ReasonerRejectedError("model", f"the Messages API does not know model "
+                                    f"'{model}' (HTTP 404); choose another model",
+                                    code="unknown_model")
+        return err
+    err = ReasonerRejectedError(
+        "reasoner", f"the Messages API rejected the call (HTTP {exc.status_code}: "
+        f"{exc.message}); check the server's ANTHROPIC_API_KEY and model access",
+        code="upstream_rejected")
+    # The server's own configuration, not the request, is at fault.
+    err.status_code = 502 if exc.status_code in (401, 403) else 422
+    return err

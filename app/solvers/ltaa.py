@@ -92,6 +92,11 @@ class LTAASolver(Solver):
         )
         try:
             run_graph(build_graph(InMemorySaver()), context, uuid.uuid4().hex, resume=False)
+        except DomainError as exc:
+            # e.g. the Messages API refusing the model: point at the request's option.
+            err = DomainError(f"options.{exc.field}", exc.message, code=exc.code)
+            err.status_code = exc.status_code
+            raise err from exc
         finally:
             close = getattr(reasoner, "close", None)
             if callable(close):

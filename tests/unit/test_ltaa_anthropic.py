@@ -13,7 +13,7 @@ from app.graph.memory_recorder import MemoryRecorder
 from app.graph.prompts import prompt_for
 from app.graph.usage import usage_from_attempts
 from app.graph.validation import validate_text
-from app.reasoners.anthropic import SAMPLING_API_VERSION, AnthropicReasoner
+from app.reasoners.anthropic import SAMPLING_API_VERSION, AnthropicReasoner, ReasonerRejectedError
 from app.reasoners.factory import make_reasoner
 from app.reasoners.rules import RulesReasoner
 from app.solvers.registry import get_solver
@@ -127,8 +127,22 @@ def test_transport_giving_up_is_a_failed_attempt_not_a_failed_run(api: FakeMessa
 
 def test_a_rejected_key_ends_the_run(api: FakeMessagesAPI) -> None:
     api.script(Reply.error(401, retry_after=None))
-    with pytest.raises(anthropic.AuthenticationError):
+    with pytest.raises(ReasonerRejectedError) as err:
         run(problem(n_tasks=1), reasoner(api))
+    assert err.value.status_code == 502 and "ANTHROPIC_API_KEY" in err.value.message
+    assert isinstance(err.value.__cause__, anthropic.AuthenticationError)
+
+
+def test_an_unknown_model_through_allocate_names_the_option(
+    api: FakeMessagesAPI, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("LTAA_ANTHROPIC_API_KEY", "test")
+    monkeypatch.setenv("LTAA_ANTHROPIC_BASE_URL", api.base_url)
+    api.script(Reply.error(404, retry_after=None))
+    with pytest.raises(DomainError) as err:
+        get_solver("ltaa").solve(problem(n_tasks=1),
+                                 options={"reasoner": "anthropic", "model": "nope"})
+    assert err.value.field == "options.model" and err.value.status_code == 422
 
 
 def test_the_fake_answers_every_prompt_tier_well() -> None:
