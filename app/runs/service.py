@@ -98,13 +98,14 @@ class Usage:
 
 
 def usage_of(attempts: list[Attempt]) -> Usage:
-    """LLM calls are attempts answered by a model (the rules reasoner records none)."""
+    """LLM calls are attempts answered by a model (the rules reasoner records none);
+    the same rule as app.graph.usage, so a run and the `ltaa` solver count alike."""
     usage = Usage()
     for a in attempts:
         if a.reply_model is not None:
             usage.llm_calls += 1
-        usage.input_tokens += a.input_tokens
-        usage.output_tokens += a.output_tokens
+            usage.input_tokens += a.input_tokens
+            usage.output_tokens += a.output_tokens
     return usage
 
 

@@ -206,7 +206,7 @@ class RunWorker:
         except Exception as exc:
             log.exception("run %s failed", run_id)
             self._finish(run_id, "failed", {"error": f"{type(exc).__name__}: {exc}"},
-                         error=str(exc))
+                         error=f"{type(exc).__name__}: {exc}")
             return
         stored = recorder.decisions()
         if [d.task_index for d in stored] != list(range(problem.instance.n_tasks)):

@@ -11,6 +11,7 @@ deviation term R*|L - W| — so one solve gives "max success, then least deviati
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,19 +37,32 @@ def _deviation_arcs(load_from: int, load_to: int, r: int, n: int) -> list[tuple[
     return sorted(((cap, cost) for cost, cap in arcs.items()), key=lambda a: a[1])
 
 
-def best_completion(
-    success: np.ndarray,
-    cap: WorkloadCap,
-    initial_loads: Sequence[int] | None = None,
-) -> tuple[list[int], float]:
-    """Optimal robots for the rows of `success`, given loads already placed.
+@dataclass(frozen=True)
+class TaskClasses:
+    """Tasks with identical success rows are interchangeable: one flow node per class."""
 
-    Returns (assignment, sum of S over these rows). `cap` is the whole run's cap, so its
-    target and bounds refer to the final loads (initial + new).
-    """
-    m, r = success.shape
-    n = cap.n_tasks
-    init = list(initial_loads) if initial_loads is not None else [0] * r
+    rows: np.ndarray  # (classes, robots) success rows, in first-appearance order
+    of_task: np.ndarray  # class index of each task
+
+    @classmethod
+    def of(cls, success: np.ndarray) -> TaskClasses:
+        _, first, inverse = np.unique(success, axis=0, return_index=True, return_inverse=True)
+        order = np.argsort(first)  # first-appearance order, for a stable tie-break
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        return cls(rows=success[first[order]], of_task=rank[inverse.reshape(-1)])
+
+    def counts(self, start: int = 0) -> np.ndarray:
+        return np.bincount(self.of_task[start:], minlength=len(self.rows))
+
+
+def class_allocation(
+    rows: np.ndarray, counts: np.ndarray, cap: WorkloadCap, initial_loads: Sequence[int]
+) -> np.ndarray:
+    """x[c, r]: how many tasks of class c robot r takes in an optimal completion."""
+    n_classes, r = rows.shape
+    m, n = int(counts.sum()), cap.n_tasks
+    init = list(initial_loads)
     lo, hi = cap.lower, cap.upper
     need = [max(0, lo - x) for x in init]
     room = [hi - x for x in init]
@@ -58,19 +72,7 @@ def best_completion(
             f"[{lo}, {hi}] tasks from loads {init}"
         )
     if m == 0:
-        return [], 0.0
-
-    # Group identical rows: their tasks are interchangeable.
-    _, first, inverse = np.unique(success, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    order = np.argsort(first)  # classes in first-appearance order, for a stable tie-break
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    cls = rank[inverse]
-    n_classes = order.size
-    rows = success[first[order]]
-    counts = np.bincount(cls, minlength=n_classes)
-
+        return np.zeros((n_classes, r), dtype=np.int64)
     factor = deviation_factor(n, r)
     weight = integer_weights(rows, weight_scale(n, r, m))
 
@@ -101,13 +103,31 @@ def best_completion(
             f"the min-cost flow found no allocation within [{lo}, {hi}] tasks per robot "
             f"(solver status {status})"
         )
-    x = flow.flows(arcs[: n_classes * r]).reshape(n_classes, r)
+    return np.asarray(flow.flows(arcs[: n_classes * r])).reshape(n_classes, r)
 
+
+def best_completion(
+    success: np.ndarray,
+    cap: WorkloadCap,
+    initial_loads: Sequence[int] | None = None,
+) -> tuple[list[int], float]:
+    """Optimal robots for the rows of `success`, given loads already placed.
+
+    Returns (assignment, sum of S over these rows). `cap` is the whole run's cap, so its
+    target and bounds refer to the final loads (initial + new).
+    """
+    m, r = success.shape
+    init = list(initial_loads) if initial_loads is not None else [0] * r
+    if m == 0:
+        class_allocation(np.zeros((0, r)), np.zeros(0, dtype=np.int64), cap, init)
+        return [], 0.0
+    classes = TaskClasses.of(success)
+    x = class_allocation(classes.rows, classes.counts(), cap, init)
     # Within a class, earlier tasks get lower-numbered robots: the robot-order tie-break.
-    queues = [[i for i in range(r) for _ in range(int(x[c, i]))] for c in range(n_classes)]
-    cursor = [0] * n_classes
+    queues = [[i for i in range(r) for _ in range(int(x[c, i]))] for c in range(len(x))]
+    cursor = [0] * len(x)
     assignment: list[int] = []
-    for c in cls:
+    for c in classes.of_task:
         assignment.append(queues[c][cursor[c]])
         cursor[c] += 1
     total = float(success[np.arange(m), assignment].sum())

@@ -12,9 +12,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from app.domain.errors import InfeasibleCapError
 from app.domain.problem import Problem
-from app.solvers.optimal import best_completion
+from app.solvers.optimal import TaskClasses, class_allocation
 
 
 @dataclass(frozen=True)
@@ -29,22 +31,29 @@ class CompletionOracle:
     def __init__(self, problem: Problem) -> None:
         self._problem = problem
         self._success = problem.instance.success
-        self._cache: dict[tuple[int, tuple[int, ...]], tuple[list[int], float]] = {}
+        # Classes once per run: each query is then a flow over classes, not over tasks.
+        self._classes = TaskClasses.of(self._success)
+        self._cache: dict[tuple[int, tuple[int, ...]], tuple[np.ndarray, float]] = {}
 
-    def _best(self, task_index: int, loads: Sequence[int]) -> tuple[list[int], float] | None:
+    def _best(self, task_index: int, loads: Sequence[int]) -> tuple[np.ndarray, float] | None:
+        """(x[class, robot], sum of S) of an optimal completion from this state."""
         key = (task_index, tuple(loads))
         if key not in self._cache:
+            classes = self._classes
             try:
-                self._cache[key] = best_completion(self._success[task_index:],
-                                                   self._problem.cap, loads)
+                x = class_allocation(classes.rows, classes.counts(task_index),
+                                     self._problem.cap, loads)
             except InfeasibleCapError:
                 return None
+            self._cache[key] = (x, float((x * classes.rows).sum()))
             if len(self._cache) > 4096:  # runs move forward; old states are never asked again
                 self._cache.pop(next(iter(self._cache)))
         return self._cache[key]
 
     def value(self, task_index: int, loads: Sequence[int]) -> float | None:
         """Largest sum of S over tasks task_index.. reachable from `loads` within the cap."""
+        if task_index >= self._problem.instance.n_tasks:
+            return 0.0 if self._problem.cap.can_complete(loads, 0) else None
         best = self._best(task_index, loads)
         return None if best is None else best[1]
 
@@ -67,11 +76,16 @@ class CompletionOracle:
         return loss / self._problem.instance.n_tasks
 
     def guidance(self, task_index: int, loads: Sequence[int]) -> GuidedChoice | None:
-        best = self._best(task_index, loads)
-        if best is None or not best[0]:
+        if task_index >= self._problem.instance.n_tasks:
             return None
+        best = self._best(task_index, loads)
+        if best is None:
+            return None
+        # The current task takes the lowest-numbered robot its class uses (as optimal does).
+        row = best[0][self._classes.of_task[task_index]]
+        guided = int(np.flatnonzero(row)[0])
         costs = []
         for robot in range(self._problem.instance.n_robots):
             loss = self.loss(task_index, loads, robot)
             costs.append(None if loss is None else round(max(0.0, loss) * 100, 6))
-        return GuidedChoice(robot=best[0][0], costs=tuple(costs))
+        return GuidedChoice(robot=guided, costs=tuple(costs))
