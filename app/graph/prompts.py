@@ -12,7 +12,7 @@ from app.domain.modes import MODE_DESCRIPTIONS, tradeoff_threshold
 from app.domain.phases import Phase
 from app.graph.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
-from app.reasoners.base import DecisionContext
+from app.reasoners.base import DecisionContext, percent
 
 TARGET_USER_PROMPT_CHARS = 2_500
 
@@ -40,22 +40,14 @@ _FORMAT = """Reply in exactly this format:
 **Robot Analysis**: <optional: one line per robot>"""
 
 
-def _pct(x: float) -> str:
-    return f"{x * 100:.1f}%"
-
-
-def _labels(ctx: DecisionContext) -> tuple[str, ...]:
-    return tuple(
-        label or name for label, name in zip(ctx.robot_labels, ctx.robot_names, strict=True)
-    )
 
 
 def _facts(ctx: DecisionContext) -> str:
-    labels = _labels(ctx)
+    labels = ctx.labels
     allocated = sum(ctx.loads)
     task_type = f" ({ctx.task_type})" if ctx.task_type else ""
     rows = [
-        f"- {labels[r]} [{ctx.robot_names[r]}]: S {_pct(ctx.success[r])}, load {ctx.loads[r]} "
+        f"- {labels[r]} [{ctx.robot_names[r]}]: S {percent(ctx.success[r])}, load {ctx.loads[r]} "
         f"(dev {ctx.loads[r] - ctx.target:+.1f})" + ("" if r in ctx.feasible else ", NOT allowed")
         for r in range(len(labels))
     ]
@@ -90,13 +82,13 @@ def _guidance(ctx: DecisionContext) -> str:
     ]
     if ctx.guided_robot is not None:
         lines.append(
-            f"Optimizer guidance: {_labels(ctx)[ctx.guided_robot]} lies on the optimal "
+            f"Optimizer guidance: {ctx.labels[ctx.guided_robot]} lies on the optimal "
             "completion of the queue; follow it, or explain in the reasoning why you depart."
         )
         if ctx.guided_costs is not None:
             costs = ", ".join(
                 f"{label} {'not allowed' if c is None else f'{c:.1f}'}"
-                for label, c in zip(_labels(ctx), ctx.guided_costs, strict=True)
+                for label, c in zip(ctx.labels, ctx.guided_costs, strict=True)
             )
             lines.append(f"Success points each choice gives away over the queue: {costs}.")
     return "\n".join(lines)
@@ -151,7 +143,7 @@ def retry_prompt(
 
 
 def _step_template(ctx: DecisionContext) -> str:
-    labels = _labels(ctx)
+    labels = ctx.labels
     allowed = ", ".join(labels[r] for r in ctx.feasible)
     threshold = tradeoff_threshold(ctx.mode, ctx.phase)
     counts = ", ".join(

@@ -16,7 +16,7 @@ from app.graph.parsing import (
     parse_response,
 )
 from app.graph.tradeoff import TradeOff, expected_confidence, rule_for
-from app.reasoners.base import DecisionContext
+from app.reasoners.base import DecisionContext, percent
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
 
@@ -65,18 +65,10 @@ class Validation:
     parsed: ParsedResponse = field(default_factory=ParsedResponse)
 
 
-def _labels(ctx: DecisionContext) -> tuple[str, ...]:
-    return tuple(
-        label or name for label, name in zip(ctx.robot_labels, ctx.robot_names, strict=True)
-    )
-
-
-def _pct(x: float) -> str:
-    return f"{x * 100:.1f}%"
 
 
 def hard_invalid_reason(parsed: ParsedResponse, ctx: DecisionContext) -> str | None:
-    labels = _labels(ctx)
+    labels = ctx.labels
     if parsed.decision_text is None:
         return "no parseable decision: the answer has no **Decision** line"
     if parsed.robot is None:
@@ -108,7 +100,7 @@ def _explanation(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[
     else:
         q += 0.1 if n in (1, 5, 6) else 0.0
         problems.append(f"it has {n} sentence(s) instead of 2-4")
-    if choice in mentioned_robots(text, ctx.robot_names, _labels(ctx)):
+    if choice in mentioned_robots(text, ctx.robot_names, ctx.labels):
         q += 0.25
     else:
         problems.append("it does not name the chosen robot")
@@ -121,14 +113,14 @@ def _explanation(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[
 
 def _accuracy(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
     true_s = ctx.success[choice]
-    label = _labels(ctx)[choice]
+    label = ctx.labels[choice]
     if p.expected_success is None:
-        return 0.0, f"no **Expected Success** value (S of {label} is {_pct(true_s)})"
+        return 0.0, f"no **Expected Success** value (S of {label} is {percent(true_s)})"
     err = abs(p.expected_success - true_s)
     if err <= ACCURACY_EXACT:
         return 1.0, ""
     q = max(0.0, 1.0 - (err - ACCURACY_EXACT) / (ACCURACY_ZERO - ACCURACY_EXACT))
-    return q, f"stated {_pct(p.expected_success)} but S of {label} is {_pct(true_s)}"
+    return q, f"stated {percent(p.expected_success)} but S of {label} is {percent(true_s)}"
 
 
 def _tradeoff_analysis(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
@@ -144,7 +136,7 @@ def _tradeoff_analysis(p: ParsedResponse, ctx: DecisionContext, choice: int) -> 
         q += 0.25
     else:
         problems.append("it does not mention loads or balance")
-    others = mentioned_robots(text, ctx.robot_names, _labels(ctx)) - {choice}
+    others = mentioned_robots(text, ctx.robot_names, ctx.labels) - {choice}
     if others or len(ctx.feasible) <= 1:
         q += 0.25
     else:
@@ -155,7 +147,7 @@ def _tradeoff_analysis(p: ParsedResponse, ctx: DecisionContext, choice: int) -> 
 def _workload(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
     after = list(ctx.loads)
     after[choice] += 1
-    labels = _labels(ctx)
+    labels = ctx.labels
     truth = ", ".join(f"{labels[r]}: {after[r]}" for r in range(len(after)))
     if not p.workload_after:
         return 0.0, f"no **Workload After Assignment** counts (true: {truth})"
@@ -168,7 +160,7 @@ def _workload(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[flo
 def _mode(ctx: DecisionContext, choice: int, rule: TradeOff) -> tuple[float, str]:
     if choice == rule.choice or choice == ctx.guided_robot:
         return 1.0, ""
-    labels = _labels(ctx)
+    labels = ctx.labels
     why = (
         f"the trade-off rule picks {labels[rule.choice]} ({rule.rule_text}; best "
         f"{labels[rule.best]}, least-loaded {labels[rule.fewest]})"
@@ -193,7 +185,7 @@ def _phase(p: ParsedResponse, ctx: DecisionContext) -> tuple[float, str]:
 
 def _logic(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
     q, problems = 0.0, []
-    if choice in mentioned_robots(p.reasoning or "", ctx.robot_names, _labels(ctx)):
+    if choice in mentioned_robots(p.reasoning or "", ctx.robot_names, ctx.labels):
         q += 0.5
     else:
         problems.append("the reasoning does not discuss the robot it chose")
@@ -257,4 +249,4 @@ def reasoner_failed(error: str) -> Validation:
 def validate_text(
     text: str, ctx: DecisionContext, threshold: float = DEFAULT_QUALITY_THRESHOLD
 ) -> Validation:
-    return score(parse_response(text, ctx.robot_names, _labels(ctx)), ctx, threshold)
+    return score(parse_response(text, ctx.robot_names, ctx.labels), ctx, threshold)

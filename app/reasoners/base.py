@@ -33,6 +33,17 @@ class DecisionContext:
     task_type: str = ""
     load_bounds: tuple[int, int] | None = None  # final-load range the cap allows; None = no cap
 
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """How prompts and replies name each robot: its label, else its key."""
+        return tuple(label or name
+                     for label, name in zip(self.robot_labels, self.robot_names, strict=True))
+
+
+def percent(x: float) -> str:
+    """A success probability as prompts and replies write it: 0.7 -> '70.0%'."""
+    return f"{x * 100:.1f}%"
+
 
 @dataclass(frozen=True)
 class ReasonerReply:

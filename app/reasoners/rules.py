@@ -7,17 +7,7 @@ true DecisionContext rather than the prompt, so it is also the graph's fallback.
 from __future__ import annotations
 
 from app.graph.tradeoff import TradeOff, expected_confidence, rule_for
-from app.reasoners.base import DecisionContext, ReasonerReply
-
-
-def _pct(x: float) -> str:
-    return f"{x * 100:.1f}%"
-
-
-def _labels(ctx: DecisionContext) -> tuple[str, ...]:
-    return tuple(
-        label or name for label, name in zip(ctx.robot_labels, ctx.robot_names, strict=True)
-    )
+from app.reasoners.base import DecisionContext, ReasonerReply, percent
 
 
 def choose(ctx: DecisionContext) -> tuple[int, TradeOff]:
@@ -30,16 +20,18 @@ def choose(ctx: DecisionContext) -> tuple[int, TradeOff]:
 
 def compose_answer(ctx: DecisionContext) -> str:
     choice, rule = choose(ctx)
-    names, s, loads = _labels(ctx), ctx.success, ctx.loads
+    names, s, loads = ctx.labels, ctx.success, ctx.loads
     others = sorted((r for r in range(len(s)) if r != choice), key=lambda r: (-s[r], r))
-    alternatives = ", ".join(f"{names[r]} {_pct(s[r])} with {loads[r]} tasks" for r in others[:2])
+    alternatives = ", ".join(
+        f"{names[r]} {percent(s[r])} with {loads[r]} tasks" for r in others[:2]
+    )
     features = ", ".join(ctx.features)
     sentences = [
         f"Rule-based choice (the trade-off rule, not a language model): {names[choice]} has "
-        f"success {_pct(s[choice])} on {ctx.task_name} ({features}) with {loads[choice]} tasks so "
-        f"far" + (f", against {alternatives}." if alternatives else "."),
+        f"success {percent(s[choice])} on {ctx.task_name} ({features}) with {loads[choice]} "
+        f"tasks so far" + (f", against {alternatives}." if alternatives else "."),
         f"Among the robots the cap allows, the best is {names[rule.best]} at "
-        f"{_pct(s[rule.best])} and the least loaded is {names[rule.fewest]} with "
+        f"{percent(s[rule.best])} and the least loaded is {names[rule.fewest]} with "
         f"{loads[rule.fewest]} tasks (target {ctx.target:.1f}); {rule.rule_text}.",
         f"This is the {ctx.phase.value} phase of {ctx.mode.value} mode, weighting success to "
         f"balance {ctx.weights}, with a threshold of {rule.threshold:g} points.",
@@ -53,21 +45,21 @@ def compose_answer(ctx: DecisionContext) -> str:
     after = list(loads)
     after[choice] += 1
     confidence = expected_confidence(rule, choice, ctx.guided_robot if guided else None)
-    runner_up = f"; runner-up {names[others[0]]} at {_pct(s[others[0]])}" if others else ""
+    runner_up = f"; runner-up {names[others[0]]} at {percent(s[others[0]])}" if others else ""
     tradeoff = (
-        f"Best {names[rule.best]} {_pct(s[rule.best])} vs least-loaded {names[rule.fewest]} "
+        f"Best {names[rule.best]} {percent(s[rule.best])} vs least-loaded {names[rule.fewest]} "
         f"({loads[rule.fewest]} tasks): {rule.rule_text}; {names[choice]} takes the task"
         f"{runner_up}."
     )
     analysis = "; ".join(
-        f"{names[r]} {_pct(s[r])}, load {loads[r]}"
+        f"{names[r]} {percent(s[r])}, load {loads[r]}"
         + ("" if r in ctx.feasible else " (cap: not allowed)")
         for r in range(len(s))
     )
     return "\n".join(
         [
             f"**Decision**: {names[choice]}",
-            f"**Expected Success**: {_pct(s[choice])}",
+            f"**Expected Success**: {percent(s[choice])}",
             f"**Reasoning**: {' '.join(sentences)}",
             "**Workload After Assignment**: "
             + ", ".join(f"{names[r]}: {after[r]}" for r in range(len(after))),

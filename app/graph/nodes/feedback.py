@@ -33,9 +33,7 @@ _FIXES = {
 def compose_feedback(verdict: Validation, dctx: DecisionContext, threshold: float) -> str:
     """First line: a one-line summary (it becomes the failure-log entry). Then one line per
     criterion that lost points, largest loss first."""
-    labels = [
-        label or name for label, name in zip(dctx.robot_labels, dctx.robot_names, strict=True)
-    ]
+    labels = dctx.labels
     if verdict.hard_invalid is not None:
         allowed = ", ".join(labels[r] for r in dctx.feasible)
         return (
