@@ -19,9 +19,10 @@ def _plus_one(loads: Loads, i: int) -> Loads:
     return (*loads[:i], loads[i] + 1, *loads[i + 1 :])
 
 
-def _state_bound(n: int, r: int) -> int:
-    """Load vectors with t tasks placed number C(t+r-1, r-1); sum over t."""
-    return math.comb(n + r, r)
+def state_bound(n_tasks: int, n_robots: int) -> int:
+    """(task index, load vector) states: C(t+r-1, r-1) load vectors with t tasks placed,
+    summed over t. The DP and tabular Q-learning share this state space."""
+    return math.comb(n_tasks + n_robots, n_robots)
 
 
 class DynamicProgrammingSolver(Solver):
@@ -35,7 +36,7 @@ class DynamicProgrammingSolver(Solver):
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         s, cap = problem.instance.success, problem.cap
         n, r = s.shape
-        bound = _state_bound(n, r)
+        bound = state_bound(n, r)
         if bound > MAX_STATES:
             raise TooLargeError(
                 "tasks",

@@ -22,7 +22,6 @@ Choices that make it learn well on noisy rewards (measured on the baseline scena
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +31,7 @@ from pydantic import Field
 from app.domain.errors import TooLargeError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
+from app.solvers.dp import state_bound
 
 MAX_STATES = 200_000
 
@@ -61,11 +61,6 @@ class StateSpace:
     @property
     def size(self) -> int:
         return int(self.task.size)
-
-
-def state_bound(n_tasks: int, n_robots: int) -> int:
-    """Load vectors with t tasks placed number C(t+r-1, r-1); summed over t."""
-    return math.comb(n_tasks + n_robots, n_robots)
 
 
 def enumerate_states(problem: Problem) -> StateSpace:
