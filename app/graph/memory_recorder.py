@@ -14,14 +14,6 @@ from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 BeforeReasonHook = Callable[[int, int], None]
 
 
-def _copy_attempt(record: AttemptRecord) -> AttemptRecord:
-    # Shallow copy plus the mutable containers: strings and the frozen reply are shared.
-    out = copy.copy(record)
-    out.scores = dict(record.scores)
-    out.parsed = copy.deepcopy(record.parsed) if record.parsed is not None else None
-    return out
-
-
 def _copy_decision(record: DecisionRecord) -> DecisionRecord:
     out = copy.copy(record)
     out.failure_log = list(record.failure_log)
@@ -52,16 +44,16 @@ class MemoryRecorder:
 
     def save_attempt(self, record: AttemptRecord) -> None:
         self.attempt_saves += 1
-        self._attempts[(record.task_index, record.attempt)] = _copy_attempt(record)
+        self._attempts[(record.task_index, record.attempt)] = record.copy()
 
     def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None:
         record = self._attempts.get((task_index, attempt))
-        return _copy_attempt(record) if record is not None else None
+        return record.copy() if record is not None else None
 
     def attempts(self, task_index: int | None = None) -> list[AttemptRecord]:
         """Every recorded attempt (of one task, or all), in (task, attempt) order."""
         keys = sorted(k for k in self._attempts if task_index is None or k[0] == task_index)
-        return [_copy_attempt(self._attempts[k]) for k in keys]
+        return [self._attempts[k].copy() for k in keys]
 
     def save_decision(self, record: DecisionRecord) -> None:
         self.decision_saves += 1

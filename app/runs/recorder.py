@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import logging
 import threading
 import time
@@ -78,7 +77,7 @@ class SqlRecorder:
             if self._fence is not None:
                 self._fence(session)
             repo.upsert_attempt(session=session, run_id=self.run_id, record=record)
-        self._attempts[(record.task_index, record.attempt)] = copy.deepcopy(record)
+        self._attempts[(record.task_index, record.attempt)] = record.copy()
         # Only the current task's attempts are ever read back.
         for key in [k for k in self._attempts if k[0] < record.task_index]:
             del self._attempts[key]
@@ -86,7 +85,7 @@ class SqlRecorder:
     def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None:
         cached = self._attempts.get((task_index, attempt))
         if cached is not None:
-            return copy.deepcopy(cached)
+            return cached.copy()
         with self._sessions() as session:
             row = repo.get_attempt(session=session, run_id=self.run_id, task_index=task_index,
                                    attempt=attempt)
