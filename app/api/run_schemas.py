@@ -27,6 +27,14 @@ class RunRequest(InstanceRequest):
         None, description="'optimizer': the prompt carries the optimal completion's choice")
     seed: int = Field(0, ge=0, le=MAX_SEED, strict=True,
                       description="Seed of the simulated-completion metric")
+    token_budget: int | None = Field(
+        None, ge=1, strict=True,
+        description="LLM tokens (input + output) the run may spend; once spent, the "
+        "remaining tasks use the offline 'rules' reasoner (default: the server's setting)")
+    replay_of: str | None = Field(
+        None, min_length=1, max_length=64,
+        description="reasoner 'replay': id of the finished run whose recorded LLM replies "
+        "are replayed, with no API call")
 
 
 class RunCreated(BaseModel):

@@ -27,6 +27,11 @@ class RunSpec:
     model: str | None = None
     temperature: float | None = None
     guidance: str | None = None
+    # LLM tokens (input + output) the run may spend; once spent, the remaining tasks go to
+    # the offline rules reasoner. None = no budget.
+    token_budget: int | None = None
+    # reasoner 'replay': the finished run whose recorded replies are replayed.
+    replay_of: str | None = None
 
     @classmethod
     def for_instance(cls, instance: Instance, **params: Any) -> RunSpec:

@@ -56,6 +56,11 @@ class Run(Base):
     lease_owner: Mapped[str | None] = mapped_column(String(128), nullable=True)
     lease_expires_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True),
                                                               nullable=True)
+    # Idempotency-Key of the POST /runs that created the run, and a digest of its body, so
+    # a retried request returns this run and a reused key with another body is refused.
+    idempotency_key: Mapped[str | None] = mapped_column(String(255), nullable=True,
+                                                        unique=True, index=True)
+    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class RunEvent(Base):
@@ -68,6 +73,8 @@ class RunEvent(Base):
     kind: Mapped[str] = mapped_column(String(32))
     detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    # Tamper evidence: a hash over this row's content and the previous link of its run.
+    chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class Decision(Base):
@@ -97,6 +104,8 @@ class Decision(Base):
     severity_after: Mapped[str] = mapped_column(String(16))
     regret: Mapped[float | None] = mapped_column(Float, nullable=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    # Tamper evidence: a hash over this row's content and the previous link of its run.
+    chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class Attempt(Base):
