@@ -27,6 +27,7 @@ from app.graph.builder import build_graph
 from app.graph.checkpoint import open_sqlite_saver
 from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
+from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs.integrity import check_integrity
 from app.runs.recorder import Fence, RunStop, SqlRecorder
@@ -191,8 +192,7 @@ class RunWorker:
                                fence=self._fence(run_id, stop))
         context = graph_context(
             problem,
-            reasoner=make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
-                                   temperature=spec.temperature),
+            reasoner=self._reasoner(run_id, spec),
             recorder=recorder,
             quality_threshold=spec.quality_threshold,
             max_retries=spec.max_retries,
@@ -218,6 +218,11 @@ class RunWorker:
                          error="graph ended early")
             return
         self._finish(run_id, "completed", {"decisions": len(stored)})
+
+    def _reasoner(self, run_id: str, spec: RunSpec) -> Reasoner:
+        """The reasoner a run's graph calls, built afresh at every (re)start."""
+        return make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
+                             temperature=spec.temperature)
 
     def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
         if stop.lease_lost.is_set():

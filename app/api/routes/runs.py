@@ -39,6 +39,7 @@ def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: Set
         seed=body.seed, reasoner=body.reasoner or settings.default_reasoner,
         quality_threshold=body.quality_threshold, max_retries=body.max_retries,
         model=body.model, temperature=body.temperature, guidance=body.guidance,
+        token_budget=body.token_budget, replay_of=body.replay_of,
     )
     run = service.create_run(sessions=runs.sessions, worker=runs.worker, settings=settings,
                              spec=spec)
