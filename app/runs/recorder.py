@@ -56,6 +56,10 @@ class SqlRecorder:
         # Write-through cache: this process wrote these rows, so reads need no query.
         # After a restart the cache starts empty and reads fall through to the table.
         self._attempts: dict[tuple[int, int], AttemptRecord] = {}
+        # Tasks after the last one with a stored attempt (read once, at the first miss)
+        # have only the attempts this recorder wrote: one writer per run (the lease fence
+        # stops this one if another process takes the run), so a miss there needs no query.
+        self._stored_through: int | None = None
 
     def check_cancelled(self) -> None:
         if self._stop.lease_lost.is_set():
@@ -86,6 +90,12 @@ class SqlRecorder:
         cached = self._attempts.get((task_index, attempt))
         if cached is not None:
             return cached.copy()
+        if self._stored_through is None:
+            with self._sessions() as session:
+                self._stored_through = repo.last_attempted_task(session=session,
+                                                                run_id=self.run_id)
+        if task_index > self._stored_through:
+            return None
         with self._sessions() as session:
             row = repo.get_attempt(session=session, run_id=self.run_id, task_index=task_index,
                                    attempt=attempt)

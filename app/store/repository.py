@@ -135,6 +135,12 @@ def attempt_record(row: Attempt) -> AttemptRecord:
     )
 
 
+def last_attempted_task(*, session: Session, run_id: str) -> int:
+    """The highest task index with a stored attempt, or -1."""
+    last = session.scalar(select(func.max(Attempt.task_index)).where(Attempt.run_id == run_id))
+    return -1 if last is None else int(last)
+
+
 def get_attempt(*, session: Session, run_id: str, task_index: int, attempt: int) -> Attempt | None:
     return session.scalar(select(Attempt).where(Attempt.run_id == run_id,
                                                 Attempt.task_index == task_index,
