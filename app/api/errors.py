@@ -13,6 +13,7 @@ from typing import Any
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from fastapi.routing import iter_route_contexts
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -93,8 +94,22 @@ async def _on_domain(_: Request, exc: DomainError) -> JSONResponse:
     return JSONResponse(domain_error_body(exc), status_code=exc.status_code)
 
 
-async def _on_http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+def _allowed_methods(request: Request) -> str:
+    """Every method of the path. Starlette's 405 lists only the first route matching the path,
+    e.g. `Allow: POST` for /runs, whose GET is a separate route."""
+    methods: set[str] = set()
+    for route in iter_route_contexts(request.app.router.routes):
+        path_regex = getattr(route, "path_regex", None)
+        if path_regex is not None and path_regex.match(request.scope["path"]):
+            methods |= route.methods or set()
+    return ", ".join(sorted(methods))
+
+
+async def _on_http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
     code = exc.status_code
+    headers = exc.headers
+    if code == 405:
+        headers = {**(headers or {}), "Allow": _allowed_methods(request)}
     if isinstance(exc, ApiError):
         body = error_body(exc.loc, str(exc.detail), exc.type)
     elif isinstance(exc.detail, list):  # already in list form
@@ -102,7 +117,7 @@ async def _on_http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
     else:
         body = error_body(_DEFAULT_LOC.get(code, ["request"]), str(exc.detail),
                           _DEFAULT_TYPE.get(code, "http_error"))
-    return JSONResponse(body, status_code=code, headers=exc.headers)
+    return JSONResponse(body, status_code=code, headers=headers)
 
 
 async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:

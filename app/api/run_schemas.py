@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
-from datetime import datetime
-from typing import Any, Literal
+from datetime import UTC, datetime
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import AfterValidator, BaseModel, Field
 
 from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
 
 RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "cancelled"]
+
+
+def _with_offset(value: datetime) -> datetime:
+    # Times are stored in UTC, but SQLite hands them back without an offset, and a
+    # date-time without one is not RFC 3339 (OpenAPI's format): a client cannot place it.
+    return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
+
+
+Timestamp = Annotated[datetime, AfterValidator(_with_offset)]
 
 
 class RunRequest(InstanceRequest):
@@ -74,9 +83,9 @@ class RunOut(BaseModel):
     usage: UsageOut
     resumes: int
     error: str | None
-    created_at: datetime
-    updated_at: datetime
-    finished_at: datetime | None
+    created_at: Timestamp
+    updated_at: Timestamp
+    finished_at: Timestamp | None
 
 
 class RunSummary(BaseModel):
@@ -87,14 +96,14 @@ class RunSummary(BaseModel):
     n_tasks: int
     n_robots: int
     resumes: int
-    created_at: datetime
+    created_at: Timestamp
 
 
 class EventOut(BaseModel):
     seq: int
     kind: str
     detail: dict[str, Any]
-    at: datetime
+    at: Timestamp
 
 
 class AttemptOut(BaseModel):

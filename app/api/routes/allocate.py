@@ -9,6 +9,7 @@ from fastapi.openapi.models import Example
 
 from app.api.allocation import allocate as run_allocation
 from app.api.deps import ClientDep
+from app.api.responses import BODY, CLIENT, errors
 from app.api.schemas import AllocateRequest, AllocateResponse
 
 router = APIRouter(tags=["allocate"])
@@ -53,7 +54,7 @@ EXAMPLES: dict[str, Example] = {
 }
 
 
-@router.post("/allocate", response_model=AllocateResponse)
+@router.post("/allocate", response_model=AllocateResponse, responses=errors(*CLIENT, *BODY, 502))
 def allocate(
     caller: ClientDep,
     body: Annotated[AllocateRequest, Body(openapi_examples=EXAMPLES)],

@@ -8,6 +8,7 @@ from fastapi import APIRouter
 
 from app.api.allocation import load_solver
 from app.api.deps import ClientDep
+from app.api.responses import CLIENT, errors
 from app.api.schemas import RobotOut, ScenarioOut, SolverOut, TaskOut
 from app.domain import catalog
 from app.domain.errors import DomainError
@@ -17,7 +18,7 @@ router = APIRouter(tags=["catalog"])
 log = logging.getLogger(__name__)
 
 
-@router.get("/solvers", response_model=list[SolverOut])
+@router.get("/solvers", response_model=list[SolverOut], responses=errors(*CLIENT))
 def list_solvers(caller: ClientDep) -> list[SolverOut]:
     """List the allocation methods usable in POST /allocate, with exactness and size limits."""
     out: list[SolverOut] = []
@@ -33,7 +34,7 @@ def list_solvers(caller: ClientDep) -> list[SolverOut]:
     return out
 
 
-@router.get("/scenarios", response_model=list[ScenarioOut])
+@router.get("/scenarios", response_model=list[ScenarioOut], responses=errors(*CLIENT))
 def list_scenarios(caller: ClientDep) -> list[ScenarioOut]:
     """List the built-in scenarios: the 36 TEACh tasks and each scenario's robot success rates."""
     return [

@@ -14,6 +14,7 @@ from fastapi.responses import StreamingResponse
 
 from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
+from app.api.responses import SUPERVISOR, errors
 from app.runs.errors import RunNotFoundError
 from app.runs.progress import Cursor, read_progress, run_status
 
@@ -58,7 +59,7 @@ def sse(*, event: str | None = None, id: str | None = None, data: object = None,
 # A plain StreamingResponse rather than fastapi.sse.EventSourceResponse: the latter's
 # keep-alive task logs a BrokenResourceError traceback whenever a client hangs up.
 @router.get("/{run_id}/events", response_class=StreamingResponse,
-            responses={200: {"content": {"text/event-stream": {}}}})
+            responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404)})
 async def run_events(
     caller: SupervisorDep,  # first: who may ask is settled before whether the run exists
     run_id: Annotated[str, Depends(existing_run)],

@@ -6,6 +6,7 @@ from fastapi import APIRouter, Request, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
 from app.api.deps import SupervisorDep
+from app.api.responses import SUPERVISOR, errors
 from app.observability.metrics import Metrics
 
 router = APIRouter(tags=["metrics"])
@@ -13,7 +14,8 @@ router = APIRouter(tags=["metrics"])
 
 @router.get("/metrics", response_class=Response,
             responses={200: {"content": {CONTENT_TYPE_LATEST: {}},
-                             "description": "Prometheus text format"}})
+                             "description": "Prometheus text format"},
+                       **errors(*SUPERVISOR)})
 def metrics(request: Request, caller: SupervisorDep) -> Response:
     """For supervisors (and the Prometheus scraper): runs, decisions, LLM usage, validation,
     retries, fallbacks and request latency."""

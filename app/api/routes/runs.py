@@ -8,6 +8,7 @@ from fastapi import APIRouter, Query, Response, status
 
 from app.api.allocation import build_problem
 from app.api.deps import ClientDep, RunsDep, SettingsDep, SupervisorDep
+from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.run_schemas import (
     AttemptOut,
     DecisionOut,
@@ -29,7 +30,8 @@ from app.store.models import Attempt
 router = APIRouter(prefix="/runs", tags=["runs"])
 
 
-@router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=RunCreated)
+@router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=RunCreated,
+             responses=errors(*CLIENT, *BODY, 409))
 def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: SettingsDep,
                response: Response) -> RunCreated:
     """Start an LTAA run in the background; poll the Location for progress."""
@@ -47,7 +49,7 @@ def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: Set
     return RunCreated(id=run.id, status=run.status, location=f"/runs/{run.id}")
 
 
-@router.get("", response_model=list[RunSummary])
+@router.get("", response_model=list[RunSummary], responses=errors(*CLIENT))
 def list_runs(
     caller: ClientDep,
     runs: RunsDep,
@@ -84,7 +86,7 @@ def _run_out(view: service.RunView) -> RunOut:
     )
 
 
-@router.get("/{run_id}", response_model=RunOut)
+@router.get("/{run_id}", response_model=RunOut, responses=errors(*CLIENT, 404))
 def get_run(caller: ClientDep, run_id: str, runs: RunsDep) -> RunOut:
     """A run's status, progress, workload, assignments so far, metrics and usage."""
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
@@ -102,7 +104,8 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
     )
 
 
-@router.get("/{run_id}/trace", response_model=TraceOut)
+@router.get("/{run_id}/trace", response_model=TraceOut,
+            responses=errors(*SUPERVISOR, 404))
 def get_trace(
     caller: SupervisorDep, run_id: str, runs: RunsDep,
     include: Annotated[Literal["prompts"] | None, Query()] = None,
@@ -135,14 +138,16 @@ def get_trace(
     )
 
 
-@router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut)
+@router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut,
+             responses=errors(*SUPERVISOR, 404, 409))
 def resume_run(caller: SupervisorDep, run_id: str, runs: RunsDep) -> RunOut:
     """For supervisors: resume an interrupted (or failed) run from its last checkpoint."""
     service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
 
 
-@router.post("/{run_id}/cancel", response_model=RunOut)
+@router.post("/{run_id}/cancel", response_model=RunOut,
+             responses=errors(*SUPERVISOR, 404, 409))
 def cancel_run(caller: SupervisorDep, run_id: str, runs: RunsDep) -> RunOut:
     """For supervisors: cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)

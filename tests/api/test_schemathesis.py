@@ -1,0 +1,125 @@
+"""Hostile input from schemathesis: requests generated from the app's own OpenAPI schema,
+valid and invalid, sent in-process to the ASGI app. No request may end in a 5xx and every
+response must conform to the schema: a documented status code, content type, headers and a
+body matching its model.
+
+Every endpoint is covered with a bounded number of examples (a fixed seed via derandomize),
+so the whole module stays well under a minute and a half.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+import schemathesis
+from fastapi import FastAPI
+from fastapi.testclient import TestClient
+from hypothesis import HealthCheck, settings
+from pydantic import SecretStr
+from schemathesis.python.asgi import shutdown_lifespans
+from starlette.types import Receive, Scope, Send
+
+from app.config import Settings
+from app.main import create_app
+
+SUPERVISOR_KEY = "schemathesis-supervisor-key-0123"
+KEYS = SecretStr(f"{SUPERVISOR_KEY}:supervisor")
+AUTH = {"Authorization": f"Bearer {SUPERVISOR_KEY}"}
+
+
+class AppUnderTest:
+    """The ASGI app schemathesis calls: it forwards to the app the running test built.
+
+    The schema is loaded at import (schemathesis makes one test per operation at
+    collection), but each test needs its own app over its own temporary data directory.
+    """
+
+    def __init__(self) -> None:
+        self.app: FastAPI | None = None
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        assert self.app is not None, "no app: the test did not request the app_under_test fixture"
+        await self.app(scope, receive, send)
+
+
+APP = AppUnderTest()
+
+
+def _openapi_document() -> dict[str, Any]:
+    # Building the app opens nothing (the lifespan does); the schema needs no data directory.
+    return create_app(Settings(api_keys=KEYS, host="127.0.0.1")).openapi()
+
+
+schema = schemathesis.openapi.from_dict(_openapi_document())
+schema.app = APP
+
+# Requests generated from the schema are sent both as they are and to the run the fixture
+# stored, so GET /runs/{id}, its trace and events are answered with bodies too, not only 404s.
+RUN_PATHS = r"\{run_id\}"
+HYPOTHESIS = settings(
+    max_examples=25,
+    deadline=None,  # in-process calls share 2 cores with other tests; time is bounded by count
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
+                           HealthCheck.data_too_large, HealthCheck.function_scoped_fixture],
+)
+# Schema-valid bodies that the app still refuses with a 422 are expected: the schema cannot
+# say that a task's features must be rated by every robot, that a scenario or solver name
+# must exist or that the cap must be feasible. Everything else schemathesis checks stays on.
+EXCLUDED = [schemathesis.checks.positive_data_acceptance]
+
+
+@pytest.fixture
+def app_settings(settings: Settings) -> Settings:
+    # One run at a time and short event streams: POST /runs starts background runs, and a
+    # stream stays open while its run is running.
+    return settings.model_copy(update={"api_keys": KEYS, "max_concurrent_runs": 1,
+                                       "events_max_stream_s": 0.5, "events_poll_s": 0.05})
+
+
+@pytest.fixture
+def app_under_test(app_settings: Settings) -> Iterator[FastAPI]:
+    APP.app = create_app(app_settings)
+    try:
+        yield APP.app
+    finally:
+        # Drains the run worker (background runs stop at a node boundary) before the
+        # temporary data directory goes away. schemathesis's own teardown does the same.
+        shutdown_lifespans()
+        APP.app = None
+
+
+@pytest.fixture
+def stored_run(app_settings: Settings) -> str:
+    """A completed run in the data directory the app under test will open."""
+    with TestClient(create_app(app_settings)) as client:
+        body = {"scenario": "baseline", "reasoner": "rules"}
+        run_id = str(client.post("/runs", json=body, headers=AUTH).json()["id"])
+        for _ in range(600):
+            if client.get(f"/runs/{run_id}", headers=AUTH).json()["status"] == "completed":
+                return run_id
+            time.sleep(0.05)
+    raise AssertionError("the stored run did not complete")
+
+
+@schema.exclude(path_regex=RUN_PATHS).parametrize()
+@HYPOTHESIS
+def test_api_conforms_to_its_schema(case: schemathesis.Case, app_under_test: FastAPI) -> None:
+    case.call_and_validate(headers=AUTH, excluded_checks=EXCLUDED)
+
+
+@schema.include(path_regex=RUN_PATHS).parametrize()
+@HYPOTHESIS
+def test_run_endpoints_conform_to_their_schema(
+    case: schemathesis.Case, stored_run: str, app_under_test: FastAPI
+) -> None:
+    case.call_and_validate(headers=AUTH, excluded_checks=EXCLUDED)
+    case.path_parameters = {**(case.path_parameters or {}), "run_id": stored_run}
+    # The id is now a real one, whatever was generated; a negative case may have been
+    # negative only in the id, so that the app now rightly accepts it.
+    case.call_and_validate(headers=AUTH, excluded_checks=[
+        *EXCLUDED, schemathesis.checks.negative_data_rejection])
