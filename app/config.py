@@ -61,6 +61,9 @@ class Settings(BaseSettings):
     # Test-only: a durable run pauses before reasoning about this task index, so
     # end-to-end tests can kill the server at a known point.
     test_pause_at_task: int | None = Field(None, ge=0)
+    # Test-only, with test_pause_at_task: hold the run at `<node>:before` or `<node>:after`
+    # of that task instead (any of the nine nodes; see app.graph.pause).
+    test_pause_at_node: str | None = Field(None, pattern=r"^[a-z_]+(:(before|after))?$")
 
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
 

@@ -18,7 +18,20 @@ from langgraph.graph import END, START, StateGraph
 from langgraph.graph.state import CompiledStateGraph
 
 from app.graph import nodes
+from app.graph.pause import Node, NodeHook
 from app.graph.state import GraphContext, LTAAState
+
+NODES: dict[str, Node] = {
+    "detect_phase": nodes.detect_phase,
+    "build_prompt": nodes.build_prompt,
+    "reason": nodes.reason,
+    "validate": nodes.validate,
+    "build_feedback": nodes.build_feedback,
+    "retry": nodes.retry,
+    "finalize": nodes.finalize,
+    "update_workload": nodes.update_workload,
+    "store_and_route": nodes.store_and_route,
+}
 
 
 def route_after_validate(state: LTAAState) -> str:
@@ -35,18 +48,16 @@ def route_after_store(state: LTAAState) -> str:
 
 def build_graph(
     checkpointer: BaseCheckpointSaver[Any] | None = None,
+    *,
+    node_hook: NodeHook | None = None,
 ) -> CompiledStateGraph[Any, Any, Any, Any]:
-    """Compile the graph. Call once per process (or per synchronous solve), never at import."""
+    """Compile the graph. Call once per process (or per synchronous solve), never at import.
+
+    `node_hook(name, node)` may wrap nodes (the test-only pause points of app.graph.pause).
+    """
     g = StateGraph(LTAAState, context_schema=GraphContext)
-    g.add_node("detect_phase", nodes.detect_phase)
-    g.add_node("build_prompt", nodes.build_prompt)
-    g.add_node("reason", nodes.reason)
-    g.add_node("validate", nodes.validate)
-    g.add_node("build_feedback", nodes.build_feedback)
-    g.add_node("retry", nodes.retry)
-    g.add_node("finalize", nodes.finalize)
-    g.add_node("update_workload", nodes.update_workload)
-    g.add_node("store_and_route", nodes.store_and_route)
+    for name, node in NODES.items():
+        g.add_node(name, node_hook(name, node) if node_hook is not None else node)
 
     g.add_edge(START, "detect_phase")
     g.add_edge("detect_phase", "build_prompt")

@@ -23,8 +23,9 @@ from langgraph.checkpoint.base import BaseCheckpointSaver
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
-from app.graph.builder import build_graph
+from app.graph.builder import NODES, build_graph
 from app.graph.checkpoint import open_sqlite_saver
+from app.graph.pause import NodeHook, PausePoint, pause_hook
 from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
 from app.reasoners.base import Reasoner
@@ -45,7 +46,7 @@ class RunWorker:
         self._settings = settings
         self._sessions = sessions
         self.checkpointer, self._close_checkpointer = self._open_checkpointer()
-        self.graph = build_graph(self.checkpointer)
+        self.graph = build_graph(self.checkpointer, node_hook=self._pause_hook())
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
         )
@@ -64,6 +65,13 @@ class RunWorker:
         # kill -9 loses nothing committed; only an OS crash could lose the last steps.
         saver = open_sqlite_saver(path, compact=True, synchronous="NORMAL")
         return saver, saver.conn.close
+
+    def _pause_hook(self) -> NodeHook | None:
+        """Test-only: hold runs at one node of one task (LTAA_TEST_PAUSE_AT_NODE)."""
+        task, node = self._settings.test_pause_at_task, self._settings.test_pause_at_node
+        if task is None or node is None:
+            return None
+        return pause_hook(PausePoint.parse(task, node), frozenset(NODES))
 
     # -- lifecycle ---------------------------------------------------------------------
 
@@ -188,7 +196,8 @@ class RunWorker:
             repo.set_status(session=session, run=run, status="running")
 
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop,
-                               pause_at_task=self._settings.test_pause_at_task,
+                               pause_at_task=None if self._settings.test_pause_at_node
+                               else self._settings.test_pause_at_task,
                                fence=self._fence(run_id, stop))
         context = graph_context(
             problem,

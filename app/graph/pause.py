@@ -1,0 +1,83 @@
+"""Test-only crash points: hold a run at one node of one task, so an end-to-end test can
+SIGKILL (or SIGTERM) the server at a known place anywhere in the graph.
+
+`<node>:before` holds the node before its body runs: the previous step's checkpoint is
+written and this node has done nothing. `<node>:after` holds it once its body has run and
+its side effects are recorded, but before LangGraph writes the step's checkpoint: the
+window in which a crash makes LangGraph re-run the node from its top, which is where a
+non-idempotent side effect would show.
+
+A held run waits, polling `Recorder.check_cancelled`, until the process dies or the run is
+stopped (a cancel or the server draining raises RunCancelled out of the hold).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from langgraph.runtime import Runtime
+
+from app.graph.state import GraphContext, LTAAState
+
+log = logging.getLogger("ltaa.runs")
+
+Node = Callable[[LTAAState, Runtime[GraphContext]], dict[str, Any]]
+NodeHook = Callable[[str, Node], Node]
+POLL_S = 0.05
+
+
+@dataclass(frozen=True)
+class PausePoint:
+    task_index: int
+    node: str
+    after: bool
+
+    @classmethod
+    def parse(cls, task_index: int, spec: str) -> PausePoint:
+        """`spec` is `<node>:before` or `<node>:after` (a bare `<node>` means after)."""
+        node, _, when = spec.partition(":")
+        if when not in ("", "before", "after"):
+            raise ValueError(f"pause point {spec!r}: write <node>:before or <node>:after")
+        return cls(task_index=task_index, node=node, after=when != "before")
+
+    def message(self) -> str:
+        """The log line's text; end-to-end tests wait for it before killing the server."""
+        return (f"test pause: holding task {self.task_index} "
+                f"{'after' if self.after else 'before'} {self.node}")
+
+
+def pause_hook(point: PausePoint, node_names: frozenset[str]) -> NodeHook:
+    """A build_graph node hook that wraps only the node named by `point`."""
+    if point.node not in node_names:
+        raise ValueError(f"pause point names node {point.node!r}; the graph's nodes are "
+                         f"{', '.join(sorted(node_names))}")
+
+    def hook(name: str, node: Node) -> Node:
+        if name != point.node:
+            return node
+
+        @functools.wraps(node)
+        def held(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+            hit = state["task_index"] == point.task_index
+            if hit and not point.after:
+                _hold(point, runtime.context)
+            update = node(state, runtime)
+            if hit and point.after:
+                _hold(point, runtime.context)
+            return update
+
+        return held
+
+    return hook
+
+
+def _hold(point: PausePoint, context: GraphContext) -> None:
+    log.warning("%s", point.message())
+    while True:
+        context.recorder.check_cancelled()
+        time.sleep(POLL_S)
