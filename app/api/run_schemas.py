@@ -24,7 +24,9 @@ Timestamp = Annotated[datetime, AfterValidator(_with_offset)]
 class RunRequest(InstanceRequest):
     """An LTAA run on an instance, executed durably in the background."""
 
-    reasoner: Name | None = Field(None, description="'rules' (default, offline) or 'anthropic'")
+    reasoner: Name | None = Field(
+        None, description="'rules' (default, offline), 'anthropic', or 'replay' (with "
+        "replay_of)")
     quality_threshold: float = Field(0.6, ge=0, le=1, strict=True, allow_inf_nan=False,
                                      description="Accept a reply when Q >= this")
     max_retries: int = Field(3, ge=0, le=10, strict=True,
@@ -42,8 +44,12 @@ class RunRequest(InstanceRequest):
         "remaining tasks use the offline 'rules' reasoner (default: the server's setting)")
     replay_of: str | None = Field(
         None, min_length=1, max_length=64,
-        description="reasoner 'replay': id of the finished run whose recorded LLM replies "
-        "are replayed, with no API call")
+        description="Required by reasoner 'replay', refused with any other: id of a completed "
+        "run whose recorded replies are replayed, with no API call. The replay copies that "
+        "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance and "
+        "seed: omit them, or send the original's values (any other value is a 422 naming "
+        "the field); model, temperature and token_budget do not apply. Unknown id: 422; "
+        "a run not completed: 409")
 
 
 class RunCreated(BaseModel):
@@ -120,6 +126,12 @@ class AttemptOut(BaseModel):
     latency_ms: float
     transport_retries: int
     model: str | None
+    replayed_from: str | None = Field(
+        None, description="Replay runs: the run whose recorded reply this attempt reused "
+        "(no API call; model null, tokens 0)")
+    original_model: str | None = Field(
+        None, description="Replay runs: the model that wrote the recorded reply (null for "
+        "the rules reasoner)")
     system_prompt: str | None = Field(None, description="With ?include=prompts")
     user_prompt: str | None = Field(None, description="With ?include=prompts")
     reply: str | None = Field(None, description="Raw reply, with ?include=prompts")

@@ -40,4 +40,5 @@ def decision_context(
         guided_costs=tuple(costs) if (costs := view.get("guided_costs")) is not None else None,
         task_type=task.type,
         load_bounds=bounds,
+        attempt=state.get("attempt") or 1,
     )

@@ -32,6 +32,9 @@ class DecisionContext:
     guided_costs: tuple[float | None, ...] | None = None
     task_type: str = ""
     load_bounds: tuple[int, int] | None = None  # final-load range the cap allows; None = no cap
+    # 1-based attempt at this task (tiers stop at 3; attempts do not): the key, with
+    # task_index, of a recorded reply, for reasoners that replay a run's record.
+    attempt: int = 1
 
     @property
     def labels(self) -> tuple[str, ...]:

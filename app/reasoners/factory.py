@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from typing import Any, Protocol
 
 from pydantic import SecretStr
 
 from app.domain.errors import DomainError
 from app.reasoners.base import Reasoner
+from app.reasoners.replay import RecordedReply, ReplayReasoner, ReplyKey
 from app.reasoners.rules import RulesReasoner
 
-REASONERS = ("rules", "anthropic")
+REASONERS = ("rules", "anthropic", "replay")
 API_KEY_VARS = ("LTAA_ANTHROPIC_API_KEY", "ANTHROPIC_API_KEY")
 
 
@@ -49,10 +51,23 @@ def make_reasoner(
     base_url: str | None = None,
     timeout: float | None = None,
     max_retries: int | None = None,
+    replay_of: str | None = None,
+    replies: Mapping[ReplyKey, RecordedReply] | None = None,
 ) -> Reasoner:
-    """Explicit arguments win over settings, which win over the reasoner's defaults."""
+    """Explicit arguments win over settings, which win over the reasoner's defaults.
+
+    'replay' reads no database: the caller loads the recorded replies of run `replay_of`
+    and passes them in `replies`.
+    """
     if name == "rules":
         return RulesReasoner()
+    if name == "replay":
+        if replay_of is None or replies is None:
+            raise DomainError(
+                "reasoner", "the 'replay' reasoner replays a finished durable run: "
+                "POST /runs with \"reasoner\": \"replay\" and \"replay_of\": <run id>",
+                code="replay_needs_run")
+        return ReplayReasoner(run_id=replay_of, replies=replies)
     if name != "anthropic":
         raise DomainError(
             "reasoner",

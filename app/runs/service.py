@@ -14,6 +14,7 @@ from app.domain.phases import detect_phase
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import make_reasoner
 from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.replay import validate_replay
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import repository as repo
@@ -28,8 +29,11 @@ def create_run(
 ) -> Run:
     """Validate everything first, so a bad request never leaves a half-written run."""
     problem = spec.problem  # raises DomainError for an infeasible cap, bad instance...
-    make_reasoner(spec.reasoner, settings=settings, model=spec.model,
-                  temperature=spec.temperature)  # raises for unknown reasoner / missing key
+    # A replay names a completed run and copies its parameters; nothing else names a run.
+    validate_replay(sessions=sessions, spec=spec)
+    if spec.replay_of is None:  # a replay's reasoner is built from the record, at run time
+        make_reasoner(spec.reasoner, settings=settings, model=spec.model,
+                      temperature=spec.temperature)  # raises for unknown reasoner / missing key
     run_id = uuid.uuid4().hex
     with transaction(sessions) as session:
         run = Run(
@@ -44,7 +48,8 @@ def create_run(
                        detail={"reasoner": spec.reasoner, "mode": spec.mode,
                                "tasks": problem.instance.n_tasks,
                                "robots": problem.instance.n_robots,
-                               "max_deviation": problem.cap.max_deviation})
+                               "max_deviation": problem.cap.max_deviation,
+                               **({"replay_of": spec.replay_of} if spec.replay_of else {})})
     worker.submit(run_id)
     return run
 

@@ -32,6 +32,7 @@ from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs.integrity import check_integrity
 from app.runs.recorder import Fence, RunStop, SqlRecorder
+from app.runs.replay import recorded_replies
 from app.runs.spec import RunSpec
 from app.solvers.ltaa import graph_context
 from app.store import repository as repo
@@ -230,8 +231,11 @@ class RunWorker:
 
     def _reasoner(self, run_id: str, spec: RunSpec) -> Reasoner:
         """The reasoner a run's graph calls, built afresh at every (re)start."""
+        replies = (recorded_replies(sessions=self._sessions, run_id=spec.replay_of)
+                   if spec.replay_of is not None else None)
         return make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
-                             temperature=spec.temperature)
+                             temperature=spec.temperature, replay_of=spec.replay_of,
+                             replies=replies)
 
     def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
         if stop.lease_lost.is_set():

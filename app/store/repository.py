@@ -67,6 +67,14 @@ def attempts(*, session: Session, run_id: str) -> list[Attempt]:
                                 .order_by(Attempt.task_index, Attempt.attempt)))
 
 
+def attempt_replies(*, session: Session, run_id: str) -> list[Any]:
+    """Only the reply columns of a run's attempts (no prompts): what a replay needs."""
+    return list(session.execute(
+        select(Attempt.task_index, Attempt.attempt, Attempt.reply_text, Attempt.reply_model,
+               Attempt.input_tokens, Attempt.output_tokens, Attempt.reply_extra)
+        .where(Attempt.run_id == run_id)))
+
+
 @cache
 def _upsert_statement(dialect: str, model: type[Base], keys: tuple[str, ...]) -> Any:
     # Built once and executed with parameters, so SQLAlchemy's compiled cache is hit.

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response, status
 
-from app.api.allocation import build_problem
+from app.api.allocation import build_problem, resolve_instance
 from app.api.deps import ClientDep, RunsDep, SettingsDep, SupervisorDep
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.run_schemas import (
@@ -23,7 +23,9 @@ from app.api.run_schemas import (
     TraceOut,
 )
 from app.api.schemas import MetricsOut, UsageOut
+from app.domain.serialize import instance_to_dict
 from app.runs import service
+from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
 from app.store.models import Attempt
 
@@ -35,18 +37,40 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: SettingsDep,
                response: Response) -> RunCreated:
     """Start an LTAA run in the background; poll the Location for progress."""
-    problem = build_problem(body)
-    spec = RunSpec.for_instance(
-        problem.instance, mode=problem.mode.value, max_deviation=problem.cap.max_deviation,
-        seed=body.seed, reasoner=body.reasoner or settings.default_reasoner,
-        quality_threshold=body.quality_threshold, max_retries=body.max_retries,
-        model=body.model, temperature=body.temperature, guidance=body.guidance,
-        token_budget=body.token_budget, replay_of=body.replay_of,
-    )
+    reasoner = body.reasoner or settings.default_reasoner
+    if reasoner == "replay" or body.replay_of is not None:
+        spec = replay_spec(sessions=runs.sessions, reasoner=reasoner, replay_of=body.replay_of,
+                           sent=_sent_for_replay(body))
+    else:
+        problem = build_problem(body)
+        spec = RunSpec.for_instance(
+            problem.instance, mode=problem.mode.value, max_deviation=problem.cap.max_deviation,
+            seed=body.seed, reasoner=reasoner,
+            quality_threshold=body.quality_threshold, max_retries=body.max_retries,
+            model=body.model, temperature=body.temperature, guidance=body.guidance,
+            token_budget=body.token_budget, replay_of=body.replay_of,
+        )
     run = service.create_run(sessions=runs.sessions, worker=runs.worker, settings=settings,
                              spec=spec)
     response.headers["Location"] = f"/runs/{run.id}"
     return RunCreated(id=run.id, status=run.status, location=f"/runs/{run.id}")
+
+
+def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
+    """What a replay request sent explicitly (each must match the original run), keyed by
+    request field, valued as a run spec stores it; omitted fields are copied."""
+    sent = body.model_fields_set
+    values: dict[str, Any] = {}
+    named = [f for f in ("scenario", "tasks", "robots") if getattr(body, f) is not None]
+    if named:
+        values[named[0]] = instance_to_dict(resolve_instance(body))
+    if "mode" in sent:
+        values["mode"] = body.mode.value
+    for name in ("max_deviation", "quality_threshold", "max_retries", "guidance", "seed",
+                 "model", "temperature", "token_budget"):
+        if name in sent:
+            values[name] = getattr(body, name)
+    return values
 
 
 @router.get("", response_model=list[RunSummary], responses=errors(*CLIENT))
@@ -98,6 +122,8 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
         quality=a.quality, accepted=a.accepted, hard_invalid=a.hard_invalid,
         feedback=a.feedback, input_tokens=a.input_tokens, output_tokens=a.output_tokens,
         latency_ms=a.latency_ms, transport_retries=a.transport_retries, model=a.reply_model,
+        replayed_from=(a.reply_extra or {}).get("replayed_from"),
+        original_model=(a.reply_extra or {}).get("original_model"),
         system_prompt=a.system_prompt if prompts else None,
         user_prompt=a.user_prompt if prompts else None,
         reply=a.reply_text if prompts else None,
