@@ -168,3 +168,36 @@ class TraceOut(BaseModel):
     robots: list[str]
     events: list[EventOut]
     decisions: list[DecisionOut]
+
+
+class BrokenLinkOut(BaseModel):
+    """Where a run's hash chain first fails to verify."""
+
+    table: Literal["decisions", "events"]
+    task_index: int | None = Field(description="The decision (decisions table), else null")
+    seq: int | None = Field(description="The event (events table), else null")
+    expected: str | None = Field(
+        description="The hash recomputed from the row's content and the previous link; null "
+        "when the row is missing or has no stored hash")
+    stored: str | None = Field(description="The hash stored with the row")
+    reason: str = Field(description="What this means, in plain language")
+
+
+class ChainHeadsOut(BaseModel):
+    decisions: str | None = Field(description="Stored hash of the newest decision")
+    events: str | None = Field(description="Stored hash of the newest event")
+
+
+class TraceVerifyOut(BaseModel):
+    """The result of recomputing a run's two hash chains (decisions, events) from its rows."""
+
+    ok: bool = Field(description="Every row present, chained and unaltered")
+    decisions: int = Field(description="Decision rows checked")
+    events: int = Field(description="Event rows checked")
+    unchained: int = Field(
+        description="Rows with no chain hash (written before tamper evidence existed); "
+        "any makes ok false")
+    heads: ChainHeadsOut = Field(
+        description="Record these at sign-off: any later rewrite of the record changes them")
+    broken: BrokenLinkOut | None = Field(
+        description="The first broken link (the decisions chain first), or null when ok")

@@ -8,13 +8,14 @@ from dataclasses import asdict
 from functools import cache
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import and_, func, select
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
 from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
+from app.store import chain
 from app.store.models import Attempt, Base, Decision, Run, RunEvent, utcnow
 
 ACTIVE = ("queued", "running")
@@ -45,11 +46,42 @@ def set_status(*, session: Session, run: Run, status: str, error: str | None = N
 
 
 def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:
-    seq = session.scalar(select(func.coalesce(func.max(RunEvent.seq), 0))
-                         .where(RunEvent.run_id == run_id)) or 0
-    event = RunEvent(run_id=run_id, seq=seq + 1, kind=kind, detail=detail)
+    # One indexed lookup gives both the next seq and the link the new row hangs off.
+    last = session.execute(select(RunEvent.seq, RunEvent.chain_hash)
+                           .where(RunEvent.run_id == run_id)
+                           .order_by(RunEvent.seq.desc()).limit(1)).first()
+    seq = last.seq + 1 if last is not None else 1
+    prev = chain.next_prev(last.chain_hash) if last is not None else chain.genesis("events",
+                                                                                    run_id)
+    link = chain.event_link(prev, {"seq": seq, "kind": kind, "detail": detail})
+    event = RunEvent(run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link)
     session.add(event)
     return event
+
+
+def events_page(*, session: Session, run_id: str, after_seq: int, limit: int) -> list[RunEvent]:
+    """Events with seq > after_seq, in order: the audit record read in bounded pages."""
+    return list(session.scalars(select(RunEvent).where(RunEvent.run_id == run_id,
+                                                       RunEvent.seq > after_seq)
+                                .order_by(RunEvent.seq).limit(limit)))
+
+
+def decisions_page(*, session: Session, run_id: str, after_task: int,
+                   limit: int) -> list[Decision]:
+    return list(session.scalars(select(Decision).where(Decision.run_id == run_id,
+                                                       Decision.task_index > after_task)
+                                .order_by(Decision.task_index).limit(limit)))
+
+
+def attempts_of_tasks(*, session: Session, run_id: str, first: int,
+                      last: int) -> dict[int, list[Attempt]]:
+    """Attempts of task indexes first..last, by task, in attempt order."""
+    by_task: dict[int, list[Attempt]] = {}
+    for row in session.scalars(select(Attempt).where(Attempt.run_id == run_id,
+                                                     Attempt.task_index.between(first, last))
+                               .order_by(Attempt.task_index, Attempt.attempt)):
+        by_task.setdefault(row.task_index, []).append(row)
+    return by_task
 
 
 def events(*, session: Session, run_id: str) -> list[RunEvent]:
@@ -92,9 +124,32 @@ def _upsert(session: Session, model: type[Base], values: dict[str, Any],
     session.execute(stmt, values)
 
 
+def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) -> str:
+    """The decision's link over its content, its task's attempts and the previous decision's
+    hash, with one indexed SELECT: the previous link joined to the task's attempts.
+
+    The attempts must already be written (in this transaction or an earlier one); content
+    equal to what is stored (a re-upsert after a crash) gives the stored hash again."""
+    d, a = Decision.__table__.c, Attempt.__table__.c
+    task_index = values["task_index"]
+    prev = (select(func.coalesce(d.chain_hash, chain.UNCHAINED))
+            .where(d.run_id == run_id, d.task_index < task_index)
+            .order_by(d.task_index.desc()).limit(1).scalar_subquery())
+    anchor = select(prev.label("prev")).subquery()
+    rows = session.execute(
+        select(anchor.c.prev, *(a[name] for name in chain.ATTEMPT_FIELDS))
+        .select_from(anchor.outerjoin(Attempt.__table__,
+                                      and_(a.run_id == run_id, a.task_index == task_index)))
+        .order_by(a.attempt)).all()
+    prev_link = rows[0].prev if rows[0].prev is not None else chain.genesis("decisions", run_id)
+    attempts = [row._mapping for row in rows if row.attempt is not None]
+    return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
+
+
 def upsert_decision(*, session: Session, run_id: str, record: DecisionRecord) -> None:
     values = asdict(record)
     values["task_id"] = str(record.task_id)
+    values["chain_hash"] = _decision_chain_hash(session, run_id, values)
     _upsert(session, Decision, {"run_id": run_id, **values, "created_at": utcnow()},
             ("run_id", "task_index"))
 

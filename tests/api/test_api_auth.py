@@ -25,7 +25,8 @@ BASELINE = {"scenario": "baseline", "mode": "balanced"}
 # (method, path) of every endpoint behind a key; {id} is replaced by a real run id.
 CLIENT_ENDPOINTS = [("GET", "/solvers"), ("GET", "/scenarios"), ("POST", "/allocate"),
                     ("POST", "/runs"), ("GET", "/runs"), ("GET", "/runs/{id}")]
-SUPERVISOR_ENDPOINTS = [("GET", "/runs/{id}/trace"), ("GET", "/runs/{id}/events"),
+SUPERVISOR_ENDPOINTS = [("GET", "/runs/{id}/trace"), ("GET", "/runs/{id}/trace/verify"),
+                        ("GET", "/runs/{id}/events"),
                         ("POST", "/runs/{id}/resume"), ("POST", "/runs/{id}/cancel"),
                         ("GET", "/metrics")]
 

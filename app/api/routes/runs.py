@@ -5,8 +5,10 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response, status
+from fastapi.responses import StreamingResponse
 
 from app.api.allocation import build_problem, resolve_instance
+from app.api.audit import JSONL_RESPONSE, jsonl_trace, verify_out
 from app.api.deps import ClientDep, RunsDep, SettingsDep, SupervisorDep
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.run_schemas import (
@@ -21,10 +23,11 @@ from app.api.run_schemas import (
     RunStatus,
     RunSummary,
     TraceOut,
+    TraceVerifyOut,
 )
 from app.api.schemas import MetricsOut, UsageOut
 from app.domain.serialize import instance_to_dict
-from app.runs import service
+from app.runs import audit, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
 from app.store.models import Attempt
@@ -131,12 +134,17 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
 
 
 @router.get("/{run_id}/trace", response_model=TraceOut,
-            responses=errors(*SUPERVISOR, 404))
+            responses={**errors(*SUPERVISOR, 404), 200: JSONL_RESPONSE})
 def get_trace(
     caller: SupervisorDep, run_id: str, runs: RunsDep,
     include: Annotated[Literal["prompts"] | None, Query()] = None,
-) -> TraceOut:
+    format_: Annotated[Literal["json", "jsonl"], Query(
+        alias="format", description="jsonl: stream the whole audit record (with prompts) "
+        "as JSON lines")] = "json",
+) -> TraceOut | StreamingResponse:
     """For supervisors: run events and every decision with its validated attempts."""
+    if format_ == "jsonl":
+        return jsonl_trace(sessions=runs.sessions, run_id=run_id)
     trace = service.run_trace(sessions=runs.sessions, run_id=run_id)
     spec = RunSpec.from_json(trace.run.request)
     instance = spec.problem.instance
@@ -162,6 +170,13 @@ def get_trace(
             for d in trace.decisions
         ],
     )
+
+
+@router.get("/{run_id}/trace/verify", response_model=TraceVerifyOut,
+            responses=errors(*SUPERVISOR, 404))
+def verify_trace(caller: SupervisorDep, run_id: str, runs: RunsDep) -> TraceVerifyOut:
+    """For supervisors: recompute the run's hash chains; ok, or the first broken link."""
+    return verify_out(audit.verify_trace(sessions=runs.sessions, run_id=run_id))
 
 
 @router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut,

@@ -1,0 +1,189 @@
+"""A run's audit record: verify its hash chains, or export it whole as JSON lines.
+
+Both read the record in pages of bounded size, each in its own short session: a 10,000-task
+run's prompts and replies are hundreds of megabytes, and a read transaction held open for a
+slow download would keep SQLite's WAL from being checkpointed while runs write. Rows are
+only ever appended in key order (and a re-upsert rewrites the same content), so reading
+by key in pages sees a consistent prefix of a live run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.runs.errors import RunNotFoundError
+from app.store import chain
+from app.store import repository as repo
+from app.store.models import Attempt, Decision, Run, RunEvent
+
+DECISIONS_PER_PAGE = 100  # with their attempts' prompts: about 1-3 MB per page
+EVENTS_PER_PAGE = 1000
+
+
+def _run(session: Session, run_id: str) -> Run:
+    run = repo.get_run(session=session, run_id=run_id)
+    if run is None:
+        raise RunNotFoundError(run_id)
+    return run
+
+
+def _event_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[RunEvent]]:
+    after = 0
+    while True:
+        with sessions() as session:
+            page = repo.events_page(session=session, run_id=run_id, after_seq=after,
+                                    limit=EVENTS_PER_PAGE)
+        if not page:
+            return
+        yield page
+        after = page[-1].seq
+
+
+def _decision_pages(sessions: sessionmaker[Session], run_id: str,
+                    ) -> Iterator[list[tuple[Decision, list[Attempt]]]]:
+    after = -1
+    while True:
+        with sessions() as session:
+            page = repo.decisions_page(session=session, run_id=run_id, after_task=after,
+                                       limit=DECISIONS_PER_PAGE)
+            if not page:
+                return
+            attempts = repo.attempts_of_tasks(session=session, run_id=run_id,
+                                              first=page[0].task_index,
+                                              last=page[-1].task_index)
+        yield [(d, attempts.get(d.task_index, [])) for d in page]
+        after = page[-1].task_index
+
+
+def _columns(row: Any, fields: dict[str, Any]) -> dict[str, Any]:
+    return {name: getattr(row, name) for name in fields}
+
+
+# -- verification --------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ChainCheckResult:
+    rows: int
+    unchained: int
+    head: str | None  # the newest row's stored hash: what a supervisor records at sign-off
+    first_break: chain.Break | None
+
+
+@dataclass(frozen=True)
+class ChainReport:
+    decisions: ChainCheckResult
+    events: ChainCheckResult
+
+    @property
+    def ok(self) -> bool:
+        return self.decisions.first_break is None and self.events.first_break is None
+
+    @property
+    def first_break(self) -> chain.Break | None:
+        """The decisions chain's break if it has one, else the events chain's."""
+        return self.decisions.first_break or self.events.first_break
+
+
+def _result(check: chain.ChainCheck) -> ChainCheckResult:
+    return ChainCheckResult(rows=check.count, unchained=check.unchained, head=check.head,
+                            first_break=check.first_break)
+
+
+def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport:
+    """Recompute both chains of a run from its rows and report the first broken link."""
+    with sessions() as session:
+        run = _run(session, run_id)
+        status, n_tasks = run.status, run.n_tasks
+
+    decisions = chain.ChainCheck("decisions", run_id, first_key=0)
+    for page in _decision_pages(sessions, run_id):
+        for d, attempts in page:
+            def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:
+                digest = chain.attempts_digest(_columns(a, chain.ATTEMPT_FIELDS)
+                                               for a in attempts)
+                return chain.decision_link(prev, _columns(d, chain.DECISION_FIELDS), digest)
+            decisions.feed(d.task_index, d.chain_hash, link)
+
+    events = chain.ChainCheck("events", run_id, first_key=1)
+    last_kind = None
+    for event_page in _event_pages(sessions, run_id):
+        for e in event_page:
+            events.feed(e.seq, e.chain_hash,
+                        lambda prev, e=e: chain.event_link(prev, _columns(e, chain.EVENT_FIELDS)))
+            last_kind = e.kind
+
+    # The newest rows of a chain leave no gap when deleted; a completed run says where its
+    # chains end (n_tasks decisions, and its last event is the one that completed it).
+    if status == "completed" and decisions.last_key != n_tasks - 1:
+        stored = 0 if decisions.last_key is None else decisions.last_key + 1
+        decisions.missing_tail(f"the run completed with {n_tasks} tasks but decisions stop "
+                               f"after {stored}: the last decisions were deleted")
+    if status == "completed" and last_kind != "completed":
+        events.missing_tail("the run completed but its events do not end with the "
+                            "'completed' event: the last events were deleted")
+    return ChainReport(decisions=_result(decisions), events=_result(events))
+
+
+# -- export --------------------------------------------------------------------------------
+
+def _when(value: datetime | None) -> str | None:
+    return value.isoformat() if value is not None else None
+
+
+def _run_line(run: Run) -> dict[str, Any]:
+    return {
+        "type": "run", "format": chain.SCHEME, "id": run.id, "status": run.status,
+        "reasoner": run.reasoner, "mode": run.mode, "max_deviation": run.max_deviation,
+        "n_tasks": run.n_tasks, "n_robots": run.n_robots, "resumes": run.resumes,
+        "error": run.error, "created_at": _when(run.created_at),
+        "finished_at": _when(run.finished_at), "request": run.request,
+        "genesis": {"decisions": chain.genesis("decisions", run.id),
+                    "events": chain.genesis("events", run.id)},
+    }
+
+
+def _event_line(e: RunEvent) -> dict[str, Any]:
+    return {"type": "event", **_columns(e, chain.EVENT_FIELDS), "at": _when(e.created_at),
+            "chain_hash": e.chain_hash}
+
+
+def _decision_line(d: Decision, attempts: list[Attempt]) -> dict[str, Any]:
+    # Columns under their stored names, so the export alone suffices to recompute the chain.
+    return {
+        "type": "decision", **_columns(d, chain.DECISION_FIELDS), "at": _when(d.created_at),
+        "chain_hash": d.chain_hash,
+        "attempt_records": [{**_columns(a, chain.ATTEMPT_FIELDS), "at": _when(a.created_at)}
+                            for a in attempts],
+    }
+
+
+def trace_record(*, sessions: sessionmaker[Session], run_id: str,
+                 ) -> Iterator[list[dict[str, Any]]]:
+    """The whole audit record as pages of self-describing lines: the run, its events, its
+    decisions (each with its attempts, prompts and replies), then an end line with counts
+    so a reader can tell a complete record from a cut-off download.
+
+    Raises RunNotFoundError here, before the first page is asked for."""
+    with sessions() as session:
+        header = _run_line(_run(session, run_id))
+    return _record_pages(sessions, run_id, header)
+
+
+def _record_pages(sessions: sessionmaker[Session], run_id: str,
+                  header: dict[str, Any]) -> Iterator[list[dict[str, Any]]]:
+    yield [header]
+    n_events = n_decisions = n_attempts = 0
+    for events in _event_pages(sessions, run_id):
+        n_events += len(events)
+        yield [_event_line(e) for e in events]
+    for decisions in _decision_pages(sessions, run_id):
+        n_decisions += len(decisions)
+        n_attempts += sum(len(a) for _, a in decisions)
+        yield [_decision_line(d, a) for d, a in decisions]
+    yield [{"type": "end", "events": n_events, "decisions": n_decisions,
+            "attempts": n_attempts}]
