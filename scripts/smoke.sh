@@ -68,6 +68,8 @@ check 'all(x["attempts"] and x["attempts"][0]["scores"] and x["reasoning"] for x
       "each decision has validated attempts and reasoning"
 check 'd["decisions"][0]["attempts"][0]["user_prompt"]' "prompts included"
 check '[e["kind"] for e in d["events"]][-1] == "completed"' "completed event"
+[ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace/verify"; check 'd["ok"] is True and d["decisions"] == 36 and d["broken"] is None' "trace hash chains verify"
+[ "$(call GET "/runs/$run_id/trace?format=jsonl" '' "${SUPERVISOR[@]}")" = 200 ] && python3 -c "import json; t=[json.loads(l)['type'] for l in open('$TMP/out')]; assert t[0] == 'run' and t[-1] == 'end' and t.count('decision') == 36" || fail "jsonl trace: $(head -c 300 "$TMP/out")"
 [ "$(call POST "/runs/$run_id/resume" '' "${SUPERVISOR[@]}")" = 409 ] || fail "resume completed run should be 409"
 if [ -n "${SMOKE_SUPERVISOR_KEY:-}" ]; then
   [ "$(call GET "/runs/$run_id" '')" = 401 ] || fail "no key should be 401"
