@@ -1,8 +1,11 @@
 """Claude through the official `anthropic` SDK.
 
-The SDK is the transport layer: it retries timeouts, 429 and 5xx itself, with backoff
-and `retry-after`. Only what it finally gives up on reaches the graph, as ReasonerError,
-which the graph counts as a failed attempt (validation retries are a separate budget).
+The SDK is the transport layer: it retries connection errors, timeouts, 408, 409, 429 and
+5xx itself (SDK 2.10, `_should_retry`), waiting what `retry-after` (or `retry-after-ms`)
+says, else an exponential backoff from 0.5 s. Only what it finally gives up on reaches the
+graph, as ReasonerError, which the graph counts as a failed attempt (validation retries
+are a separate budget). So does a 200 whose body is no Message (empty, cut off, an HTML
+page from a proxy): the SDK would hand those back unparsed or raise a bare ValueError.
 
 Temperature: the pinned SDK (2.x) sends `anthropic-version: 2026-10-21` and no longer has a
 `temperature` argument; that API version rejects sampling parameters with HTTP 400. The
@@ -17,6 +20,8 @@ import time
 from typing import Any
 
 import anthropic
+import pydantic
+from anthropic.types import Message
 
 from app.domain.errors import DomainError
 from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
@@ -35,6 +40,31 @@ _TRANSIENT_STATUSES = {408, 409, 429}
 
 def _transient(exc: anthropic.APIStatusError) -> bool:
     return exc.status_code in _TRANSIENT_STATUSES or exc.status_code >= 500
+
+
+def _retries_taken(exc: anthropic.APIError) -> int:
+    """The SDK numbers each try in a request header; the last try's number is the retries."""
+    try:
+        return int(exc.request.headers.get("x-stainless-retry-count", 0))
+    except ValueError:
+        return 0
+
+
+def _message(raw: anthropic.APIResponse[Any]) -> Message:
+    """The reply body as a Message, validated: the SDK's lenient parse() would return a str
+    for a non-JSON content type, a Message without its fields for JSON of another shape,
+    and raise a bare ValueError for an empty or cut-off body."""
+    body: bytes = raw.http_response.content
+    try:
+        return Message.model_validate_json(body)
+    except pydantic.ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first["loc"]) or "body"
+        raise ReasonerError(
+            f"unreadable reply (HTTP {raw.status_code}, {len(body)} bytes, "
+            f"{raw.headers.get('content-type', 'no content-type')}): {where}: {first['msg']}",
+            transport_retries=raw.retries_taken,
+        ) from exc
 
 
 class AnthropicReasoner:
@@ -75,17 +105,17 @@ class AnthropicReasoner:
                 messages=[{"role": "user", "content": user}],
                 **sampling,
             )
-            message = raw.parse()
         except anthropic.APIConnectionError as exc:  # includes APITimeoutError
-            raise ReasonerError(
-                f"{type(exc).__name__} after {self.max_retries} transport retries: {exc}"
-            ) from exc
+            retries = _retries_taken(exc)
+            raise ReasonerError(f"{type(exc).__name__} after {retries} transport retries: {exc}",
+                                transport_retries=retries) from exc
         except anthropic.APIStatusError as exc:
             if not _transient(exc):
                 raise _rejected(exc, self.model) from exc
-            raise ReasonerError(
-                f"HTTP {exc.status_code} after {self.max_retries} transport retries: {exc}"
-            ) from exc
+            retries = _retries_taken(exc)
+            raise ReasonerError(f"HTTP {exc.status_code} after {retries} transport retries: "
+                                f"{exc}", transport_retries=retries) from exc
+        message = _message(raw)
         latency_ms = (time.perf_counter() - started) * 1000.0
         text = "".join(getattr(block, "text", "") for block in message.content)
         extra: dict[str, Any] = {

@@ -66,6 +66,10 @@ class ReasonerError(RuntimeError):
     any other exception from a reasoner (bad key, unknown model) ends the run.
     """
 
+    def __init__(self, message: str, *, transport_retries: int = 0) -> None:
+        super().__init__(message)
+        self.transport_retries = transport_retries  # the trace shows what the transport tried
+
 
 class Reasoner(Protocol):
     name: str

@@ -1,7 +1,9 @@
 """A fake Anthropic Messages API on 127.0.0.1, for driving the real SDK without the network.
 
-Serves POST /v1/messages from a scripted queue of replies (answers, HTTP errors with
-`retry-after`, delayed replies that trip the client timeout); when the queue is empty it
+Serves POST /v1/messages from a scripted queue of replies (answers, HTTP errors in the
+API's error shape with `retry-after`, delayed replies that trip the client timeout, and
+broken bodies: empty, cut off, not JSON, or a connection dropped mid-body); when the queue
+is empty it
 falls back to a default responder (by default: a good answer computed from the prompt, so
 end-to-end runs of any length work unscripted). Every request and every delivered reply
 is recorded, with the token counts it reported.
@@ -60,6 +62,18 @@ class Reply:
     delay_s: float = 0.0
     input_tokens: int | None = None  # default: estimated from the request
     output_tokens: int | None = None  # default: estimated from the text
+    # Broken bodies (status 200 unless set): `body` is sent verbatim instead of a message;
+    # `cut_to` keeps only the first bytes of the message JSON (Content-Length matching, as
+    # a proxy that truncates); `drop_after` announces the full length, sends that many
+    # bytes and closes the connection (the client sees an incomplete body).
+    body: bytes | None = None
+    content_type: str = "application/json"
+    cut_to: int | None = None
+    drop_after: int | None = None
+
+    @property
+    def wellformed(self) -> bool:
+        return self.body is None and self.cut_to is None and self.drop_after is None
 
     @classmethod
     def answer(cls, text: str, **kw: Any) -> Reply:
@@ -80,6 +94,34 @@ class Reply:
         """Answers only after `delay_s`: longer than the client's timeout, it is a timeout."""
         return cls(text=text, delay_s=delay_s)
 
+    @classmethod
+    def overloaded(cls, *, retry_after: float | None = 0.05) -> Reply:
+        """529 `overloaded_error`, the API's answer when it is short of capacity."""
+        reply = cls.error(529, retry_after=retry_after)
+        reply.text = "Overloaded"
+        return reply
+
+    @classmethod
+    def empty(cls) -> Reply:
+        """200 with an empty body."""
+        return cls(body=b"")
+
+    @classmethod
+    def truncated(cls, keep: int = 60) -> Reply:
+        """200 whose message JSON stops after `keep` bytes."""
+        return cls(cut_to=keep)
+
+    @classmethod
+    def garbage(cls) -> Reply:
+        """200 with an HTML page, as a misbehaving proxy in front of the API sends."""
+        return cls(body=b"<html><body>upstream says hello</body></html>",
+                   content_type="text/html")
+
+    @classmethod
+    def dropped(cls, after: int = 40) -> Reply:
+        """200 whose connection closes after `after` bytes of the announced body."""
+        return cls(drop_after=after)
+
 
 @dataclass
 class Served:
@@ -87,6 +129,7 @@ class Served:
     input_tokens: int = 0
     output_tokens: int = 0
     delivered: bool = True  # False when the client had gone (e.g. it timed out first)
+    wellformed: bool = True  # False for a broken body (empty, cut off, not JSON, dropped)
 
 
 # ---------------------------------------------------------------- prompt -> good answer
@@ -157,7 +200,7 @@ class FakeMessagesAPI:
         self._default = default
         self._lock = threading.Lock()
         self._ids = itertools.count(1)
-        self.requests: list[dict[str, Any]] = []  # bodies, plus "_headers"
+        self.requests: list[dict[str, Any]] = []  # bodies, plus "_headers", "_received_at"
         self.served: list[Served] = []
         self._server = ThreadingHTTPServer(("127.0.0.1", port), self._handler_class())
         self._server.daemon_threads = True
@@ -174,12 +217,12 @@ class FakeMessagesAPI:
 
     # -- accounting
     def tokens(self) -> tuple[int, int]:
-        """(input, output) tokens reported by delivered 200 replies."""
-        ok = [s for s in self.served if s.status == 200 and s.delivered]
+        """(input, output) tokens reported by delivered, readable 200 replies."""
+        ok = [s for s in self.served if s.status == 200 and s.delivered and s.wellformed]
         return sum(s.input_tokens for s in ok), sum(s.output_tokens for s in ok)
 
     def answered(self) -> int:
-        return sum(1 for s in self.served if s.status == 200 and s.delivered)
+        return sum(1 for s in self.served if s.status == 200 and s.delivered and s.wellformed)
 
     # -- lifecycle
     @property
@@ -227,8 +270,11 @@ class FakeMessagesAPI:
             body = {
                 "type": "error",
                 "error": {"type": kind, "message": reply.text or f"fake {reply.status}"},
+                "request_id": f"req_fake_{next(self._ids):05d}",
             }
             return reply, reply.status, body
+        if reply.body is not None:
+            return reply, reply.status, {}  # sent verbatim: no message to compose
         text = reply.text if reply.text is not None else answer_from_prompt(prompt_of(request))
         prompt = (request.get("system") or "") + prompt_of(request)
         in_tokens = (
@@ -268,18 +314,20 @@ class FakeMessagesAPI:
                             "type": "error",
                             "error": {"type": "not_found_error", "message": self.path},
                         },
-                        {},
+                        Reply(status=404),
                     )
                     return
                 request = json.loads(raw or b"{}")
                 request["_headers"] = {k.lower(): v for k, v in self.headers.items()}
+                request["_received_at"] = time.monotonic()
                 with api._lock:
                     api.requests.append(request)
                 reply, status, body = api._respond(request)
                 if reply.delay_s:
                     time.sleep(reply.delay_s)
-                delivered = not self._peer_closed() and self._send(status, body, reply.headers)
-                usage = body.get("usage", {})
+                delivered = not self._peer_closed() and self._send(status, body, reply)
+                # A broken body reports no usage the client could read.
+                usage = body.get("usage", {}) if reply.wellformed else {}
                 with api._lock:
                     api.served.append(
                         Served(
@@ -287,6 +335,7 @@ class FakeMessagesAPI:
                             usage.get("input_tokens", 0),
                             usage.get("output_tokens", 0),
                             delivered,
+                            reply.wellformed,
                         )
                     )
 
@@ -300,20 +349,28 @@ class FakeMessagesAPI:
                 except OSError:
                     return True
 
-            def _send(self, status: int, body: dict[str, Any], headers: dict[str, str]) -> bool:
-                data = json.dumps(body).encode()
+            def _send(self, status: int, body: dict[str, Any], reply: Reply) -> bool:
+                data = json.dumps(body).encode() if reply.body is None else reply.body
+                if reply.cut_to is not None:
+                    data = data[: reply.cut_to]
+                length = len(data)
+                if reply.drop_after is not None:
+                    data = data[: reply.drop_after]
                 try:
                     self.send_response(status)
-                    self.send_header("content-type", "application/json")
-                    self.send_header("content-length", str(len(data)))
+                    self.send_header("content-type", reply.content_type)
+                    self.send_header("content-length", str(length))
                     self.send_header("request-id", f"req_fake_{time.monotonic_ns()}")
-                    for k, v in headers.items():
+                    for k, v in reply.headers.items():
                         self.send_header(k, v)
                     self.end_headers()
                     self.wfile.write(data)
                     self.wfile.flush()
                 except (BrokenPipeError, ConnectionResetError):
                     return False
+                if reply.drop_after is not None:
+                    self.close_connection = True
+                    self.connection.shutdown(socket.SHUT_RDWR)
                 return True
 
         return Handler
