@@ -57,6 +57,9 @@ class Settings(BaseSettings):
     )
     anthropic_timeout_s: float = Field(60.0, gt=0)
     anthropic_max_transport_retries: int = Field(3, ge=0)
+    # LLM tokens (input + output) a run may spend when its request names no token_budget;
+    # then its remaining tasks go to the offline rules reasoner. None: no limit.
+    run_token_budget: int | None = Field(None, ge=1)
 
     # Test-only: a durable run pauses before reasoning about this task index, so
     # end-to-end tests can kill the server at a known point.

@@ -34,6 +34,7 @@ from app.runs.integrity import check_integrity
 from app.runs.recorder import Fence, RunStop, SqlRecorder
 from app.runs.replay import recorded_replies
 from app.runs.spec import RunSpec
+from app.runs.token_budget import with_token_budget
 from app.solvers.ltaa import graph_context
 from app.store import repository as repo
 from app.store.db import transaction
@@ -233,9 +234,11 @@ class RunWorker:
         """The reasoner a run's graph calls, built afresh at every (re)start."""
         replies = (recorded_replies(sessions=self._sessions, run_id=spec.replay_of)
                    if spec.replay_of is not None else None)
-        return make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
-                             temperature=spec.temperature, replay_of=spec.replay_of,
-                             replies=replies)
+        reasoner = make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
+                                 temperature=spec.temperature, replay_of=spec.replay_of,
+                                 replies=replies)
+        return with_token_budget(reasoner, run_id=run_id, budget=spec.token_budget,
+                                 sessions=self._sessions)
 
     def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
         if stop.lease_lost.is_set():

@@ -213,3 +213,16 @@ def get_attempt(*, session: Session, run_id: str, task_index: int, attempt: int)
 def decision_record(row: Decision) -> DecisionRecord:
     fields = DecisionRecord.__dataclass_fields__
     return DecisionRecord(**{name: getattr(row, name) for name in fields})
+
+
+def tokens_spent(*, session: Session, run_id: str) -> int:
+    """Input + output tokens of a run's replies that name a model (as app.graph.usage
+    counts them): what its LLM calls have cost so far, from the record."""
+    total = session.scalar(select(func.sum(Attempt.input_tokens + Attempt.output_tokens))
+                           .where(Attempt.run_id == run_id, Attempt.reply_model.is_not(None)))
+    return int(total or 0)
+
+
+def has_event(*, session: Session, run_id: str, kind: str) -> bool:
+    return session.scalar(select(RunEvent.id).where(RunEvent.run_id == run_id,
+                                                    RunEvent.kind == kind).limit(1)) is not None

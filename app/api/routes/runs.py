@@ -51,7 +51,8 @@ def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: Set
             seed=body.seed, reasoner=reasoner,
             quality_threshold=body.quality_threshold, max_retries=body.max_retries,
             model=body.model, temperature=body.temperature, guidance=body.guidance,
-            token_budget=body.token_budget, replay_of=body.replay_of,
+            token_budget=body.token_budget if body.token_budget is not None
+            else settings.run_token_budget, replay_of=body.replay_of,
         )
     run = service.create_run(sessions=runs.sessions, worker=runs.worker, settings=settings,
                              spec=spec)
