@@ -78,7 +78,7 @@ class Settings(BaseSettings):
     # GET /runs/{id}/events polls the app tables at this interval (works across processes).
     events_poll_s: float = Field(0.1, gt=0, le=10)
     # A stream ends after this long even if the run has not; EventSource reconnects with
-    # Last-Event-ID and misses nothing. Bounds how long a graceful shutdown waits on watchers.
+    # Last-Event-ID and misses nothing. (A shutdown ends every stream at once.)
     events_max_stream_s: float = Field(300.0, gt=0)
 
     @field_validator("log_level", mode="before")

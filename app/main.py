@@ -7,6 +7,7 @@ import logging
 import tomllib
 from collections.abc import AsyncIterator
 from contextlib import AsyncExitStack, asynccontextmanager
+from functools import partial
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -14,12 +15,14 @@ from fastapi.concurrency import run_in_threadpool
 
 from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
+from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.routes import allocate, catalog, events, health, metrics, runs
 from app.config import Settings, get_settings
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
 from app.runs.factory import make_worker
+from app.runs.worker import RunWorker
 from app.store.db import make_engine, make_session_factory
 from app.store.migrate import upgrade_head
 
@@ -58,11 +61,19 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         worker = await run_in_threadpool(make_worker, settings=settings, sessions=sessions)
         # Drain on shutdown: runs stop at a node boundary and are marked interrupted.
         resources.push_async_callback(run_in_threadpool, worker.close)
+        # ... starting as soon as the signal arrives, before uvicorn waits on open streams.
+        resources.enter_context(drain_on_signal(partial(_begin_drain, worker)))
         app.state.runs = RunsContext(sessions=sessions, worker=worker)
         resumed = await run_in_threadpool(worker.recover)
         if resumed:
             log.info("resuming %d interrupted run(s): %s", len(resumed), ", ".join(resumed))
         yield
+
+
+def _begin_drain(worker: RunWorker) -> None:
+    held = worker.begin_drain()
+    log.info("shutting down: running runs stop at their next node boundary; %d run(s) "
+             "continue at the next start", held)
 
 
 def _log_access_mode(settings: Settings, keyring: KeyRing) -> None:

@@ -96,12 +96,22 @@ class RunWorker:
                 self.submit(run_id)
         return interrupted if self._settings.auto_resume else []
 
-    def close(self) -> None:
-        """Drain: running runs stop at their next node boundary and are marked interrupted."""
+    def begin_drain(self) -> int:
+        """Take no more runs; running ones stop at their next node boundary and are marked
+        interrupted. Returns at once, with how many runs it held; close() waits for them."""
         with self._lock:
             self._closing = True
             for stop in self._stops.values():
                 stop.shutting_down.set()
+            return len(self._stops)
+
+    @property
+    def draining(self) -> bool:
+        return self._closing
+
+    def close(self) -> None:
+        """Drain, wait for the runs to stop, close the checkpointer. Queued runs stay queued."""
+        self.begin_drain()
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._close_checkpointer()
 
@@ -170,6 +180,8 @@ class RunWorker:
                 self._stops.pop(run_id, None)
 
     def _run(self, run_id: str, stop: RunStop) -> None:
+        if stop.shutting_down.is_set():
+            return  # draining before it began: it stays queued (or interrupted) for the next start
         checkpoint = self.checkpointer.get_tuple(self._config(run_id))
         with transaction(self._sessions) as session:
             run = self._owned_run(session, run_id)

@@ -90,6 +90,10 @@ async def _stream(run_id: str, cursor: Cursor, runs: RunsDep,
         cursor = batch.cursor
         if batch.ended:
             return
+        if runs.worker.draining:
+            # uvicorn waits for open responses before it lets the app shut down.
+            yield sse(comment="server shutting down; reconnect with Last-Event-ID")
+            return
         if time.monotonic() >= deadline:
             yield sse(comment="stream time limit (LTAA_EVENTS_MAX_STREAM_S) reached; "
                           "reconnect with Last-Event-ID")
