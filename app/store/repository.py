@@ -8,7 +8,7 @@ from dataclasses import asdict
 from functools import cache
 from typing import Any
 
-from sqlalchemy import and_, func, select
+from sqlalchemy import and_, bindparam, func, select
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
@@ -124,23 +124,29 @@ def _upsert(session: Session, model: type[Base], values: dict[str, Any],
     session.execute(stmt, values)
 
 
+@cache
+def _decision_link_statement() -> Any:
+    # Built once (building it took half the helper's time) and executed with parameters.
+    d, a = Decision.__table__.c, Attempt.__table__.c
+    run_id, task_index = bindparam("run_id"), bindparam("task_index")
+    prev = (select(func.coalesce(d.chain_hash, chain.UNCHAINED))
+            .where(d.run_id == run_id, d.task_index < task_index)
+            .order_by(d.task_index.desc()).limit(1).scalar_subquery())
+    anchor = select(prev.label("prev")).subquery()
+    return (select(anchor.c.prev, *(a[name] for name in chain.ATTEMPT_FIELDS))
+            .select_from(anchor.outerjoin(Attempt.__table__,
+                                          and_(a.run_id == run_id, a.task_index == task_index)))
+            .order_by(a.attempt))
+
+
 def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) -> str:
     """The decision's link over its content, its task's attempts and the previous decision's
     hash, with one indexed SELECT: the previous link joined to the task's attempts.
 
     The attempts must already be written (in this transaction or an earlier one); content
     equal to what is stored (a re-upsert after a crash) gives the stored hash again."""
-    d, a = Decision.__table__.c, Attempt.__table__.c
-    task_index = values["task_index"]
-    prev = (select(func.coalesce(d.chain_hash, chain.UNCHAINED))
-            .where(d.run_id == run_id, d.task_index < task_index)
-            .order_by(d.task_index.desc()).limit(1).scalar_subquery())
-    anchor = select(prev.label("prev")).subquery()
-    rows = session.execute(
-        select(anchor.c.prev, *(a[name] for name in chain.ATTEMPT_FIELDS))
-        .select_from(anchor.outerjoin(Attempt.__table__,
-                                      and_(a.run_id == run_id, a.task_index == task_index)))
-        .order_by(a.attempt)).all()
+    rows = session.execute(_decision_link_statement(),
+                           {"run_id": run_id, "task_index": values["task_index"]}).all()
     prev_link = rows[0].prev if rows[0].prev is not None else chain.genesis("decisions", run_id)
     attempts = [row._mapping for row in rows if row.attempt is not None]
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
