@@ -101,6 +101,29 @@ def test_replay_of_an_anthropic_run_with_the_api_stopped_reproduces_it_exactly(
     assert len(api.requests) == calls
 
 
+def test_replay_of_a_run_whose_token_budget_switched_it_to_rules_matches_it(
+    make_client: ClientFactory,
+) -> None:
+    api = FakeMessagesAPI().start()
+    client = make_client(anthropic_api_key="test-key", anthropic_base_url=api.base_url)
+    try:
+        original, first = run_to_end(client, {**BASELINE, "reasoner": "anthropic",
+                                              "token_budget": 3000})
+    finally:
+        api.stop()
+    calls = len(api.requests)
+    models = [d["attempts"][0]["model"] for d in first["decisions"]]
+    assert models[0] is not None and models[-1] is None  # the switch happened mid-run
+    assert [e["kind"] for e in first["events"]].count("budget_exhausted") == 1
+
+    replay, again = run_to_end(client, {"reasoner": "replay", "replay_of": original["id"]})
+    assert len(api.requests) == calls
+    assert replay["assignments"] == original["assignments"]
+    assert verdicts(again) == verdicts(first) and replay["usage"] == ZERO_USAGE
+    assert [d["attempts"][0]["original_model"] for d in again["decisions"]] == models
+    assert "budget_exhausted" not in [e["kind"] for e in again["events"]]
+
+
 def test_replay_of_a_rules_run_matches_it(client: TestClient) -> None:
     original, first = run_to_end(client, {**BASELINE, "mode": "success_focused",
                                           "guidance": "optimizer", "seed": 7})
@@ -113,6 +136,14 @@ def test_replay_of_a_rules_run_matches_it(client: TestClient) -> None:
     assert verdicts(again) == verdicts(first)
     assert replay["usage"] == ZERO_USAGE
     assert again["decisions"][0]["attempts"][0]["original_model"] is None
+
+
+def test_the_synchronous_ltaa_solver_has_no_record_to_replay(client: TestClient) -> None:
+    response = client.post("/allocate", json={**BASELINE, "solver": "ltaa",
+                                              "options": {"reasoner": "replay"}})
+    assert response.status_code == 422
+    detail = response.json()["detail"][0]
+    assert detail["loc"] == ["body", "options", "reasoner"] and "POST /runs" in detail["msg"]
 
 
 ONE_TASK = {"tasks": [{"id": 1, "features": ["heavy"]}],
