@@ -3,13 +3,14 @@ trip through the tables, and different content never hashes alike."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import ExitStack
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from sqlalchemy import create_engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.graph.recorder import AttemptRecord, DecisionRecord
@@ -17,9 +18,10 @@ from app.reasoners.base import ReasonerReply
 from app.runs import audit
 from app.store import chain
 from app.store import repository as repo
-from app.store.db import transaction
+from app.store.db import make_engine, transaction
 from app.store.migrate import upgrade_head
 from app.store.models import Run
+from tests.e2e.postgres import fresh_database
 
 DECISION = DecisionRecord(
     task_index=0, task_id=7, task_name="Lift beam", robot=1, robot_name="heavy", phase="early",
@@ -73,14 +75,19 @@ def test_a_link_depends_on_its_predecessor_its_attempts_its_run_and_its_table() 
     assert chain.attempts_digest([]) != chain.attempts_digest([attempt])
 
 
-@pytest.fixture
-def sessions(tmp_path: Path) -> sessionmaker[Session]:
-    url = f"sqlite:///{tmp_path / 'ltaa.db'}"
-    upgrade_head(url)  # the real schema, through the real migrations
-    return sessionmaker(create_engine(url), expire_on_commit=False)
+@pytest.fixture(params=["sqlite", "postgresql"])
+def sessions(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[sessionmaker[Session]]:
+    """Both back-ends: each stores floats and JSON its own way."""
+    with ExitStack() as stack:
+        url = (f"sqlite:///{tmp_path / 'ltaa.db'}" if request.param == "sqlite"
+               else stack.enter_context(fresh_database()))
+        upgrade_head(url)  # the real schema, through the real migrations
+        engine = make_engine(url)
+        stack.callback(engine.dispose)
+        yield sessionmaker(engine, expire_on_commit=False)
 
 
-def test_awkward_values_verify_after_a_round_trip_through_sqlite(
+def test_awkward_values_verify_after_a_round_trip_through_the_tables(
     sessions: sessionmaker[Session],
 ) -> None:
     """Hashes are computed from the values written and checked against the values read."""
