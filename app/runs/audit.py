@@ -120,9 +120,9 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
     # The newest rows of a chain leave no gap when deleted; a completed run says where its
     # chains end (n_tasks decisions, and its last event is the one that completed it).
     if status == "completed" and decisions.last_key != n_tasks - 1:
-        stored = 0 if decisions.last_key is None else decisions.last_key + 1
-        decisions.missing_tail(f"the run completed with {n_tasks} tasks but decisions stop "
-                               f"after {stored}: the last decisions were deleted")
+        last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
+        decisions.missing_tail(f"the run completed with {n_tasks} tasks but its decisions "
+                               f"end at {last}: the last decisions were deleted")
     if status == "completed" and last_kind != "completed":
         events.missing_tail("the run completed but its events do not end with the "
                             "'completed' event: the last events were deleted")
