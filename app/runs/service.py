@@ -6,6 +6,7 @@ import uuid
 from dataclasses import dataclass
 from typing import Any
 
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
@@ -14,6 +15,7 @@ from app.domain.phases import detect_phase
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import make_reasoner
 from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.replay import validate_replay
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
@@ -25,7 +27,8 @@ TERMINAL = ("completed", "failed", "cancelled")
 
 
 def create_run(
-    *, sessions: sessionmaker[Session], worker: RunWorker, settings: Settings, spec: RunSpec
+    *, sessions: sessionmaker[Session], worker: RunWorker, settings: Settings, spec: RunSpec,
+    idempotency: Idempotency | None = None,
 ) -> Run:
     """Validate everything first, so a bad request never leaves a half-written run."""
     problem = spec.problem  # raises DomainError for an infeasible cap, bad instance...
@@ -41,6 +44,8 @@ def create_run(
             mode=spec.mode, max_deviation=problem.cap.max_deviation,
             n_tasks=problem.instance.n_tasks, n_robots=problem.instance.n_robots, resumes=0,
             cancel_requested=False,
+            idempotency_key=idempotency.key if idempotency else None,
+            request_digest=idempotency.digest if idempotency else None,
         )
         session.add(run)
         session.flush()
@@ -52,6 +57,25 @@ def create_run(
                                **({"replay_of": spec.replay_of} if spec.replay_of else {})})
     worker.submit(run_id)
     return run
+
+
+def create_or_replay_run(
+    *, sessions: sessionmaker[Session], worker: RunWorker, settings: Settings, spec: RunSpec,
+    idempotency: Idempotency,
+) -> tuple[Run, bool]:
+    """Create a run under an Idempotency-Key: (the run, whether an earlier request with the
+    same key and body created it). The same key with another body is a 409."""
+    try:
+        return create_run(sessions=sessions, worker=worker, settings=settings, spec=spec,
+                          idempotency=idempotency), False
+    except IntegrityError:
+        # No look-up first: the unique index on the key is the one arbiter, so a retry after
+        # the first request ended and two requests at once end the same way. The insert
+        # rolled back whole; the run that holds the key answers this request too.
+        earlier = run_for_key(sessions=sessions, idempotency=idempotency)
+        if earlier is None:
+            raise  # the key was free: a different constraint failed
+        return earlier, True
 
 
 def _require(session: Session, run_id: str, *, lock: bool = False) -> Run:

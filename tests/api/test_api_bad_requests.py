@@ -250,3 +250,64 @@ def test_unavailable_solver_is_a_4xx_not_a_crash(client: TestClient) -> None:
     (item,) = assert_error_shape(r.json())
     assert item["loc"] == ["body", "solver"] and "not available" in item["msg"]
     assert "missing_dep" not in listed
+
+
+# -- size limits on every endpoint that reads a body ----------------------------------------
+BODY_ENDPOINTS = ["/allocate", "/runs"]
+
+
+def robots_rating_heavy(n: int) -> list[dict[str, Any]]:
+    return [{"name": f"r{i}", "success": {"heavy": round(0.5 + i / 1000, 3)}} for i in range(n)]
+
+
+@pytest.mark.parametrize("path", BODY_ENDPOINTS)
+def test_over_long_body_with_content_length_is_413(make_client: Any, path: str) -> None:
+    small = make_client(max_body_bytes=500)
+    body = json.dumps(custom(tasks=many_tasks(50))).encode()
+    r = small.post(path, content=body, headers={"content-type": JSON})
+    assert r.status_code == 413, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"] == ["body"] and item["type"] == "body_too_large"
+    assert f"{len(body):,} bytes" in item["msg"] and "LTAA_MAX_BODY_BYTES" in item["msg"]
+
+
+@pytest.mark.parametrize("path", BODY_ENDPOINTS)
+def test_over_long_chunked_body_without_content_length_is_413(make_client: Any, path: str) -> None:
+    small = make_client(max_body_bytes=500)
+
+    def chunks() -> Iterator[bytes]:
+        yield b'{"tasks": ['
+        for i in range(50):
+            yield b'{"id": %d, "features": ["heavy"]},' % i
+        yield b'{"id": -1, "features": ["heavy"]}]}'
+
+    r = small.post(path, content=chunks(), headers={"content-type": JSON})
+    assert "content-length" not in r.request.headers  # streamed: counted while read
+    assert r.status_code == 413, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"] == ["body"] and "500 bytes" in item["msg"]
+    assert small.get("/runs").json() == []  # and nothing was half-created
+
+
+def test_run_with_10001_tasks_is_422_naming_the_field(client: TestClient) -> None:
+    r = client.post("/runs", json={"tasks": many_tasks(10_001), "robots": ROBOTS})
+    assert r.status_code == 422
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"] == ["body", "tasks"] and "10000" in item["msg"]
+    assert client.get("/runs").json() == []
+
+
+def test_run_with_101_robots_is_422_naming_the_field(client: TestClient) -> None:
+    r = client.post("/runs", json={"tasks": many_tasks(3), "robots": robots_rating_heavy(101)})
+    assert r.status_code == 422
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"] == ["body", "robots"] and "100" in item["msg"]
+    assert client.get("/runs").json() == []
+
+
+def test_the_limits_themselves_are_accepted(client: TestClient) -> None:
+    r = client.post("/allocate", json={"solver": "greedy", "tasks": many_tasks(10_000),
+                                       "robots": robots_rating_heavy(100)})
+    assert r.status_code == 200, r.text[:500]
+    assert len(r.json()["assignments"]) == 10_000
+    assert len(r.json()["metrics"]["workload"]) == 100

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Query, Response, status
+from fastapi import APIRouter, Body, Query, Response, status
 from fastapi.responses import StreamingResponse
 
 from app.api.allocation import build_problem, resolve_instance
 from app.api.audit import JSONL_RESPONSE, jsonl_trace, verify_out
 from app.api.deps import ClientDep, RunsDep, SettingsDep, SupervisorDep
+from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey, idempotency_of
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
+from app.api.run_examples import RUN_EXAMPLES
 from app.api.run_schemas import (
     AttemptOut,
     DecisionOut,
@@ -36,9 +38,10 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 
 
 @router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=RunCreated,
-             responses=errors(*CLIENT, *BODY, 409))
-def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: SettingsDep,
-               response: Response) -> RunCreated:
+             responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409)})
+def create_run(caller: ClientDep, body: Annotated[RunRequest, Body(openapi_examples=RUN_EXAMPLES)],
+               runs: RunsDep, settings: SettingsDep, response: Response,
+               idempotency_key: IdempotencyKey = None) -> RunCreated:
     """Start an LTAA run in the background; poll the Location for progress."""
     reasoner = body.reasoner or settings.default_reasoner
     if reasoner == "replay" or body.replay_of is not None:
@@ -54,10 +57,20 @@ def create_run(caller: ClientDep, body: RunRequest, runs: RunsDep, settings: Set
             token_budget=body.token_budget if body.token_budget is not None
             else settings.run_token_budget, replay_of=body.replay_of,
         )
-    run = service.create_run(sessions=runs.sessions, worker=runs.worker, settings=settings,
-                             spec=spec)
+    idempotency = idempotency_of(idempotency_key, body)
+    if idempotency is None:
+        run, replayed = service.create_run(sessions=runs.sessions, worker=runs.worker,
+                                           settings=settings, spec=spec), False
+    else:
+        run, replayed = service.create_or_replay_run(
+            sessions=runs.sessions, worker=runs.worker, settings=settings, spec=spec,
+            idempotency=idempotency)
     response.headers["Location"] = f"/runs/{run.id}"
-    return RunCreated(id=run.id, status=run.status, location=f"/runs/{run.id}")
+    if replayed:
+        response.headers[REPLAYED_HEADER] = "true"
+    # A replay answers as the first request was answered, when the run was just queued.
+    return RunCreated(id=run.id, status="queued" if replayed else run.status,
+                      location=f"/runs/{run.id}")
 
 
 def _sent_for_replay(body: RunRequest) -> dict[str, Any]:

@@ -1,0 +1,38 @@
+"""The Idempotency-Key header of POST /runs, as the route reads and documents it."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import Header
+from pydantic import BaseModel
+
+from app.runs.idempotency import HEADER, MAX_KEY_LENGTH, Idempotency, request_digest
+
+REPLAYED_HEADER = "Idempotent-Replayed"
+
+IdempotencyKey = Annotated[str | None, Header(
+    alias=HEADER, min_length=1, max_length=MAX_KEY_LENGTH,
+    description="Makes retries safe: a unique value per run you mean to start (e.g. a UUID). "
+    "Resending the same key with the same body returns the run the first request created "
+    f"(202, same body and Location, `{REPLAYED_HEADER}: true`) instead of starting another; "
+    "the same key with a different body is a 409. Keys are global, not per API key.",
+)]
+
+CREATED_HEADERS: dict[str, Any] = {
+    "Location": {"description": "The run: /runs/{id}", "schema": {"type": "string"}},
+    REPLAYED_HEADER: {
+        "description": f"`true` when an earlier request with the same {HEADER} and body "
+        "created the run",
+        "schema": {"type": "string", "enum": ["true"]},
+    },
+}
+
+
+def idempotency_of(key: str | None, body: BaseModel) -> Idempotency | None:
+    # Only the fields the client sent: an explicit `"max_deviation": null` (no cap) and an
+    # omitted one (the mode's cap) are different requests.
+    if key is None:
+        return None
+    return Idempotency(key=key, digest=request_digest(body.model_dump(mode="json",
+                                                                       exclude_unset=True)))
