@@ -204,3 +204,26 @@ def hbar_figure(bars: Sequence[tuple[str, float]], xlabel: str, title: str, capt
     ax.grid(axis="x", alpha=0.3)
     _footer(fig, caption)
     return save(fig, name, directory)
+
+
+def latency_histogram_figure(latencies: dict[str, Sequence[float]], title: str, caption: str,
+                             name: str, directory: Path = IMG) -> str:
+    """Stacked histogram of request latencies (seconds) by label, p50/p95/p99 of all marked."""
+    everything = [v for values in latencies.values() for v in values]
+    fig, ax = plt.subplots(figsize=(8.5, 3.6))
+    bins = np.linspace(0, max(everything, default=1.0), 41)
+    labels = list(latencies)
+    ax.hist([latencies[k] for k in labels], bins=bins, stacked=True, label=labels,
+            color=PALETTE[: len(labels)])
+    for q, style in ((50, "-"), (95, "--"), (99, ":")):
+        x = float(np.percentile(everything, q)) if everything else 0.0
+        ax.axvline(x, color="black", linestyle=style, linewidth=1)
+        ax.annotate(f"p{q}", (x, 1), xycoords=("data", "axes fraction"), xytext=(3, -12),
+                    textcoords="offset points", fontsize=8)
+    ax.set_xlabel("latency (s)")
+    ax.set_ylabel("calls")
+    ax.set_title(title)
+    ax.grid(axis="y", alpha=0.3)
+    handles, names = ax.get_legend_handles_labels()
+    _footer(fig, caption, handles, names, ncol=len(labels))
+    return save(fig, name, directory)

@@ -15,6 +15,7 @@ SECTIONS = [
     "benchmarks.ltaa_runs",
     "benchmarks.learners",
     "benchmarks.paper",
+    "benchmarks.load",
 ]
 
 
