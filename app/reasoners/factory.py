@@ -41,6 +41,13 @@ def resolve_api_key(explicit: SecretStr | str | None, settings: Any = None) -> s
     return next((os.environ[v] for v in API_KEY_VARS if os.environ.get(v)), None)
 
 
+def close_reasoner(reasoner: Reasoner) -> None:
+    """Release what a reasoner holds (the anthropic SDK's connection pool); rules has none."""
+    close = getattr(reasoner, "close", None)
+    if callable(close):
+        close()
+
+
 def make_reasoner(
     name: str,
     *,

@@ -13,7 +13,7 @@ from app.config import Settings
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
 from app.graph.recorder import DecisionRecord
-from app.reasoners.factory import make_reasoner
+from app.reasoners.factory import close_reasoner, make_reasoner
 from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.replay import validate_replay
@@ -35,8 +35,9 @@ def create_run(
     # A replay names a completed run and copies its parameters; nothing else names a run.
     validate_replay(sessions=sessions, spec=spec)
     if spec.replay_of is None:  # a replay's reasoner is built from the record, at run time
-        make_reasoner(spec.reasoner, settings=settings, model=spec.model,
-                      temperature=spec.temperature)  # raises for unknown reasoner / missing key
+        # Raises for an unknown reasoner or a missing key; the run builds its own later.
+        close_reasoner(make_reasoner(spec.reasoner, settings=settings, model=spec.model,
+                                     temperature=spec.temperature))
     run_id = uuid.uuid4().hex
     with transaction(sessions) as session:
         run = Run(

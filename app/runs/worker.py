@@ -29,7 +29,7 @@ from app.graph.pause import NodeHook, PausePoint, pause_hook
 from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
 from app.reasoners.base import Reasoner
-from app.reasoners.factory import make_reasoner
+from app.reasoners.factory import close_reasoner, make_reasoner
 from app.runs.integrity import check_integrity
 from app.runs.recorder import Fence, RunStop, SqlRecorder
 from app.runs.replay import recorded_replies
@@ -213,9 +213,10 @@ class RunWorker:
                                pause_at_task=None if self._settings.test_pause_at_node
                                else self._settings.test_pause_at_task,
                                fence=self._fence(run_id, stop))
+        reasoner = self._reasoner(run_id, spec)
         context = graph_context(
             problem,
-            reasoner=self._reasoner(run_id, spec),
+            reasoner=reasoner,
             recorder=recorder,
             quality_threshold=spec.quality_threshold,
             max_retries=spec.max_retries,
@@ -231,6 +232,8 @@ class RunWorker:
             self._finish(run_id, "failed", {"error": f"{type(exc).__name__}: {exc}"},
                          error=f"{type(exc).__name__}: {exc}")
             return
+        finally:
+            close_reasoner(reasoner)  # its HTTP connection pool, for the anthropic one
         stored = recorder.decisions()
         if [d.task_index for d in stored] != list(range(problem.instance.n_tasks)):
             # A graph can end without routing (a raising router, LangGraph #8834):

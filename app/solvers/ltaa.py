@@ -23,7 +23,7 @@ from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
 from app.graph.usage import usage_from_attempts
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
-from app.reasoners.factory import make_reasoner
+from app.reasoners.factory import close_reasoner, make_reasoner
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions, Usage
 from app.solvers.oracle import CompletionOracle
 
@@ -98,9 +98,7 @@ class LTAASolver(Solver):
             err.status_code = exc.status_code
             raise err from exc
         finally:
-            close = getattr(reasoner, "close", None)
-            if callable(close):
-                close()
+            close_reasoner(reasoner)
         decisions = recorder.decisions()
         if [d.task_index for d in decisions] != list(range(problem.instance.n_tasks)):
             raise RuntimeError(
