@@ -7,7 +7,6 @@ verdicts), and the fake must have received nothing more.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from fastapi.testclient import TestClient
@@ -15,20 +14,11 @@ from fastapi.testclient import TestClient
 from tests.api.conftest import ClientFactory
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_prompt, prompt_of
 from tests.fakes.scripted_reasoner import GARBAGE, poor_answer
+from tests.run_polling import wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
 ZERO_USAGE = {"llm_calls": 0, "input_tokens": 0, "output_tokens": 0}
 
-
-def wait_until(client: TestClient, run_id: str, statuses: tuple[str, ...],
-               timeout: float = 120) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        state = client.get(f"/runs/{run_id}").json()
-        if state["status"] in statuses:
-            return state
-        time.sleep(0.02)
-    raise AssertionError(f"run {run_id} never reached {statuses}: {state}")
 
 
 def run_to_end(client: TestClient, body: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -9,19 +9,10 @@ import pytest
 from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
+from tests.run_polling import wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
 
-
-def wait_until(client: TestClient, run_id: str, statuses: tuple[str, ...],
-               timeout: float = 60) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        state = client.get(f"/runs/{run_id}").json()
-        if state["status"] in statuses:
-            return state
-        time.sleep(0.02)
-    raise AssertionError(f"run {run_id} never reached {statuses}: {state}")
 
 
 def test_a_rules_run_completes_with_metrics_and_a_full_trace(client: TestClient) -> None:

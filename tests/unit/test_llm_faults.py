@@ -10,7 +10,6 @@ rules fallback (`fallback` with a `failure_log`). No run fails because of the LL
 from __future__ import annotations
 
 import itertools
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -22,6 +21,7 @@ from pydantic import SecretStr
 from app.config import Settings
 from app.main import create_app
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, answer_from_prompt, prompt_of
+from tests.run_polling import wait_until
 
 TRANSPORT_RETRIES = 2  # the SDK's max_retries in these tests
 TIMEOUT_S = 2.0  # the client's timeout; a "slow" reply takes longer
@@ -57,10 +57,7 @@ def llm_run(client: TestClient, n_tasks: int = 2) -> tuple[dict[str, Any], dict[
     created = client.post("/runs", json=body)
     assert created.status_code == 202, created.text
     run_id = created.json()["id"]
-    deadline = time.monotonic() + 90
-    while (state := client.get(f"/runs/{run_id}").json())["status"] in ("queued", "running"):
-        assert time.monotonic() < deadline, state
-        time.sleep(0.02)
+    state = wait_until(client, run_id)
     trace = client.get(f"/runs/{run_id}/trace").json()
     return state, trace
 

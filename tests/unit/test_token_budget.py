@@ -8,7 +8,6 @@ the fake Messages API, with the budget from the request and from the server's se
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from itertools import accumulate
 from typing import Any
@@ -23,6 +22,7 @@ from app.reasoners.base import ReasonerError
 from app.reasoners.budget import BudgetExhausted, TokenBudgetReasoner
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
+from tests.run_polling import wait_until
 from tests.unit.ltaa_support import problem, run
 
 N_TASKS = 6
@@ -94,10 +94,7 @@ def llm_run(client: TestClient, **extra: Any) -> tuple[dict[str, Any], dict[str,
     created = client.post("/runs", json=body)
     assert created.status_code == 202, created.text
     run_id = created.json()["id"]
-    deadline = time.monotonic() + 90
-    while (state := client.get(f"/runs/{run_id}").json())["status"] in ("queued", "running"):
-        assert time.monotonic() < deadline, state
-        time.sleep(0.02)
+    state = wait_until(client, run_id)
     assert state["status"] == "completed", state
     return state, client.get(f"/runs/{run_id}/trace", params={"include": "prompts"}).json()
 
