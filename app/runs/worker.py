@@ -197,6 +197,19 @@ class RunWorker:
                 values = checkpoint.checkpoint["channel_values"] if checkpoint else None
                 report = check_integrity(decisions=stored, n_tasks=problem.instance.n_tasks,
                                          n_robots=problem.instance.n_robots, checkpoint=values)
+                if not report.ok:
+                    # Resuming would build on a record that the checkpoint contradicts, and
+                    # its final allocation could not be trusted: stop here, say why.
+                    repo.add_event(session=session, run_id=run_id, kind="integrity_failed",
+                                   detail={"integrity": report.as_dict(),
+                                           **self._event_detail()})
+                    repo.set_status(
+                        session=session, run=run, status="failed",
+                        error="not resumed: the integrity check failed ("
+                        + "; ".join(report.problems) + "). The stored decisions and the "
+                        "checkpoint disagree; inspect GET /runs/{id}/trace and "
+                        "/trace/verify, then start a new run.")
+                    return
                 run.resumes += 1
                 repo.add_event(session=session, run_id=run_id, kind="resumed",
                                detail={"integrity": report.as_dict(),

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import sqlite3
 import time
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
+from sqlalchemy.engine import make_url
 
+from app.config import Settings
+from app.main import create_app
 from tests.api.conftest import ClientFactory
 from tests.run_polling import wait_until
 
@@ -137,3 +141,29 @@ def test_status_filter_must_be_a_known_status(client: TestClient) -> None:
     response = client.get("/runs", params={"status": "sleeping"})
     assert response.status_code == 422
     assert response.json()["detail"][0]["loc"] == ["query", "status"]
+
+
+def test_a_run_whose_record_fails_the_integrity_check_is_not_resumed(
+        settings: Settings) -> None:
+    paused = settings.model_copy(update={"test_pause_at_task": 5})
+    with TestClient(create_app(paused)) as first:
+        run_id = first.post("/runs", json=BASELINE).json()["id"]
+        deadline = time.monotonic() + 30
+        while first.get(f"/runs/{run_id}").json()["progress"]["allocated"] < 5:
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+    # Shut down mid-run (interrupted at task 5), then lose a stored decision.
+    database = sqlite3.connect(make_url(settings.db_url).database or "")
+    with database:
+        database.execute("DELETE FROM decisions WHERE run_id = ? AND task_index = 2", (run_id,))
+    database.close()
+
+    with TestClient(create_app(settings)) as second:  # auto-resume at start-up
+        state = wait_until(second, run_id, ("failed", "completed"))
+        assert state["status"] == "failed"
+        assert "integrity check failed" in state["error"]
+        assert state["progress"]["allocated"] == 4  # nothing built on the broken record
+        assert state["resumes"] == 0
+        events = second.get(f"/runs/{run_id}/trace").json()["events"]
+        assert events[-1]["kind"] == "integrity_failed"
+        assert not events[-1]["detail"]["integrity"]["ok"]
