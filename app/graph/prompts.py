@@ -80,18 +80,24 @@ def _guidance(ctx: DecisionContext) -> str:
         f"Confidence: High if the gap is {CLEAR_MARGIN:g}+ points from the deciding cut-off, "
         "Medium if closer, Low if you depart from the rule.",
     ]
-    if ctx.guided_robot is not None:
-        lines.append(
-            f"Optimizer guidance: {ctx.labels[ctx.guided_robot]} lies on the optimal "
-            "completion of the queue; follow it, or explain in the reasoning why you depart."
+    return "\n".join(lines + _optimizer_guidance(ctx))
+
+
+def _optimizer_guidance(ctx: DecisionContext) -> list[str]:
+    """The optimizer's choice, when the run asked for it (every tier carries it)."""
+    if ctx.guided_robot is None:
+        return []
+    lines = [
+        f"Optimizer guidance: {ctx.labels[ctx.guided_robot]} lies on the optimal "
+        "completion of the queue; follow it, or explain in the reasoning why you depart."
+    ]
+    if ctx.guided_costs is not None:
+        costs = ", ".join(
+            f"{label} {'not allowed' if c is None else f'{c:.1f}'}"
+            for label, c in zip(ctx.labels, ctx.guided_costs, strict=True)
         )
-        if ctx.guided_costs is not None:
-            costs = ", ".join(
-                f"{label} {'not allowed' if c is None else f'{c:.1f}'}"
-                for label, c in zip(ctx.labels, ctx.guided_costs, strict=True)
-            )
-            lines.append(f"Success points each choice gives away over the queue: {costs}.")
-    return "\n".join(lines)
+        lines.append(f"Success points each choice gives away over the queue: {costs}.")
+    return lines
 
 
 def user_prompt(ctx: DecisionContext) -> str:
@@ -139,7 +145,10 @@ def retry_prompt(
         return "\n\n".join(
             [_facts(ctx), _guidance(ctx), fb, _criteria_guide(), _WORKED_EXAMPLE, _FORMAT]
         )
-    return "\n\n".join([_facts(ctx), fb, _step_template(ctx)])
+    # The step template replaces the framework text, but not the optimizer's choice.
+    guidance = _optimizer_guidance(ctx)
+    return "\n\n".join([_facts(ctx), *(["\n".join(guidance)] if guidance else []), fb,
+                         _step_template(ctx)])
 
 
 def _step_template(ctx: DecisionContext) -> str:

@@ -63,3 +63,12 @@ def test_retry_tiers_are_genuinely_different() -> None:
     assert "fill in the template" in tiers[3] and "1. Allowed robots" in tiers[3]
     assert "Q=0.30, needed 0.60" in tiers[3]
     assert retry_prompt(CTX, 5, feedback, 0.3, 0.6) == tiers[3]  # above 3: still tier 3
+
+
+def test_every_retry_tier_keeps_the_optimizer_guidance() -> None:
+    guided = replace(CTX, guided_robot=1, guided_costs=(2.5, 0.0, None))
+    for tier in (1, 2, 3):
+        text = retry_prompt(guided, tier, "Q=0.30 below the threshold 0.60.", 0.3, 0.6)
+        assert "Optimizer guidance: Medium Robot" in text, tier
+        assert "Light Robot 2.5, Medium Robot 0.0, Heavy Robot not allowed" in text, tier
+    assert "Optimizer guidance" not in retry_prompt(CTX, 3, "x", 0.3, 0.6)
