@@ -16,10 +16,10 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from app.domain.metrics import Metrics
-from app.domain.models import MAX_ROBOTS, MAX_TASKS
+from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS
 from app.domain.modes import Mode
 
-Name = Annotated[StrictStr, Field(min_length=1, max_length=200)]
+Name = Annotated[StrictStr, Field(min_length=1, max_length=MAX_NAME_CHARS)]
 _JSON_TYPES = {bool: "a boolean", float: "a number", list: "an array", dict: "an object",
                type(None): "null"}
 
@@ -27,6 +27,10 @@ _JSON_TYPES = {bool: "a boolean", float: "a number", list: "an array", dict: "an
 def _task_id(value: object) -> int | str:
     # One error naming the field, rather than one per member of an int | str union.
     if isinstance(value, int | str) and not isinstance(value, bool) and str(value).strip():
+        if len(str(value)) > MAX_NAME_CHARS:
+            raise PydanticCustomError(
+                "task_id_too_long", "task id must be at most {limit} characters, got {got}",
+                {"limit": MAX_NAME_CHARS, "got": len(str(value))})
         return value
     raise PydanticCustomError(
         "task_id_type", "task id must be an integer or a non-empty string, not {got}",
@@ -64,7 +68,8 @@ class RobotIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: Name = Field(description="Key used in assignments and workloads; unique")
-    label: StrictStr = Field("", max_length=200, description="Display name, e.g. 'Light Robot'")
+    label: StrictStr = Field("", max_length=MAX_NAME_CHARS,
+                             description="Display name, e.g. 'Light Robot'")
     description: StrictStr = Field("", max_length=2000)
     success: dict[Name, Probability] = Field(
         description="Success probability per feature, each in [0, 1]"

@@ -12,6 +12,9 @@ from app.domain.errors import DomainError
 
 MAX_TASKS = 10_000
 MAX_ROBOTS = 100
+# Longest name, label, feature or task id (as text) a request may carry; the app tables
+# size their name columns from it.
+MAX_NAME_CHARS = 200
 
 TaskId = int | str
 

@@ -22,6 +22,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
+from app.domain.models import MAX_NAME_CHARS
+
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
@@ -84,10 +86,10 @@ class Decision(Base):
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
     task_index: Mapped[int] = mapped_column(Integer)
-    task_id: Mapped[str] = mapped_column(String(128))
+    task_id: Mapped[str] = mapped_column(String(MAX_NAME_CHARS))
     task_name: Mapped[str] = mapped_column(String(256))
     robot: Mapped[int] = mapped_column(Integer)
-    robot_name: Mapped[str] = mapped_column(String(128))
+    robot_name: Mapped[str] = mapped_column(String(MAX_NAME_CHARS))
     phase: Mapped[str] = mapped_column(String(16))
     expected_success: Mapped[float] = mapped_column(Float)
     reasoning: Mapped[str] = mapped_column(Text)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import ExitStack
 from pathlib import Path
 
 import pytest
@@ -9,9 +11,13 @@ from alembic import command
 from sqlalchemy import inspect
 from sqlalchemy.exc import IntegrityError
 
+from app.domain.models import MAX_NAME_CHARS
+from app.graph.recorder import DecisionRecord
+from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
 from app.store.models import Decision, Run
+from tests.e2e.postgres import fresh_database
 
 
 def test_upgrade_head_matches_the_models(tmp_path: Path) -> None:
@@ -38,3 +44,37 @@ def test_one_decision_per_run_and_task_is_enforced(tmp_path: Path) -> None:
         session.add(Decision(run_id="r1", task_index=0, **row))
     with pytest.raises(IntegrityError), transaction(sessions) as session:
         session.add(Decision(run_id="r1", task_index=0, **row))
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def migrated_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
+    with ExitStack() as stack:
+        url = (f"sqlite:///{tmp_path / 'app.db'}" if request.param == "sqlite"
+               else stack.enter_context(fresh_database()))
+        upgrade_head(url)
+        yield url
+
+
+def test_the_longest_names_the_api_accepts_fit_the_columns(migrated_url: str) -> None:
+    """PostgreSQL enforces VARCHAR lengths (SQLite does not): a run whose robot is named
+    with the API's longest name must still be able to store its decisions."""
+    longest = "x" * MAX_NAME_CHARS
+    engine = make_engine(migrated_url)
+    sessions = make_session_factory(engine)
+    try:
+        with transaction(sessions) as session:
+            session.add(Run(id="r1", status="running", request={}, reasoner="rules",
+                            mode="balanced", n_tasks=1, n_robots=1, resumes=0,
+                            cancel_requested=False))
+            session.flush()
+            repo.upsert_decision(session=session, run_id="r1", record=DecisionRecord(
+                task_index=0, task_id=longest, task_name=longest, robot=0,
+                robot_name=longest, phase="early", expected_success=0.5, reasoning="",
+                confidence="High", tradeoff="", quality=1.0, fallback=False, attempts=1,
+                failure_log=[], loads_before=[0], loads_after=[1], balance_before=0.0,
+                balance_after=1.0, severity_after="low"))
+        with sessions() as session:
+            stored = repo.decisions(session=session, run_id="r1")[0]
+            assert (stored.task_id, stored.robot_name) == (longest, longest)
+    finally:
+        engine.dispose()
