@@ -10,6 +10,9 @@ from pydantic import AfterValidator, BaseModel, Field
 from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
 
 RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "cancelled"]
+# Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
+# database may refuse in a query (PostgreSQL rejects a NUL character with an error, a 500).
+RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
 
 
 def _with_offset(value: datetime) -> datetime:
@@ -43,7 +46,7 @@ class RunRequest(InstanceRequest):
         description="LLM tokens (input + output) the run may spend; once spent, the "
         "remaining tasks use the offline 'rules' reasoner (default: the server's setting)")
     replay_of: str | None = Field(
-        None, min_length=1, max_length=64,
+        None, min_length=1, max_length=64, pattern=RUN_ID_PATTERN,
         description="Required by reasoner 'replay', refused with any other: id of a completed "
         "run whose recorded replies are replayed, with no API call. The replay copies that "
         "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance and "

@@ -198,3 +198,15 @@ def test_bad_replay_requests_are_4xx_naming_the_field_and_write_nothing(
     assert wait_until(client, same.json()["id"], ("completed",))["assignments"] \
         == done["assignments"]
 
+
+
+def test_a_replay_of_that_no_run_id_can_have_is_a_422_naming_the_field(
+    client: TestClient,
+) -> None:
+    """A NUL character reached the run lookup, where PostgreSQL refuses it (a 500 there)."""
+    for replay_of in ("ab\u0000cd", "../runs", "a b"):
+        response = client.post("/runs", json={"reasoner": "replay", "replay_of": replay_of})
+        assert response.status_code == 422, (replay_of, response.text)
+        detail = response.json()["detail"][0]
+        assert (detail["loc"], detail["type"]) == (["body", "replay_of"],
+                                                   "string_pattern_mismatch"), detail
