@@ -53,10 +53,6 @@ def _int(value: Any) -> int:
     return int(value)
 
 
-def _opt_int(value: Any) -> int | None:
-    return None if value is None else int(value)
-
-
 def _str(value: Any) -> str:
     return str(value)
 
@@ -171,11 +167,6 @@ class ChainCheck:
         self._prev = genesis(table, run_id)
         self._next_key = first_key
         self._noun = "task_index" if table == "decisions" else "seq"
-
-    @property
-    def verifying(self) -> bool:
-        """False once a break was found: later rows are only counted (their check is moot)."""
-        return self.first_break is None
 
     def _fail(self, key: int, expected: str | None, stored: str | None, reason: str) -> None:
         if self.first_break is None:
