@@ -287,3 +287,14 @@ class RunWorker:
                 return
             repo.set_status(session=session, run=run, status=status, error=error)
             repo.add_event(session=session, run_id=run_id, kind=event or status, detail=detail)
+        if status in ("completed", "cancelled"):
+            self._prune_checkpoints(run_id)
+
+    def _prune_checkpoints(self, run_id: str) -> None:
+        """A run that can never resume needs no checkpoints (~17 KB per task); its record
+        lives in the app tables. Deleted after the status commits, so a crash in between
+        leaves only garbage, never a run without the checkpoint it would resume from."""
+        try:
+            self.checkpointer.delete_thread(run_id)
+        except Exception:  # storage hygiene must not turn a finished run into an error
+            log.exception("could not delete the checkpoints of run %s", run_id)

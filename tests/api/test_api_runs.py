@@ -167,3 +167,32 @@ def test_a_run_whose_record_fails_the_integrity_check_is_not_resumed(
         events = second.get(f"/runs/{run_id}/trace").json()["events"]
         assert events[-1]["kind"] == "integrity_failed"
         assert not events[-1]["detail"]["integrity"]["ok"]
+
+
+def _checkpoints_of(settings: Settings, run_id: str) -> int:
+    saver = sqlite3.connect(settings.checkpoint_file)
+    try:
+        return saver.execute("SELECT count(*) FROM checkpoints WHERE thread_id = ?",
+                             (run_id,)).fetchone()[0]
+    finally:
+        saver.close()
+
+
+def test_checkpoints_go_when_a_run_can_no_longer_resume(settings: Settings) -> None:
+    paused = settings.model_copy(update={"test_pause_at_task": 3})
+    with TestClient(create_app(paused)) as client:
+        held = client.post("/runs", json=BASELINE).json()["id"]
+        wait_until(client, held, ("running",))
+        deadline = time.monotonic() + 30
+        while client.get(f"/runs/{held}").json()["progress"]["allocated"] < 3:
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+    # Shut down while the run waited at task 3: interrupted, its checkpoints kept.
+    assert _checkpoints_of(settings, held) > 0
+    with TestClient(create_app(settings)) as client:
+        assert wait_until(client, held, ("completed",))["resumes"] == 1
+        done = client.post("/runs", json=BASELINE).json()["id"]
+        wait_until(client, done, ("completed",))
+    # Completed: the record is in the app tables, the checkpoints are gone.
+    assert _checkpoints_of(settings, held) == 0
+    assert _checkpoints_of(settings, done) == 0
