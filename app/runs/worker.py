@@ -23,6 +23,7 @@ from langgraph.checkpoint.base import BaseCheckpointSaver
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
+from app.domain.errors import DomainError
 from app.graph.builder import NODES, build_graph
 from app.graph.checkpoint import open_sqlite_saver
 from app.graph.pause import NodeHook, PausePoint, pause_hook
@@ -226,7 +227,14 @@ class RunWorker:
                                pause_at_task=None if self._settings.test_pause_at_node
                                else self._settings.test_pause_at_task,
                                fence=self._fence(run_id, stop))
-        reasoner = self._reasoner(run_id, spec)
+        try:
+            reasoner = self._reasoner(run_id, spec)
+        except DomainError as exc:
+            # The configuration changed since the run was accepted (e.g. the API key was
+            # removed before a resume): fail with the reason and the fix, not "internal error".
+            self._finish(run_id, "failed", {"error": exc.message, "field": exc.field},
+                         error=f"cannot resume: {exc.message}")
+            return
         context = graph_context(
             problem,
             reasoner=reasoner,

@@ -203,3 +203,23 @@ def test_a_run_whose_every_call_fails_completes_on_fallbacks(settings: Settings)
                    for a in decision["attempts"])
         # The fallback is the rules reasoner's choice, validated like any answer.
         assert decision["quality"] >= 0.9 and "Rule-based choice" in decision["reasoning"]
+
+
+def test_a_resume_without_the_api_key_fails_saying_which_key_to_set(
+        settings: Settings) -> None:
+    with FakeMessagesAPI() as api:
+        keyed = settings.model_copy(update={
+            "anthropic_api_key": SecretStr("test-key"), "anthropic_base_url": api.base_url,
+            "test_pause_at_task": 1})
+        with TestClient(create_app(keyed)) as first:
+            baseline = next(s for s in first.get("/scenarios").json()
+                            if s["name"] == "baseline")
+            run_id = first.post("/runs", json={
+                "tasks": baseline["tasks"][:2], "robots": baseline["robots"],
+                "reasoner": "anthropic", "model": "claude-test"}).json()["id"]
+            wait_until(first, run_id, ("running",))
+    # The key is gone when the server starts again and resumes the interrupted run.
+    with TestClient(create_app(settings)) as second:
+        state = wait_until(second, run_id, ("failed", "completed"))
+    assert state["status"] == "failed"
+    assert "ANTHROPIC_API_KEY" in state["error"] and "internal error" not in state["error"]
