@@ -77,7 +77,9 @@ class ReplayReasoner:
         if recorded is None:
             raise ReplayDivergedError(
                 f"run '{self.run_id}' recorded no attempt {context.attempt} for task index "
-                f"{context.task_index}; the replay no longer follows the original run"
+                f"{context.task_index}; the replay no longer follows the original run. This "
+                "happens when prompts or validation changed since that run was recorded: "
+                "replay it with the version that recorded it, or start a new run"
             )
         if recorded.error is not None:
             raise ReasonerError(recorded.error)
