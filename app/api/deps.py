@@ -6,12 +6,13 @@ import logging
 from dataclasses import dataclass
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Path, Request
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import Caller, KeyRing, Role
 from app.api.errors import ApiError
+from app.api.run_schemas import RUN_ID_PATTERN
 from app.config import Settings
 from app.runs.worker import RunWorker
 
@@ -41,6 +42,8 @@ def get_runs(request: Request) -> RunsContext:
 
 
 RunsDep = Annotated[RunsContext, Depends(get_runs)]
+# Checked before any query: PostgreSQL answers a NUL character in a parameter with an error.
+RunIdPath = Annotated[str, Path(pattern=RUN_ID_PATTERN, description="A run id, see GET /runs")]
 
 
 # -- access control ----------------------------------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 from pydantic import (
+    AfterValidator,
     AliasChoices,
     BaseModel,
     ConfigDict,
@@ -19,7 +20,18 @@ from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS
 from app.domain.modes import Mode
 
-Name = Annotated[StrictStr, Field(min_length=1, max_length=MAX_NAME_CHARS)]
+
+def _no_nul(value: str) -> str:
+    # PostgreSQL refuses a NUL in any text value, so a run naming one would be accepted and
+    # then fail when its first decision is stored; refuse it up front on every back-end.
+    if "\x00" in value:
+        raise PydanticCustomError("nul_character",
+                                 "must not contain a NUL character (\\u0000); remove it")
+    return value
+
+
+NoNul = AfterValidator(_no_nul)
+Name = Annotated[StrictStr, Field(min_length=1, max_length=MAX_NAME_CHARS), NoNul]
 _JSON_TYPES = {bool: "a boolean", float: "a number", list: "an array", dict: "an object",
                type(None): "null"}
 
@@ -31,6 +43,8 @@ def _task_id(value: object) -> int | str:
             raise PydanticCustomError(
                 "task_id_too_long", "task id must be at most {limit} characters, got {got}",
                 {"limit": MAX_NAME_CHARS, "got": len(str(value))})
+        if isinstance(value, str):
+            _no_nul(value)
         return value
     raise PydanticCustomError(
         "task_id_type", "task id must be an integer or a non-empty string, not {got}",
@@ -68,9 +82,9 @@ class RobotIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: Name = Field(description="Key used in assignments and workloads; unique")
-    label: StrictStr = Field("", max_length=MAX_NAME_CHARS,
-                             description="Display name, e.g. 'Light Robot'")
-    description: StrictStr = Field("", max_length=2000)
+    label: Annotated[StrictStr, NoNul] = Field("", max_length=MAX_NAME_CHARS,
+                                               description="Display name, e.g. 'Light Robot'")
+    description: Annotated[StrictStr, NoNul] = Field("", max_length=2000)
     success: dict[Name, Probability] = Field(
         description="Success probability per feature, each in [0, 1]"
     )

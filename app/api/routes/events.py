@@ -12,7 +12,7 @@ from fastapi import APIRouter, Depends, Header
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import StreamingResponse
 
-from app.api.deps import RunsDep, SettingsDep, SupervisorDep
+from app.api.deps import RunIdPath, RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
 from app.api.responses import SUPERVISOR, errors
 from app.runs.errors import RunNotFoundError
@@ -23,7 +23,7 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 RECONNECT_MS = 1000
 
 
-def existing_run(run_id: str, runs: RunsDep) -> str:
+def existing_run(run_id: RunIdPath, runs: RunsDep) -> str:
     # A dependency, so an unknown id is a 404 before the stream (and its 200) begins.
     if run_status(sessions=runs.sessions, run_id=run_id) is None:
         raise RunNotFoundError(run_id)

@@ -9,7 +9,7 @@ from fastapi.responses import StreamingResponse
 
 from app.api.allocation import build_problem, resolve_instance
 from app.api.audit import JSONL_RESPONSE, jsonl_trace, verify_out
-from app.api.deps import ClientDep, RunsDep, SettingsDep, SupervisorDep
+from app.api.deps import ClientDep, RunIdPath, RunsDep, SettingsDep, SupervisorDep
 from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey, idempotency_of
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.run_examples import RUN_EXAMPLES
@@ -128,7 +128,7 @@ def _run_out(view: service.RunView) -> RunOut:
 
 
 @router.get("/{run_id}", response_model=RunOut, responses=errors(*CLIENT, 404))
-def get_run(caller: ClientDep, run_id: str, runs: RunsDep) -> RunOut:
+def get_run(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     """A run's status, progress, workload, assignments so far, metrics and usage."""
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
 
@@ -150,7 +150,7 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
 @router.get("/{run_id}/trace", response_model=TraceOut,
             responses={**errors(*SUPERVISOR, 404), 200: JSONL_RESPONSE})
 def get_trace(
-    caller: SupervisorDep, run_id: str, runs: RunsDep,
+    caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep,
     include: Annotated[Literal["prompts"] | None, Query()] = None,
     format_: Annotated[Literal["json", "jsonl"], Query(
         alias="format", description="jsonl: stream the whole audit record (with prompts) "
@@ -188,14 +188,14 @@ def get_trace(
 
 @router.get("/{run_id}/trace/verify", response_model=TraceVerifyOut,
             responses=errors(*SUPERVISOR, 404))
-def verify_trace(caller: SupervisorDep, run_id: str, runs: RunsDep) -> TraceVerifyOut:
+def verify_trace(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> TraceVerifyOut:
     """For supervisors: recompute the run's hash chains; ok, or the first broken link."""
     return verify_out(audit.verify_trace(sessions=runs.sessions, run_id=run_id))
 
 
 @router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut,
              responses=errors(*SUPERVISOR, 404, 409))
-def resume_run(caller: SupervisorDep, run_id: str, runs: RunsDep) -> RunOut:
+def resume_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     """For supervisors: resume an interrupted (or failed) run from its last checkpoint."""
     service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
@@ -203,7 +203,7 @@ def resume_run(caller: SupervisorDep, run_id: str, runs: RunsDep) -> RunOut:
 
 @router.post("/{run_id}/cancel", response_model=RunOut,
              responses=errors(*SUPERVISOR, 404, 409))
-def cancel_run(caller: SupervisorDep, run_id: str, runs: RunsDep) -> RunOut:
+def cancel_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     """For supervisors: cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
