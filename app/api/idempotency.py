@@ -4,20 +4,34 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import Header
+from fastapi import Depends, Header, Request
 from pydantic import BaseModel
 
+from app.api.errors import ApiError
 from app.runs.idempotency import HEADER, MAX_KEY_LENGTH, Idempotency, request_digest
 
 REPLAYED_HEADER = "Idempotent-Replayed"
 
-IdempotencyKey = Annotated[str | None, Header(
+_KeyHeader = Annotated[str | None, Header(
     alias=HEADER, min_length=1, max_length=MAX_KEY_LENGTH,
     description="Makes retries safe: a unique value per run you mean to start (e.g. a UUID). "
     "Resending the same key with the same body returns the run the first request created "
     f"(202, same body and Location, `{REPLAYED_HEADER}: true`) instead of starting another; "
     "the same key with a different body is a 409. Keys are global, not per API key.",
 )]
+
+
+def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
+    # The header parameter alone reads only the first of several: a retry repeating the
+    # other one (or a proxy joining them into "a, b") would then start another run.
+    sent = len(request.headers.getlist(HEADER))
+    if sent > 1:
+        raise ApiError(422, ["header", HEADER], f"{sent} {HEADER} headers were sent; send "
+                       "exactly one, with one key", "duplicate_header")
+    return key
+
+
+IdempotencyKey = Annotated[str | None, Depends(_one_key)]
 
 CREATED_HEADERS: dict[str, Any] = {
     "Location": {"description": "The run: /runs/{id}", "schema": {"type": "string"}},

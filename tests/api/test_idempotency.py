@@ -194,3 +194,14 @@ def test_concurrent_retries_against_a_real_server(tmp_path: Path) -> None:
             assert [r["id"] for r in http.get("/runs").json()] == [responses[0].json()["id"]]
     finally:
         server.stop()
+
+
+@pytest.mark.parametrize("keys", [("key-a", "key-b"), ("key-a", "key-a")])
+def test_two_idempotency_key_headers_are_a_422_naming_the_header(
+        client: TestClient, keys: tuple[str, str]) -> None:
+    # Which key would a retry have to repeat? Picking one silently (or a proxy joining them
+    # into "key-a, key-b") would make retries start runs; one key per request.
+    r = client.post("/runs", json=BODY, headers=[("Idempotency-Key", k) for k in keys])
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"] == ["header", "Idempotency-Key"]
+    assert run_ids(client) == []

@@ -41,7 +41,7 @@ router = APIRouter(prefix="/runs", tags=["runs"])
              responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409)})
 def create_run(caller: ClientDep, body: Annotated[RunRequest, Body(openapi_examples=RUN_EXAMPLES)],
                runs: RunsDep, settings: SettingsDep, response: Response,
-               idempotency_key: IdempotencyKey = None) -> RunCreated:
+               idempotency_key: IdempotencyKey) -> RunCreated:
     """Start an LTAA run in the background; poll the Location for progress."""
     reasoner = body.reasoner or settings.default_reasoner
     if reasoner == "replay" or body.replay_of is not None:
