@@ -200,6 +200,7 @@ def run(
 ) -> None:
     """Run the LTAA graph durably in the local data directory, with a progress bar."""
     from app.cli_run import print_summary, run_locally
+    from app.runs.store_lock import StoreInUseError
 
     console = Console()
     try:
@@ -207,6 +208,9 @@ def run(
                            max_deviation=max_deviation, guidance=guidance, console=console)
     except DomainError as exc:
         _fail(domain_error_body(exc), as_json=False)
+    except StoreInUseError as exc:  # a server (or another `ltaa run`) has the data directory
+        Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
     print_summary(view, console)
     if view.run.status != "completed":
         raise typer.Exit(1)

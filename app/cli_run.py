@@ -36,7 +36,8 @@ def run_locally(
     try:
         spec = RunSpec.for_instance(problem.instance, mode=mode.value,
                                     max_deviation=problem.cap.max_deviation,
-                                    reasoner=reasoner, guidance=guidance)
+                                    reasoner=reasoner, guidance=guidance,
+                                    token_budget=settings.run_token_budget)
         run = service.create_run(sessions=sessions, worker=worker, settings=settings,
                                  spec=spec)
         columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),

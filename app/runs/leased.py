@@ -83,6 +83,9 @@ class LeasedRunWorker(RunWorker):
         # Started now, not in recover(): `ltaa run` claims runs without ever polling.
         self._heartbeat.start()
 
+    def _claim_store(self) -> Callable[[], None]:
+        return lambda: None  # several processes share PostgreSQL; leases arbitrate the runs
+
     def _open_checkpointer(self) -> tuple[BaseCheckpointSaver[Any], Callable[[], None]]:
         from app.graph.checkpoint_postgres import open_postgres_saver
 

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from langgraph.checkpoint.base import BaseCheckpointSaver
+from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
@@ -35,6 +36,7 @@ from app.runs.integrity import check_integrity
 from app.runs.recorder import Fence, RunStop, SqlRecorder
 from app.runs.replay import recorded_replies
 from app.runs.spec import RunSpec
+from app.runs.store_lock import StoreLock
 from app.runs.token_budget import with_token_budget
 from app.solvers.ltaa import graph_context
 from app.store import repository as repo
@@ -48,7 +50,12 @@ class RunWorker:
     def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
         self._settings = settings
         self._sessions = sessions
-        self.checkpointer, self._close_checkpointer = self._open_checkpointer()
+        self._release_store = self._claim_store()
+        try:
+            self.checkpointer, self._close_checkpointer = self._open_checkpointer()
+        except BaseException:
+            self._release_store()
+            raise
         self.graph = build_graph(self.checkpointer, node_hook=self._pause_hook())
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
@@ -57,6 +64,17 @@ class RunWorker:
         self._stops: dict[str, RunStop] = {}
         self._futures: dict[str, Future[None]] = {}
         self._closing = False
+
+    def _claim_store(self) -> Callable[[], None]:
+        """Scale-out hook: make this the only process on the embedded store (raises
+        StoreInUseError otherwise); returns how to let go."""
+        url = make_url(self._settings.db_url)
+        database = url.database
+        if url.get_backend_name() != "sqlite" or not database or database == ":memory:":
+            return lambda: None
+        lock = StoreLock(Path(database))
+        lock.acquire()
+        return lock.release
 
     def _open_checkpointer(self) -> tuple[BaseCheckpointSaver[Any], Callable[[], None]]:
         """Scale-out hook: the saver and how to close it."""
@@ -115,6 +133,7 @@ class RunWorker:
         self.begin_drain()
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._close_checkpointer()
+        self._release_store()
 
     # -- commands ----------------------------------------------------------------------
 

@@ -11,6 +11,9 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from app.cli import cli
+from app.config import Settings
+from app.main import create_app
+from tests.fakes.fake_messages_api import FakeMessagesAPI
 
 
 @pytest.fixture
@@ -109,3 +112,31 @@ def test_apply_migrations_creates_the_database(tmp_path: Path) -> None:
     settings = Settings(data_dir=tmp_path / "fresh")
     apply_migrations(settings)
     assert (tmp_path / "fresh" / "ltaa.db").is_file()
+
+
+def test_run_completes_with_a_summary(runner: CliRunner) -> None:
+    result = runner.invoke(cli, ["run", "--scenario", "baseline", "--mode", "balanced"])
+    assert result.exit_code == 0, result.output
+    assert "completed" in result.output and "36 of 36" in result.output
+
+
+def test_run_refuses_a_data_directory_a_server_is_using(
+        runner: CliRunner, tmp_path: Path) -> None:
+    settings = Settings(data_dir=tmp_path / "cli-data", anthropic_api_key=None)
+    with TestClient(create_app(settings)):
+        result = runner.invoke(cli, ["run"])
+    assert result.exit_code == 1
+    assert "another LTAA process" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_run_applies_the_token_budget_setting(runner: CliRunner) -> None:
+    with FakeMessagesAPI() as api:
+        result = runner.invoke(cli, ["run", "--reasoner", "anthropic"], env={
+            "ANTHROPIC_API_KEY": "test-key", "LTAA_ANTHROPIC_BASE_URL": api.base_url,
+            "LTAA_RUN_TOKEN_BUDGET": "1"})
+        answered = api.answered()
+    assert result.exit_code == 0, result.output
+    # The first call spends the budget; every later task goes to the rules reasoner.
+    assert answered == 1
+    assert "LLM calls / tokens in / out" in result.output

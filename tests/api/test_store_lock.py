@@ -1,0 +1,32 @@
+"""One process per embedded SQLite store: a second one refuses to start, touching nothing."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.config import Settings
+from app.main import create_app
+from app.runs.store_lock import StoreInUseError
+from tests.run_polling import wait_until
+
+BASELINE = {"scenario": "baseline", "mode": "balanced"}
+
+
+def test_a_second_server_on_the_same_store_refuses_to_start(settings: Settings) -> None:
+    paused = settings.model_copy(update={"test_pause_at_task": 3})
+    with TestClient(create_app(paused)) as first:
+        run_id = first.post("/runs", json=BASELINE).json()["id"]
+        wait_until(first, run_id, ("running",))
+        with pytest.raises(StoreInUseError, match="another LTAA process"):
+            TestClient(create_app(settings)).__enter__()
+        time.sleep(0.2)
+        # The live run was not taken over: no "interrupted"/"resumed" written by the other.
+        kinds = [e["kind"] for e in first.get(f"/runs/{run_id}/trace").json()["events"]]
+        assert kinds == ["created", "started"]
+        assert first.get(f"/runs/{run_id}").json()["status"] == "running"
+    # Once the first has stopped, the store is free again.
+    with TestClient(create_app(settings)) as second:
+        assert wait_until(second, run_id, ("completed",))["resumes"] == 1
