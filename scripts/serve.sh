@@ -4,8 +4,9 @@
 set -eu
 HOST="${HOST:-127.0.0.1}"
 PORT="${PORT:-8000}"
-# The app refuses to listen beyond loopback without API keys: it must know the address.
-export LTAA_HOST="$HOST"
+# The app refuses to listen beyond loopback without API keys: it must know the address
+# (and names it, port included, in its start-up warning).
+export LTAA_HOST="$HOST" LTAA_PORT="$PORT"
 BIN="${LTAA_BIN:-}"
 "${BIN}alembic" upgrade head
 exec "${BIN}uvicorn" app.main:create_app --factory --host "$HOST" --port "$PORT"

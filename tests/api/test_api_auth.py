@@ -131,7 +131,7 @@ def test_every_other_route_requires_a_key(secured: TestClient) -> None:
                if op.get("security") == [{"bearer": []}, {"apiKey": []}]}
     assert guarded == set(CLIENT_ENDPOINTS + SUPERVISOR_ENDPOINTS)
     assert set(operations) - {(m, p.replace("{id}", "{run_id}")) for m, p in guarded} == {
-        ("GET", "/health")}
+        ("GET", "/health"), ("HEAD", "/health")}
 
 
 def test_without_keys_access_is_open_and_startup_says_so(

@@ -16,6 +16,8 @@ def test_health_reports_ok_version_and_solvers(client: TestClient) -> None:
     assert body["version"] == app_version() != "unknown"
     assert {"greedy", "brute_force", "dp", "optimal"} <= set(body["solvers"])
     assert body["default_reasoner"] == "rules"
+    head = client.head("/health")  # how load balancers and health checks often probe
+    assert head.status_code == 200 and head.content == b""
 
 
 def test_solvers_describe_exactness_and_limits(client: TestClient) -> None:

@@ -21,6 +21,8 @@ def test_over_long_bodies_are_413_over_real_http(tmp_path: Path) -> None:
     server = Server(tmp_path / "data", env={"LTAA_MAX_BODY_BYTES": str(LIMIT)}).start()
     body = json.dumps({"tasks": TASKS, "robots": ROBOTS}).encode()
     assert len(body) > LIMIT
+    # No keys: the start-up warning names the address actually served (PORT of serve.sh).
+    assert f"127.0.0.1:{server.port}" in server.log.read_text()
 
     def chunks() -> Iterator[bytes]:
         for start in range(0, len(body), 256):

@@ -11,7 +11,8 @@ from app.solvers.registry import solver_names
 router = APIRouter(tags=["health"])
 
 
-@router.get("/health", response_model=HealthOut)
+# HEAD too: load balancers and container health checks often probe with it.
+@router.api_route("/health", methods=["GET", "HEAD"], response_model=HealthOut)
 def health(request: Request, settings: SettingsDep) -> HealthOut:
     """Report that the service is up, its version, solvers and default reasoner."""
     return HealthOut(version=request.app.version, solvers=solver_names(),
