@@ -19,7 +19,7 @@ from app.runs.worker import RunWorker
 log = logging.getLogger("ltaa.auth")
 
 
-def get_app_settings(request: Request) -> Settings:
+async def get_app_settings(request: Request) -> Settings:
     # The instance create_app() was given, not a fresh read of the environment.
     settings: Settings = request.app.state.settings
     return settings
@@ -36,7 +36,7 @@ class RunsContext:
     worker: RunWorker
 
 
-def get_runs(request: Request) -> RunsContext:
+async def get_runs(request: Request) -> RunsContext:
     runs: RunsContext = request.app.state.runs
     return runs
 
@@ -59,7 +59,10 @@ def _unauthenticated(loc: str, msg: str, type_: str, challenge: str) -> ApiError
     return ApiError(401, ["header", loc], msg, type_, headers={"WWW-Authenticate": challenge})
 
 
-def authenticate(
+# The auth dependencies are `async def` although they never await: they are a dictionary
+# look-up, and a plain `def` would make each one a separate job on the shared threadpool,
+# queued behind every solve of a burst.
+async def authenticate(
     request: Request,
     bearer: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
     header_key: Annotated[str | None, Depends(_api_key_header)],
@@ -91,11 +94,11 @@ def _check_role(caller: Caller, required: Role) -> Caller:
     return caller
 
 
-def require_client(caller: Annotated[Caller, Depends(authenticate)]) -> Caller:
+async def require_client(caller: Annotated[Caller, Depends(authenticate)]) -> Caller:
     return _check_role(caller, Role.CLIENT)
 
 
-def require_supervisor(caller: Annotated[Caller, Depends(authenticate)]) -> Caller:
+async def require_supervisor(caller: Annotated[Caller, Depends(authenticate)]) -> Caller:
     return _check_role(caller, Role.SUPERVISOR)
 
 

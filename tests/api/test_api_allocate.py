@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import inspect
+import threading
+import time
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
-
-from app.api.routes import allocate as allocate_route
 
 ROBOTS: list[dict[str, Any]] = [
     {"name": "arm", "label": "Precision Arm", "success": {"dexterous": 0.9, "heavy": 0.3}},
@@ -136,9 +135,22 @@ def test_fractional_cap_and_any_feature_names(client: TestClient) -> None:
     assert out["metrics"]["workload"] == {"r0": 2, "r1": 2, "r2": 3}
 
 
-def test_allocate_route_runs_in_the_threadpool() -> None:
-    # A sync (def) endpoint is what makes FastAPI run the CPU-bound solve off the event loop.
-    assert not inspect.iscoroutinefunction(allocate_route.allocate)
+def test_a_long_solve_leaves_the_event_loop_free(client: TestClient) -> None:
+    """The solve runs in the threadpool: /health answers while a long /allocate is solving."""
+    robots = [{"name": f"r{i}", "success": {"f": 0.2 * (i + 1)}} for i in range(4)]
+    big = {"solver": "ltaa", "tasks": [{"id": i, "features": ["f"]} for i in range(400)],
+           "robots": robots}
+    answered: list[int] = []
+    solving = threading.Thread(
+        target=lambda: answered.append(client.post("/allocate", json=big).status_code))
+    solving.start()
+    try:
+        time.sleep(0.5)  # the request is in, its solve (several seconds) under way
+        assert client.get("/health").status_code == 200
+        assert answered == []  # /health did not wait for the solve
+    finally:
+        solving.join()
+    assert answered == [200]
 
 
 def test_explicit_null_max_deviation_means_no_cap(client: TestClient) -> None:
