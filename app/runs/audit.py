@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.runs.errors import RunNotFoundError
 from app.store import chain
 from app.store import repository as repo
-from app.store.models import Attempt, Decision, Run, RunEvent
+from app.store.models import Attempt, Decision, Run, RunEvent, as_utc
 
 DECISIONS_PER_PAGE = 100  # with their attempts' prompts: about 1-3 MB per page
 EVENTS_PER_PAGE = 1000
@@ -132,7 +132,7 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
 # -- export --------------------------------------------------------------------------------
 
 def _when(value: datetime | None) -> str | None:
-    return value.isoformat() if value is not None else None
+    return as_utc(value).isoformat() if value is not None else None
 
 
 def _run_line(run: Run) -> dict[str, Any]:

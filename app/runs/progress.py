@@ -11,13 +11,13 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import datetime
 from typing import Any, Literal, TypeVar
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.store.models import Decision, Run, RunEvent
+from app.store.models import Decision, Run, RunEvent, as_utc
 
 ENDED = ("completed", "failed", "cancelled")
 _OPENING = ("created", "started", "resumed")
@@ -67,9 +67,7 @@ def _decision_data(d: Decision) -> dict[str, Any]:
 
 
 def _event_data(e: RunEvent) -> dict[str, Any]:
-    # SQLite hands back naive datetimes; they were written as UTC.
-    at = e.created_at if e.created_at.tzinfo else e.created_at.replace(tzinfo=UTC)
-    return {"seq": e.seq, "kind": e.kind, "detail": e.detail, "at": at}
+    return {"seq": e.seq, "kind": e.kind, "detail": e.detail, "at": as_utc(e.created_at)}
 
 
 def _monotonic(rows: Iterable[R]) -> list[tuple[datetime, R]]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from datetime import datetime, timedelta
+
 from fastapi.testclient import TestClient
 
 from tests.sse import Event, parse_events
@@ -31,6 +33,10 @@ def test_a_watched_run_streams_every_event_in_order_then_ends(client: TestClient
     # The stream agrees with the run's own record.
     assigned = [a["robot"] for a in client.get(f"/runs/{run_id}").json()["assignments"]]
     assert [d["robot"] for d in decisions] == assigned
+    # Times as RFC 3339 with their offset, as in every other response.
+    for event in (e for e in events if e.event == "run"):
+        assert datetime.fromisoformat(event.data["at"]).utcoffset() == timedelta(0)
+        assert event.data["at"][10] == "T"  # not str()'s "2026-11-23 02:28:33+00:00"
 
 
 def test_last_event_id_continues_where_the_stream_stopped(client: TestClient) -> None:

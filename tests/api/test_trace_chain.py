@@ -10,6 +10,7 @@ import json
 import sqlite3
 import time
 from collections.abc import Iterator
+from datetime import datetime, timedelta
 from typing import Any
 
 import pytest
@@ -193,6 +194,10 @@ def test_jsonl_streams_the_whole_record_line_by_line(client: TestClient) -> None
     events = [line for line in lines if line["type"] == "event"]
     assert [(e["seq"], e["kind"], e["detail"]) for e in events] == [
         (e["seq"], e["kind"], e["detail"]) for e in trace["events"]]
+    # Times carry their offset (SQLite hands them back naive; they are UTC).
+    for line in [header, *events, *(line for line in lines if line["type"] == "decision")]:
+        assert datetime.fromisoformat(line.get("at") or line["created_at"]).utcoffset() \
+            == timedelta(0)
     decisions = [line for line in lines if line["type"] == "decision"]
     assert [d["task_index"] for d in decisions] == list(range(N_TASKS))
     for line, shown in zip(decisions, trace["decisions"], strict=True):

@@ -6,6 +6,7 @@ import asyncio
 import json
 import time
 from collections.abc import AsyncIterator
+from datetime import datetime
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Header
@@ -41,6 +42,11 @@ def start_cursor(
         raise ApiError(422, ["header", "last-event-id"], str(exc), "value_error") from None
 
 
+def _json_value(value: object) -> str:
+    # Times as RFC 3339 (like every other response), not str()'s "2026-11-23 02:28:33+00:00".
+    return value.isoformat() if isinstance(value, datetime) else str(value)
+
+
 def sse(*, event: str | None = None, id: str | None = None, data: object = None,
         retry: int | None = None, comment: str | None = None) -> str:
     """One Server-Sent Event in the text/event-stream wire format."""
@@ -52,7 +58,7 @@ def sse(*, event: str | None = None, id: str | None = None, data: object = None,
     if retry is not None:
         lines.append(f"retry: {retry}")
     if data is not None:
-        lines.append(f"data: {json.dumps(data, separators=(',', ':'), default=str)}")
+        lines.append(f"data: {json.dumps(data, separators=(',', ':'), default=_json_value)}")
     return "\n".join(lines) + "\n\n"
 
 
