@@ -70,6 +70,12 @@ async def authenticate(
     keyring: KeyRing = request.app.state.keyring
     if keyring.open:
         return Caller(role=Role.SUPERVISOR, anonymous=True)
+    if bearer and header_key and bearer.credentials != header_key:
+        # Which one is meant is anyone's guess; answering for either could act for the wrong
+        # caller (a proxy's key and the client's own, say).
+        raise _unauthenticated("x-api-key", "the Authorization and X-API-Key headers carry "
+                               "different API keys: send one key, in one header",
+                               "conflicting_api_keys", "Bearer")
     presented, loc = (bearer.credentials, "authorization") if bearer else (header_key, "x-api-key")
     if not presented:
         hint = ("the Authorization header must use the Bearer scheme"

@@ -79,6 +79,14 @@ def test_an_unknown_key_is_401(secured: TestClient, headers: dict[str, str]) -> 
     assert response.headers["www-authenticate"].startswith("Bearer error=")
 
 
+def test_two_different_keys_are_401_whichever_is_valid(secured: TestClient) -> None:
+    both = {**AS_SUPERVISOR, "X-API-Key": CLIENT_KEY}
+    err = _only_error(secured.get("/runs", headers=both), 401, "conflicting_api_keys")
+    assert err["loc"] == ["header", "x-api-key"] and "send one key" in err["msg"]
+    same = {**AS_CLIENT, "X-API-Key": CLIENT_KEY}
+    assert secured.get("/runs", headers=same).status_code == 200
+
+
 def test_a_key_in_another_scheme_is_401_and_says_use_bearer(secured: TestClient) -> None:
     response = secured.get("/runs", headers={"Authorization": f"Basic {CLIENT_KEY}"})
     assert "Bearer scheme" in _only_error(response, 401, "missing_api_key")["msg"]
