@@ -13,6 +13,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.reasoners.base import Reasoner
 from app.reasoners.budget import BUDGET_EXHAUSTED, BudgetExhausted, TokenBudgetReasoner
+from app.runs.recorder import Fence
 from app.store import repository as repo
 from app.store.db import transaction
 
@@ -20,8 +21,10 @@ log = logging.getLogger("ltaa.runs")
 
 
 def with_token_budget(reasoner: Reasoner, *, run_id: str, budget: int | None,
-                      sessions: sessionmaker[Session]) -> Reasoner:
-    """`reasoner` limited to `budget` tokens for the run; unchanged without a budget."""
+                      sessions: sessionmaker[Session], fence: Fence | None = None) -> Reasoner:
+    """`reasoner` limited to `budget` tokens for the run; unchanged without a budget.
+    `fence` is the recorder's write check (PostgreSQL scale-out): a process that lost the
+    run's lease writes no event either."""
     if budget is None:
         return reasoner
     with sessions() as session:
@@ -29,6 +32,8 @@ def with_token_budget(reasoner: Reasoner, *, run_id: str, budget: int | None,
 
     def record(exhausted: BudgetExhausted) -> None:
         with transaction(sessions) as session:
+            if fence is not None:
+                fence(session)
             # A run restarted after the switch is told again: the event stays single.
             if repo.has_event(session=session, run_id=run_id, kind=BUDGET_EXHAUSTED):
                 return

@@ -242,12 +242,13 @@ class RunWorker:
                                        **self._event_detail()})
             repo.set_status(session=session, run=run, status="running")
 
+        fence = self._fence(run_id, stop)
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop,
                                pause_at_task=None if self._settings.test_pause_at_node
                                else self._settings.test_pause_at_task,
-                               fence=self._fence(run_id, stop))
+                               fence=fence)
         try:
-            reasoner = self._reasoner(run_id, spec)
+            reasoner = self._reasoner(run_id, spec, fence)
         except DomainError as exc:
             # The configuration changed since the run was accepted (e.g. the API key was
             # removed before a resume): fail with the reason and the fix, not "internal error".
@@ -285,7 +286,7 @@ class RunWorker:
             return
         self._finish(run_id, "completed", {"decisions": len(stored)})
 
-    def _reasoner(self, run_id: str, spec: RunSpec) -> Reasoner:
+    def _reasoner(self, run_id: str, spec: RunSpec, fence: Fence | None = None) -> Reasoner:
         """The reasoner a run's graph calls, built afresh at every (re)start."""
         replies = (recorded_replies(sessions=self._sessions, run_id=spec.replay_of)
                    if spec.replay_of is not None else None)
@@ -293,7 +294,7 @@ class RunWorker:
                                  temperature=spec.temperature, replay_of=spec.replay_of,
                                  replies=replies)
         return with_token_budget(reasoner, run_id=run_id, budget=spec.token_budget,
-                                 sessions=self._sessions)
+                                 sessions=self._sessions, fence=fence)
 
     def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
         if stop.lease_lost.is_set():

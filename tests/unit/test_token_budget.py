@@ -10,16 +10,24 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from itertools import accumulate
+from pathlib import Path
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
+from sqlalchemy.orm import Session
 
 from app.config import Settings
 from app.main import create_app
 from app.reasoners.base import ReasonerError
-from app.reasoners.budget import BudgetExhausted, TokenBudgetReasoner
+from app.reasoners.budget import BUDGET_EXHAUSTED, BudgetExhausted, TokenBudgetReasoner
+from app.runs.recorder import LeaseLost
+from app.runs.token_budget import with_token_budget
+from app.store import repository as repo
+from app.store.db import make_engine, make_session_factory, transaction
+from app.store.migrate import upgrade_head
+from app.store.models import Run
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
 from tests.run_polling import wait_until
@@ -165,3 +173,29 @@ def test_the_server_setting_is_the_default_budget_and_a_request_overrides_it(
                for d in by_request["decisions"] for a in d["attempts"])
     assert refused.status_code == 422
     assert refused.json()["detail"][0]["loc"] == ["body", "token_budget"]
+
+
+def test_a_process_that_lost_the_run_writes_no_budget_event(tmp_path: Path) -> None:
+    """The switch's event goes through the recorder's fence (PostgreSQL leases): a process
+    whose lease passed to another stops instead of writing it."""
+    url = f"sqlite:///{tmp_path / 'ltaa.db'}"
+    upgrade_head(url)
+    engine = make_engine(url)
+    sessions = make_session_factory(engine)
+    with transaction(sessions) as session:
+        session.add(Run(id="r1", status="running", request={}, reasoner="anthropic",
+                        mode="balanced", n_tasks=2, n_robots=3, resumes=0,
+                        cancel_requested=False))
+
+    def lease_gone(session: Session) -> None:
+        raise LeaseLost("r1")
+
+    budgeted = with_token_budget(ScriptedReasoner(tokens=(100, 50)), run_id="r1", budget=100,
+                                 sessions=sessions, fence=lease_gone)
+    try:
+        with pytest.raises(LeaseLost):
+            run(problem(n_tasks=2), budgeted)
+        with sessions() as session:
+            assert not repo.has_event(session=session, run_id="r1", kind=BUDGET_EXHAUSTED)
+    finally:
+        engine.dispose()
