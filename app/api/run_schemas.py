@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
+from datetime import datetime
 from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, Field
 
 from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
+from app.store.models import as_utc
 
 RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "cancelled"]
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
@@ -15,13 +16,9 @@ RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "
 RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
 
 
-def _with_offset(value: datetime) -> datetime:
-    # Times are stored in UTC, but SQLite hands them back without an offset, and a
-    # date-time without one is not RFC 3339 (OpenAPI's format): a client cannot place it.
-    return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
-
-
-Timestamp = Annotated[datetime, AfterValidator(_with_offset)]
+# A date-time without an offset is not RFC 3339 (OpenAPI's format): a client cannot place
+# it, and SQLite hands stored times back without one.
+Timestamp = Annotated[datetime, AfterValidator(as_utc)]
 
 
 class RunRequest(InstanceRequest):

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from app.reasoners.base import DecisionContext, Reasoner, ReasonerReply
+from app.reasoners.factory import close_reasoner
 from app.reasoners.rules import RulesReasoner
 
 BUDGET_EXHAUSTED = "budget_exhausted"  # the run event recording the switch
@@ -62,6 +63,4 @@ class TokenBudgetReasoner:
                                      "reason": BUDGET_EXHAUSTED})
 
     def close(self) -> None:
-        close = getattr(self._inner, "close", None)
-        if close is not None:
-            close()
+        close_reasoner(self._inner)
