@@ -62,10 +62,13 @@ def create_run(
 
 def create_or_replay_run(
     *, sessions: sessionmaker[Session], worker: RunWorker, settings: Settings, spec: RunSpec,
-    idempotency: Idempotency,
+    idempotency: Idempotency | None,
 ) -> tuple[Run, bool]:
-    """Create a run under an Idempotency-Key: (the run, whether an earlier request with the
-    same key and body created it). The same key with another body is a 409."""
+    """Create a run, under an Idempotency-Key if the request sent one: (the run, whether an
+    earlier request with the same key and body created it). The same key with another body
+    is a 409."""
+    if idempotency is None:
+        return create_run(sessions=sessions, worker=worker, settings=settings, spec=spec), False
     try:
         return create_run(sessions=sessions, worker=worker, settings=settings, spec=spec,
                           idempotency=idempotency), False

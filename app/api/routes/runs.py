@@ -55,16 +55,11 @@ def create_run(caller: ClientDep, body: Annotated[RunRequest, Body(openapi_examp
             quality_threshold=body.quality_threshold, max_retries=body.max_retries,
             model=body.model, temperature=body.temperature, guidance=body.guidance,
             token_budget=body.token_budget if body.token_budget is not None
-            else settings.run_token_budget, replay_of=body.replay_of,
+            else settings.run_token_budget,
         )
-    idempotency = idempotency_of(idempotency_key, body)
-    if idempotency is None:
-        run, replayed = service.create_run(sessions=runs.sessions, worker=runs.worker,
-                                           settings=settings, spec=spec), False
-    else:
-        run, replayed = service.create_or_replay_run(
-            sessions=runs.sessions, worker=runs.worker, settings=settings, spec=spec,
-            idempotency=idempotency)
+    run, replayed = service.create_or_replay_run(
+        sessions=runs.sessions, worker=runs.worker, settings=settings, spec=spec,
+        idempotency=idempotency_of(idempotency_key, body))
     response.headers["Location"] = f"/runs/{run.id}"
     if replayed:
         response.headers[REPLAYED_HEADER] = "true"
