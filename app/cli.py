@@ -49,8 +49,9 @@ def serve(
         os.environ["LTAA_HOST"] = host
     settings = get_settings()
     apply_migrations(settings)
-    uvicorn.run("app.main:create_app", factory=True, host=host or settings.host,
-                port=port or settings.port)
+    uvicorn.run(
+        "app.main:create_app", factory=True, host=host or settings.host, port=port or settings.port
+    )
 
 
 def apply_migrations(settings: Settings) -> None:
@@ -65,22 +66,36 @@ def apply_migrations(settings: Settings) -> None:
 def allocate(
     solver: Annotated[str, typer.Option(help="Solver name (see GET /solvers)")] = "optimal",
     scenario: Annotated[str, typer.Option(help="Built-in scenario")] = "baseline",
-    instance: Annotated[Path | None, typer.Option(
-        help="JSON file with your own 'tasks' and 'robots' (replaces --scenario)",
-        exists=True, dir_okay=False)] = None,
+    instance: Annotated[
+        Path | None,
+        typer.Option(
+            help="JSON file with your own 'tasks' and 'robots' (replaces --scenario)",
+            exists=True,
+            dir_okay=False,
+        ),
+    ] = None,
     mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
-    max_deviation: Annotated[float | None, typer.Option(
-        help="Workload cap, in tasks either side of the target (default: the mode's)")] = None,
+    max_deviation: Annotated[
+        float | None,
+        typer.Option(help="Workload cap, in tasks either side of the target (default: the mode's)"),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Random seed")] = 0,
-    option: Annotated[list[str] | None, typer.Option(
-        "--option", "-o", help="Solver option KEY=VALUE (VALUE parsed as JSON); repeatable")
+    option: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--option", "-o", help="Solver option KEY=VALUE (VALUE parsed as JSON); repeatable"
+        ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the API's JSON response")] = False,
     show_tasks: Annotated[bool, typer.Option(help="Also list every task's assignment")] = False,
 ) -> None:
     """Allocate a task queue with one solver and print the assignments and metrics."""
-    body: dict[str, Any] = {"solver": solver, "mode": mode.value, "seed": seed,
-                            "options": _parse_options(option or [])}
+    body: dict[str, Any] = {
+        "solver": solver,
+        "mode": mode.value,
+        "seed": seed,
+        "options": _parse_options(option or []),
+    }
     if max_deviation is not None:
         body["max_deviation"] = max_deviation
     if instance is None:
@@ -116,11 +131,27 @@ def _read_instance(path: Path, as_json: bool) -> dict[str, Any]:
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        _fail({"detail": [{"loc": ["instance"], "msg": f"not valid JSON: {exc}",
-                           "type": "json_invalid"}]}, as_json)
+        _fail(
+            {
+                "detail": [
+                    {"loc": ["instance"], "msg": f"not valid JSON: {exc}", "type": "json_invalid"}
+                ]
+            },
+            as_json,
+        )
     if not isinstance(doc, dict):
-        _fail({"detail": [{"loc": ["instance"], "msg": "expected a JSON object with 'tasks' "
-                           "and 'robots'", "type": "model_type"}]}, as_json)
+        _fail(
+            {
+                "detail": [
+                    {
+                        "loc": ["instance"],
+                        "msg": "expected a JSON object with 'tasks' and 'robots'",
+                        "type": "model_type",
+                    }
+                ]
+            },
+            as_json,
+        )
     return {key: doc[key] for key in ("tasks", "robots") if key in doc}
 
 
@@ -140,8 +171,10 @@ def _print_report(r: AllocateResponse, *, show_tasks: bool) -> None:
     console = Console()  # made per call: tests swap sys.stdout
     m = r.metrics
     cap = "no cap" if r.max_deviation is None else f"cap ±{r.max_deviation:g} tasks"
-    console.print(f"[bold]{r.solver}[/] · {r.mode.value} · {cap} · {len(r.assignments)} tasks · "
-                  f"{r.elapsed_ms:.1f} ms")
+    console.print(
+        f"[bold]{r.solver}[/] · {r.mode.value} · {cap} · {len(r.assignments)} tasks · "
+        f"{r.elapsed_ms:.1f} ms"
+    )
 
     by_robot: dict[str, list[float]] = defaultdict(list)
     names: dict[str, list[str]] = defaultdict(list)
@@ -176,13 +209,19 @@ def _print_report(r: AllocateResponse, *, show_tasks: bool) -> None:
         ("Max deviation", f"{m.max_deviation:g} tasks"),
         ("Imbalance severity", m.imbalance_severity),
         ("Jain index", f"{m.jain_index:.4f}"),
-        ("Simulated completion", f"{sim.mean:.4f} (95% CI {sim.ci95[0]:.4f}–{sim.ci95[1]:.4f}, "
-                                 f"{sim.trials} trials)"),
+        (
+            "Simulated completion",
+            f"{sim.mean:.4f} (95% CI {sim.ci95[0]:.4f}–{sim.ci95[1]:.4f}, {sim.trials} trials)",
+        ),
         *((f"Success on {f}", f"{v:.4f}") for f, v in m.feature_success.items()),
     ]
     if r.usage.llm_calls:
-        rows.append(("LLM calls / tokens in / out", f"{r.usage.llm_calls} / "
-                     f"{r.usage.input_tokens} / {r.usage.output_tokens}"))
+        rows.append(
+            (
+                "LLM calls / tokens in / out",
+                f"{r.usage.llm_calls} / {r.usage.input_tokens} / {r.usage.output_tokens}",
+            )
+        )
     for name, value in rows:
         metrics.add_row(name, value)
     console.print(metrics)
@@ -193,10 +232,14 @@ def run(
     scenario: Annotated[str, typer.Option(help="Built-in scenario")] = "baseline",
     mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
     reasoner: Annotated[str, typer.Option(help="'rules' (offline) or 'anthropic'")] = "rules",
-    max_deviation: Annotated[float | None, typer.Option(
-        help="Workload cap, in tasks either side of the target (default: the mode's)")] = None,
-    guidance: Annotated[str | None, typer.Option(
-        help="'optimizer' to give the reasoner the optimal completion's choice")] = None,
+    max_deviation: Annotated[
+        float | None,
+        typer.Option(help="Workload cap, in tasks either side of the target (default: the mode's)"),
+    ] = None,
+    guidance: Annotated[
+        str | None,
+        typer.Option(help="'optimizer' to give the reasoner the optimal completion's choice"),
+    ] = None,
 ) -> None:
     """Run the LTAA graph durably in the local data directory, with a progress bar."""
     from app.cli_run import print_summary, run_locally
@@ -204,8 +247,15 @@ def run(
 
     console = Console()
     try:
-        view = run_locally(get_settings(), scenario=scenario, mode=mode, reasoner=reasoner,
-                           max_deviation=max_deviation, guidance=guidance, console=console)
+        view = run_locally(
+            get_settings(),
+            scenario=scenario,
+            mode=mode,
+            reasoner=reasoner,
+            max_deviation=max_deviation,
+            guidance=guidance,
+            console=console,
+        )
     except DomainError as exc:
         _fail(domain_error_body(exc), as_json=False)
     except StoreInUseError as exc:  # a server (or another `ltaa run`) has the data directory
@@ -218,8 +268,10 @@ def run(
 
 @cli.command()
 def bench(
-    section: Annotated[list[str] | None, typer.Argument(
-        help="Only these benchmark modules (e.g. benchmarks.solvers)")] = None,
+    section: Annotated[
+        list[str] | None,
+        typer.Argument(help="Only these benchmark modules (e.g. benchmarks.solvers)"),
+    ] = None,
 ) -> None:
     """Measure every method and write docs/benchmarks.md and docs/img/*.png."""
     from benchmarks.report import main as write_report

@@ -24,8 +24,14 @@ from app.store.migrate import upgrade_head
 
 
 def run_locally(
-    settings: Settings, *, scenario: str, mode: Mode, reasoner: str,
-    max_deviation: float | None, guidance: str | None, console: Console,
+    settings: Settings,
+    *,
+    scenario: str,
+    mode: Mode,
+    reasoner: str,
+    max_deviation: float | None,
+    guidance: str | None,
+    console: Console,
 ) -> service.RunView:
     problem = Problem.build(builtin_scenario(scenario).instance, mode, max_deviation)
     settings.data_dir.mkdir(parents=True, exist_ok=True)
@@ -34,21 +40,27 @@ def run_locally(
     sessions = make_session_factory(engine)
     worker = make_worker(settings=settings, sessions=sessions)
     try:
-        spec = RunSpec.for_instance(problem.instance, mode=mode.value,
-                                    max_deviation=problem.cap.max_deviation,
-                                    reasoner=reasoner, guidance=guidance,
-                                    token_budget=settings.run_token_budget)
-        run = service.create_run(sessions=sessions, worker=worker, settings=settings,
-                                 spec=spec)
-        columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                   TextColumn("{task.fields[phase]}"), TimeElapsedColumn())
+        spec = RunSpec.for_instance(
+            problem.instance,
+            mode=mode.value,
+            max_deviation=problem.cap.max_deviation,
+            reasoner=reasoner,
+            guidance=guidance,
+            token_budget=settings.run_token_budget,
+        )
+        run = service.create_run(sessions=sessions, worker=worker, settings=settings, spec=spec)
+        columns = (
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[phase]}"),
+            TimeElapsedColumn(),
+        )
         with Progress(*columns, console=console) as bar:
-            task = bar.add_task(f"run {run.id[:8]}", total=problem.instance.n_tasks,
-                                phase="early")
+            task = bar.add_task(f"run {run.id[:8]}", total=problem.instance.n_tasks, phase="early")
             while True:
                 view = service.run_view(sessions=sessions, run_id=run.id)
-                bar.update(task, completed=view.progress["allocated"],
-                           phase=view.progress["phase"])
+                bar.update(task, completed=view.progress["allocated"], phase=view.progress["phase"])
                 if view.run.status not in ("queued", "running"):
                     break
                 time.sleep(0.05)
@@ -69,19 +81,22 @@ def print_summary(view: service.RunView, console: Console) -> None:
         m = view.metrics
         table.add_row("expected success", f"{m.expected_success:.4f}")
         table.add_row("balance score", f"{m.balance_score:.1f} ({m.imbalance_severity})")
-        table.add_row("simulated completion",
-                      f"{m.simulated_completion.mean:.4f} "
-                      f"[{m.simulated_completion.ci95[0]:.4f}, "
-                      f"{m.simulated_completion.ci95[1]:.4f}]")
+        table.add_row(
+            "simulated completion",
+            f"{m.simulated_completion.mean:.4f} "
+            f"[{m.simulated_completion.ci95[0]:.4f}, "
+            f"{m.simulated_completion.ci95[1]:.4f}]",
+        )
     fallbacks = sum(d.fallback for d in view.decisions)
     retries = sum(d.attempts - 1 for d in view.decisions)
     table.add_row("retries / fallbacks", f"{retries} / {fallbacks}")
     if view.decisions:
         mean_q = sum(d.quality for d in view.decisions) / len(view.decisions)
         table.add_row("mean validation quality Q", f"{mean_q:.3f}")
-    table.add_row("LLM calls / tokens in / out",
-                  f"{view.usage.llm_calls} / {view.usage.input_tokens} / "
-                  f"{view.usage.output_tokens}")
+    table.add_row(
+        "LLM calls / tokens in / out",
+        f"{view.usage.llm_calls} / {view.usage.input_tokens} / {view.usage.output_tokens}",
+    )
     if view.run.error:
         table.add_row("error", view.run.error)
     console.print(table)

@@ -44,8 +44,9 @@ class Settings(BaseSettings):
         2.0, gt=0, description="How often a process looks for queued runs and expired leases"
     )
     worker_name: str | None = Field(
-        None, max_length=64, description="Label of this process in leases and run events; "
-        "default hostname"
+        None,
+        max_length=64,
+        description="Label of this process in leases and run events; default hostname",
     )
 
     # The Anthropic SDK's own variable is honoured so an existing key just works.

@@ -72,16 +72,22 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
 
 def _begin_drain(worker: RunWorker) -> None:
     held = worker.begin_drain()
-    log.info("shutting down: running runs stop at their next node boundary; %d run(s) "
-             "continue at the next start", held)
+    log.info(
+        "shutting down: running runs stop at their next node boundary; %d run(s) "
+        "continue at the next start",
+        held,
+    )
 
 
 def _log_access_mode(settings: Settings, keyring: KeyRing) -> None:
     if keyring.open:
-        log.warning("access control is off: no API keys are configured (LTAA_API_KEYS), so "
-                    "every endpoint is open to anyone who can reach %s:%s. Allowed on "
-                    "loopback only; set LTAA_API_KEYS before listening elsewhere.",
-                    settings.host, settings.port)
+        log.warning(
+            "access control is off: no API keys are configured (LTAA_API_KEYS), so "
+            "every endpoint is open to anyone who can reach %s:%s. Allowed on "
+            "loopback only; set LTAA_API_KEYS before listening elsewhere.",
+            settings.host,
+            settings.port,
+        )
     else:
         log.info("access control on: API keys by role: %s", keyring.summary())
 

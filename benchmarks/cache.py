@@ -42,25 +42,48 @@ def problem_for(scenario_name: str, mode: str, max_deviation: float | None = Non
     return Problem.build(scenario(scenario_name).instance, Mode(mode), max_deviation)
 
 
-def solved(solver: str, scenario_name: str = "baseline", mode: str = "balanced", *,
-           seed: int = 0, max_deviation: float | None = None,
-           options: dict[str, Any] | None = None) -> Solved:
+def solved(
+    solver: str,
+    scenario_name: str = "baseline",
+    mode: str = "balanced",
+    *,
+    seed: int = 0,
+    max_deviation: float | None = None,
+    options: dict[str, Any] | None = None,
+) -> Solved:
     """The cached solve; options are keyed by their JSON text so dicts can be passed."""
-    return _solved(solver, scenario_name, mode, seed, max_deviation,
-                   json.dumps(options or {}, sort_keys=True))
+    return _solved(
+        solver, scenario_name, mode, seed, max_deviation, json.dumps(options or {}, sort_keys=True)
+    )
 
 
 @cache
-def _solved(solver: str, scenario_name: str, mode: str, seed: int,
-            max_deviation: float | None, options_json: str) -> Solved:
+def _solved(
+    solver: str,
+    scenario_name: str,
+    mode: str,
+    seed: int,
+    max_deviation: float | None,
+    options_json: str,
+) -> Solved:
     problem = problem_for(scenario_name, mode, max_deviation)
     start = time.perf_counter()
     solution = get_solver(solver).solve(problem, seed=seed, options=json.loads(options_json))
     seconds = time.perf_counter() - start
-    metrics = compute_metrics(problem.instance, solution.assignment, seed=SIMULATION_SEED,
-                              trials=SIMULATION_TRIALS)
-    return Solved(solver, scenario_name, mode, problem.cap.max_deviation, seed,
-                  tuple(solution.assignment), metrics, seconds, dict(solution.details))
+    metrics = compute_metrics(
+        problem.instance, solution.assignment, seed=SIMULATION_SEED, trials=SIMULATION_TRIALS
+    )
+    return Solved(
+        solver,
+        scenario_name,
+        mode,
+        problem.cap.max_deviation,
+        seed,
+        tuple(solution.assignment),
+        metrics,
+        seconds,
+        dict(solution.details),
+    )
 
 
 GUIDED = {"guidance": "optimizer"}

@@ -28,14 +28,16 @@ class Section:
     images: list[str] = field(default_factory=list)
 
 
-def synthetic_instance(n_tasks: int, n_robots: int, *, n_features: int = 3,
-                       seed: int = 0) -> Instance:
+def synthetic_instance(
+    n_tasks: int, n_robots: int, *, n_features: int = 3, seed: int = 0
+) -> Instance:
     """Random robots (rates in [0.3, 1]) and tasks needing 1-3 random features."""
     rng = np.random.default_rng(seed)
     features = [f"f{i}" for i in range(n_features)]
     robots = tuple(
-        Robot(name=f"robot{r}", success={f: float(round(rng.uniform(0.3, 1.0), 3))
-                                         for f in features})
+        Robot(
+            name=f"robot{r}", success={f: float(round(rng.uniform(0.3, 1.0), 3)) for f in features}
+        )
         for r in range(n_robots)
     )
     tasks = []
@@ -74,5 +76,7 @@ def table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
 def machine() -> str:
     import os
 
-    return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-            f"Python {platform.python_version()}")
+    return (
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}"
+    )

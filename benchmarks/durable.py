@@ -59,8 +59,9 @@ def _checkpoint_wal(path: Path) -> None:
         raise RuntimeError(f"could not checkpoint the WAL of {path}: a reader held it")
 
 
-def measure_durable(instance: Instance, *, mode: str = "balanced", runs: int = 1,
-                    warmup: int = 0) -> DurableMeasure:
+def measure_durable(
+    instance: Instance, *, mode: str = "balanced", runs: int = 1, warmup: int = 0
+) -> DurableMeasure:
     """warmup + runs rules runs, one after another, in one fresh data directory."""
     with tempfile.TemporaryDirectory(prefix="ltaa-bench-") as tmp:
         settings = Settings(data_dir=Path(tmp), auto_resume=False)
@@ -77,8 +78,9 @@ def measure_durable(instance: Instance, *, mode: str = "balanced", runs: int = 1
             for _ in range(warmup + runs):
                 spec = RunSpec.for_instance(instance, mode=mode, reasoner="rules")
                 start, cpu_start = time.perf_counter(), time.process_time()
-                run = service.create_run(sessions=sessions, worker=worker, settings=settings,
-                                         spec=spec)
+                run = service.create_run(
+                    sessions=sessions, worker=worker, settings=settings, spec=spec
+                )
                 worker.wait(run.id)
                 times.append(time.perf_counter() - start)
                 cpu.append(time.process_time() - cpu_start)
@@ -96,5 +98,4 @@ def measure_durable(instance: Instance, *, mode: str = "balanced", runs: int = 1
             worker.close()
             engine.dispose()
     assert sizes is not None
-    return DurableMeasure(instance.n_tasks, times[:warmup], times[warmup:], cpu[warmup:],
-                          *sizes)
+    return DurableMeasure(instance.n_tasks, times[:warmup], times[warmup:], cpu[warmup:], *sizes)

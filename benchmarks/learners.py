@@ -35,8 +35,9 @@ class SeedSummary:
         return sum(g <= TOLERANCE_POINTS + 1e-9 for g in self.gaps)
 
 
-def summarise(solver: str, es: Sequence[float], seconds: Sequence[float],
-              optimum: float) -> SeedSummary:
+def summarise(
+    solver: str, es: Sequence[float], seconds: Sequence[float], optimum: float
+) -> SeedSummary:
     return SeedSummary(solver, list(es), list(seconds), optimum)
 
 
@@ -60,8 +61,14 @@ def collect() -> list[SeedSummary]:
     out = []
     for name in LEARNERS:
         runs = [solved(name, seed=s) for s in LEARNER_SEEDS]
-        out.append(summarise(name, [r.metrics.expected_success * 100 for r in runs],
-                             [r.seconds for r in runs], optimum))
+        out.append(
+            summarise(
+                name,
+                [r.metrics.expected_success * 100 for r in runs],
+                [r.seconds for r in runs],
+                optimum,
+            )
+        )
     return out
 
 
@@ -70,13 +77,22 @@ def run() -> Section:
     optimum = summaries[0].optimum
     per_seed = table(
         ["seed", *(f"`{s.solver}` expected success (gap, time)" for s in summaries)],
-        [[seed, *(f"{s.es[i]:.2f}% ({s.gaps[i]:.2f} pts, {fmt_time(s.seconds[i])})"
-                  for s in summaries)]
-         for i, seed in enumerate(LEARNER_SEEDS)],
+        [
+            [
+                seed,
+                *(
+                    f"{s.es[i]:.2f}% ({s.gaps[i]:.2f} pts, {fmt_time(s.seconds[i])})"
+                    for s in summaries
+                ),
+            ]
+            for i, seed in enumerate(LEARNER_SEEDS)
+        ],
     )
     seeds_text = f"seeds {LEARNER_SEEDS[0]}-{LEARNER_SEEDS[-1]}"
     image = plots.seeds_figure(
-        {LABELS[s.solver]: s.es for s in summaries}, optimum, TOLERANCE_POINTS,
+        {LABELS[s.solver]: s.es for s in summaries},
+        optimum,
+        TOLERANCE_POINTS,
         f"RL baselines over {len(LEARNER_SEEDS)} seeds (baseline, balanced)",
         f"Baseline scenario, 36 tasks x 3 robots, balanced mode (cap 4), default options, "
         f"{seeds_text}, one training per seed. Error bars: mean ± sample std.",
@@ -87,10 +103,17 @@ def run() -> Section:
         "each seed is one training from scratch (wall time of the `solve()` call, training "
         f"included). `optimal` reaches {optimum:.2f}%. Gap = optimal − learner, in "
         f"percentage points; acceptance: every seed within {TOLERANCE_POINTS:g} points.\n\n"
-        + table(["solver", "expected success, mean ± std", "min / max",
-                 "gap to optimal, points: mean", "seeds within 3 points",
-                 "training time: median (min-max)"],
-                [summary_row(s) for s in summaries])
+        + table(
+            [
+                "solver",
+                "expected success, mean ± std",
+                "min / max",
+                "gap to optimal, points: mean",
+                "seeds within 3 points",
+                "training time: median (min-max)",
+            ],
+            [summary_row(s) for s in summaries],
+        )
         + f"\n\nPer seed:\n\n{per_seed}\n\n![RL baselines over seeds]({image})\n"
     )
     return Section("Learners over five seeds", body)

@@ -72,9 +72,14 @@ class LoadResult:
 
 def allocate_bodies(n: int = N_ALLOCATE) -> list[dict[str, Any]]:
     """Solvers and scenarios in rotation, so every solver meets every scenario."""
-    return [{"solver": SOLVERS[i % len(SOLVERS)],
-             "scenario": SCENARIOS[(i // len(SOLVERS)) % len(SCENARIOS)], "seed": i}
-            for i in range(n)]
+    return [
+        {
+            "solver": SOLVERS[i % len(SOLVERS)],
+            "scenario": SCENARIOS[(i // len(SOLVERS)) % len(SCENARIOS)],
+            "seed": i,
+        }
+        for i in range(n)
+    ]
 
 
 async def _allocate(client: httpx.AsyncClient, body: dict[str, Any]) -> Call:
@@ -85,18 +90,25 @@ async def _allocate(client: httpx.AsyncClient, body: dict[str, Any]) -> Call:
         return Call(body["solver"], 0, time.perf_counter() - start, repr(exc), body["scenario"])
     took = time.perf_counter() - start
     if response.status_code != 200:
-        return Call(body["solver"], response.status_code, took, response.text[:500],
-                    body["scenario"])
-    return Call(body["solver"], 200, took, None, body["scenario"],
-                response.json()["metrics"]["expected_success"])
+        return Call(
+            body["solver"], response.status_code, took, response.text[:500], body["scenario"]
+        )
+    return Call(
+        body["solver"],
+        200,
+        took,
+        None,
+        body["scenario"],
+        response.json()["metrics"]["expected_success"],
+    )
 
 
-async def _runs(client: httpx.AsyncClient, n_runs: int, start: float,
-                timeout_s: float) -> tuple[list[int], list[dict[str, Any]], list[float]]:
+async def _runs(
+    client: httpx.AsyncClient, n_runs: int, start: float, timeout_s: float
+) -> tuple[list[int], list[dict[str, Any]], list[float]]:
     """Create the runs at once, then watch them as a dashboard would (one GET /runs per
     poll) until all have finished: (create statuses, final states, seconds to finish)."""
-    created = await asyncio.gather(*(client.post("/runs", json=RUN_BODY)
-                                     for _ in range(n_runs)))
+    created = await asyncio.gather(*(client.post("/runs", json=RUN_BODY) for _ in range(n_runs)))
     ids = [r.json()["id"] for r in created if r.status_code == 202]
     finished_at: dict[str, float] = {}
     deadline = time.perf_counter() + timeout_s
@@ -114,34 +126,49 @@ async def _runs(client: httpx.AsyncClient, n_runs: int, start: float,
     states = []
     for run_id in ids:
         response = await client.get(f"/runs/{run_id}")
-        states.append(response.json() if response.status_code == 200 else
-                      {"id": run_id, "error": f"{response.status_code} {response.text[:300]}"})
-    errors = [{"error": f"POST /runs: {r.status_code} {r.text[:300]}"}
-              for r in created if r.status_code != 202]
-    return ([r.status_code for r in created], states + errors,
-            [finished_at[i] for i in ids if i in finished_at])
+        states.append(
+            response.json()
+            if response.status_code == 200
+            else {"id": run_id, "error": f"{response.status_code} {response.text[:300]}"}
+        )
+    errors = [
+        {"error": f"POST /runs: {r.status_code} {r.text[:300]}"}
+        for r in created
+        if r.status_code != 202
+    ]
+    return (
+        [r.status_code for r in created],
+        states + errors,
+        [finished_at[i] for i in ids if i in finished_at],
+    )
 
 
-async def _drive(base_url: str, n_runs: int, n_allocate: int,
-                 timeout_s: float) -> LoadResult:
+async def _drive(base_url: str, n_runs: int, n_allocate: int, timeout_s: float) -> LoadResult:
     # Idle connections are dropped well before uvicorn closes them (its keep-alive is 5 s,
     # httpx's default too: a request could go out on a connection the server is closing).
-    limits = httpx.Limits(max_connections=None, max_keepalive_connections=None,
-                          keepalive_expiry=2.0)
+    limits = httpx.Limits(
+        max_connections=None, max_keepalive_connections=None, keepalive_expiry=2.0
+    )
     async with httpx.AsyncClient(base_url=base_url, timeout=timeout_s, limits=limits) as client:
         start = time.perf_counter()
         runs = asyncio.ensure_future(_runs(client, n_runs, start, timeout_s))
         calls = await asyncio.gather(*(_allocate(client, b) for b in allocate_bodies(n_allocate)))
         allocate_wall = time.perf_counter() - start
         create_statuses, states, run_seconds = await runs
-    result = LoadResult(calls=list(calls), create_statuses=create_statuses, runs=states,
-                        run_seconds=run_seconds, allocate_wall_s=allocate_wall)
+    result = LoadResult(
+        calls=list(calls),
+        create_statuses=create_statuses,
+        runs=states,
+        run_seconds=run_seconds,
+        allocate_wall_s=allocate_wall,
+    )
     result.failures = failures(result)
     return result
 
 
-def drive(base_url: str, *, n_runs: int = N_RUNS, n_allocate: int = N_ALLOCATE,
-          timeout_s: float = 300.0) -> LoadResult:
+def drive(
+    base_url: str, *, n_runs: int = N_RUNS, n_allocate: int = N_ALLOCATE, timeout_s: float = 300.0
+) -> LoadResult:
     """Send the runs and the /allocate calls at once and wait for all of them."""
     return asyncio.run(_drive(base_url, n_runs, n_allocate, timeout_s))
 
@@ -150,12 +177,21 @@ def failures(result: LoadResult, server_log: str = "") -> list[str]:
     """Everything that went wrong, one line each (empty: the round is clean)."""
     out = [f"/allocate {c.solver}: {c.status} {c.error}" for c in result.calls if not c.ok]
     out += [f"POST /runs: {s}" for s in result.create_statuses if s != 202]
-    out += [f"run {r.get('id', '?')}: {r.get('status', r.get('error'))}"
-            for r in result.runs if r.get("status") != "completed"]
-    out += [f"a response said {LOCKED!r}: {c.error}" for c in result.calls
-            if c.error and LOCKED in c.error]
-    out += [f"server log: {line[:300]}" for line in server_log.splitlines()
-            if LOCKED in line or '"level": "ERROR"' in line or "Traceback" in line]
+    out += [
+        f"run {r.get('id', '?')}: {r.get('status', r.get('error'))}"
+        for r in result.runs
+        if r.get("status") != "completed"
+    ]
+    out += [
+        f"a response said {LOCKED!r}: {c.error}"
+        for c in result.calls
+        if c.error and LOCKED in c.error
+    ]
+    out += [
+        f"server log: {line[:300]}"
+        for line in server_log.splitlines()
+        if LOCKED in line or '"level": "ERROR"' in line or "Traceback" in line
+    ]
     return out
 
 
@@ -178,14 +214,27 @@ def served(data_dir: Path, env: dict[str, str]) -> Iterator[tuple[str, Path]]:
     no API keys; yields its URL and log file, and stops it with SIGTERM."""
     port = _free_port()
     log = data_dir / "server.log"
-    full_env = {k: v for k, v in os.environ.items()
-                if k not in ("LTAA_API_KEYS", "ANTHROPIC_API_KEY", "LTAA_ANTHROPIC_API_KEY")}
-    full_env |= {**env, "LTAA_DATA_DIR": str(data_dir), "HOST": "127.0.0.1",
-                 "PORT": str(port), "LTAA_BIN": f"{Path(sys.executable).parent}/"}
+    full_env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("LTAA_API_KEYS", "ANTHROPIC_API_KEY", "LTAA_ANTHROPIC_API_KEY")
+    }
+    full_env |= {
+        **env,
+        "LTAA_DATA_DIR": str(data_dir),
+        "HOST": "127.0.0.1",
+        "PORT": str(port),
+        "LTAA_BIN": f"{Path(sys.executable).parent}/",
+    }
     url = f"http://127.0.0.1:{port}"
     with log.open("ab") as out:
-        proc = subprocess.Popen(["sh", str(ROOT / "scripts" / "serve.sh")], cwd=ROOT,
-                                env=full_env, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(
+            ["sh", str(ROOT / "scripts" / "serve.sh")],
+            cwd=ROOT,
+            env=full_env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
     try:
         deadline = time.monotonic() + 60
         while True:
@@ -206,15 +255,19 @@ def served(data_dir: Path, env: dict[str, str]) -> Iterator[tuple[str, Path]]:
 
 
 def run() -> Section:
-    with tempfile.TemporaryDirectory(prefix="ltaa-load-") as tmp, \
-            served(Path(tmp), SERVER_ENV) as (url, log):
+    with (
+        tempfile.TemporaryDirectory(prefix="ltaa-load-") as tmp,
+        served(Path(tmp), SERVER_ENV) as (url, log),
+    ):
         alone = single_call_seconds(url)
         result = drive(url)
         problems = failures(result, log.read_text())
     if problems:
         raise RuntimeError("load round failed:\n" + "\n".join(problems[:20]))
-    return Section(title=f"Load: {N_RUNS} durable runs and {N_ALLOCATE} concurrent /allocate",
-                   body=_body(result, alone))
+    return Section(
+        title=f"Load: {N_RUNS} durable runs and {N_ALLOCATE} concurrent /allocate",
+        body=_body(result, alone),
+    )
 
 
 def single_call_seconds(url: str, repeats: int = 3) -> dict[str, float]:
@@ -235,9 +288,15 @@ def single_call_seconds(url: str, repeats: int = 3) -> dict[str, float]:
 
 
 def _latency_row(label: str, values: list[float], alone: float | None) -> list[str]:
-    return [label, str(len(values)), fmt_time(alone) if alone is not None else "",
-            fmt_time(percentile(values, 50)), fmt_time(percentile(values, 95)),
-            fmt_time(percentile(values, 99)), fmt_time(max(values))]
+    return [
+        label,
+        str(len(values)),
+        fmt_time(alone) if alone is not None else "",
+        fmt_time(percentile(values, 50)),
+        fmt_time(percentile(values, 95)),
+        fmt_time(percentile(values, 99)),
+        fmt_time(max(values)),
+    ]
 
 
 def _body(result: LoadResult, alone: dict[str, float]) -> str:
@@ -245,10 +304,11 @@ def _body(result: LoadResult, alone: dict[str, float]) -> str:
         {s: result.latencies(s) for s in SOLVERS},
         title=f"POST /allocate latency with {N_RUNS} durable runs executing",
         caption=f"{N_ALLOCATE} calls sent at once ({', '.join(SOLVERS)} in rotation over "
-                f"the {', '.join(SCENARIOS)} scenarios), while {N_RUNS} rules runs of the "
-                "baseline scenario execute in the same process. Latency is send to last "
-                "byte, queueing included.",
-        name="load_allocate_latency.png")
+        f"the {', '.join(SCENARIOS)} scenarios), while {N_RUNS} rules runs of the "
+        "baseline scenario execute in the same process. Latency is send to last "
+        "byte, queueing included.",
+        name="load_allocate_latency.png",
+    )
     rows = [_latency_row(s, result.latencies(s), alone[s]) for s in SOLVERS]
     rows.append(_latency_row("all", result.latencies(), None))
     throughput = len(result.calls) / result.allocate_wall_s
@@ -261,8 +321,8 @@ def _body(result: LoadResult, alone: dict[str, float]) -> str:
         f"polled every {POLL_S} s) and {N_ALLOCATE} `POST /allocate` ({', '.join(SOLVERS)} "
         f"in rotation over the {len(SCENARIOS)} built-in scenarios). Every /allocate "
         "answered 200, every run completed, and no response or server log line said "
-        f"\"{LOCKED}\" or logged an error (the report is not written otherwise). "
-        "\"alone\" is one call at a time on the idle server (baseline scenario, median of "
+        f'"{LOCKED}" or logged an error (the report is not written otherwise). '
+        '"alone" is one call at a time on the idle server (baseline scenario, median of '
         "3), for comparison.\n\n"
         + table(["/allocate", "calls", "alone", "p50", "p95", "p99", "max"], rows)
         + f"\n\nThroughput: {len(result.calls)} calls answered in "

@@ -46,11 +46,18 @@ def baseline_problem(mode: Mode = Mode.BALANCED) -> Problem:
     return Problem.build(scenario("baseline").instance, mode)
 
 
-def _run_in_memory(problem: Problem, guidance: str | None, *,
-                   regret: bool = True) -> MemoryRecorder:
+def _run_in_memory(
+    problem: Problem, guidance: str | None, *, regret: bool = True
+) -> MemoryRecorder:
     recorder = MemoryRecorder()
-    ctx = graph_context(problem, reasoner=RulesReasoner(), recorder=recorder,
-                        quality_threshold=0.6, max_retries=3, guidance=guidance)
+    ctx = graph_context(
+        problem,
+        reasoner=RulesReasoner(),
+        recorder=recorder,
+        quality_threshold=0.6,
+        max_retries=3,
+        guidance=guidance,
+    )
     if not regret:
         ctx = dataclasses.replace(ctx, regret=None)
     run_graph(build_graph(InMemorySaver()), ctx, uuid.uuid4().hex, resume=False)
@@ -66,8 +73,10 @@ def in_memory_seconds(problem: Problem, *, regret: bool) -> tuple[float, float]:
 
 def sent_prompt_chars(problem: Problem, guidance: str | None = None) -> list[int]:
     """System + user characters of every prompt a rules run actually recorded."""
-    return [len(a.system_prompt) + len(a.user_prompt)
-            for a in _run_in_memory(problem, guidance).attempts()]
+    return [
+        len(a.system_prompt) + len(a.user_prompt)
+        for a in _run_in_memory(problem, guidance).attempts()
+    ]
 
 
 def retry_tier_chars(problem: Problem) -> dict[int, list[int]]:
@@ -76,8 +85,12 @@ def retry_tier_chars(problem: Problem) -> dict[int, list[int]]:
     sizes: dict[int, list[int]] = {tier: [] for tier in (1, 2, 3)}
     state: dict[str, Any] = initial_state(problem)
     for d in _run_in_memory(problem, None).decisions():
-        state = {**state, "task_index": d.task_index, "loads": d.loads_before,
-                 "view": task_view(problem, d.task_index, d.loads_before, None)}
+        state = {
+            **state,
+            "task_index": d.task_index,
+            "loads": d.loads_before,
+            "view": task_view(problem, d.task_index, d.loads_before, None),
+        }
         dctx = decision_context(problem, state)
         for tier in sizes:
             sizes[tier].append(prompt_size(dctx, tier)["total_chars"])
@@ -92,28 +105,52 @@ def prompt_part(problem: Problem) -> tuple[str, list[tuple[str, float]]]:
     rows: list[list[Any]] = []
     bars: list[tuple[str, float]] = []
     unguided = sent_prompt_chars(problem)
-    for label, chars in (("tier 0, unguided (what a first attempt sends)", unguided),
-                         ("tier 0, optimizer-guided", sent_prompt_chars(problem, "optimizer"))):
+    for label, chars in (
+        ("tier 0, unguided (what a first attempt sends)", unguided),
+        ("tier 0, optimizer-guided", sent_prompt_chars(problem, "optimizer")),
+    ):
         mean = statistics.fmean(chars)
-        rows.append([label, f"{min(chars):,}", f"{mean:,.0f}", f"{max(chars):,}",
-                     _tokens(mean)])
+        rows.append([label, f"{min(chars):,}", f"{mean:,.0f}", f"{max(chars):,}", _tokens(mean)])
         bars.append((f"ours: {label.split(' (')[0]}", mean))
     for tier, chars in retry_tier_chars(problem).items():
         mean = statistics.fmean(chars)
-        rows.append([f"tier {tier} retry (feedback text excluded)", f"{min(chars):,}",
-                     f"{mean:,.0f}", f"{max(chars):,}", _tokens(mean)])
+        rows.append(
+            [
+                f"tier {tier} retry (feedback text excluded)",
+                f"{min(chars):,}",
+                f"{mean:,.0f}",
+                f"{max(chars):,}",
+                _tokens(mean),
+            ]
+        )
         if tier == 2:
             bars.append(("ours: tier 2 retry (the largest)", mean))
-    rows.append(["paper's LTAA prompt, per task", "-", f"{PAPER_CHARS:,}", "-",
-                 f"{PAPER_TOKENS:,} (reported)"])
-    rows.append(["SMART-LLM concatenated examples", "-", f"{SMART_LLM_CHARS:,}", "-",
-                 _tokens(SMART_LLM_CHARS)])
+    rows.append(
+        [
+            "paper's LTAA prompt, per task",
+            "-",
+            f"{PAPER_CHARS:,}",
+            "-",
+            f"{PAPER_TOKENS:,} (reported)",
+        ]
+    )
+    rows.append(
+        [
+            "SMART-LLM concatenated examples",
+            "-",
+            f"{SMART_LLM_CHARS:,}",
+            "-",
+            _tokens(SMART_LLM_CHARS),
+        ]
+    )
     bars += [("paper's LTAA (reported)", PAPER_CHARS), ("SMART-LLM examples", SMART_LLM_CHARS)]
     text = table(["prompt", "min chars", "mean chars", "max chars", "tokens per task"], rows)
     user = statistics.fmean(unguided) - len(SYSTEM_PROMPT)
-    text += (f"\n\nIssue 3's target for the dynamic user prompt alone: ≤ "
-             f"{TARGET_USER_PROMPT_CHARS:,} characters; measured {user:,.0f} on average at "
-             f"tier 0 — {_verdict(user <= TARGET_USER_PROMPT_CHARS)}.")
+    text += (
+        f"\n\nIssue 3's target for the dynamic user prompt alone: ≤ "
+        f"{TARGET_USER_PROMPT_CHARS:,} characters; measured {user:,.0f} on average at "
+        f"tier 0 — {_verdict(user <= TARGET_USER_PROMPT_CHARS)}."
+    )
     return text, bars
 
 
@@ -121,13 +158,25 @@ def saver_rows(problem: Problem, workdir: Path) -> list[list[Any]]:
     """The graph alone (in-memory recorder) over each saver, to show what persistence costs."""
 
     def one_run(saver: BaseCheckpointSaver[Any]) -> None:
-        ctx = graph_context(problem, reasoner=RulesReasoner(), recorder=MemoryRecorder(),
-                            quality_threshold=0.6, max_retries=3, guidance=None)
+        ctx = graph_context(
+            problem,
+            reasoner=RulesReasoner(),
+            recorder=MemoryRecorder(),
+            quality_threshold=0.6,
+            max_retries=3,
+            guidance=None,
+        )
         run_graph(build_graph(saver), ctx, uuid.uuid4().hex, resume=False)
 
     memory = InMemorySaver()
-    rows: list[list[Any]] = [["InMemorySaver", "-", fmt_time(median_seconds(
-        lambda: one_run(memory), SAVER_REPEATS)), "-"]]
+    rows: list[list[Any]] = [
+        [
+            "InMemorySaver",
+            "-",
+            fmt_time(median_seconds(lambda: one_run(memory), SAVER_REPEATS)),
+            "-",
+        ]
+    ]
     for compact in (False, True):
         for sync in (None, "NORMAL"):
             path = workdir / f"cp-{compact}-{sync}.sqlite"
@@ -135,9 +184,14 @@ def saver_rows(problem: Problem, workdir: Path) -> list[list[Any]]:
             seconds = median_seconds(lambda s=saver: one_run(s), SAVER_REPEATS)
             saver.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
             per_task = path.stat().st_size / (SAVER_REPEATS + 1) / problem.instance.n_tasks
-            rows.append(["CompactSqliteSaver" if compact else "SqliteSaver",
-                         sync or "FULL (setup default)", fmt_time(seconds),
-                         f"{per_task / 1024:.1f} KB"])
+            rows.append(
+                [
+                    "CompactSqliteSaver" if compact else "SqliteSaver",
+                    sync or "FULL (setup default)",
+                    fmt_time(seconds),
+                    f"{per_task / 1024:.1f} KB",
+                ]
+            )
             saver.conn.close()
     return rows
 
@@ -146,28 +200,57 @@ def _verdict(ok: bool) -> str:
     return "met" if ok else "**missed**"
 
 
-def durable_part(small: DurableMeasure, large: DurableMeasure,
-                 in_memory: tuple[tuple[float, float], tuple[float, float]]) -> str:
+def durable_part(
+    small: DurableMeasure,
+    large: DurableMeasure,
+    in_memory: tuple[tuple[float, float], tuple[float, float]],
+) -> str:
     rows = []
     for m, target in ((small, TARGET_SMALL_S), (large, TARGET_LARGE_S)):
         med = statistics.median(m.seconds)
-        runs = ", ".join(f"{fmt_time(w)} (CPU {fmt_time(c)})"
-                         for w, c in zip(m.seconds, m.cpu_seconds, strict=True))
-        rows.append([f"wall time, {m.n_tasks:,} tasks",
-                     f"{fmt_time(med)} (median of {len(m.seconds)}; runs: {runs})",
-                     f"≤ {target:g} s", _verdict(med <= target)])
+        runs = ", ".join(
+            f"{fmt_time(w)} (CPU {fmt_time(c)})"
+            for w, c in zip(m.seconds, m.cpu_seconds, strict=True)
+        )
+        rows.append(
+            [
+                f"wall time, {m.n_tasks:,} tasks",
+                f"{fmt_time(med)} (median of {len(m.seconds)}; runs: {runs})",
+                f"≤ {target:g} s",
+                _verdict(med <= target),
+            ]
+        )
     for m in (small, large):
-        rows.append([f"checkpoint bytes per task, {m.n_tasks:,} tasks",
-                     f"{m.per_task / 1024:.1f} KB ({m.checkpoint_after_wal_checkpoint:,} B "
-                     "after a WAL checkpoint)",
-                     f"≤ {TARGET_BYTES_PER_TASK // 1024} KB",
-                     _verdict(m.per_task <= TARGET_BYTES_PER_TASK)])
-    sizes = table(["tasks", "checkpoint file as left", "its -wal as left",
-                   "file after WAL checkpoint", "per task", "app tables (ltaa.db + -wal)"],
-                  [[f"{m.n_tasks:,}", f"{m.checkpoint_main_bytes:,} B",
-                    f"{m.checkpoint_wal_bytes:,} B", f"{m.checkpoint_after_wal_checkpoint:,} B",
-                    f"{m.per_task / 1024:.1f} KB", f"{m.app_db_bytes:,} B"]
-                   for m in (small, large)])
+        rows.append(
+            [
+                f"checkpoint bytes per task, {m.n_tasks:,} tasks",
+                f"{m.per_task / 1024:.1f} KB ({m.checkpoint_after_wal_checkpoint:,} B "
+                "after a WAL checkpoint)",
+                f"≤ {TARGET_BYTES_PER_TASK // 1024} KB",
+                _verdict(m.per_task <= TARGET_BYTES_PER_TASK),
+            ]
+        )
+    sizes = table(
+        [
+            "tasks",
+            "checkpoint file as left",
+            "its -wal as left",
+            "file after WAL checkpoint",
+            "per task",
+            "app tables (ltaa.db + -wal)",
+        ],
+        [
+            [
+                f"{m.n_tasks:,}",
+                f"{m.checkpoint_main_bytes:,} B",
+                f"{m.checkpoint_wal_bytes:,} B",
+                f"{m.checkpoint_after_wal_checkpoint:,} B",
+                f"{m.per_task / 1024:.1f} KB",
+                f"{m.app_db_bytes:,} B",
+            ]
+            for m in (small, large)
+        ],
+    )
     warm = ", ".join(fmt_time(x) for x in small.warmup_seconds)
     l_med, l_cpu = statistics.median(large.seconds), statistics.median(large.cpu_seconds)
     with_regret, no_regret = in_memory
@@ -188,20 +271,36 @@ def durable_part(small: DurableMeasure, large: DurableMeasure,
         "checkpoints once it completes; SQLite keeps the freed pages for the next run, so "
         "the file's size is the run's high-water mark.\n\n"
         + table(["measure", "measured", "target", "verdict"], rows)
-        + "\n\n" + sizes + "\n\n"
+        + "\n\n"
+        + sizes
+        + "\n\n"
         f"Where the {large.n_tasks:,}-task time goes (same instance; the in-memory rows are "
         "one run each; differences taken on CPU time, which other processes disturb less "
         "than wall time):\n\n"
-        + table(["run", "wall time", "CPU time", "difference (CPU)"], [
-            ["durable (above, median)", fmt_time(l_med), fmt_time(l_cpu),
-             f"persistence: {fmt_time(l_cpu - with_regret[1])}"],
-            ["in memory (InMemorySaver, in-memory recorder, no database)",
-             fmt_time(with_regret[0]), fmt_time(with_regret[1]),
-             f"exact per-decision regret: {fmt_time(with_regret[1] - no_regret[1])}"],
-            ["in memory, regret switched off", fmt_time(no_regret[0]), fmt_time(no_regret[1]),
-             "the rest: LangGraph's 7 super-steps per task, rules reasoner, prompt, "
-             "validation"],
-        ])
+        + table(
+            ["run", "wall time", "CPU time", "difference (CPU)"],
+            [
+                [
+                    "durable (above, median)",
+                    fmt_time(l_med),
+                    fmt_time(l_cpu),
+                    f"persistence: {fmt_time(l_cpu - with_regret[1])}",
+                ],
+                [
+                    "in memory (InMemorySaver, in-memory recorder, no database)",
+                    fmt_time(with_regret[0]),
+                    fmt_time(with_regret[1]),
+                    f"exact per-decision regret: {fmt_time(with_regret[1] - no_regret[1])}",
+                ],
+                [
+                    "in memory, regret switched off",
+                    fmt_time(no_regret[0]),
+                    fmt_time(no_regret[1]),
+                    "the rest: LangGraph's 7 super-steps per task, rules reasoner, prompt, "
+                    "validation",
+                ],
+            ],
+        )
         + "\n\nPersistence is the checkpoint rows written at every super-step plus one upsert "
         "per attempt and decision in the app tables (with the decision's hash-chain link); "
         "the regret is one min-cost flow over the remaining tasks per decision, so it grows "
@@ -233,20 +332,43 @@ def regret_part() -> str:
             gap = opt - un.metrics.expected_success
             regret = float(un.details["regret"])
             worst_identity = max(worst_identity, abs(gap - regret))
-            worst_guided = max(worst_guided, abs(float(gd.details["regret"])),
-                               abs(opt - gd.metrics.expected_success))
-            rows.append([sc, mode.value, "none" if un.max_deviation is None
-                         else f"{un.max_deviation:g}", f"{opt * 100:.2f}%",
-                         f"{un.metrics.expected_success * 100:.2f}%", _points(gap),
-                         _points(regret), f"{gd.metrics.expected_success * 100:.2f}%",
-                         f"{float(gd.details['regret']) * 100:.1e}"])
+            worst_guided = max(
+                worst_guided,
+                abs(float(gd.details["regret"])),
+                abs(opt - gd.metrics.expected_success),
+            )
+            rows.append(
+                [
+                    sc,
+                    mode.value,
+                    "none" if un.max_deviation is None else f"{un.max_deviation:g}",
+                    f"{opt * 100:.2f}%",
+                    f"{un.metrics.expected_success * 100:.2f}%",
+                    _points(gap),
+                    _points(regret),
+                    f"{gd.metrics.expected_success * 100:.2f}%",
+                    f"{float(gd.details['regret']) * 100:.1e}",
+                ]
+            )
     return (
         "The `ltaa` solver (rules reasoner, default options; the same graph as a durable run, "
         "in memory), every scenario × mode with the mode's default cap, seed 0 (the rules "
         "reasoner is deterministic). Regret is summed over the run's per-decision regrets "
         "(stored in each decision record), in percentage points of expected success.\n\n"
-        + table(["scenario", "mode", "cap", "optimal", "LTAA unguided", "gap (points)",
-                 "Σ regret (points)", "LTAA guided", "guided Σ regret (points)"], rows)
+        + table(
+            [
+                "scenario",
+                "mode",
+                "cap",
+                "optimal",
+                "LTAA unguided",
+                "gap (points)",
+                "Σ regret (points)",
+                "LTAA guided",
+                "guided Σ regret (points)",
+            ],
+            rows,
+        )
         + f"\n\nLargest |gap − Σ regret| over the 12 unguided runs: {worst_identity:.1e} "
         f"(regrets telescope to the gap). Guided: largest |regret| or gap to optimal "
         f"{worst_guided:.1e} — {_verdict(worst_guided <= 1e-9)} against the target of 0 "
@@ -260,7 +382,8 @@ def run() -> Section:
     problem = baseline_problem()
     prompt_table, bars = prompt_part(problem)
     image = plots.hbar_figure(
-        bars, "characters per task (system + user prompt)",
+        bars,
+        "characters per task (system + user prompt)",
         "Prompt size per task: LTAA here vs the paper and SMART-LLM",
         "Ours: mean over the 36 decisions of a rules run on baseline/balanced (exact "
         "character counts). Paper: 5,724 characters per task as reported; SMART-LLM: 42,808 "
@@ -271,8 +394,10 @@ def run() -> Section:
     large_instance = synthetic_instance(LARGE_TASKS, LARGE_ROBOTS, seed=0)
     large = measure_durable(large_instance, runs=LARGE_RUNS)
     large_problem = Problem.build(large_instance, Mode.BALANCED)
-    in_memory = (in_memory_seconds(large_problem, regret=True),
-                 in_memory_seconds(large_problem, regret=False))
+    in_memory = (
+        in_memory_seconds(large_problem, regret=True),
+        in_memory_seconds(large_problem, regret=False),
+    )
     with tempfile.TemporaryDirectory() as tmp:
         savers = saver_rows(problem, Path(tmp))
     body = (

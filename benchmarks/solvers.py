@@ -42,8 +42,15 @@ def _row_36(name: str, problem: Problem) -> tuple[list[Any], float]:
         seconds = median_seconds(lambda: solver.solve(problem, seed=0), repeats)
         timed = str(repeats)
     kind = "exact" if get_solver(name).info.exact else "approximate"
-    return [f"`{name}`", kind, f"{m.expected_success:.6f}", f"{m.balance_score:.1f}",
-            _workload(m.workload), fmt_time(seconds), timed], seconds
+    return [
+        f"`{name}`",
+        kind,
+        f"{m.expected_success:.6f}",
+        f"{m.balance_score:.1f}",
+        _workload(m.workload),
+        fmt_time(seconds),
+        timed,
+    ], seconds
 
 
 def refusal(name: str, problem: Problem) -> str:
@@ -75,17 +82,24 @@ def large_rows() -> tuple[list[list[Any]], dict[tuple[int, int, int], float]]:
     rows: list[list[Any]] = []
     optimal_seconds: dict[tuple[int, int, int], float] = {}
     for n_tasks, n_robots, n_features in LARGE:
-        big = Problem.build(synthetic_instance(n_tasks, n_robots, n_features=n_features),
-                            Mode.BALANCED)
+        big = Problem.build(
+            synthetic_instance(n_tasks, n_robots, n_features=n_features), Mode.BALANCED
+        )
         for name in ("optimal", "greedy"):
             solver = get_solver(name)
             m = compute_metrics(big.instance, solver.solve(big).assignment, seed=0)
             seconds = median_seconds(lambda s=solver, b=big: s.solve(b), repeats=5)
             if name == "optimal":
                 optimal_seconds[(n_tasks, n_robots, n_features)] = seconds
-            rows.append([f"{n_tasks:,}×{n_robots} ({n_features} features)", f"`{name}`",
-                         f"{m.expected_success:.6f}", f"{m.balance_score:.1f}",
-                         fmt_time(seconds)])
+            rows.append(
+                [
+                    f"{n_tasks:,}×{n_robots} ({n_features} features)",
+                    f"`{name}`",
+                    f"{m.expected_success:.6f}",
+                    f"{m.balance_score:.1f}",
+                    fmt_time(seconds),
+                ]
+            )
     return rows, optimal_seconds
 
 
@@ -103,18 +117,35 @@ def run() -> Section:
             continue
         row, seconds[name] = _row_36(name, problem)
         rows.append(row)
-    small = table(["solver", "kind", "expected success", "balance", "workload L/M/H",
-                   "median time per call", "calls timed"], rows)
+    small = table(
+        [
+            "solver",
+            "kind",
+            "expected success",
+            "balance",
+            "workload L/M/H",
+            "median time per call",
+            "calls timed",
+        ],
+        rows,
+    )
     big_rows, optimal_big = large_rows()
-    large = table(["instance", "solver", "expected success", "balance", "median time"],
-                  big_rows)
+    large = table(["instance", "solver", "expected success", "balance", "median time"], big_rows)
     worst_10k = max(v for k, v in optimal_big.items() if k[0] == 10_000)
     targets = table(
         ["target", "measured", "verdict"],
-        [["`optimal` < 2 ms on 36×3", fmt_time(seconds["optimal"]),
-          _verdict(seconds["optimal"], TARGET_36_S)],
-         ["`optimal` < 2 s on 10,000×50", f"{fmt_time(worst_10k)} (slower of the two)",
-          _verdict(worst_10k, TARGET_10K_S)]],
+        [
+            [
+                "`optimal` < 2 ms on 36×3",
+                fmt_time(seconds["optimal"]),
+                _verdict(seconds["optimal"], TARGET_36_S),
+            ],
+            [
+                "`optimal` < 2 s on 10,000×50",
+                f"{fmt_time(worst_10k)} (slower of the two)",
+                _verdict(worst_10k, TARGET_10K_S),
+            ],
+        ],
     )
     body = (
         "Baseline scenario (36 TEACh tasks × 3 robots), `balanced` mode (cap 4: loads in "
@@ -122,13 +153,12 @@ def run() -> Section:
         "the stated number of calls, after one warm-up call. The learners train from scratch "
         "on every call with their default options; their time is the median over seeds 0-4 "
         "(one training per seed; the expected success shown is seed 0's, the learners "
-        f"section has all five). `brute_force` refuses by design: \"{refused}\".\n\n"
+        f'section has all five). `brute_force` refuses by design: "{refused}".\n\n'
         f"{small}\n\n{targets}\n\n"
         "The exact solvers at `brute_force`'s limit (the first 12 TEACh tasks × 3 robots, "
         "`balanced` with its default cap, 3^12 = 531,441 assignments), median of 3 calls after "
         "a warm-up:\n\n"
-        + table(["solver", "expected success", "median time", "calls timed"],
-                exact_small_rows())
+        + table(["solver", "expected success", "median time", "calls timed"], exact_small_rows())
         + "\n\nLarge synthetic instances (seeded: robot rates uniform in [0.3, 1], each task "
         "needs 1-3 random features), `balanced` mode, median of 5 calls after a warm-up. The "
         "12-feature row has hundreds of distinct task classes, so the flow network is not "

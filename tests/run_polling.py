@@ -10,8 +10,9 @@ from fastapi.testclient import TestClient
 FINISHED = ("completed", "failed", "cancelled", "interrupted")
 
 
-def wait_until(client: TestClient, run_id: str, statuses: tuple[str, ...] = FINISHED,
-               timeout: float = 90) -> dict[str, Any]:
+def wait_until(
+    client: TestClient, run_id: str, statuses: tuple[str, ...] = FINISHED, timeout: float = 90
+) -> dict[str, Any]:
     """The run's state once its status is one of `statuses`; fails the test after `timeout`."""
     deadline = time.monotonic() + timeout
     while True:

@@ -23,9 +23,12 @@ def parse_events(lines: Iterable[str]) -> Iterator[Event]:
     for line in lines:
         if line == "":
             if data:
-                yield Event(fields.get("event", "message"), fields.get("id"),
-                            json.loads("\n".join(data)),
-                            int(fields["retry"]) if "retry" in fields else None)
+                yield Event(
+                    fields.get("event", "message"),
+                    fields.get("id"),
+                    json.loads("\n".join(data)),
+                    int(fields["retry"]) if "retry" in fields else None,
+                )
             fields, data = {}, []
         elif not line.startswith(":"):
             name, _, value = line.partition(":")

@@ -28,8 +28,12 @@ _FORMS = "send either a built-in 'scenario' (see GET /scenarios) or your own 'ta
 
 
 def _task(t: TaskIn) -> Task:
-    return Task(id=t.id, name=t.name if t.name is not None else str(t.id), type=t.type,
-                features=tuple(t.features))
+    return Task(
+        id=t.id,
+        name=t.name if t.name is not None else str(t.id),
+        type=t.type,
+        features=tuple(t.features),
+    )
 
 
 def _robot(r: RobotIn) -> Robot:
@@ -41,24 +45,31 @@ def resolve_instance(request: InstanceRequest) -> Instance:
     custom = request.tasks is not None or request.robots is not None
     if request.scenario is not None:
         if custom:
-            raise DomainError("scenario", f"'scenario' was sent together with 'tasks'/'robots'; "
-                              f"{_FORMS}, not both", code="conflicting_fields")
+            raise DomainError(
+                "scenario",
+                f"'scenario' was sent together with 'tasks'/'robots'; {_FORMS}, not both",
+                code="conflicting_fields",
+            )
         return catalog.scenario(request.scenario).instance
     if request.tasks is None:
-        raise DomainError("tasks" if custom else "scenario",
-                          f"{'tasks missing' if custom else 'no instance given'}; {_FORMS}",
-                          code="missing")
+        raise DomainError(
+            "tasks" if custom else "scenario",
+            f"{'tasks missing' if custom else 'no instance given'}; {_FORMS}",
+            code="missing",
+        )
     if request.robots is None:
         raise DomainError("robots", f"robots missing; {_FORMS}", code="missing")
-    return Instance(tasks=tuple(map(_task, request.tasks)),
-                    robots=tuple(map(_robot, request.robots)))
+    return Instance(
+        tasks=tuple(map(_task, request.tasks)), robots=tuple(map(_robot, request.robots))
+    )
 
 
 def build_problem(request: InstanceRequest) -> Problem:
     # An explicit `"max_deviation": null` means no cap; leaving it out means the mode's.
     uncapped = "max_deviation" in request.model_fields_set and request.max_deviation is None
-    return Problem.build(resolve_instance(request), request.mode, request.max_deviation,
-                         uncapped=uncapped)
+    return Problem.build(
+        resolve_instance(request), request.mode, request.max_deviation, uncapped=uncapped
+    )
 
 
 def load_solver(name: str) -> Solver:
@@ -67,7 +78,8 @@ def load_solver(name: str) -> Solver:
         return get_solver(name)
     except ImportError as exc:
         raise DomainError(
-            "solver", f"solver '{name}' is not available in this installation ({exc}); its "
+            "solver",
+            f"solver '{name}' is not available in this installation ({exc}); its "
             "optional dependencies may be missing (pip install 'ltaa[rl]')",
             code="solver_unavailable",
         ) from exc
@@ -83,13 +95,20 @@ def build_response(
         mode=problem.mode,
         max_deviation=problem.cap.max_deviation,
         assignments=[
-            Assignment(task_id=task.id, task_name=task.name, robot=instance.robots[r].name,
-                       success=float(s[t, r]))
+            Assignment(
+                task_id=task.id,
+                task_name=task.name,
+                robot=instance.robots[r].name,
+                success=float(s[t, r]),
+            )
             for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
         ],
         metrics=MetricsOut.from_domain(compute_metrics(instance, solution.assignment, seed=seed)),
-        usage=UsageOut(llm_calls=solution.usage.llm_calls, input_tokens=solution.usage.input_tokens,
-                       output_tokens=solution.usage.output_tokens),
+        usage=UsageOut(
+            llm_calls=solution.usage.llm_calls,
+            input_tokens=solution.usage.input_tokens,
+            output_tokens=solution.usage.output_tokens,
+        ),
         elapsed_ms=elapsed_ms,
     )
 
@@ -102,8 +121,9 @@ def allocate(request: AllocateRequest) -> AllocateResponse:
     solution = solver.solve(problem, seed=request.seed, options=request.options)
     _check_solution(problem, solution, request.solver)
     elapsed_ms = (time.perf_counter() - started) * 1000
-    return build_response(problem, request.solver, solution, seed=request.seed,
-                          elapsed_ms=round(elapsed_ms, 3))
+    return build_response(
+        problem, request.solver, solution, seed=request.seed, elapsed_ms=round(elapsed_ms, 3)
+    )
 
 
 def _check_solution(problem: Problem, solution: Solution, solver: str) -> None:

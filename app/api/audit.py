@@ -19,15 +19,19 @@ JSONL = "application/x-ndjson"
 JSONL_RESPONSE: dict[str, Any] = {
     "description": "format=json (default): the trace as one JSON document. format=jsonl: the "
     "whole audit record streamed as JSON lines.",
-    "content": {JSONL: {"schema": {
-        "type": "string",
-        "description": "One JSON object per line, each with a `type`: first `run` (the run, "
-        "its stored request and the genesis of its two hash chains), then every `event` in "
-        "seq order, then every `decision` in task order with its `attempt_records` "
-        "(prompts, replies, scores, verdicts), all under their stored column names with "
-        "their `chain_hash`; last an `end` line with the counts, so a cut-off download is "
-        "recognisable.",
-    }}},
+    "content": {
+        JSONL: {
+            "schema": {
+                "type": "string",
+                "description": "One JSON object per line, each with a `type`: first `run` (the "
+                "run, its stored request and the genesis of its two hash chains), then every "
+                "`event` in seq order, then every `decision` in task order with its "
+                "`attempt_records` (prompts, replies, scores, verdicts), all under their stored "
+                "column names with their `chain_hash`; last an `end` line with the counts, so a "
+                "cut-off download is recognisable.",
+            }
+        }
+    },
 }
 
 
@@ -46,13 +50,19 @@ def jsonl_trace(*, sessions: sessionmaker[Session], run_id: str) -> StreamingRes
 def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
     broken = report.first_break
     return TraceVerifyOut(
-        ok=report.ok, decisions=report.decisions.rows, events=report.events.rows,
+        ok=report.ok,
+        decisions=report.decisions.rows,
+        events=report.events.rows,
         unchained=report.decisions.unchained + report.events.unchained,
         heads=ChainHeadsOut(decisions=report.decisions.head, events=report.events.head),
-        broken=None if broken is None else BrokenLinkOut(
+        broken=None
+        if broken is None
+        else BrokenLinkOut(
             table=broken.table,
             task_index=broken.key if broken.table == "decisions" else None,
             seq=broken.key if broken.table == "events" else None,
-            expected=broken.expected, stored=broken.stored, reason=broken.reason,
+            expected=broken.expected,
+            stored=broken.stored,
+            reason=broken.reason,
         ),
     )

@@ -95,8 +95,10 @@ def parse_api_keys(raw: str) -> dict[str, Role]:
                 f"LTAA_API_KEYS entry {number} has an unknown role; use one of: {roles}"
             ) from None
         if len(key) < MIN_KEY_LENGTH:
-            raise ApiKeysError(f"LTAA_API_KEYS entry {number}: keys must be at least "
-                               f"{MIN_KEY_LENGTH} characters; {KEY_HINT}")
+            raise ApiKeysError(
+                f"LTAA_API_KEYS entry {number}: keys must be at least "
+                f"{MIN_KEY_LENGTH} characters; {KEY_HINT}"
+            )
         if key in keys:
             raise ApiKeysError(f"LTAA_API_KEYS entry {number} repeats an earlier key")
         keys[key] = role

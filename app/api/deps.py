@@ -49,10 +49,17 @@ RunIdPath = Annotated[str, Path(pattern=RUN_ID_PATTERN, description="A run id, s
 # -- access control ----------------------------------------------------------------------
 # Declared as security schemes so /docs offers "Authorize"; auto_error=False because a
 # missing key is answered below, in the one error shape, and not at all when access is open.
-_bearer = HTTPBearer(auto_error=False, scheme_name="bearer",
-                     description="An API key from LTAA_API_KEYS: `Authorization: Bearer <key>`")
-_api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, scheme_name="apiKey",
-                               description="The same API key in an `X-API-Key` header")
+_bearer = HTTPBearer(
+    auto_error=False,
+    scheme_name="bearer",
+    description="An API key from LTAA_API_KEYS: `Authorization: Bearer <key>`",
+)
+_api_key_header = APIKeyHeader(
+    name="X-API-Key",
+    auto_error=False,
+    scheme_name="apiKey",
+    description="The same API key in an `X-API-Key` header",
+)
 
 
 def _unauthenticated(loc: str, msg: str, type_: str, challenge: str) -> ApiError:
@@ -73,30 +80,50 @@ async def authenticate(
     if bearer and header_key and bearer.credentials != header_key:
         # Which one is meant is anyone's guess; answering for either could act for the wrong
         # caller (a proxy's key and the client's own, say).
-        raise _unauthenticated("x-api-key", "the Authorization and X-API-Key headers carry "
-                               "different API keys: send one key, in one header",
-                               "conflicting_api_keys", "Bearer")
+        raise _unauthenticated(
+            "x-api-key",
+            "the Authorization and X-API-Key headers carry "
+            "different API keys: send one key, in one header",
+            "conflicting_api_keys",
+            "Bearer",
+        )
     presented, loc = (bearer.credentials, "authorization") if bearer else (header_key, "x-api-key")
     if not presented:
-        hint = ("the Authorization header must use the Bearer scheme"
-                if request.headers.get("authorization") else "an API key is required")
-        raise _unauthenticated("authorization", f"{hint}: send 'Authorization: Bearer <key>' "
-                               "or 'X-API-Key: <key>'", "missing_api_key", "Bearer")
+        hint = (
+            "the Authorization header must use the Bearer scheme"
+            if request.headers.get("authorization")
+            else "an API key is required"
+        )
+        raise _unauthenticated(
+            "authorization",
+            f"{hint}: send 'Authorization: Bearer <key>' or 'X-API-Key: <key>'",
+            "missing_api_key",
+            "Bearer",
+        )
     role = keyring.role_of(presented)
     if role is None:
         # Where and from whom, never what: the rejected value may be a real key mistyped.
-        log.warning("rejected an unknown API key on %s %s from %s", request.method,
-                    request.url.path, request.client.host if request.client else "?")
-        raise _unauthenticated(loc, "the API key is not valid", "invalid_api_key",
-                               'Bearer error="invalid_token"')
+        log.warning(
+            "rejected an unknown API key on %s %s from %s",
+            request.method,
+            request.url.path,
+            request.client.host if request.client else "?",
+        )
+        raise _unauthenticated(
+            loc, "the API key is not valid", "invalid_api_key", 'Bearer error="invalid_token"'
+        )
     return Caller(role=role, anonymous=False)
 
 
 def _check_role(caller: Caller, required: Role) -> Caller:
     if not caller.role.allows(required):
-        raise ApiError(403, ["header", "authorization"],
-                       f"this endpoint needs the {required.value} role; the API key sent "
-                       f"has the {caller.role.value} role", "insufficient_role")
+        raise ApiError(
+            403,
+            ["header", "authorization"],
+            f"this endpoint needs the {required.value} role; the API key sent "
+            f"has the {caller.role.value} role",
+            "insufficient_role",
+        )
     return caller
 
 

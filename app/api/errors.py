@@ -71,19 +71,37 @@ class ApiError(HTTPException):
     unchanged instead of becoming a generic 400.
     """
 
-    def __init__(self, status_code: int, loc: Loc, msg: str, type_: str,
-                 headers: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        status_code: int,
+        loc: Loc,
+        msg: str,
+        type_: str,
+        headers: dict[str, str] | None = None,
+    ) -> None:
         super().__init__(status_code, detail=msg, headers=headers)
         self.loc = list(loc)
         self.type = type_
 
 
 # FastAPI raises a bare 400 only when it cannot read the body (e.g. a 5,000-digit integer).
-_DEFAULT_LOC = {400: ["body"], 401: ["header", "authorization"],
-                403: ["header", "authorization"], 404: ["path"], 405: ["method"], 413: ["body"]}
-_DEFAULT_TYPE = {400: "body_unreadable", 401: "not_authenticated", 403: "forbidden",
-                 404: "not_found", 405: "method_not_allowed",
-                 409: "conflict", 413: "too_large"}
+_DEFAULT_LOC = {
+    400: ["body"],
+    401: ["header", "authorization"],
+    403: ["header", "authorization"],
+    404: ["path"],
+    405: ["method"],
+    413: ["body"],
+}
+_DEFAULT_TYPE = {
+    400: "body_unreadable",
+    401: "not_authenticated",
+    403: "forbidden",
+    404: "not_found",
+    405: "method_not_allowed",
+    409: "conflict",
+    413: "too_large",
+}
 
 
 async def _on_validation(_: Request, exc: RequestValidationError) -> JSONResponse:
@@ -115,16 +133,21 @@ async def _on_http(request: Request, exc: StarletteHTTPException) -> JSONRespons
     elif isinstance(exc.detail, list):  # already in list form
         body = {"detail": exc.detail}
     else:
-        body = error_body(_DEFAULT_LOC.get(code, ["request"]), str(exc.detail),
-                          _DEFAULT_TYPE.get(code, "http_error"))
+        body = error_body(
+            _DEFAULT_LOC.get(code, ["request"]),
+            str(exc.detail),
+            _DEFAULT_TYPE.get(code, "http_error"),
+        )
     return JSONResponse(body, status_code=code, headers=headers)
 
 
 async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
     # A bug, not bad input: still JSON, with no internals; the traceback goes to the log.
     log.exception("unhandled error on %s %s", request.method, request.url.path)
-    return JSONResponse(error_body(["server"], "internal error; the server log has the "
-                                   "details", "internal_error"), status_code=500)
+    return JSONResponse(
+        error_body(["server"], "internal error; the server log has the details", "internal_error"),
+        status_code=500,
+    )
 
 
 def install_error_handlers(app: FastAPI) -> None:
@@ -170,7 +193,8 @@ class BodySizeLimit:
     def _too_large(self, size: int | None) -> ApiError:
         amount = f"{size:,} bytes" if size is not None else "too large"
         return ApiError(
-            413, ["body"],
+            413,
+            ["body"],
             f"request body is {amount}: the limit is {self.max_bytes:,} bytes "
             "(LTAA_MAX_BODY_BYTES); send fewer tasks or raise the limit",
             "body_too_large",

@@ -12,13 +12,18 @@ from app.runs.idempotency import HEADER, MAX_KEY_LENGTH, Idempotency, request_di
 
 REPLAYED_HEADER = "Idempotent-Replayed"
 
-_KeyHeader = Annotated[str | None, Header(
-    alias=HEADER, min_length=1, max_length=MAX_KEY_LENGTH,
-    description="Makes retries safe: a unique value per run you mean to start (e.g. a UUID). "
-    "Resending the same key with the same body returns the run the first request created "
-    f"(202, same body and Location, `{REPLAYED_HEADER}: true`) instead of starting another; "
-    "the same key with a different body is a 409. Keys are global, not per API key.",
-)]
+_KeyHeader = Annotated[
+    str | None,
+    Header(
+        alias=HEADER,
+        min_length=1,
+        max_length=MAX_KEY_LENGTH,
+        description="Makes retries safe: a unique value per run you mean to start (e.g. a UUID). "
+        "Resending the same key with the same body returns the run the first request created "
+        f"(202, same body and Location, `{REPLAYED_HEADER}: true`) instead of starting another; "
+        "the same key with a different body is a 409. Keys are global, not per API key.",
+    ),
+]
 
 
 def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
@@ -26,8 +31,12 @@ def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
     # other one (or a proxy joining them into "a, b") would then start another run.
     sent = len(request.headers.getlist(HEADER))
     if sent > 1:
-        raise ApiError(422, ["header", HEADER], f"{sent} {HEADER} headers were sent; send "
-                       "exactly one, with one key", "duplicate_header")
+        raise ApiError(
+            422,
+            ["header", HEADER],
+            f"{sent} {HEADER} headers were sent; send exactly one, with one key",
+            "duplicate_header",
+        )
     return key
 
 
@@ -48,5 +57,6 @@ def idempotency_of(key: str | None, body: BaseModel) -> Idempotency | None:
     # omitted one (the mode's cap) are different requests.
     if key is None:
         return None
-    return Idempotency(key=key, digest=request_digest(body.model_dump(mode="json",
-                                                                       exclude_unset=True)))
+    return Idempotency(
+        key=key, digest=request_digest(body.model_dump(mode="json", exclude_unset=True))
+    )

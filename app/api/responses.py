@@ -12,8 +12,10 @@ from pydantic import BaseModel, Field
 
 
 class ErrorItem(BaseModel):
-    loc: list[str | int] = Field(description="Where in the request: ['body', 'tasks', 3, 'id'], "
-                                 "['path', 'run_id'], ['header', 'idempotency-key'], ...")
+    loc: list[str | int] = Field(
+        description="Where in the request: ['body', 'tasks', 3, 'id'], "
+        "['path', 'run_id'], ['header', 'idempotency-key'], ..."
+    )
     msg: str = Field(description="What is wrong and how to fix it")
     type: str = Field(description="A stable, machine-readable error code")
 

@@ -18,16 +18,22 @@ RUN_EXAMPLES: dict[str, Example] = {
         summary="Own tasks (TEACh keys) and robots",
         value={
             "tasks": [
-                {"action_id": 200, "action_name": "Pickup", "action_type": "ObjectInteraction",
-                 "features": ["heavy"]},
+                {
+                    "action_id": 200,
+                    "action_name": "Pickup",
+                    "action_type": "ObjectInteraction",
+                    "features": ["heavy"],
+                },
                 {"id": "weld-7", "name": "Weld seam", "features": ["dexterous"]},
                 {"id": "lift-2", "name": "Lift beam", "features": ["heavy", "dexterous"]},
             ],
             "robots": [
-                {"name": "arm", "label": "Precision Arm",
-                 "success": {"dexterous": 0.9, "heavy": 0.3}},
-                {"name": "lifter", "label": "Lifter",
-                 "success": {"dexterous": 0.4, "heavy": 0.95}},
+                {
+                    "name": "arm",
+                    "label": "Precision Arm",
+                    "success": {"dexterous": 0.9, "heavy": 0.3},
+                },
+                {"name": "lifter", "label": "Lifter", "success": {"dexterous": 0.4, "heavy": 0.95}},
             ],
             "mode": "success_focused",
             "quality_threshold": 0.7,

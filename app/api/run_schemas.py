@@ -25,31 +25,57 @@ class RunRequest(InstanceRequest):
     """An LTAA run on an instance, executed durably in the background."""
 
     reasoner: Name | None = Field(
-        None, description="'rules' (default, offline), 'anthropic', or 'replay' (with "
-        "replay_of)")
-    quality_threshold: float = Field(0.6, ge=0, le=1, strict=True, allow_inf_nan=False,
-                                     description="Accept a reply when Q >= this")
-    max_retries: int = Field(3, ge=0, le=10, strict=True,
-                             description="Validation retries (tiers 1-3) before the fallback")
+        None, description="'rules' (default, offline), 'anthropic', or 'replay' (with replay_of)"
+    )
+    quality_threshold: float = Field(
+        0.6,
+        ge=0,
+        le=1,
+        strict=True,
+        allow_inf_nan=False,
+        description="Accept a reply when Q >= this",
+    )
+    max_retries: int = Field(
+        3,
+        ge=0,
+        le=10,
+        strict=True,
+        description="Validation retries (tiers 1-3) before the fallback",
+    )
     model: Name | None = Field(None, description="Claude model (anthropic reasoner)")
-    temperature: float | None = Field(None, ge=0, le=1, strict=True, allow_inf_nan=False,
-                                      description="Sampling temperature (default 0.1)")
+    temperature: float | None = Field(
+        None,
+        ge=0,
+        le=1,
+        strict=True,
+        allow_inf_nan=False,
+        description="Sampling temperature (default 0.1)",
+    )
     guidance: Literal["optimizer"] | None = Field(
-        None, description="'optimizer': the prompt carries the optimal completion's choice")
-    seed: int = Field(0, ge=0, le=MAX_SEED, strict=True,
-                      description="Seed of the simulated-completion metric")
+        None, description="'optimizer': the prompt carries the optimal completion's choice"
+    )
+    seed: int = Field(
+        0, ge=0, le=MAX_SEED, strict=True, description="Seed of the simulated-completion metric"
+    )
     token_budget: int | None = Field(
-        None, ge=1, strict=True,
+        None,
+        ge=1,
+        strict=True,
         description="LLM tokens (input + output) the run may spend; once spent, the "
-        "remaining tasks use the offline 'rules' reasoner (default: the server's setting)")
+        "remaining tasks use the offline 'rules' reasoner (default: the server's setting)",
+    )
     replay_of: str | None = Field(
-        None, min_length=1, max_length=64, pattern=RUN_ID_PATTERN,
+        None,
+        min_length=1,
+        max_length=64,
+        pattern=RUN_ID_PATTERN,
         description="Required by reasoner 'replay', refused with any other: id of a completed "
         "run whose recorded replies are replayed, with no API call. The replay copies that "
         "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance and "
         "seed: omit them, or send the original's values (any other value is a 422 naming "
         "the field); model, temperature and token_budget do not apply. Unknown id: 422; "
-        "a run not completed: 409")
+        "a run not completed: 409",
+    )
 
 
 class RunCreated(BaseModel):
@@ -85,7 +111,8 @@ class RunOut(BaseModel):
     metrics: MetricsOut | None = Field(description="Set once the run has completed")
     regret: float | None = Field(
         description="Sum of the per-decision regrets so far: expected success given away "
-        "against the exact optimum (once completed, equals optimal's minus the run's)")
+        "against the exact optimum (once completed, equals optimal's minus the run's)"
+    )
     usage: UsageOut
     resumes: int
     error: str | None
@@ -127,11 +154,15 @@ class AttemptOut(BaseModel):
     transport_retries: int
     model: str | None
     replayed_from: str | None = Field(
-        None, description="Replay runs: the run whose recorded reply this attempt reused "
-        "(no API call; model null, tokens 0)")
+        None,
+        description="Replay runs: the run whose recorded reply this attempt reused "
+        "(no API call; model null, tokens 0)",
+    )
     original_model: str | None = Field(
-        None, description="Replay runs: the model that wrote the recorded reply (null for "
-        "the rules reasoner)")
+        None,
+        description="Replay runs: the model that wrote the recorded reply (null for "
+        "the rules reasoner)",
+    )
     system_prompt: str | None = Field(None, description="With ?include=prompts")
     user_prompt: str | None = Field(None, description="With ?include=prompts")
     reply: str | None = Field(None, description="Raw reply, with ?include=prompts")
@@ -178,7 +209,8 @@ class BrokenLinkOut(BaseModel):
     seq: int | None = Field(description="The event (events table), else null")
     expected: str | None = Field(
         description="The hash recomputed from the row's content and the previous link; null "
-        "when the row is missing or has no stored hash")
+        "when the row is missing or has no stored hash"
+    )
     stored: str | None = Field(description="The hash stored with the row")
     reason: str = Field(description="What this means, in plain language")
 
@@ -196,8 +228,11 @@ class TraceVerifyOut(BaseModel):
     events: int = Field(description="Event rows checked")
     unchained: int = Field(
         description="Rows with no chain hash (written before tamper evidence existed); "
-        "any makes ok false")
+        "any makes ok false"
+    )
     heads: ChainHeadsOut = Field(
-        description="Record these at sign-off: any later rewrite of the record changes them")
+        description="Record these at sign-off: any later rewrite of the record changes them"
+    )
     broken: BrokenLinkOut | None = Field(
-        description="The first broken link (the decisions chain first), or null when ok")
+        description="The first broken link (the decisions chain first), or null when ok"
+    )

@@ -25,15 +25,21 @@ def _no_nul(value: str) -> str:
     # PostgreSQL refuses a NUL in any text value, so a run naming one would be accepted and
     # then fail when its first decision is stored; refuse it up front on every back-end.
     if "\x00" in value:
-        raise PydanticCustomError("nul_character",
-                                 "must not contain a NUL character (\\u0000); remove it")
+        raise PydanticCustomError(
+            "nul_character", "must not contain a NUL character (\\u0000); remove it"
+        )
     return value
 
 
 NoNul = AfterValidator(_no_nul)
 Name = Annotated[StrictStr, Field(min_length=1, max_length=MAX_NAME_CHARS), NoNul]
-_JSON_TYPES = {bool: "a boolean", float: "a number", list: "an array", dict: "an object",
-               type(None): "null"}
+_JSON_TYPES = {
+    bool: "a boolean",
+    float: "a number",
+    list: "an array",
+    dict: "an object",
+    type(None): "null",
+}
 
 
 def _task_id(value: object) -> int | str:
@@ -41,13 +47,16 @@ def _task_id(value: object) -> int | str:
     if isinstance(value, int | str) and not isinstance(value, bool) and str(value).strip():
         if len(str(value)) > MAX_NAME_CHARS:
             raise PydanticCustomError(
-                "task_id_too_long", "task id must be at most {limit} characters, got {got}",
-                {"limit": MAX_NAME_CHARS, "got": len(str(value))})
+                "task_id_too_long",
+                "task id must be at most {limit} characters, got {got}",
+                {"limit": MAX_NAME_CHARS, "got": len(str(value))},
+            )
         if isinstance(value, str):
             _no_nul(value)
         return value
     raise PydanticCustomError(
-        "task_id_type", "task id must be an integer or a non-empty string, not {got}",
+        "task_id_type",
+        "task id must be an integer or a non-empty string, not {got}",
         {"got": _JSON_TYPES.get(type(value), "an empty string")},
     )
 
@@ -69,7 +78,8 @@ class TaskIn(BaseModel):
 
     id: TaskId = Field(validation_alias=AliasChoices("id", "action_id"))
     name: Name | None = Field(
-        None, validation_alias=AliasChoices("name", "action_name"),
+        None,
+        validation_alias=AliasChoices("name", "action_name"),
         description="Defaults to the id as text",
     )
     type: Name = Field("Custom", validation_alias=AliasChoices("type", "action_type"))
@@ -82,8 +92,9 @@ class RobotIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: Name = Field(description="Key used in assignments and workloads; unique")
-    label: Annotated[StrictStr, NoNul] = Field("", max_length=MAX_NAME_CHARS,
-                                               description="Display name, e.g. 'Light Robot'")
+    label: Annotated[StrictStr, NoNul] = Field(
+        "", max_length=MAX_NAME_CHARS, description="Display name, e.g. 'Light Robot'"
+    )
     description: Annotated[StrictStr, NoNul] = Field("", max_length=2000)
     success: dict[Name, Probability] = Field(
         description="Success probability per feature, each in [0, 1]"
@@ -100,7 +111,10 @@ class InstanceRequest(BaseModel):
     robots: list[RobotIn] | None = Field(None, max_length=MAX_ROBOTS)
     mode: Mode = Mode.BALANCED
     max_deviation: float | None = Field(
-        None, ge=0, allow_inf_nan=False, strict=True,
+        None,
+        ge=0,
+        allow_inf_nan=False,
+        strict=True,
         description="Workload cap in tasks either side of the target load; omit it for the "
         "mode's default, send null for no cap",
     )
@@ -139,9 +153,13 @@ class MetricsOut(BaseModel):
     def from_domain(cls, m: Metrics) -> MetricsOut:
         c = m.simulated_completion
         return cls(
-            expected_success=m.expected_success, balance_score=m.balance_score,
-            max_deviation=m.max_deviation, imbalance_severity=m.imbalance_severity.value,
-            workload=m.workload, feature_success=m.feature_success, jain_index=m.jain_index,
+            expected_success=m.expected_success,
+            balance_score=m.balance_score,
+            max_deviation=m.max_deviation,
+            imbalance_severity=m.imbalance_severity.value,
+            workload=m.workload,
+            feature_success=m.feature_success,
+            jain_index=m.jain_index,
             simulated_completion=CompletionOut(mean=c.mean, ci95=c.ci95, trials=c.trials),
         )
 

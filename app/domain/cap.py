@@ -98,8 +98,9 @@ class CapTracker:
     every robot's load at every step (greedy on 10,000 x 50 needs this).
     """
 
-    def __init__(self, cap: WorkloadCap, loads: Sequence[int] | None = None,
-                 remaining: int | None = None) -> None:
+    def __init__(
+        self, cap: WorkloadCap, loads: Sequence[int] | None = None, remaining: int | None = None
+    ) -> None:
         self.cap = cap
         self.loads = list(loads) if loads is not None else [0] * cap.n_robots
         self.remaining = cap.n_tasks - sum(self.loads) if remaining is None else remaining

@@ -19,8 +19,12 @@ def _load(name: str) -> Any:
 @cache
 def teach_tasks() -> tuple[Task, ...]:
     return tuple(
-        Task(id=a["action_id"], name=a["action_name"], type=a["action_type"],
-             features=tuple(a["features"]))
+        Task(
+            id=a["action_id"],
+            name=a["action_name"],
+            type=a["action_type"],
+            features=tuple(a["features"]),
+        )
         for a in _load("teach_actions.json")["actions"]
     )
 
@@ -39,12 +43,17 @@ def scenarios() -> dict[str, Scenario]:
     out: dict[str, Scenario] = {}
     for sc in doc["scenarios"]:
         robots = tuple(
-            Robot(name=name, label=meta[name]["label"], description=meta[name]["description"],
-                  success=dict(rates))
+            Robot(
+                name=name,
+                label=meta[name]["label"],
+                description=meta[name]["description"],
+                success=dict(rates),
+            )
             for name, rates in sc["success"].items()
         )
-        out[sc["name"]] = Scenario(sc["name"], sc["description"],
-                                   Instance(tasks=teach_tasks(), robots=robots))
+        out[sc["name"]] = Scenario(
+            sc["name"], sc["description"], Instance(tasks=teach_tasks(), robots=robots)
+        )
     return out
 
 
@@ -53,5 +62,8 @@ def scenario(name: str) -> Scenario:
         return scenarios()[name]
     except KeyError:
         known = ", ".join(scenarios())
-        raise DomainError("scenario", f"unknown scenario '{name}'; choose one of: {known}",
-                          code="unknown_scenario") from None
+        raise DomainError(
+            "scenario",
+            f"unknown scenario '{name}'; choose one of: {known}",
+            code="unknown_scenario",
+        ) from None

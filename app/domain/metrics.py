@@ -66,8 +66,9 @@ def feature_success(instance: Instance, assignment: Sequence[int]) -> dict[str, 
     s = instance.success
     out: dict[str, float] = {}
     for feature in instance.features:
-        values = [s[t, assignment[t]] for t, task in enumerate(instance.tasks)
-                  if feature in task.features]
+        values = [
+            s[t, assignment[t]] for t, task in enumerate(instance.tasks) if feature in task.features
+        ]
         out[feature] = float(np.mean(values))
     return out
 
@@ -104,7 +105,10 @@ class Metrics:
 
 
 def compute_metrics(
-    instance: Instance, assignment: Sequence[int], *, seed: int = 0,
+    instance: Instance,
+    assignment: Sequence[int],
+    *,
+    seed: int = 0,
     trials: int = DEFAULT_TRIALS,
 ) -> Metrics:
     loads = workload(assignment, instance.n_robots)

@@ -74,8 +74,9 @@ class Instance:
     def success(self) -> np.ndarray:
         """S[t, r] = mean over the task's features of the robot's success rate."""
         column = {f: i for i, f in enumerate(self.features)}
-        rates = np.array([[robot.success[f] for robot in self.robots] for f in self.features],
-                         dtype=float)
+        rates = np.array(
+            [[robot.success[f] for robot in self.robots] for f in self.features], dtype=float
+        )
         need = np.zeros((self.n_tasks, len(self.features)))
         for t, task in enumerate(self.tasks):
             for f in task.features:
@@ -98,14 +99,16 @@ def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
         raise DomainError("tasks", "the task queue is empty; send at least one task")
     if len(tasks) > MAX_TASKS:
         raise DomainError(
-            "tasks", f"{len(tasks)} tasks exceeds the limit of {MAX_TASKS:,} per request",
+            "tasks",
+            f"{len(tasks)} tasks exceeds the limit of {MAX_TASKS:,} per request",
             code="too_large",
         )
     if not robots:
         raise DomainError("robots", "the fleet is empty; send at least one robot")
     if len(robots) > MAX_ROBOTS:
         raise DomainError(
-            "robots", f"{len(robots)} robots exceeds the limit of {MAX_ROBOTS} per request",
+            "robots",
+            f"{len(robots)} robots exceeds the limit of {MAX_ROBOTS} per request",
             code="too_large",
         )
     _check_robot_names(robots)
@@ -127,8 +130,9 @@ def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
         if not task.features:
             raise DomainError(f"tasks.{i}.features", "a task needs at least one feature")
         if len(set(task.features)) != len(task.features):
-            raise DomainError(f"tasks.{i}.features",
-                              "a feature is listed twice; list each feature once")
+            raise DomainError(
+                f"tasks.{i}.features", "a feature is listed twice; list each feature once"
+            )
         for feature in task.features:
             missing = [r.name for r in robots if feature not in r.success]
             if missing:
@@ -155,12 +159,16 @@ def _check_robot_names(robots: Sequence[Robot]) -> None:
                 continue
             bad = sorted(_RESERVED & set(value))
             if bad:
-                raise DomainError(f"robots.{i}.{field}",
-                                  f"{field} '{value}' contains {', '.join(map(repr, bad))}, "
-                                  "which reasoner replies use as markup; remove it")
+                raise DomainError(
+                    f"robots.{i}.{field}",
+                    f"{field} '{value}' contains {', '.join(map(repr, bad))}, "
+                    "which reasoner replies use as markup; remove it",
+                )
             if key in owner and owner[key] != i:
-                raise DomainError(f"robots.{i}.{field}",
-                                  f"duplicate robot {field} '{value}': robot {owner[key]} "
-                                  "already uses it as a name or label; names and labels "
-                                  "must identify one robot each")
+                raise DomainError(
+                    f"robots.{i}.{field}",
+                    f"duplicate robot {field} '{value}': robot {owner[key]} "
+                    "already uses it as a name or label; names and labels "
+                    "must identify one robot each",
+                )
             owner[key] = i

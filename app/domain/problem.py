@@ -18,8 +18,12 @@ class Problem:
 
     @classmethod
     def build(
-        cls, instance: Instance, mode: Mode = Mode.BALANCED, max_deviation: float | None = None,
-        *, uncapped: bool = False,
+        cls,
+        instance: Instance,
+        mode: Mode = Mode.BALANCED,
+        max_deviation: float | None = None,
+        *,
+        uncapped: bool = False,
     ) -> Problem:
         """Apply the mode's default cap unless `max_deviation` overrides it (or `uncapped`
         asks for no cap at all); reject infeasible caps."""

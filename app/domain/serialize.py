@@ -14,8 +14,12 @@ def instance_to_dict(instance: Instance) -> dict[str, Any]:
             for t in instance.tasks
         ],
         "robots": [
-            {"name": r.name, "label": r.label, "description": r.description,
-             "success": dict(r.success)}
+            {
+                "name": r.name,
+                "label": r.label,
+                "description": r.description,
+                "success": dict(r.success),
+            }
             for r in instance.robots
         ],
     }
@@ -24,13 +28,21 @@ def instance_to_dict(instance: Instance) -> dict[str, Any]:
 def instance_from_dict(data: dict[str, Any]) -> Instance:
     return Instance(
         tasks=tuple(
-            Task(id=t["id"], name=t["name"], type=t.get("type", "Custom"),
-                 features=tuple(t["features"]))
+            Task(
+                id=t["id"],
+                name=t["name"],
+                type=t.get("type", "Custom"),
+                features=tuple(t["features"]),
+            )
             for t in data["tasks"]
         ),
         robots=tuple(
-            Robot(name=r["name"], label=r.get("label", ""), description=r.get("description", ""),
-                  success=dict(r["success"]))
+            Robot(
+                name=r["name"],
+                label=r.get("label", ""),
+                description=r.get("description", ""),
+                success=dict(r["success"]),
+            )
             for r in data["robots"]
         ),
     )

@@ -30,7 +30,10 @@ class CompactSqliteSaver(SqliteSaver):
 
 
 def open_sqlite_saver(
-    path: str | Path, *, compact: bool = True, synchronous: str | None = None,
+    path: str | Path,
+    *,
+    compact: bool = True,
+    synchronous: str | None = None,
     busy_timeout_s: float = 30.0,
 ) -> SqliteSaver:
     """A saver over its own connection (check_same_thread=False, as SqliteSaver requires).

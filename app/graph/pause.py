@@ -47,15 +47,19 @@ class PausePoint:
 
     def message(self) -> str:
         """The log line's text; end-to-end tests wait for it before killing the server."""
-        return (f"test pause: holding task {self.task_index} "
-                f"{'after' if self.after else 'before'} {self.node}")
+        return (
+            f"test pause: holding task {self.task_index} "
+            f"{'after' if self.after else 'before'} {self.node}"
+        )
 
 
 def pause_hook(point: PausePoint, node_names: frozenset[str]) -> NodeHook:
     """A build_graph node hook that wraps only the node named by `point`."""
     if point.node not in node_names:
-        raise ValueError(f"pause point names node {point.node!r}; the graph's nodes are "
-                         f"{', '.join(sorted(node_names))}")
+        raise ValueError(
+            f"pause point names node {point.node!r}; the graph's nodes are "
+            f"{', '.join(sorted(node_names))}"
+        )
 
     def hook(name: str, node: Node) -> Node:
         if name != point.node:

@@ -40,8 +40,6 @@ _FORMAT = """Reply in exactly this format:
 **Robot Analysis**: <optional: one line per robot>"""
 
 
-
-
 def _facts(ctx: DecisionContext) -> str:
     labels = ctx.labels
     allocated = sum(ctx.loads)
@@ -147,8 +145,9 @@ def retry_prompt(
         )
     # The step template replaces the framework text, but not the optimizer's choice.
     guidance = _optimizer_guidance(ctx)
-    return "\n\n".join([_facts(ctx), *(["\n".join(guidance)] if guidance else []), fb,
-                         _step_template(ctx)])
+    return "\n\n".join(
+        [_facts(ctx), *(["\n".join(guidance)] if guidance else []), fb, _step_template(ctx)]
+    )
 
 
 def _step_template(ctx: DecisionContext) -> str:

@@ -96,7 +96,10 @@ def initial_state(problem: Problem) -> dict[str, Any]:
 
 
 def task_view(
-    problem: Problem, task_index: int, loads: Sequence[int], guided_robot: int | None,
+    problem: Problem,
+    task_index: int,
+    loads: Sequence[int],
+    guided_robot: int | None,
     guided_costs: Sequence[float | None] | None = None,
 ) -> TaskView:
     inst = problem.instance

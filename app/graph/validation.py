@@ -65,8 +65,6 @@ class Validation:
     parsed: ParsedResponse = field(default_factory=ParsedResponse)
 
 
-
-
 def hard_invalid_reason(parsed: ParsedResponse, ctx: DecisionContext) -> str | None:
     labels = ctx.labels
     if parsed.decision_text is None:

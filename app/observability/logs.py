@@ -53,19 +53,29 @@ class AccessFields(logging.Filter):
     """uvicorn's access records keep method, path and status in `args`: make them fields."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if record.name == "uvicorn.access" and isinstance(record.args, tuple) \
-                and len(record.args) == 5:
+        if (
+            record.name == "uvicorn.access"
+            and isinstance(record.args, tuple)
+            and len(record.args) == 5
+        ):
             client, method, path, _, status = record.args
             record.client, record.method, record.path, record.status = (
-                client, method, path, status)
+                client,
+                method,
+                path,
+                status,
+            )
         return True
 
 
 class TextFormatter(logging.Formatter):
     def format(self, record: logging.LogRecord) -> str:
         line = super().format(record)
-        context = " ".join(f"{name}={getattr(record, name)}" for name in CONTEXT_FIELDS
-                           if getattr(record, name, None) is not None)
+        context = " ".join(
+            f"{name}={getattr(record, name)}"
+            for name in CONTEXT_FIELDS
+            if getattr(record, name, None) is not None
+        )
         return f"{line} [{context}]" if context else line
 
 
@@ -83,10 +93,14 @@ class StderrHandler(logging.StreamHandler[TextIO]):
 
 def make_formatter(fmt: str) -> logging.Formatter:
     if fmt == "json":
-        return JsonFormatter("{levelname}{name}{message}", style="{", timestamp="time",
-                             rename_fields={"levelname": "level", "name": "logger"},
-                             # uvicorn's ANSI-coloured copy of each message
-                             reserved_attrs=[*RESERVED_ATTRS, "color_message"])
+        return JsonFormatter(
+            "{levelname}{name}{message}",
+            style="{",
+            timestamp="time",
+            rename_fields={"levelname": "level", "name": "logger"},
+            # uvicorn's ANSI-coloured copy of each message
+            reserved_attrs=[*RESERVED_ATTRS, "color_message"],
+        )
     return TextFormatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 

@@ -63,22 +63,36 @@ def _count_if(condition: Any) -> Any:
 
 def read_counts(session: Session) -> RunCounts:
     counts = RunCounts()
-    counts.runs_by_status = {status: n for status, n in session.execute(
-        select(Run.status, func.count()).group_by(Run.status))}
+    counts.runs_by_status = {
+        status: n
+        for status, n in session.execute(select(Run.status, func.count()).group_by(Run.status))
+    }
     counts.decisions, counts.fallbacks = session.execute(
-        select(func.count(), _count_if(Decision.fallback))).one()
-    (counts.llm_calls, counts.input_tokens, counts.output_tokens, counts.transport_retries,
-     counts.hard_invalid, counts.below_threshold) = session.execute(select(
-        func.count(Attempt.reply_model),  # counts non-null: attempts a model answered
-        func.coalesce(func.sum(Attempt.input_tokens), 0),
-        func.coalesce(func.sum(Attempt.output_tokens), 0),
-        func.coalesce(func.sum(Attempt.transport_retries), 0),
-        _count_if(Attempt.hard_invalid.is_not(None)),
-        _count_if(Attempt.accepted.is_(False) & Attempt.hard_invalid.is_(None)),
-    )).one()
-    counts.retries_by_tier = {str(tier): n for tier, n in session.execute(
-        select(Attempt.tier, func.count()).where(Attempt.tier > 0).group_by(Attempt.tier)
-    )}
+        select(func.count(), _count_if(Decision.fallback))
+    ).one()
+    (
+        counts.llm_calls,
+        counts.input_tokens,
+        counts.output_tokens,
+        counts.transport_retries,
+        counts.hard_invalid,
+        counts.below_threshold,
+    ) = session.execute(
+        select(
+            func.count(Attempt.reply_model),  # counts non-null: attempts a model answered
+            func.coalesce(func.sum(Attempt.input_tokens), 0),
+            func.coalesce(func.sum(Attempt.output_tokens), 0),
+            func.coalesce(func.sum(Attempt.transport_retries), 0),
+            _count_if(Attempt.hard_invalid.is_not(None)),
+            _count_if(Attempt.accepted.is_(False) & Attempt.hard_invalid.is_(None)),
+        )
+    ).one()
+    counts.retries_by_tier = {
+        str(tier): n
+        for tier, n in session.execute(
+            select(Attempt.tier, func.count()).where(Attempt.tier > 0).group_by(Attempt.tier)
+        )
+    }
     return counts
 
 
@@ -88,22 +102,35 @@ def families(c: RunCounts) -> Iterator[Metric]:
         runs.add_metric([status], c.runs_by_status.get(status, 0))
     yield runs
     yield CounterMetricFamily("ltaa_decisions", "Finalised decisions", c.decisions)
-    yield CounterMetricFamily("ltaa_fallbacks", "Decisions that fell back to the rules "
-                              "reasoner after every retry failed validation", c.fallbacks)
-    yield CounterMetricFamily("ltaa_llm_calls", "Reasoner calls answered by a model "
-                              "(the rules reasoner makes none)", c.llm_calls)
+    yield CounterMetricFamily(
+        "ltaa_fallbacks",
+        "Decisions that fell back to the rules reasoner after every retry failed validation",
+        c.fallbacks,
+    )
+    yield CounterMetricFamily(
+        "ltaa_llm_calls",
+        "Reasoner calls answered by a model (the rules reasoner makes none)",
+        c.llm_calls,
+    )
     yield CounterMetricFamily("ltaa_llm_input_tokens", "LLM input tokens", c.input_tokens)
     yield CounterMetricFamily("ltaa_llm_output_tokens", "LLM output tokens", c.output_tokens)
-    yield CounterMetricFamily("ltaa_llm_transport_retries", "LLM calls retried after a "
-                              "timeout, 429 or 5xx", c.transport_retries)
+    yield CounterMetricFamily(
+        "ltaa_llm_transport_retries",
+        "LLM calls retried after a timeout, 429 or 5xx",
+        c.transport_retries,
+    )
     failures = CounterMetricFamily(
-        "ltaa_validation_failures", "Attempts rejected by validation: hard_invalid (Q forced "
-        "to 0) or below_threshold (Q under the quality threshold)", labels=["reason"])
+        "ltaa_validation_failures",
+        "Attempts rejected by validation: hard_invalid (Q forced "
+        "to 0) or below_threshold (Q under the quality threshold)",
+        labels=["reason"],
+    )
     failures.add_metric(["hard_invalid"], c.hard_invalid)
     failures.add_metric(["below_threshold"], c.below_threshold)
     yield failures
-    retries = CounterMetricFamily("ltaa_retries", "Retry attempts, by escalation tier",
-                                  labels=["tier"])
+    retries = CounterMetricFamily(
+        "ltaa_retries", "Retry attempts, by escalation tier", labels=["tier"]
+    )
     for tier in sorted({*RETRY_TIERS, *c.retries_by_tier}, key=int):
         retries.add_metric([tier], c.retries_by_tier.get(tier, 0))
     yield retries
@@ -151,4 +178,5 @@ class RequestMetrics:
         finally:
             route = getattr(scope.get("route"), "path", None) or "unrouted"
             self.histogram.labels(scope["method"], route, str(status)).observe(
-                time.perf_counter() - started)
+                time.perf_counter() - started
+            )

@@ -107,14 +107,18 @@ class AnthropicReasoner:
             )
         except anthropic.APIConnectionError as exc:  # includes APITimeoutError
             retries = _retries_taken(exc)
-            raise ReasonerError(f"{type(exc).__name__} after {retries} transport retries: {exc}",
-                                transport_retries=retries) from exc
+            raise ReasonerError(
+                f"{type(exc).__name__} after {retries} transport retries: {exc}",
+                transport_retries=retries,
+            ) from exc
         except anthropic.APIStatusError as exc:
             if not _transient(exc):
                 raise _rejected(exc, self.model) from exc
             retries = _retries_taken(exc)
-            raise ReasonerError(f"HTTP {exc.status_code} after {retries} transport retries: "
-                                f"{exc}", transport_retries=retries) from exc
+            raise ReasonerError(
+                f"HTTP {exc.status_code} after {retries} transport retries: {exc}",
+                transport_retries=retries,
+            ) from exc
         message = _message(raw)
         latency_ms = (time.perf_counter() - started) * 1000.0
         text = "".join(getattr(block, "text", "") for block in message.content)
@@ -144,14 +148,18 @@ class ReasonerRejectedError(DomainError):
 
 def _rejected(exc: anthropic.APIStatusError, model: str) -> DomainError:
     if exc.status_code == 404:
-        err = ReasonerRejectedError("model", f"the Messages API does not know model "
-                                    f"'{model}' (HTTP 404); choose another model",
-                                    code="unknown_model")
+        err = ReasonerRejectedError(
+            "model",
+            f"the Messages API does not know model '{model}' (HTTP 404); choose another model",
+            code="unknown_model",
+        )
         return err
     err = ReasonerRejectedError(
-        "reasoner", f"the Messages API rejected the call (HTTP {exc.status_code}: "
+        "reasoner",
+        f"the Messages API rejected the call (HTTP {exc.status_code}: "
         f"{exc.message}); check the server's ANTHROPIC_API_KEY and model access",
-        code="upstream_rejected")
+        code="upstream_rejected",
+    )
     # The server's own configuration, not the request, is at fault.
     err.status_code = 502 if exc.status_code in (401, 403) else 422
     return err

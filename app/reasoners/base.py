@@ -39,8 +39,9 @@ class DecisionContext:
     @property
     def labels(self) -> tuple[str, ...]:
         """How prompts and replies name each robot: its label, else its key."""
-        return tuple(label or name
-                     for label, name in zip(self.robot_labels, self.robot_names, strict=True))
+        return tuple(
+            label or name for label, name in zip(self.robot_labels, self.robot_names, strict=True)
+        )
 
 
 def percent(x: float) -> str:

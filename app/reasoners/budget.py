@@ -34,8 +34,14 @@ class BudgetExhausted:
 
 
 class TokenBudgetReasoner:
-    def __init__(self, inner: Reasoner, *, budget: int, spent: int,
-                 on_exhausted: Callable[[BudgetExhausted], None]) -> None:
+    def __init__(
+        self,
+        inner: Reasoner,
+        *,
+        budget: int,
+        spent: int,
+        on_exhausted: Callable[[BudgetExhausted], None],
+    ) -> None:
         self.name = inner.name  # failed calls are still attributed to the configured reasoner
         self.budget = budget
         self.spent = spent
@@ -59,8 +65,9 @@ class TokenBudgetReasoner:
             self._told = True
         # The rules reply names no model, so the trace shows which reasoner answered.
         reply = self._rules.reason(system, user, context)
-        return replace(reply, extra={**reply.extra, "reasoner": self._rules.name,
-                                     "reason": BUDGET_EXHAUSTED})
+        return replace(
+            reply, extra={**reply.extra, "reasoner": self._rules.name, "reason": BUDGET_EXHAUSTED}
+        )
 
     def close(self) -> None:
         close_reasoner(self._inner)

@@ -71,9 +71,11 @@ def make_reasoner(
     if name == "replay":
         if replay_of is None or replies is None:
             raise DomainError(
-                "reasoner", "the 'replay' reasoner replays a finished durable run: "
-                "POST /runs with \"reasoner\": \"replay\" and \"replay_of\": <run id>",
-                code="replay_needs_run")
+                "reasoner",
+                "the 'replay' reasoner replays a finished durable run: "
+                'POST /runs with "reasoner": "replay" and "replay_of": <run id>',
+                code="replay_needs_run",
+            )
         return ReplayReasoner(run_id=replay_of, replies=replies)
     if name != "anthropic":
         raise DomainError(

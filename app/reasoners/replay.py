@@ -53,8 +53,10 @@ class RecordedReply:
     def original_tokens(self) -> tuple[int, int]:
         """(input, output) tokens the first run paid for this text."""
         if self.model is None and "replayed_from" in self.extra:
-            return (int(self.extra.get("original_input_tokens") or 0),
-                    int(self.extra.get("original_output_tokens") or 0))
+            return (
+                int(self.extra.get("original_input_tokens") or 0),
+                int(self.extra.get("original_output_tokens") or 0),
+            )
         return self.input_tokens, self.output_tokens
 
 

@@ -36,26 +36,30 @@ def _event_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[
     after = 0
     while True:
         with sessions() as session:
-            page = repo.events_page(session=session, run_id=run_id, after_seq=after,
-                                    limit=EVENTS_PER_PAGE)
+            page = repo.events_page(
+                session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
+            )
         if not page:
             return
         yield page
         after = page[-1].seq
 
 
-def _decision_pages(sessions: sessionmaker[Session], run_id: str,
-                    ) -> Iterator[list[tuple[Decision, list[Attempt]]]]:
+def _decision_pages(
+    sessions: sessionmaker[Session],
+    run_id: str,
+) -> Iterator[list[tuple[Decision, list[Attempt]]]]:
     after = -1
     while True:
         with sessions() as session:
-            page = repo.decisions_page(session=session, run_id=run_id, after_task=after,
-                                       limit=DECISIONS_PER_PAGE)
+            page = repo.decisions_page(
+                session=session, run_id=run_id, after_task=after, limit=DECISIONS_PER_PAGE
+            )
             if not page:
                 return
-            attempts = repo.attempts_of_tasks(session=session, run_id=run_id,
-                                              first=page[0].task_index,
-                                              last=page[-1].task_index)
+            attempts = repo.attempts_of_tasks(
+                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
+            )
         yield [(d, attempts.get(d.task_index, [])) for d in page]
         after = page[-1].task_index
 
@@ -65,6 +69,7 @@ def _columns(row: Any, fields: dict[str, Any]) -> dict[str, Any]:
 
 
 # -- verification --------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class ChainCheckResult:
@@ -90,8 +95,9 @@ class ChainReport:
 
 
 def _result(check: chain.ChainCheck) -> ChainCheckResult:
-    return ChainCheckResult(rows=check.count, unchained=check.unchained, head=check.head,
-                            first_break=check.first_break)
+    return ChainCheckResult(
+        rows=check.count, unchained=check.unchained, head=check.head, first_break=check.first_break
+    )
 
 
 def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport:
@@ -103,33 +109,42 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
     decisions = chain.ChainCheck("decisions", run_id, first_key=0)
     for page in _decision_pages(sessions, run_id):
         for d, attempts in page:
+
             def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:
-                digest = chain.attempts_digest(_columns(a, chain.ATTEMPT_FIELDS)
-                                               for a in attempts)
+                digest = chain.attempts_digest(_columns(a, chain.ATTEMPT_FIELDS) for a in attempts)
                 return chain.decision_link(prev, _columns(d, chain.DECISION_FIELDS), digest)
+
             decisions.feed(d.task_index, d.chain_hash, link)
 
     events = chain.ChainCheck("events", run_id, first_key=1)
     last_kind = None
     for event_page in _event_pages(sessions, run_id):
         for e in event_page:
-            events.feed(e.seq, e.chain_hash,
-                        lambda prev, e=e: chain.event_link(prev, _columns(e, chain.EVENT_FIELDS)))
+            events.feed(
+                e.seq,
+                e.chain_hash,
+                lambda prev, e=e: chain.event_link(prev, _columns(e, chain.EVENT_FIELDS)),
+            )
             last_kind = e.kind
 
     # The newest rows of a chain leave no gap when deleted; a completed run says where its
     # chains end (n_tasks decisions, and its last event is the one that completed it).
     if status == "completed" and decisions.last_key != n_tasks - 1:
         last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
-        decisions.missing_tail(f"the run completed with {n_tasks} tasks but its decisions "
-                               f"end at {last}: the last decisions were deleted")
+        decisions.missing_tail(
+            f"the run completed with {n_tasks} tasks but its decisions "
+            f"end at {last}: the last decisions were deleted"
+        )
     if status == "completed" and last_kind != "completed":
-        events.missing_tail("the run completed but its events do not end with the "
-                            "'completed' event: the last events were deleted")
+        events.missing_tail(
+            "the run completed but its events do not end with the "
+            "'completed' event: the last events were deleted"
+        )
     return ChainReport(decisions=_result(decisions), events=_result(events))
 
 
 # -- export --------------------------------------------------------------------------------
+
 
 def _when(value: datetime | None) -> str | None:
     return as_utc(value).isoformat() if value is not None else None
@@ -137,33 +152,54 @@ def _when(value: datetime | None) -> str | None:
 
 def _run_line(run: Run) -> dict[str, Any]:
     return {
-        "type": "run", "format": chain.SCHEME, "id": run.id, "status": run.status,
-        "reasoner": run.reasoner, "mode": run.mode, "max_deviation": run.max_deviation,
-        "n_tasks": run.n_tasks, "n_robots": run.n_robots, "resumes": run.resumes,
-        "error": run.error, "created_at": _when(run.created_at),
-        "finished_at": _when(run.finished_at), "request": run.request,
-        "genesis": {"decisions": chain.genesis("decisions", run.id),
-                    "events": chain.genesis("events", run.id)},
+        "type": "run",
+        "format": chain.SCHEME,
+        "id": run.id,
+        "status": run.status,
+        "reasoner": run.reasoner,
+        "mode": run.mode,
+        "max_deviation": run.max_deviation,
+        "n_tasks": run.n_tasks,
+        "n_robots": run.n_robots,
+        "resumes": run.resumes,
+        "error": run.error,
+        "created_at": _when(run.created_at),
+        "finished_at": _when(run.finished_at),
+        "request": run.request,
+        "genesis": {
+            "decisions": chain.genesis("decisions", run.id),
+            "events": chain.genesis("events", run.id),
+        },
     }
 
 
 def _event_line(e: RunEvent) -> dict[str, Any]:
-    return {"type": "event", **_columns(e, chain.EVENT_FIELDS), "at": _when(e.created_at),
-            "chain_hash": e.chain_hash}
+    return {
+        "type": "event",
+        **_columns(e, chain.EVENT_FIELDS),
+        "at": _when(e.created_at),
+        "chain_hash": e.chain_hash,
+    }
 
 
 def _decision_line(d: Decision, attempts: list[Attempt]) -> dict[str, Any]:
     # Columns under their stored names, so the export alone suffices to recompute the chain.
     return {
-        "type": "decision", **_columns(d, chain.DECISION_FIELDS), "at": _when(d.created_at),
+        "type": "decision",
+        **_columns(d, chain.DECISION_FIELDS),
+        "at": _when(d.created_at),
         "chain_hash": d.chain_hash,
-        "attempt_records": [{**_columns(a, chain.ATTEMPT_FIELDS), "at": _when(a.created_at)}
-                            for a in attempts],
+        "attempt_records": [
+            {**_columns(a, chain.ATTEMPT_FIELDS), "at": _when(a.created_at)} for a in attempts
+        ],
     }
 
 
-def trace_record(*, sessions: sessionmaker[Session], run_id: str,
-                 ) -> Iterator[list[dict[str, Any]]]:
+def trace_record(
+    *,
+    sessions: sessionmaker[Session],
+    run_id: str,
+) -> Iterator[list[dict[str, Any]]]:
     """The whole audit record as pages of self-describing lines: the run, its events, its
     decisions (each with its attempts, prompts and replies), then an end line with counts
     so a reader can tell a complete record from a cut-off download.
@@ -174,8 +210,9 @@ def trace_record(*, sessions: sessionmaker[Session], run_id: str,
     return _record_pages(sessions, run_id, header)
 
 
-def _record_pages(sessions: sessionmaker[Session], run_id: str,
-                  header: dict[str, Any]) -> Iterator[list[dict[str, Any]]]:
+def _record_pages(
+    sessions: sessionmaker[Session], run_id: str, header: dict[str, Any]
+) -> Iterator[list[dict[str, Any]]]:
     yield [header]
     n_events = n_decisions = n_attempts = 0
     for events in _event_pages(sessions, run_id):
@@ -185,5 +222,4 @@ def _record_pages(sessions: sessionmaker[Session], run_id: str,
         n_decisions += len(decisions)
         n_attempts += sum(len(a) for _, a in decisions)
         yield [_decision_line(d, a) for d, a in decisions]
-    yield [{"type": "end", "events": n_events, "decisions": n_decisions,
-            "attempts": n_attempts}]
+    yield [{"type": "end", "events": n_events, "decisions": n_decisions, "attempts": n_attempts}]

@@ -10,8 +10,9 @@ class RunNotFoundError(DomainError):
     location = "path"
 
     def __init__(self, run_id: str) -> None:
-        super().__init__("run_id", f"no run with id '{run_id}'; list runs with GET /runs",
-                         code="not_found")
+        super().__init__(
+            "run_id", f"no run with id '{run_id}'; list runs with GET /runs", code="not_found"
+        )
 
 
 class RunStateConflictError(DomainError):
@@ -19,5 +20,6 @@ class RunStateConflictError(DomainError):
     location = "path"
 
     def __init__(self, run_id: str, status: str, action: str, hint: str) -> None:
-        super().__init__("run_id", f"run '{run_id}' is {status}; cannot {action}. {hint}",
-                         code="conflict")
+        super().__init__(
+            "run_id", f"run '{run_id}' is {status}; cannot {action}. {hint}", code="conflict"
+        )

@@ -31,8 +31,9 @@ class Idempotency:
 def request_digest(body: Mapping[str, Any]) -> str:
     """SHA-256 of the canonical JSON of a validated request body, so that key order and
     whitespace do not make a retry look like a different request."""
-    canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
-                           allow_nan=False)
+    canonical = json.dumps(
+        body, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False
+    )
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
@@ -42,9 +43,12 @@ class IdempotencyKeyReusedError(DomainError):
 
     def __init__(self, run_id: str) -> None:
         super().__init__(
-            HEADER, f"this {HEADER} was already used with a different request body (it "
+            HEADER,
+            f"this {HEADER} was already used with a different request body (it "
             f"created run '{run_id}'); send a new key for a new request, or resend the "
-            "original body to get that run", code="idempotency_key_reused")
+            "original body to get that run",
+            code="idempotency_key_reused",
+        )
 
 
 def run_for_key(*, sessions: sessionmaker[Session], idempotency: Idempotency) -> Run | None:

@@ -50,8 +50,10 @@ def check_integrity(
     for d in decisions:
         loads[d.robot] += 1
         if d.loads_after != loads:
-            problems.append(f"task {d.task_index}: stored loads_after {d.loads_after} but the "
-                            f"decisions so far give {loads}")
+            problems.append(
+                f"task {d.task_index}: stored loads_after {d.loads_after} but the "
+                f"decisions so far give {loads}"
+            )
             break
 
     cp_index = checkpoint.get("task_index") if checkpoint else None
@@ -60,8 +62,9 @@ def check_integrity(
     if cp_index is not None:
         lag = len(decisions) - cp_index
         if lag not in (0, 1):
-            problems.append(f"checkpoint is at task {cp_index} but {len(decisions)} decisions "
-                            "are stored")
+            problems.append(
+                f"checkpoint is at task {cp_index} but {len(decisions)} decisions are stored"
+            )
         if cp_loads is not None:
             expected = [0] * n_robots
             for d in decisions[: min(cp_index, len(decisions))]:
@@ -76,8 +79,9 @@ def check_integrity(
                 counted[robot] += 1
             loads_consistent = cp_loads in (expected, counted)
             if not loads_consistent:
-                problems.append(f"checkpoint loads {cp_loads} disagree with the stored "
-                                f"decisions ({expected})")
+                problems.append(
+                    f"checkpoint loads {cp_loads} disagree with the stored decisions ({expected})"
+                )
     resume_at = len(decisions)
     target = n_tasks / n_robots
     return IntegrityReport(

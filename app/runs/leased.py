@@ -67,8 +67,7 @@ class Periodic:
             try:
                 self._fn()
             except Exception:
-                log.exception("%s failed; retrying in %.1f s", self._thread.name,
-                              self._interval_s)
+                log.exception("%s failed; retrying in %.1f s", self._thread.name, self._interval_s)
 
 
 class LeasedRunWorker(RunWorker):
@@ -89,8 +88,9 @@ class LeasedRunWorker(RunWorker):
     def _open_checkpointer(self) -> tuple[BaseCheckpointSaver[Any], Callable[[], None]]:
         from app.graph.checkpoint_postgres import open_postgres_saver
 
-        return open_postgres_saver(self._settings.db_url,
-                                   max_connections=self._settings.max_concurrent_runs)
+        return open_postgres_saver(
+            self._settings.db_url, max_connections=self._settings.max_concurrent_runs
+        )
 
     # -- lifecycle ---------------------------------------------------------------------
 
@@ -114,8 +114,9 @@ class LeasedRunWorker(RunWorker):
         with self._claim_lock:
             if self._free_slots() > 0:
                 with transaction(self._sessions) as session:
-                    claimed = leases.claim_run(session=session, run_id=run_id,
-                                               owner=self.owner, lease_s=self._lease_s)
+                    claimed = leases.claim_run(
+                        session=session, run_id=run_id, owner=self.owner, lease_s=self._lease_s
+                    )
                 if claimed:
                     self._start_claimed(run_id)
                     return
@@ -144,16 +145,27 @@ class LeasedRunWorker(RunWorker):
         """Reap expired leases, then claim up to the free slots; returns resumed run ids."""
         with transaction(self._sessions) as session:
             for run, previous in leases.reap_expired(session=session):
-                repo.add_event(session=session, run_id=run.id, kind="interrupted",
-                               detail={"reason": f"the lease of {previous or 'no process'} "
-                                                 "expired: the process running it stopped",
-                                       "lease_owner": previous, "worker": self.owner})
+                repo.add_event(
+                    session=session,
+                    run_id=run.id,
+                    kind="interrupted",
+                    detail={
+                        "reason": f"the lease of {previous or 'no process'} "
+                        "expired: the process running it stopped",
+                        "lease_owner": previous,
+                        "worker": self.owner,
+                    },
+                )
         statuses = ["queued", "interrupted"] if self._settings.auto_resume else ["queued"]
         with self._claim_lock:
             with transaction(self._sessions) as session:
-                claimed = leases.claim_runs(session=session, owner=self.owner,
-                                            lease_s=self._lease_s, limit=self._free_slots(),
-                                            statuses=statuses)
+                claimed = leases.claim_runs(
+                    session=session,
+                    owner=self.owner,
+                    lease_s=self._lease_s,
+                    limit=self._free_slots(),
+                    statuses=statuses,
+                )
             for run_id, _ in claimed:
                 self._start_claimed(run_id)
         if claimed:
@@ -166,8 +178,9 @@ class LeasedRunWorker(RunWorker):
         if not held:
             return
         with transaction(self._sessions) as session:
-            alive = leases.renew(session=session, owner=self.owner, run_ids=list(held),
-                                 lease_s=self._lease_s)
+            alive = leases.renew(
+                session=session, owner=self.owner, run_ids=list(held), lease_s=self._lease_s
+            )
         for run_id, stop in held.items():
             if run_id not in alive:
                 if self._is_local(run_id) and not stop.lease_lost.is_set():
@@ -199,8 +212,9 @@ class LeasedRunWorker(RunWorker):
 
     def _fence(self, run_id: str, stop: RunStop) -> Fence:
         def fence(session: Session) -> None:
-            alive = leases.renew(session=session, owner=self.owner, run_ids=[run_id],
-                                 lease_s=self._lease_s)
+            alive = leases.renew(
+                session=session, owner=self.owner, run_ids=[run_id], lease_s=self._lease_s
+            )
             if run_id not in alive:
                 stop.lease_lost.set()
                 raise LeaseLost(run_id)

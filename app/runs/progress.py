@@ -60,10 +60,19 @@ class ProgressBatch:
 
 
 def _decision_data(d: Decision) -> dict[str, Any]:
-    return {"task_index": d.task_index, "task_id": d.task_id, "task_name": d.task_name,
-            "robot": d.robot_name, "phase": d.phase, "expected_success": d.expected_success,
-            "quality": d.quality, "fallback": d.fallback, "attempts": d.attempts,
-            "regret": d.regret, "balance_after": d.balance_after}
+    return {
+        "task_index": d.task_index,
+        "task_id": d.task_id,
+        "task_name": d.task_name,
+        "robot": d.robot_name,
+        "phase": d.phase,
+        "expected_success": d.expected_success,
+        "quality": d.quality,
+        "fallback": d.fallback,
+        "attempts": d.attempts,
+        "regret": d.regret,
+        "balance_after": d.balance_after,
+    }
 
 
 def _event_data(e: RunEvent) -> dict[str, Any]:
@@ -85,8 +94,9 @@ def run_status(*, sessions: sessionmaker[Session], run_id: str) -> str | None:
         return session.scalar(select(Run.status).where(Run.id == run_id))
 
 
-def read_progress(*, sessions: sessionmaker[Session], run_id: str,
-                  cursor: Cursor) -> ProgressBatch | None:
+def read_progress(
+    *, sessions: sessionmaker[Session], run_id: str, cursor: Cursor
+) -> ProgressBatch | None:
     """Everything after `cursor`, or None if there is no such run."""
     with sessions() as session:
         # Status first: rows read afterwards include everything written before it changed,
@@ -94,11 +104,16 @@ def read_progress(*, sessions: sessionmaker[Session], run_id: str,
         status = session.scalar(select(Run.status).where(Run.id == run_id))
         if status is None:
             return None
-        events = session.scalars(select(RunEvent).where(
-            RunEvent.run_id == run_id, RunEvent.seq > cursor.events).order_by(RunEvent.seq))
-        decisions = session.scalars(select(Decision).where(
-            Decision.run_id == run_id, Decision.task_index >= cursor.decisions)
-            .order_by(Decision.task_index))
+        events = session.scalars(
+            select(RunEvent)
+            .where(RunEvent.run_id == run_id, RunEvent.seq > cursor.events)
+            .order_by(RunEvent.seq)
+        )
+        decisions = session.scalars(
+            select(Decision)
+            .where(Decision.run_id == run_id, Decision.task_index >= cursor.decisions)
+            .order_by(Decision.task_index)
+        )
         rows = [(at, 0 if e.kind in _OPENING else 2, e) for at, e in _monotonic(events)]
         contiguous = []
         for d in decisions:

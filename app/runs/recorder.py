@@ -34,8 +34,7 @@ class RunStop:
         self.lease_lost = threading.Event()
 
     def requested(self) -> bool:
-        return (self.cancelled.is_set() or self.shutting_down.is_set()
-                or self.lease_lost.is_set())
+        return self.cancelled.is_set() or self.shutting_down.is_set() or self.lease_lost.is_set()
 
 
 class SqlRecorder:
@@ -92,13 +91,13 @@ class SqlRecorder:
             return cached.copy()
         if self._stored_through is None:
             with self._sessions() as session:
-                self._stored_through = repo.last_attempted_task(session=session,
-                                                                run_id=self.run_id)
+                self._stored_through = repo.last_attempted_task(session=session, run_id=self.run_id)
         if task_index > self._stored_through:
             return None
         with self._sessions() as session:
-            row = repo.get_attempt(session=session, run_id=self.run_id, task_index=task_index,
-                                   attempt=attempt)
+            row = repo.get_attempt(
+                session=session, run_id=self.run_id, task_index=task_index, attempt=attempt
+            )
             return repo.attempt_record(row) if row is not None else None
 
     def save_decision(self, record: DecisionRecord) -> None:
@@ -106,13 +105,20 @@ class SqlRecorder:
             if self._fence is not None:
                 self._fence(session)
             repo.upsert_decision(session=session, run_id=self.run_id, record=record)
-        log.log(logging.WARNING if record.fallback else logging.INFO,
-                "task %d -> %s (Q %.2f, %d attempt(s)%s)", record.task_index,
-                record.robot_name, record.quality, record.attempts,
-                ", rules fallback" if record.fallback else "",
-                extra={"run_id": self.run_id, "task_index": record.task_index})
+        log.log(
+            logging.WARNING if record.fallback else logging.INFO,
+            "task %d -> %s (Q %.2f, %d attempt(s)%s)",
+            record.task_index,
+            record.robot_name,
+            record.quality,
+            record.attempts,
+            ", rules fallback" if record.fallback else "",
+            extra={"run_id": self.run_id, "task_index": record.task_index},
+        )
 
     def decisions(self) -> list[DecisionRecord]:
         with self._sessions() as session:
-            return [repo.decision_record(row)
-                    for row in repo.decisions(session=session, run_id=self.run_id)]
+            return [
+                repo.decision_record(row)
+                for row in repo.decisions(session=session, run_id=self.run_id)
+            ]

@@ -22,8 +22,15 @@ from app.store import repository as repo
 
 REPLAY = "replay"
 # RunSpec fields a replay copies from the original run.
-COPIED = ("instance_data", "mode", "max_deviation", "quality_threshold", "max_retries",
-          "guidance", "seed")
+COPIED = (
+    "instance_data",
+    "mode",
+    "max_deviation",
+    "quality_threshold",
+    "max_retries",
+    "guidance",
+    "seed",
+)
 # Request fields that have no meaning for a replay.
 NOT_FOR_REPLAY = ("model", "temperature", "token_budget")
 # Request fields naming the instance; they all map onto the spec's instance_data.
@@ -34,21 +41,31 @@ class ReplaySourceNotFinishedError(DomainError):
     status_code = 409
 
     def __init__(self, run_id: str, status: str) -> None:
-        hint = ("wait until it completes" if status in ("queued", "running", "interrupted")
-                else "only a completed run has a full record to replay")
-        super().__init__("replay_of", f"run '{run_id}' is {status}; {hint}",
-                         code="replay_source_not_completed")
+        hint = (
+            "wait until it completes"
+            if status in ("queued", "running", "interrupted")
+            else "only a completed run has a full record to replay"
+        )
+        super().__init__(
+            "replay_of", f"run '{run_id}' is {status}; {hint}", code="replay_source_not_completed"
+        )
 
 
 def check_reasoner(reasoner: str, replay_of: str | None) -> None:
     """`replay_of` goes with the replay reasoner, and only with it."""
     if reasoner == REPLAY and replay_of is None:
-        raise DomainError("replay_of", "the 'replay' reasoner needs 'replay_of': the id of a "
-                          "completed run (see GET /runs)", code="missing")
+        raise DomainError(
+            "replay_of",
+            "the 'replay' reasoner needs 'replay_of': the id of a completed run (see GET /runs)",
+            code="missing",
+        )
     if reasoner != REPLAY and replay_of is not None:
-        raise DomainError("replay_of", f"'replay_of' only goes with \"reasoner\": \"replay\" "
-                          f"(this request's reasoner is '{reasoner}'); drop one of them",
-                          code="replay_of_without_replay")
+        raise DomainError(
+            "replay_of",
+            f'\'replay_of\' only goes with "reasoner": "replay" '
+            f"(this request's reasoner is '{reasoner}'); drop one of them",
+            code="replay_of_without_replay",
+        )
 
 
 def original_spec(*, session: Session, replay_of: str) -> RunSpec:
@@ -56,8 +73,11 @@ def original_spec(*, session: Session, replay_of: str) -> RunSpec:
     field (a 404 would suggest the URL is wrong); a run not completed is a 409."""
     run = repo.get_run(session=session, run_id=replay_of)
     if run is None:
-        raise DomainError("replay_of", f"no run with id '{replay_of}' to replay; list runs "
-                          "with GET /runs?status=completed", code="unknown_run")
+        raise DomainError(
+            "replay_of",
+            f"no run with id '{replay_of}' to replay; list runs with GET /runs?status=completed",
+            code="unknown_run",
+        )
     if run.status != "completed":
         raise ReplaySourceNotFinishedError(replay_of, run.status)
     return RunSpec.from_json(run.request)
@@ -74,8 +94,12 @@ def check_conflicts(original: RunSpec, replay_of: str, values: Mapping[str, Any]
         if name in NOT_FOR_REPLAY:
             if value is None:
                 continue
-            raise DomainError(name, f"a replay calls no model and spends no tokens, so "
-                              f"'{name}' does not apply; omit it", code="not_for_replay")
+            raise DomainError(
+                name,
+                f"a replay calls no model and spends no tokens, so "
+                f"'{name}' does not apply; omit it",
+                code="not_for_replay",
+            )
         spec_field = _spec_field(name)
         if spec_field not in COPIED:
             continue
@@ -84,14 +108,23 @@ def check_conflicts(original: RunSpec, replay_of: str, values: Mapping[str, Any]
         if spec_field == "instance_data":
             differs = f"describes another instance than run '{replay_of}'"
         else:
-            differs = f"differs from run '{replay_of}', whose {name} is " \
-                      f"{getattr(original, spec_field)!r}"
-        raise DomainError(name, f"{differs}; a replay copies the original's, so omit "
-                          f"'{name}' or send the same value", code="replay_conflict")
+            differs = (
+                f"differs from run '{replay_of}', whose {name} is {getattr(original, spec_field)!r}"
+            )
+        raise DomainError(
+            name,
+            f"{differs}; a replay copies the original's, so omit '{name}' or send the same value",
+            code="replay_conflict",
+        )
 
 
-def replay_spec(*, sessions: sessionmaker[Session], reasoner: str, replay_of: str | None,
-                sent: Mapping[str, Any]) -> RunSpec:
+def replay_spec(
+    *,
+    sessions: sessionmaker[Session],
+    reasoner: str,
+    replay_of: str | None,
+    sent: Mapping[str, Any],
+) -> RunSpec:
     """The spec of a replay of run `replay_of`, given the fields a request sent explicitly
     (request field -> value, the instance as `instance_to_dict` of what it describes)."""
     check_reasoner(reasoner, replay_of)
@@ -99,8 +132,14 @@ def replay_spec(*, sessions: sessionmaker[Session], reasoner: str, replay_of: st
     with sessions() as session:
         original = original_spec(session=session, replay_of=replay_of)
     check_conflicts(original, replay_of, sent)
-    return dataclasses.replace(original, reasoner=REPLAY, replay_of=replay_of, model=None,
-                               temperature=None, token_budget=None)
+    return dataclasses.replace(
+        original,
+        reasoner=REPLAY,
+        replay_of=replay_of,
+        model=None,
+        temperature=None,
+        token_budget=None,
+    )
 
 
 def validate_replay(*, sessions: sessionmaker[Session], spec: RunSpec) -> None:
@@ -114,14 +153,19 @@ def validate_replay(*, sessions: sessionmaker[Session], spec: RunSpec) -> None:
     check_conflicts(original, spec.replay_of, own)
 
 
-def recorded_replies(*, sessions: sessionmaker[Session],
-                     run_id: str) -> dict[ReplyKey, RecordedReply]:
+def recorded_replies(
+    *, sessions: sessionmaker[Session], run_id: str
+) -> dict[ReplyKey, RecordedReply]:
     """The replies run `run_id` recorded, by (task_index, attempt), as plain data."""
     with sessions() as session:
         rows = repo.attempt_replies(session=session, run_id=run_id)
     return {
         (row.task_index, row.attempt): RecordedReply(
-            text=row.reply_text, model=row.reply_model, input_tokens=row.input_tokens,
-            output_tokens=row.output_tokens, extra=dict(row.reply_extra or {}))
+            text=row.reply_text,
+            model=row.reply_model,
+            input_tokens=row.input_tokens,
+            output_tokens=row.output_tokens,
+            extra=dict(row.reply_extra or {}),
+        )
         for row in rows
     }

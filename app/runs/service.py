@@ -27,7 +27,11 @@ TERMINAL = ("completed", "failed", "cancelled")
 
 
 def create_run(
-    *, sessions: sessionmaker[Session], worker: RunWorker, settings: Settings, spec: RunSpec,
+    *,
+    sessions: sessionmaker[Session],
+    worker: RunWorker,
+    settings: Settings,
+    spec: RunSpec,
     idempotency: Idempotency | None = None,
 ) -> Run:
     """Validate everything first, so a bad request never leaves a half-written run."""
@@ -36,32 +40,52 @@ def create_run(
     validate_replay(sessions=sessions, spec=spec)
     if spec.replay_of is None:  # a replay's reasoner is built from the record, at run time
         # Raises for an unknown reasoner or a missing key; the run builds its own later.
-        close_reasoner(make_reasoner(spec.reasoner, settings=settings, model=spec.model,
-                                     temperature=spec.temperature))
+        close_reasoner(
+            make_reasoner(
+                spec.reasoner, settings=settings, model=spec.model, temperature=spec.temperature
+            )
+        )
     run_id = uuid.uuid4().hex
     with transaction(sessions) as session:
         run = Run(
-            id=run_id, status="queued", request=spec.to_json(), reasoner=spec.reasoner,
-            mode=spec.mode, max_deviation=problem.cap.max_deviation,
-            n_tasks=problem.instance.n_tasks, n_robots=problem.instance.n_robots, resumes=0,
+            id=run_id,
+            status="queued",
+            request=spec.to_json(),
+            reasoner=spec.reasoner,
+            mode=spec.mode,
+            max_deviation=problem.cap.max_deviation,
+            n_tasks=problem.instance.n_tasks,
+            n_robots=problem.instance.n_robots,
+            resumes=0,
             cancel_requested=False,
             idempotency_key=idempotency.key if idempotency else None,
             request_digest=idempotency.digest if idempotency else None,
         )
         session.add(run)
         session.flush()
-        repo.add_event(session=session, run_id=run_id, kind="created",
-                       detail={"reasoner": spec.reasoner, "mode": spec.mode,
-                               "tasks": problem.instance.n_tasks,
-                               "robots": problem.instance.n_robots,
-                               "max_deviation": problem.cap.max_deviation,
-                               **({"replay_of": spec.replay_of} if spec.replay_of else {})})
+        repo.add_event(
+            session=session,
+            run_id=run_id,
+            kind="created",
+            detail={
+                "reasoner": spec.reasoner,
+                "mode": spec.mode,
+                "tasks": problem.instance.n_tasks,
+                "robots": problem.instance.n_robots,
+                "max_deviation": problem.cap.max_deviation,
+                **({"replay_of": spec.replay_of} if spec.replay_of else {}),
+            },
+        )
     worker.submit(run_id)
     return run
 
 
 def create_or_replay_run(
-    *, sessions: sessionmaker[Session], worker: RunWorker, settings: Settings, spec: RunSpec,
+    *,
+    sessions: sessionmaker[Session],
+    worker: RunWorker,
+    settings: Settings,
+    spec: RunSpec,
     idempotency: Idempotency | None,
 ) -> tuple[Run, bool]:
     """Create a run, under an Idempotency-Key if the request sent one: (the run, whether an
@@ -70,8 +94,9 @@ def create_or_replay_run(
     if idempotency is None:
         return create_run(sessions=sessions, worker=worker, settings=settings, spec=spec), False
     try:
-        return create_run(sessions=sessions, worker=worker, settings=settings, spec=spec,
-                          idempotency=idempotency), False
+        return create_run(
+            sessions=sessions, worker=worker, settings=settings, spec=spec, idempotency=idempotency
+        ), False
     except IntegrityError:
         # No look-up first: the unique index on the key is the one arbiter, so a retry after
         # the first request ended and two requests at once end the same way. The insert
@@ -93,11 +118,11 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
     with transaction(sessions) as session:
         run = _require(session, run_id)
         if run.status == "completed":
-            raise RunStateConflictError(run_id, run.status, "resume",
-                                        "A completed run has nothing left to do.")
+            raise RunStateConflictError(
+                run_id, run.status, "resume", "A completed run has nothing left to do."
+            )
         if run.status == "cancelled":
-            raise RunStateConflictError(run_id, run.status, "resume",
-                                        "Create a new run instead.")
+            raise RunStateConflictError(run_id, run.status, "resume", "Create a new run instead.")
         if run.status in ("queued", "running") or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
         if run.status == "failed":
@@ -116,8 +141,12 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
         run.cancel_requested = True
         if not worker.is_active(run_id):
             repo.set_status(session=session, run=run, status="cancelled")
-            repo.add_event(session=session, run_id=run_id, kind="cancelled",
-                           detail={"reason": "cancel requested before it ran"})
+            repo.add_event(
+                session=session,
+                run_id=run_id,
+                kind="cancelled",
+                detail={"reason": "cancel requested before it ran"},
+            )
     worker.cancel(run_id)
     with sessions() as session:
         return _require(session, run_id)
@@ -153,8 +182,11 @@ class RunView:
     @property
     def progress(self) -> dict[str, Any]:
         allocated = len(self.decisions)
-        return {"allocated": allocated, "total": self.run.n_tasks,
-                "phase": detect_phase(min(allocated, self.run.n_tasks), self.run.n_tasks).value}
+        return {
+            "allocated": allocated,
+            "total": self.run.n_tasks,
+            "phase": detect_phase(min(allocated, self.run.n_tasks), self.run.n_tasks).value,
+        }
 
     @property
     def regret(self) -> float | None:
@@ -176,18 +208,21 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
     with sessions() as session:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
-        decisions = [repo.decision_record(d) for d in repo.decisions(session=session,
-                                                                     run_id=run_id)]
+        decisions = [
+            repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+        ]
         usage = usage_of(repo.attempts(session=session, run_id=run_id))
     metrics = None
     if run.status == "completed" and len(decisions) == run.n_tasks:
-        metrics = compute_metrics(spec.problem.instance, [d.robot for d in decisions],
-                                  seed=spec.seed)
+        metrics = compute_metrics(
+            spec.problem.instance, [d.robot for d in decisions], seed=spec.seed
+        )
     return RunView(run=run, spec=spec, decisions=decisions, usage=usage, metrics=metrics)
 
 
-def list_run_rows(*, sessions: sessionmaker[Session], status: str | None, limit: int,
-                  offset: int) -> list[Run]:
+def list_run_rows(
+    *, sessions: sessionmaker[Session], status: str | None, limit: int, offset: int
+) -> list[Run]:
     with sessions() as session:
         return repo.list_runs(session=session, status=status, limit=limit, offset=offset)
 
@@ -209,7 +244,8 @@ def run_trace(*, sessions: sessionmaker[Session], run_id: str) -> Trace:
         return Trace(
             run=run,
             events=repo.events(session=session, run_id=run_id),
-            decisions=[repo.decision_record(d) for d in repo.decisions(session=session,
-                                                                       run_id=run_id)],
+            decisions=[
+                repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+            ],
             attempts=by_task,
         )

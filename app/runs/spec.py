@@ -43,8 +43,12 @@ class RunSpec:
 
     @cached_property
     def problem(self) -> Problem:
-        return Problem.build(instance_from_dict(self.instance_data), Mode(self.mode),
-                             self.max_deviation, uncapped=self.max_deviation is None)
+        return Problem.build(
+            instance_from_dict(self.instance_data),
+            Mode(self.mode),
+            self.max_deviation,
+            uncapped=self.max_deviation is None,
+        )
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

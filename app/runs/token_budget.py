@@ -20,8 +20,14 @@ from app.store.db import transaction
 log = logging.getLogger("ltaa.runs")
 
 
-def with_token_budget(reasoner: Reasoner, *, run_id: str, budget: int | None,
-                      sessions: sessionmaker[Session], fence: Fence | None = None) -> Reasoner:
+def with_token_budget(
+    reasoner: Reasoner,
+    *,
+    run_id: str,
+    budget: int | None,
+    sessions: sessionmaker[Session],
+    fence: Fence | None = None,
+) -> Reasoner:
     """`reasoner` limited to `budget` tokens for the run; unchanged without a budget.
     `fence` is the recorder's write check (PostgreSQL scale-out): a process that lost the
     run's lease writes no event either."""
@@ -37,10 +43,16 @@ def with_token_budget(reasoner: Reasoner, *, run_id: str, budget: int | None,
             # A run restarted after the switch is told again: the event stays single.
             if repo.has_event(session=session, run_id=run_id, kind=BUDGET_EXHAUSTED):
                 return
-            repo.add_event(session=session, run_id=run_id, kind=BUDGET_EXHAUSTED,
-                           detail=exhausted.as_dict())
-        log.warning("token budget spent (%d of %d tokens): the rules reasoner decides from "
-                    "task index %d on", exhausted.tokens_spent, exhausted.budget,
-                    exhausted.task_index, extra={"run_id": run_id})
+            repo.add_event(
+                session=session, run_id=run_id, kind=BUDGET_EXHAUSTED, detail=exhausted.as_dict()
+            )
+        log.warning(
+            "token budget spent (%d of %d tokens): the rules reasoner decides from "
+            "task index %d on",
+            exhausted.tokens_spent,
+            exhausted.budget,
+            exhausted.task_index,
+            extra={"run_id": run_id},
+        )
 
     return TokenBudgetReasoner(reasoner, budget=budget, spent=spent, on_exhausted=record)

@@ -102,12 +102,16 @@ class RunWorker:
             orphans = repo.runs_with_status(session=session, statuses=["running"])
             for run in orphans:
                 repo.set_status(session=session, run=run, status="interrupted")
-                repo.add_event(session=session, run_id=run.id, kind="interrupted",
-                               detail={"reason": "found running at start-up; the process "
-                                                 "that ran it stopped"})
+                repo.add_event(
+                    session=session,
+                    run_id=run.id,
+                    kind="interrupted",
+                    detail={"reason": "found running at start-up; the process that ran it stopped"},
+                )
             queued = [r.id for r in repo.runs_with_status(session=session, statuses=["queued"])]
-            interrupted = [r.id for r in repo.runs_with_status(session=session,
-                                                                 statuses=["interrupted"])]
+            interrupted = [
+                r.id for r in repo.runs_with_status(session=session, statuses=["interrupted"])
+            ]
         for run_id in queued:
             self.submit(run_id)
         if self._settings.auto_resume:
@@ -190,10 +194,18 @@ class RunWorker:
             with transaction(self._sessions) as session:
                 run = self._owned_run(session, run_id)
                 if run is not None and run.status == "running":
-                    repo.set_status(session=session, run=run, status="failed",
-                                    error="internal error; see the server log")
-                    repo.add_event(session=session, run_id=run_id, kind="failed",
-                                   detail={"error": "internal error"})
+                    repo.set_status(
+                        session=session,
+                        run=run,
+                        status="failed",
+                        error="internal error; see the server log",
+                    )
+                    repo.add_event(
+                        session=session,
+                        run_id=run_id,
+                        kind="failed",
+                        detail={"error": "internal error"},
+                    )
         finally:
             with self._lock:
                 self._futures.pop(run_id, None)
@@ -212,48 +224,82 @@ class RunWorker:
             spec = RunSpec.from_json(run.request)
             problem = spec.problem
             if checkpoint is not None or run.status == "interrupted":
-                stored = [repo.decision_record(d)
-                          for d in repo.decisions(session=session, run_id=run_id)]
+                stored = [
+                    repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+                ]
                 values = checkpoint.checkpoint["channel_values"] if checkpoint else None
-                report = check_integrity(decisions=stored, n_tasks=problem.instance.n_tasks,
-                                         n_robots=problem.instance.n_robots, checkpoint=values)
+                report = check_integrity(
+                    decisions=stored,
+                    n_tasks=problem.instance.n_tasks,
+                    n_robots=problem.instance.n_robots,
+                    checkpoint=values,
+                )
                 if not report.ok:
                     # Resuming would build on a record that the checkpoint contradicts, and
                     # its final allocation could not be trusted: stop here, say why.
-                    repo.add_event(session=session, run_id=run_id, kind="integrity_failed",
-                                   detail={"integrity": report.as_dict(),
-                                           **self._event_detail()})
+                    repo.add_event(
+                        session=session,
+                        run_id=run_id,
+                        kind="integrity_failed",
+                        detail={"integrity": report.as_dict(), **self._event_detail()},
+                    )
                     repo.set_status(
-                        session=session, run=run, status="failed",
+                        session=session,
+                        run=run,
+                        status="failed",
                         error="not resumed: the integrity check failed ("
-                        + "; ".join(report.problems) + "). The stored decisions and the "
+                        + "; ".join(report.problems)
+                        + "). The stored decisions and the "
                         "checkpoint disagree; inspect GET /runs/{id}/trace and "
-                        "/trace/verify, then start a new run.")
+                        "/trace/verify, then start a new run.",
+                    )
                     return
                 run.resumes += 1
-                repo.add_event(session=session, run_id=run_id, kind="resumed",
-                               detail={"integrity": report.as_dict(),
-                                       "from_checkpoint": checkpoint is not None,
-                                       **self._event_detail()})
+                repo.add_event(
+                    session=session,
+                    run_id=run_id,
+                    kind="resumed",
+                    detail={
+                        "integrity": report.as_dict(),
+                        "from_checkpoint": checkpoint is not None,
+                        **self._event_detail(),
+                    },
+                )
             else:
-                repo.add_event(session=session, run_id=run_id, kind="started",
-                               detail={"reasoner": spec.reasoner, "mode": spec.mode,
-                                       "tasks": problem.instance.n_tasks,
-                                       **self._event_detail()})
+                repo.add_event(
+                    session=session,
+                    run_id=run_id,
+                    kind="started",
+                    detail={
+                        "reasoner": spec.reasoner,
+                        "mode": spec.mode,
+                        "tasks": problem.instance.n_tasks,
+                        **self._event_detail(),
+                    },
+                )
             repo.set_status(session=session, run=run, status="running")
 
         fence = self._fence(run_id, stop)
-        recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop,
-                               pause_at_task=None if self._settings.test_pause_at_node
-                               else self._settings.test_pause_at_task,
-                               fence=fence)
+        recorder = SqlRecorder(
+            run_id=run_id,
+            sessions=self._sessions,
+            stop=stop,
+            pause_at_task=None
+            if self._settings.test_pause_at_node
+            else self._settings.test_pause_at_task,
+            fence=fence,
+        )
         try:
             reasoner = self._reasoner(run_id, spec, fence)
         except DomainError as exc:
             # The configuration changed since the run was accepted (e.g. the API key was
             # removed before a resume): fail with the reason and the fix, not "internal error".
-            self._finish(run_id, "failed", {"error": exc.message, "field": exc.field},
-                         error=f"cannot resume: {exc.message}")
+            self._finish(
+                run_id,
+                "failed",
+                {"error": exc.message, "field": exc.field},
+                error=f"cannot resume: {exc.message}",
+            )
             return
         context = graph_context(
             problem,
@@ -270,8 +316,12 @@ class RunWorker:
             return
         except Exception as exc:
             log.exception("run %s failed", run_id)
-            self._finish(run_id, "failed", {"error": f"{type(exc).__name__}: {exc}"},
-                         error=f"{type(exc).__name__}: {exc}")
+            self._finish(
+                run_id,
+                "failed",
+                {"error": f"{type(exc).__name__}: {exc}"},
+                error=f"{type(exc).__name__}: {exc}",
+            )
             return
         finally:
             close_reasoner(reasoner)  # its HTTP connection pool, for the anthropic one
@@ -279,22 +329,36 @@ class RunWorker:
         if [d.task_index for d in stored] != list(range(problem.instance.n_tasks)):
             # A graph can end without routing (a raising router, LangGraph #8834):
             # completion is judged by our own record, never by the graph returning.
-            self._finish(run_id, "failed",
-                         {"error": f"graph ended with {len(stored)} of "
-                                   f"{problem.instance.n_tasks} decisions stored"},
-                         error="graph ended early")
+            self._finish(
+                run_id,
+                "failed",
+                {
+                    "error": f"graph ended with {len(stored)} of "
+                    f"{problem.instance.n_tasks} decisions stored"
+                },
+                error="graph ended early",
+            )
             return
         self._finish(run_id, "completed", {"decisions": len(stored)})
 
     def _reasoner(self, run_id: str, spec: RunSpec, fence: Fence | None = None) -> Reasoner:
         """The reasoner a run's graph calls, built afresh at every (re)start."""
-        replies = (recorded_replies(sessions=self._sessions, run_id=spec.replay_of)
-                   if spec.replay_of is not None else None)
-        reasoner = make_reasoner(spec.reasoner, settings=self._settings, model=spec.model,
-                                 temperature=spec.temperature, replay_of=spec.replay_of,
-                                 replies=replies)
-        return with_token_budget(reasoner, run_id=run_id, budget=spec.token_budget,
-                                 sessions=self._sessions, fence=fence)
+        replies = (
+            recorded_replies(sessions=self._sessions, run_id=spec.replay_of)
+            if spec.replay_of is not None
+            else None
+        )
+        reasoner = make_reasoner(
+            spec.reasoner,
+            settings=self._settings,
+            model=spec.model,
+            temperature=spec.temperature,
+            replay_of=spec.replay_of,
+            replies=replies,
+        )
+        return with_token_budget(
+            reasoner, run_id=run_id, budget=spec.token_budget, sessions=self._sessions, fence=fence
+        )
 
     def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
         if stop.lease_lost.is_set():
@@ -304,11 +368,19 @@ class RunWorker:
         if stop.cancelled.is_set():
             self._finish(run_id, "cancelled", {"reason": "cancel requested"})
         else:
-            self._finish(run_id, "interrupted", {"reason": "server shutting down"},
-                         event="interrupted")
+            self._finish(
+                run_id, "interrupted", {"reason": "server shutting down"}, event="interrupted"
+            )
 
-    def _finish(self, run_id: str, status: str, detail: dict[str, Any], *,
-                error: str | None = None, event: str | None = None) -> None:
+    def _finish(
+        self,
+        run_id: str,
+        status: str,
+        detail: dict[str, Any],
+        *,
+        error: str | None = None,
+        event: str | None = None,
+    ) -> None:
         with transaction(self._sessions) as session:
             run = self._owned_run(session, run_id)
             if run is None:

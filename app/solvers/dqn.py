@@ -41,19 +41,18 @@ class DQNOptions(SolverOptions):
     # Bounded so one request cannot hold the (serialised) trainer for long: 200,000 steps
     # is about 5 minutes here; train_freq and target_update_interval above `timesteps`
     # would make SB3 collect forever without training.
-    timesteps: int = Field(
-        20_000, ge=100, le=200_000, description="environment steps of training"
-    )
+    timesteps: int = Field(20_000, ge=100, le=200_000, description="environment steps of training")
     learning_rate: float = Field(1e-3, gt=0.0, le=1.0)
     gamma: float = Field(1.0, ge=0.0, le=1.0, description="discount; 1 suits the fixed horizon")
     batch_size: int = Field(64, ge=1, le=4096)
     buffer_size: int = Field(50_000, ge=100, le=1_000_000)
     learning_starts: int = Field(
-        1_000, ge=0, le=200_000,
+        1_000,
+        ge=0,
+        le=200_000,
         description="random steps before training; at most a tenth of timesteps",
     )
-    target_update_interval: int = Field(500, ge=1, le=200_000,
-                                        description="at most timesteps")
+    target_update_interval: int = Field(500, ge=1, le=200_000, description="at most timesteps")
     train_freq: int = Field(4, ge=1, le=1_000, description="at most timesteps")
     exploration_fraction: float = Field(0.5, gt=0.0, le=1.0)
     exploration_final_eps: float = Field(0.05, ge=0.0, le=1.0)
@@ -68,8 +67,9 @@ class DQNOptions(SolverOptions):
     def _within_timesteps(self) -> DQNOptions:
         for name in ("train_freq", "target_update_interval"):
             if name in self.model_fields_set and getattr(self, name) > self.timesteps:
-                raise ValueError(f"{name} ({getattr(self, name)}) must not exceed timesteps "
-                                 f"({self.timesteps})")
+                raise ValueError(
+                    f"{name} ({getattr(self, name)}) must not exceed timesteps ({self.timesteps})"
+                )
         return self
 
 

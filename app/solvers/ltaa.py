@@ -41,14 +41,22 @@ class LTAAOptions(SolverOptions):
 
 
 def graph_context(
-    problem: Problem, *, reasoner: Reasoner, recorder: Recorder, quality_threshold: float,
-    max_retries: int, guidance: str | None,
+    problem: Problem,
+    *,
+    reasoner: Reasoner,
+    recorder: Recorder,
+    quality_threshold: float,
+    max_retries: int,
+    guidance: str | None,
 ) -> GraphContext:
     """The LTAA graph's run context, with exact regret always and guidance on request."""
     oracle = CompletionOracle(problem)
     return GraphContext(
-        problem=problem, reasoner=reasoner, recorder=recorder,
-        quality_threshold=quality_threshold, max_retries=max_retries,
+        problem=problem,
+        reasoner=reasoner,
+        recorder=recorder,
+        quality_threshold=quality_threshold,
+        max_retries=max_retries,
         guidance=oracle.guidance if guidance == "optimizer" else None,
         regret=oracle.regret,
     )
@@ -86,8 +94,11 @@ class LTAASolver(Solver):
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
         recorder = MemoryRecorder()
         context = graph_context(
-            problem, reasoner=reasoner, recorder=recorder,
-            quality_threshold=opts.quality_threshold, max_retries=opts.max_retries,
+            problem,
+            reasoner=reasoner,
+            recorder=recorder,
+            quality_threshold=opts.quality_threshold,
+            max_retries=opts.max_retries,
             guidance=opts.guidance,
         )
         try:

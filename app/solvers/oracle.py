@@ -41,8 +41,9 @@ class CompletionOracle:
         if key not in self._cache:
             classes = self._classes
             try:
-                x = class_allocation(classes.rows, classes.counts(task_index),
-                                     self._problem.cap, loads)
+                x = class_allocation(
+                    classes.rows, classes.counts(task_index), self._problem.cap, loads
+                )
             except InfeasibleCapError:
                 return None
             self._cache[key] = (x, float((x * classes.rows).sum()))
@@ -71,8 +72,10 @@ class CompletionOracle:
         """Expected success (mean over all tasks) given away by this decision."""
         loss = self.loss(task_index, loads, robot)
         if loss is None:
-            raise InfeasibleCapError(f"task {task_index} to robot {robot} from loads "
-                                     f"{list(loads)} leaves no cap-respecting completion")
+            raise InfeasibleCapError(
+                f"task {task_index} to robot {robot} from loads "
+                f"{list(loads)} leaves no cap-respecting completion"
+            )
         return loss / self._problem.instance.n_tasks
 
     def guidance(self, task_index: int, loads: Sequence[int]) -> GuidedChoice | None:

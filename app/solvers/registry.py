@@ -26,7 +26,8 @@ def get_solver(name: str) -> Solver:
     target = _SOLVERS.get(name)
     if target is None:
         raise DomainError(
-            "solver", f"unknown solver '{name}'; choose one of: {', '.join(_SOLVERS)}",
+            "solver",
+            f"unknown solver '{name}'; choose one of: {', '.join(_SOLVERS)}",
             code="unknown_solver",
         )
     module, cls = target.split(":")

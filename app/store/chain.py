@@ -84,26 +84,53 @@ def _json(value: Any) -> Any:
 Normaliser = Callable[[Any], Any]
 
 DECISION_FIELDS: dict[str, Normaliser] = {
-    "task_index": _int, "task_id": _str, "task_name": _str,
-    "robot": _int, "robot_name": _str, "phase": _str, "expected_success": _float,
-    "reasoning": _str, "confidence": _str, "tradeoff": _str, "quality": _float,
-    "fallback": _bool, "attempts": _int, "failure_log": _json,
-    "loads_before": _json, "loads_after": _json, "balance_before": _float,
-    "balance_after": _float, "severity_after": _str, "regret": _float,
+    "task_index": _int,
+    "task_id": _str,
+    "task_name": _str,
+    "robot": _int,
+    "robot_name": _str,
+    "phase": _str,
+    "expected_success": _float,
+    "reasoning": _str,
+    "confidence": _str,
+    "tradeoff": _str,
+    "quality": _float,
+    "fallback": _bool,
+    "attempts": _int,
+    "failure_log": _json,
+    "loads_before": _json,
+    "loads_after": _json,
+    "balance_before": _float,
+    "balance_after": _float,
+    "severity_after": _str,
+    "regret": _float,
 }
 ATTEMPT_FIELDS: dict[str, Normaliser] = {
-    "attempt": _int, "tier": _int, "system_prompt": _str, "user_prompt": _str,
-    "reply_text": _opt_str, "reply_model": _opt_str, "input_tokens": _int,
-    "output_tokens": _int, "latency_ms": _float, "transport_retries": _int,
-    "reply_extra": _json, "parsed": _json, "scores": _json, "quality": _float,
-    "accepted": _opt_bool, "hard_invalid": _opt_str, "feedback": _opt_str,
+    "attempt": _int,
+    "tier": _int,
+    "system_prompt": _str,
+    "user_prompt": _str,
+    "reply_text": _opt_str,
+    "reply_model": _opt_str,
+    "input_tokens": _int,
+    "output_tokens": _int,
+    "latency_ms": _float,
+    "transport_retries": _int,
+    "reply_extra": _json,
+    "parsed": _json,
+    "scores": _json,
+    "quality": _float,
+    "accepted": _opt_bool,
+    "hard_invalid": _opt_str,
+    "feedback": _opt_str,
 }
 EVENT_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
 
 
 def canonical_json(value: Any) -> str:
-    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
-                      allow_nan=True)
+    return json.dumps(
+        value, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=True
+    )
 
 
 def _sha256(text: str) -> str:
@@ -178,24 +205,42 @@ class ChainCheck:
         self.last_key, self.head = key, stored
         if self.first_break is None:
             if key != self._next_key:
-                missing = (f"{self._noun} {self._next_key}" if key == self._next_key + 1 else
-                           f"{self._noun} {self._next_key} to {key - 1}")
-                self._fail(self._next_key, None, None,
-                           f"{missing} is missing from the {self.table}: the row was deleted "
-                           "(or renumbered)")
+                missing = (
+                    f"{self._noun} {self._next_key}"
+                    if key == self._next_key + 1
+                    else f"{self._noun} {self._next_key} to {key - 1}"
+                )
+                self._fail(
+                    self._next_key,
+                    None,
+                    None,
+                    f"{missing} is missing from the {self.table}: the row was deleted "
+                    "(or renumbered)",
+                )
             elif stored is None:
-                self._fail(key, None, None,
-                           f"{self._noun} {key} has no chain hash: it was written before "
-                           "tamper evidence existed (or its hash was erased), so it cannot be "
-                           "verified")
+                self._fail(
+                    key,
+                    None,
+                    None,
+                    f"{self._noun} {key} has no chain hash: it was written before "
+                    "tamper evidence existed (or its hash was erased), so it cannot be "
+                    "verified",
+                )
             else:
                 expected = link(self._prev)
                 if expected != stored:
-                    self._fail(key, expected, stored,
-                               f"{self._noun} {key} does not match its recorded hash: the row "
-                               "was edited, moved, or replaced" +
-                               (" (or one of its task's attempts was changed)"
-                                if self.table == "decisions" else ""))
+                    self._fail(
+                        key,
+                        expected,
+                        stored,
+                        f"{self._noun} {key} does not match its recorded hash: the row "
+                        "was edited, moved, or replaced"
+                        + (
+                            " (or one of its task's attempts was changed)"
+                            if self.table == "decisions"
+                            else ""
+                        ),
+                    )
         if stored is None:
             self.unchained += 1
         self._prev = next_prev(stored)

@@ -38,8 +38,10 @@ def reap_expired(*, session: Session) -> list[tuple[Run, str | None]]:
     """Runs `running` under an expired lease: their process died or stalled. Each is set
     `interrupted` and unleased (returned with its previous owner, for the event)."""
     rows = session.scalars(
-        select(Run).where(Run.status == "running", _unleased())
-        .order_by(Run.created_at).with_for_update(skip_locked=True)
+        select(Run)
+        .where(Run.status == "running", _unleased())
+        .order_by(Run.created_at)
+        .with_for_update(skip_locked=True)
     ).all()
     reaped = []
     for run in rows:
@@ -57,20 +59,32 @@ def claim_runs(
     if limit <= 0 or not statuses:
         return []
     rows = session.execute(
-        select(Run.id, Run.status).where(Run.status.in_(statuses), _unleased())
-        .order_by(Run.created_at, Run.id).limit(limit).with_for_update(skip_locked=True)
+        select(Run.id, Run.status)
+        .where(Run.status.in_(statuses), _unleased())
+        .order_by(Run.created_at, Run.id)
+        .limit(limit)
+        .with_for_update(skip_locked=True)
     ).all()
     ids = [r.id for r in rows]
     if ids:
-        session.execute(_no_sync(update(Run).where(Run.id.in_(ids))
-                                 .values(lease_owner=owner, lease_expires_at=_expires(lease_s))))
+        session.execute(
+            _no_sync(
+                update(Run)
+                .where(Run.id.in_(ids))
+                .values(lease_owner=owner, lease_expires_at=_expires(lease_s))
+            )
+        )
     return [(r.id, r.status) for r in rows]
 
 
 def claim_run(*, session: Session, run_id: str, owner: str, lease_s: float) -> bool:
     """Lease one run if it is claimable and nobody holds it (one conditional UPDATE)."""
-    stmt = (update(Run).where(Run.id == run_id, Run.status.in_(CLAIMABLE), _unleased())
-            .values(lease_owner=owner, lease_expires_at=_expires(lease_s)).returning(Run.id))
+    stmt = (
+        update(Run)
+        .where(Run.id == run_id, Run.status.in_(CLAIMABLE), _unleased())
+        .values(lease_owner=owner, lease_expires_at=_expires(lease_s))
+        .returning(Run.id)
+    )
     return session.execute(_no_sync(stmt)).first() is not None
 
 
@@ -81,24 +95,43 @@ def renew(
     from the answer was taken from this owner."""
     if not run_ids:
         return {}
-    stmt = (update(Run).where(Run.id.in_(run_ids), Run.lease_owner == owner)
-            .values(lease_expires_at=_expires(lease_s))
-            .returning(Run.id, Run.cancel_requested))
+    stmt = (
+        update(Run)
+        .where(Run.id.in_(run_ids), Run.lease_owner == owner)
+        .values(lease_expires_at=_expires(lease_s))
+        .returning(Run.id, Run.cancel_requested)
+    )
     return {r.id: bool(r.cancel_requested) for r in session.execute(_no_sync(stmt))}
 
 
 def release(*, session: Session, run_id: str, owner: str) -> None:
-    session.execute(_no_sync(update(Run).where(Run.id == run_id, Run.lease_owner == owner)
-                             .values(lease_owner=None, lease_expires_at=None)))
+    session.execute(
+        _no_sync(
+            update(Run)
+            .where(Run.id == run_id, Run.lease_owner == owner)
+            .values(lease_owner=None, lease_expires_at=None)
+        )
+    )
 
 
 def requeue(*, session: Session, run_id: str) -> None:
     """Hand an unleased interrupted run to whichever process has a free slot first."""
-    session.execute(_no_sync(update(Run).where(Run.id == run_id, Run.status == "interrupted",
-                                               _unleased()).values(status="queued")))
+    session.execute(
+        _no_sync(
+            update(Run)
+            .where(Run.id == run_id, Run.status == "interrupted", _unleased())
+            .values(status="queued")
+        )
+    )
 
 
 def is_leased(*, session: Session, run_id: str) -> bool:
-    return session.scalar(select(Run.id).where(
-        Run.id == run_id, and_(Run.lease_owner.is_not(None), Run.lease_expires_at >= func.now())
-    )) is not None
+    return (
+        session.scalar(
+            select(Run.id).where(
+                Run.id == run_id,
+                and_(Run.lease_owner.is_not(None), Run.lease_expires_at >= func.now()),
+            )
+        )
+        is not None
+    )

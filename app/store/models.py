@@ -62,12 +62,14 @@ class Run(Base):
     # An expired lease means that process stopped; any other process may then take the run.
     # Unused on SQLite, where one process owns the database.
     lease_owner: Mapped[str | None] = mapped_column(String(128), nullable=True)
-    lease_expires_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True),
-                                                              nullable=True)
+    lease_expires_at: Mapped[datetime | None] = mapped_column(
+        DateTime(timezone=True), nullable=True
+    )
     # Idempotency-Key of the POST /runs that created the run, and a digest of its body, so
     # a retried request returns this run and a reused key with another body is refused.
-    idempotency_key: Mapped[str | None] = mapped_column(String(255), nullable=True,
-                                                        unique=True, index=True)
+    idempotency_key: Mapped[str | None] = mapped_column(
+        String(255), nullable=True, unique=True, index=True
+    )
     request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 

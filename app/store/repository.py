@@ -47,12 +47,14 @@ def set_status(*, session: Session, run: Run, status: str, error: str | None = N
 
 def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:
     # One indexed lookup gives both the next seq and the link the new row hangs off.
-    last = session.execute(select(RunEvent.seq, RunEvent.chain_hash)
-                           .where(RunEvent.run_id == run_id)
-                           .order_by(RunEvent.seq.desc()).limit(1)).first()
+    last = session.execute(
+        select(RunEvent.seq, RunEvent.chain_hash)
+        .where(RunEvent.run_id == run_id)
+        .order_by(RunEvent.seq.desc())
+        .limit(1)
+    ).first()
     seq = last.seq + 1 if last is not None else 1
-    prev = chain.next_prev(last.chain_hash) if last is not None else chain.genesis("events",
-                                                                                    run_id)
+    prev = chain.next_prev(last.chain_hash) if last is not None else chain.genesis("events", run_id)
     link = chain.event_link(prev, {"seq": seq, "kind": kind, "detail": detail})
     event = RunEvent(run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link)
     session.add(event)
@@ -61,50 +63,80 @@ def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any
 
 def events_page(*, session: Session, run_id: str, after_seq: int, limit: int) -> list[RunEvent]:
     """Events with seq > after_seq, in order: the audit record read in bounded pages."""
-    return list(session.scalars(select(RunEvent).where(RunEvent.run_id == run_id,
-                                                       RunEvent.seq > after_seq)
-                                .order_by(RunEvent.seq).limit(limit)))
+    return list(
+        session.scalars(
+            select(RunEvent)
+            .where(RunEvent.run_id == run_id, RunEvent.seq > after_seq)
+            .order_by(RunEvent.seq)
+            .limit(limit)
+        )
+    )
 
 
-def decisions_page(*, session: Session, run_id: str, after_task: int,
-                   limit: int) -> list[Decision]:
-    return list(session.scalars(select(Decision).where(Decision.run_id == run_id,
-                                                       Decision.task_index > after_task)
-                                .order_by(Decision.task_index).limit(limit)))
+def decisions_page(*, session: Session, run_id: str, after_task: int, limit: int) -> list[Decision]:
+    return list(
+        session.scalars(
+            select(Decision)
+            .where(Decision.run_id == run_id, Decision.task_index > after_task)
+            .order_by(Decision.task_index)
+            .limit(limit)
+        )
+    )
 
 
-def attempts_of_tasks(*, session: Session, run_id: str, first: int,
-                      last: int) -> dict[int, list[Attempt]]:
+def attempts_of_tasks(
+    *, session: Session, run_id: str, first: int, last: int
+) -> dict[int, list[Attempt]]:
     """Attempts of task indexes first..last, by task, in attempt order."""
     by_task: dict[int, list[Attempt]] = {}
-    for row in session.scalars(select(Attempt).where(Attempt.run_id == run_id,
-                                                     Attempt.task_index.between(first, last))
-                               .order_by(Attempt.task_index, Attempt.attempt)):
+    for row in session.scalars(
+        select(Attempt)
+        .where(Attempt.run_id == run_id, Attempt.task_index.between(first, last))
+        .order_by(Attempt.task_index, Attempt.attempt)
+    ):
         by_task.setdefault(row.task_index, []).append(row)
     return by_task
 
 
 def events(*, session: Session, run_id: str) -> list[RunEvent]:
-    return list(session.scalars(select(RunEvent).where(RunEvent.run_id == run_id)
-                                .order_by(RunEvent.seq)))
+    return list(
+        session.scalars(select(RunEvent).where(RunEvent.run_id == run_id).order_by(RunEvent.seq))
+    )
 
 
 def decisions(*, session: Session, run_id: str) -> list[Decision]:
-    return list(session.scalars(select(Decision).where(Decision.run_id == run_id)
-                                .order_by(Decision.task_index)))
+    return list(
+        session.scalars(
+            select(Decision).where(Decision.run_id == run_id).order_by(Decision.task_index)
+        )
+    )
 
 
 def attempts(*, session: Session, run_id: str) -> list[Attempt]:
-    return list(session.scalars(select(Attempt).where(Attempt.run_id == run_id)
-                                .order_by(Attempt.task_index, Attempt.attempt)))
+    return list(
+        session.scalars(
+            select(Attempt)
+            .where(Attempt.run_id == run_id)
+            .order_by(Attempt.task_index, Attempt.attempt)
+        )
+    )
 
 
 def attempt_replies(*, session: Session, run_id: str) -> list[Any]:
     """Only the reply columns of a run's attempts (no prompts): what a replay needs."""
-    return list(session.execute(
-        select(Attempt.task_index, Attempt.attempt, Attempt.reply_text, Attempt.reply_model,
-               Attempt.input_tokens, Attempt.output_tokens, Attempt.reply_extra)
-        .where(Attempt.run_id == run_id)))
+    return list(
+        session.execute(
+            select(
+                Attempt.task_index,
+                Attempt.attempt,
+                Attempt.reply_text,
+                Attempt.reply_model,
+                Attempt.input_tokens,
+                Attempt.output_tokens,
+                Attempt.reply_extra,
+            ).where(Attempt.run_id == run_id)
+        )
+    )
 
 
 @cache
@@ -112,13 +144,17 @@ def _upsert_statement(dialect: str, model: type[Base], keys: tuple[str, ...]) ->
     # Built once and executed with parameters, so SQLAlchemy's compiled cache is hit.
     insert = {"sqlite": sqlite_insert, "postgresql": postgresql_insert}[dialect]
     stmt = insert(model.__table__)
-    updates = {c.name: stmt.excluded[c.name] for c in model.__table__.columns
-               if c.name not in keys and not c.primary_key}
+    updates = {
+        c.name: stmt.excluded[c.name]
+        for c in model.__table__.columns
+        if c.name not in keys and not c.primary_key
+    }
     return stmt.on_conflict_do_update(index_elements=list(keys), set_=updates)
 
 
-def _upsert(session: Session, model: type[Base], values: dict[str, Any],
-            keys: tuple[str, ...]) -> None:
+def _upsert(
+    session: Session, model: type[Base], values: dict[str, Any], keys: tuple[str, ...]
+) -> None:
     """INSERT ... ON CONFLICT (keys) DO UPDATE, in one statement (SQLite and PostgreSQL)."""
     stmt = _upsert_statement(session.get_bind().dialect.name, model, keys)
     session.execute(stmt, values)
@@ -129,14 +165,23 @@ def _decision_link_statement() -> Any:
     # Built once (building it took half the helper's time) and executed with parameters.
     d, a = Decision.__table__.c, Attempt.__table__.c
     run_id, task_index = bindparam("run_id"), bindparam("task_index")
-    prev = (select(func.coalesce(d.chain_hash, chain.UNCHAINED))
-            .where(d.run_id == run_id, d.task_index < task_index)
-            .order_by(d.task_index.desc()).limit(1).scalar_subquery())
+    prev = (
+        select(func.coalesce(d.chain_hash, chain.UNCHAINED))
+        .where(d.run_id == run_id, d.task_index < task_index)
+        .order_by(d.task_index.desc())
+        .limit(1)
+        .scalar_subquery()
+    )
     anchor = select(prev.label("prev")).subquery()
-    return (select(anchor.c.prev, *(a[name] for name in chain.ATTEMPT_FIELDS))
-            .select_from(anchor.outerjoin(Attempt.__table__,
-                                          and_(a.run_id == run_id, a.task_index == task_index)))
-            .order_by(a.attempt))
+    return (
+        select(anchor.c.prev, *(a[name] for name in chain.ATTEMPT_FIELDS))
+        .select_from(
+            anchor.outerjoin(
+                Attempt.__table__, and_(a.run_id == run_id, a.task_index == task_index)
+            )
+        )
+        .order_by(a.attempt)
+    )
 
 
 def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) -> str:
@@ -145,8 +190,9 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
 
     The attempts must already be written (in this transaction or an earlier one); content
     equal to what is stored (a re-upsert after a crash) gives the stored hash again."""
-    rows = session.execute(_decision_link_statement(),
-                           {"run_id": run_id, "task_index": values["task_index"]}).all()
+    rows = session.execute(
+        _decision_link_statement(), {"run_id": run_id, "task_index": values["task_index"]}
+    ).all()
     prev_link = rows[0].prev if rows[0].prev is not None else chain.genesis("decisions", run_id)
     attempts = [row._mapping for row in rows if row.attempt is not None]
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
@@ -156,8 +202,12 @@ def upsert_decision(*, session: Session, run_id: str, record: DecisionRecord) ->
     values = asdict(record)
     values["task_id"] = str(record.task_id)
     values["chain_hash"] = _decision_chain_hash(session, run_id, values)
-    _upsert(session, Decision, {"run_id": run_id, **values, "created_at": utcnow()},
-            ("run_id", "task_index"))
+    _upsert(
+        session,
+        Decision,
+        {"run_id": run_id, **values, "created_at": utcnow()},
+        ("run_id", "task_index"),
+    )
 
 
 def _attempt_values(record: AttemptRecord) -> dict[str, Any]:
@@ -183,8 +233,13 @@ def _attempt_values(record: AttemptRecord) -> dict[str, Any]:
 
 
 def upsert_attempt(*, session: Session, run_id: str, record: AttemptRecord) -> None:
-    values = {"run_id": run_id, "task_index": record.task_index, "attempt": record.attempt,
-              **_attempt_values(record), "created_at": utcnow()}
+    values = {
+        "run_id": run_id,
+        "task_index": record.task_index,
+        "attempt": record.attempt,
+        **_attempt_values(record),
+        "created_at": utcnow(),
+    }
     _upsert(session, Attempt, values, ("run_id", "task_index", "attempt"))
 
 
@@ -192,15 +247,27 @@ def attempt_record(row: Attempt) -> AttemptRecord:
     reply = None
     if row.reply_text is not None:
         reply = ReasonerReply(
-            text=row.reply_text, input_tokens=row.input_tokens, output_tokens=row.output_tokens,
-            latency_ms=row.latency_ms, model=row.reply_model,
-            transport_retries=row.transport_retries, extra=dict(row.reply_extra or {}),
+            text=row.reply_text,
+            input_tokens=row.input_tokens,
+            output_tokens=row.output_tokens,
+            latency_ms=row.latency_ms,
+            model=row.reply_model,
+            transport_retries=row.transport_retries,
+            extra=dict(row.reply_extra or {}),
         )
     return AttemptRecord(
-        task_index=row.task_index, attempt=row.attempt, tier=row.tier,
-        system_prompt=row.system_prompt, user_prompt=row.user_prompt, reply=reply,
-        parsed=row.parsed, scores=dict(row.scores or {}), quality=row.quality,
-        accepted=row.accepted, hard_invalid=row.hard_invalid, feedback=row.feedback,
+        task_index=row.task_index,
+        attempt=row.attempt,
+        tier=row.tier,
+        system_prompt=row.system_prompt,
+        user_prompt=row.user_prompt,
+        reply=reply,
+        parsed=row.parsed,
+        scores=dict(row.scores or {}),
+        quality=row.quality,
+        accepted=row.accepted,
+        hard_invalid=row.hard_invalid,
+        feedback=row.feedback,
     )
 
 
@@ -211,9 +278,11 @@ def last_attempted_task(*, session: Session, run_id: str) -> int:
 
 
 def get_attempt(*, session: Session, run_id: str, task_index: int, attempt: int) -> Attempt | None:
-    return session.scalar(select(Attempt).where(Attempt.run_id == run_id,
-                                                Attempt.task_index == task_index,
-                                                Attempt.attempt == attempt))
+    return session.scalar(
+        select(Attempt).where(
+            Attempt.run_id == run_id, Attempt.task_index == task_index, Attempt.attempt == attempt
+        )
+    )
 
 
 def decision_record(row: Decision) -> DecisionRecord:
@@ -224,11 +293,18 @@ def decision_record(row: Decision) -> DecisionRecord:
 def tokens_spent(*, session: Session, run_id: str) -> int:
     """Input + output tokens of a run's replies that name a model (as app.graph.usage
     counts them): what its LLM calls have cost so far, from the record."""
-    total = session.scalar(select(func.sum(Attempt.input_tokens + Attempt.output_tokens))
-                           .where(Attempt.run_id == run_id, Attempt.reply_model.is_not(None)))
+    total = session.scalar(
+        select(func.sum(Attempt.input_tokens + Attempt.output_tokens)).where(
+            Attempt.run_id == run_id, Attempt.reply_model.is_not(None)
+        )
+    )
     return int(total or 0)
 
 
 def has_event(*, session: Session, run_id: str, kind: str) -> bool:
-    return session.scalar(select(RunEvent.id).where(RunEvent.run_id == run_id,
-                                                    RunEvent.kind == kind).limit(1)) is not None
+    return (
+        session.scalar(
+            select(RunEvent.id).where(RunEvent.run_id == run_id, RunEvent.kind == kind).limit(1)
+        )
+        is not None
+    )

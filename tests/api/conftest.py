@@ -25,8 +25,11 @@ def make_client(settings: Settings) -> Iterator[ClientFactory]:
             # Clients stay open until teardown, and one SQLite store serves one process at
             # a time (app.runs.store_lock): each further client gets a store of its own.
             # (model_copy runs no validators: the paths derived from data_dir are reset too.)
-            overrides |= {"data_dir": settings.data_dir.with_name(f"data-{len(opened) + 1}"),
-                          "database_url": None, "checkpoint_path": None}
+            overrides |= {
+                "data_dir": settings.data_dir.with_name(f"data-{len(opened) + 1}"),
+                "database_url": None,
+                "checkpoint_path": None,
+            }
         client = TestClient(create_app(settings.model_copy(update=overrides)))
         opened.append(client.__enter__())
         return client

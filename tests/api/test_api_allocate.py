@@ -31,8 +31,11 @@ def post(client: TestClient, body: dict[str, Any]) -> dict[str, Any]:
 @pytest.mark.parametrize("solver", ["dp", "optimal"])
 @pytest.mark.parametrize(
     ("mode", "cap", "expected"),
-    [("success_focused", None, 0.830556), ("balanced", None, 0.786111),
-     ("aggressive_balance", 1, 0.769444)],
+    [
+        ("success_focused", None, 0.830556),
+        ("balanced", None, 0.786111),
+        ("aggressive_balance", 1, 0.769444),
+    ],
 )
 def test_baseline_exact_optima(
     client: TestClient, solver: str, mode: str, cap: int | None, expected: float
@@ -47,15 +50,34 @@ def test_baseline_exact_optima(
 
 def test_response_shape_and_consistency(client: TestClient) -> None:
     out = post(client, {"solver": "greedy", "scenario": "baseline"})
-    assert set(out) == {"solver", "mode", "max_deviation", "assignments", "metrics", "usage",
-                        "elapsed_ms"}
+    assert set(out) == {
+        "solver",
+        "mode",
+        "max_deviation",
+        "assignments",
+        "metrics",
+        "usage",
+        "elapsed_ms",
+    }
     assert out["mode"] == "balanced" and out["max_deviation"] == 4
     assert len(out["assignments"]) == 36
-    assert out["assignments"][0] == {"task_id": 0, "task_name": "Stop", "robot": "light",
-                                     "success": pytest.approx(0.8)}
+    assert out["assignments"][0] == {
+        "task_id": 0,
+        "task_name": "Stop",
+        "robot": "light",
+        "success": pytest.approx(0.8),
+    }
     m = out["metrics"]
-    assert set(m) == {"expected_success", "balance_score", "max_deviation", "imbalance_severity",
-                      "workload", "feature_success", "jain_index", "simulated_completion"}
+    assert set(m) == {
+        "expected_success",
+        "balance_score",
+        "max_deviation",
+        "imbalance_severity",
+        "workload",
+        "feature_success",
+        "jain_index",
+        "simulated_completion",
+    }
     counts = {name: 0 for name in ("light", "medium", "heavy")}
     for a in out["assignments"]:
         counts[a["robot"]] += 1
@@ -72,8 +94,13 @@ def test_response_shape_and_consistency(client: TestClient) -> None:
 
 @pytest.mark.parametrize(
     ("mode", "override", "effective"),
-    [("success_focused", None, None), ("balanced", None, 4), ("aggressive_balance", None, 1),
-     ("balanced", 2, 2), ("success_focused", 0, 0)],
+    [
+        ("success_focused", None, None),
+        ("balanced", None, 4),
+        ("aggressive_balance", None, 1),
+        ("balanced", 2, 2),
+        ("success_focused", 0, 0),
+    ],
 )
 def test_effective_cap_is_reported(
     client: TestClient, mode: str, override: int | None, effective: int | None
@@ -89,8 +116,9 @@ def test_effective_cap_is_reported(
 
 def test_exact_solvers_agree_on_a_small_custom_instance(client: TestClient) -> None:
     results = {
-        solver: post(client, {"solver": solver, "tasks": TASKS, "robots": ROBOTS,
-                              "mode": "balanced"})
+        solver: post(
+            client, {"solver": solver, "tasks": TASKS, "robots": ROBOTS, "mode": "balanced"}
+        )
         for solver in ("brute_force", "dp", "optimal")
     }
     es = {s: r["metrics"]["expected_success"] for s, r in results.items()}
@@ -103,15 +131,30 @@ def test_exact_solvers_agree_on_a_small_custom_instance(client: TestClient) -> N
 
 def test_custom_tasks_accept_teach_keys_and_string_ids(client: TestClient) -> None:
     tasks = [
-        {"action_id": 200, "action_name": "Pickup", "action_type": "ObjectInteraction",
-         "features": ["heavy"], "pose_delta": [0, 0, 0]},  # extra TEACh keys are ignored
+        {
+            "action_id": 200,
+            "action_name": "Pickup",
+            "action_type": "ObjectInteraction",
+            "features": ["heavy"],
+            "pose_delta": [0, 0, 0],
+        },  # extra TEACh keys are ignored
         {"id": "weld-7", "name": "Weld seam", "features": ["dexterous"]},
         {"id": "drill", "features": ["dexterous"]},
     ]
-    out = post(client, {"solver": "greedy", "tasks": tasks, "robots": ROBOTS,
-                        "mode": "success_focused", "seed": 7})
+    out = post(
+        client,
+        {
+            "solver": "greedy",
+            "tasks": tasks,
+            "robots": ROBOTS,
+            "mode": "success_focused",
+            "seed": 7,
+        },
+    )
     assert [(a["task_id"], a["task_name"], a["robot"]) for a in out["assignments"]] == [
-        (200, "Pickup", "lifter"), ("weld-7", "Weld seam", "arm"), ("drill", "drill", "arm"),
+        (200, "Pickup", "lifter"),
+        ("weld-7", "Weld seam", "arm"),
+        ("drill", "drill", "arm"),
     ]
     assert out["max_deviation"] is None
 
@@ -128,8 +171,9 @@ def test_seed_makes_the_simulation_reproducible(client: TestClient) -> None:
 def test_fractional_cap_and_any_feature_names(client: TestClient) -> None:
     robots = [{"name": f"r{i}", "success": {"paint": 0.1 * (i + 1)}} for i in range(3)]
     tasks = [{"id": i, "features": ["paint"]} for i in range(7)]
-    out = post(client, {"solver": "optimal", "tasks": tasks, "robots": robots,
-                        "max_deviation": 0.7})
+    out = post(
+        client, {"solver": "optimal", "tasks": tasks, "robots": robots, "max_deviation": 0.7}
+    )
     # W = 7/3: loads within [ceil(1.63), floor(3.03)] = [2, 3]
     assert out["max_deviation"] == pytest.approx(0.7)
     assert out["metrics"]["workload"] == {"r0": 2, "r1": 2, "r2": 3}
@@ -138,11 +182,15 @@ def test_fractional_cap_and_any_feature_names(client: TestClient) -> None:
 def test_a_long_solve_leaves_the_event_loop_free(client: TestClient) -> None:
     """The solve runs in the threadpool: /health answers while a long /allocate is solving."""
     robots = [{"name": f"r{i}", "success": {"f": 0.2 * (i + 1)}} for i in range(4)]
-    big = {"solver": "ltaa", "tasks": [{"id": i, "features": ["f"]} for i in range(400)],
-           "robots": robots}
+    big = {
+        "solver": "ltaa",
+        "tasks": [{"id": i, "features": ["f"]} for i in range(400)],
+        "robots": robots,
+    }
     answered: list[int] = []
     solving = threading.Thread(
-        target=lambda: answered.append(client.post("/allocate", json=big).status_code))
+        target=lambda: answered.append(client.post("/allocate", json=big).status_code)
+    )
     solving.start()
     try:
         time.sleep(0.5)  # the request is in, its solve (several seconds) under way

@@ -23,12 +23,22 @@ AS_SUPERVISOR = {"Authorization": f"Bearer {SUPERVISOR_KEY}"}
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
 
 # (method, path) of every endpoint behind a key; {id} is replaced by a real run id.
-CLIENT_ENDPOINTS = [("GET", "/solvers"), ("GET", "/scenarios"), ("POST", "/allocate"),
-                    ("POST", "/runs"), ("GET", "/runs"), ("GET", "/runs/{id}")]
-SUPERVISOR_ENDPOINTS = [("GET", "/runs/{id}/trace"), ("GET", "/runs/{id}/trace/verify"),
-                        ("GET", "/runs/{id}/events"),
-                        ("POST", "/runs/{id}/resume"), ("POST", "/runs/{id}/cancel"),
-                        ("GET", "/metrics")]
+CLIENT_ENDPOINTS = [
+    ("GET", "/solvers"),
+    ("GET", "/scenarios"),
+    ("POST", "/allocate"),
+    ("POST", "/runs"),
+    ("GET", "/runs"),
+    ("GET", "/runs/{id}"),
+]
+SUPERVISOR_ENDPOINTS = [
+    ("GET", "/runs/{id}/trace"),
+    ("GET", "/runs/{id}/trace/verify"),
+    ("GET", "/runs/{id}/events"),
+    ("POST", "/runs/{id}/resume"),
+    ("POST", "/runs/{id}/cancel"),
+    ("GET", "/metrics"),
+]
 
 
 @pytest.fixture
@@ -43,11 +53,16 @@ def _wait_completed(client: TestClient, run_id: str) -> None:
         time.sleep(0.02)
 
 
-def _call(client: TestClient, method: str, path: str, headers: dict[str, str],
-          run_id: str = "0" * 32) -> Any:
+def _call(
+    client: TestClient, method: str, path: str, headers: dict[str, str], run_id: str = "0" * 32
+) -> Any:
     body = {"solver": "greedy", **BASELINE} if path == "/allocate" else BASELINE
-    return client.request(method, path.replace("{id}", run_id), headers=headers,
-                          json=body if method == "POST" else None)
+    return client.request(
+        method,
+        path.replace("{id}", run_id),
+        headers=headers,
+        json=body if method == "POST" else None,
+    )
 
 
 def _only_error(response: Any, status: int, type_: str) -> dict[str, Any]:
@@ -59,19 +74,21 @@ def _only_error(response: Any, status: int, type_: str) -> dict[str, Any]:
 
 
 @pytest.mark.parametrize(("method", "path"), CLIENT_ENDPOINTS + SUPERVISOR_ENDPOINTS)
-def test_no_key_is_401_with_a_bearer_challenge(secured: TestClient, method: str,
-                                               path: str) -> None:
+def test_no_key_is_401_with_a_bearer_challenge(secured: TestClient, method: str, path: str) -> None:
     response = _call(secured, method, path, {})
     err = _only_error(response, 401, "missing_api_key")
     assert response.headers["www-authenticate"] == "Bearer"
     assert "Authorization: Bearer" in err["msg"] and "X-API-Key" in err["msg"]
 
 
-@pytest.mark.parametrize("headers", [
-    {"Authorization": f"Bearer {SUPERVISOR_KEY}x"},
-    {"X-API-Key": CLIENT_KEY[:-1]},
-    {"Authorization": f"bearer {SUPERVISOR_KEY.upper()}"},
-])
+@pytest.mark.parametrize(
+    "headers",
+    [
+        {"Authorization": f"Bearer {SUPERVISOR_KEY}x"},
+        {"X-API-Key": CLIENT_KEY[:-1]},
+        {"Authorization": f"bearer {SUPERVISOR_KEY.upper()}"},
+    ],
+)
 def test_an_unknown_key_is_401(secured: TestClient, headers: dict[str, str]) -> None:
     response = secured.get("/runs", headers=headers)
     err = _only_error(response, 401, "invalid_api_key")
@@ -105,10 +122,10 @@ def test_client_runs_and_allocates_but_supervisor_endpoints_are_403(
     _wait_completed(secured, run_id)
 
     for method, path in SUPERVISOR_ENDPOINTS:
-        err = _only_error(_call(secured, method, path, AS_CLIENT, run_id), 403,
-                          "insufficient_role")
-        assert err["msg"] == ("this endpoint needs the supervisor role; the API key sent "
-                              "has the client role"), path
+        err = _only_error(_call(secured, method, path, AS_CLIENT, run_id), 403, "insufficient_role")
+        assert err["msg"] == (
+            "this endpoint needs the supervisor role; the API key sent has the client role"
+        ), path
 
     trace = secured.get(f"/runs/{run_id}/trace", headers=AS_SUPERVISOR)
     assert trace.status_code == 200 and len(trace.json()["decisions"]) == 36
@@ -133,22 +150,31 @@ def test_every_other_route_requires_a_key(secured: TestClient) -> None:
     """A route added later without ClientDep or SupervisorDep fails here: the security
     schemes appear in an operation's OpenAPI only when it depends on authentication."""
     paths = secured.get("/openapi.json").json()["paths"]
-    operations = {(method.upper(), path): op for path, ops in paths.items()
-                  for method, op in ops.items()}
-    guarded = {(m, p.replace("{run_id}", "{id}")) for (m, p), op in operations.items()
-               if op.get("security") == [{"bearer": []}, {"apiKey": []}]}
+    operations = {
+        (method.upper(), path): op for path, ops in paths.items() for method, op in ops.items()
+    }
+    guarded = {
+        (m, p.replace("{run_id}", "{id}"))
+        for (m, p), op in operations.items()
+        if op.get("security") == [{"bearer": []}, {"apiKey": []}]
+    }
     assert guarded == set(CLIENT_ENDPOINTS + SUPERVISOR_ENDPOINTS)
     assert set(operations) - {(m, p.replace("{id}", "{run_id}")) for m, p in guarded} == {
-        ("GET", "/health"), ("HEAD", "/health")}
+        ("GET", "/health"),
+        ("HEAD", "/health"),
+    }
 
 
 def test_without_keys_access_is_open_and_startup_says_so(
-    make_client: ClientFactory, caplog: pytest.LogCaptureFixture,
+    make_client: ClientFactory,
+    caplog: pytest.LogCaptureFixture,
 ) -> None:
     with caplog.at_level(logging.INFO, logger="ltaa"):
         client = make_client()
-    assert any("access control is off" in r.getMessage() and r.levelno == logging.WARNING
-               for r in caplog.records)
+    assert any(
+        "access control is off" in r.getMessage() and r.levelno == logging.WARNING
+        for r in caplog.records
+    )
     assert client.get(f"/runs/{'0' * 32}/trace").status_code == 404  # open: reaches the route
     assert client.get("/metrics").status_code == 200
 
@@ -161,15 +187,14 @@ def test_refuses_to_start_beyond_loopback_without_keys(settings: Settings, host:
 
 
 @pytest.mark.parametrize("host", ["127.0.0.1", "localhost", "::1", "127.0.0.2"])
-def test_loopback_without_keys_and_anywhere_with_keys_start(settings: Settings,
-                                                            host: str) -> None:
+def test_loopback_without_keys_and_anywhere_with_keys_start(settings: Settings, host: str) -> None:
     create_app(settings.model_copy(update={"host": host}))
     create_app(settings.model_copy(update={"host": "0.0.0.0", "api_keys": KEYS}))
 
 
-def test_keys_never_appear_in_logs(make_client: ClientFactory,
-                                   caplog: pytest.LogCaptureFixture,
-                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_keys_never_appear_in_logs(
+    make_client: ClientFactory, caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str]
+) -> None:
     near_miss = SUPERVISOR_KEY[:-1] + "?"
     with caplog.at_level(logging.DEBUG):
         client = make_client(api_keys=KEYS)
@@ -187,7 +212,8 @@ def test_keys_never_appear_in_logs(make_client: ClientFactory,
         assert secret not in logged
     settings = client.app.state.settings  # type: ignore[attr-defined]
     assert SUPERVISOR_KEY not in repr(settings) and SUPERVISOR_KEY not in str(
-        settings.model_dump(mode="json"))
+        settings.model_dump(mode="json")
+    )
 
 
 def test_keys_from_the_environment_stay_hidden(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -199,18 +225,25 @@ def test_keys_from_the_environment_stay_hidden(monkeypatch: pytest.MonkeyPatch) 
 
 def test_key_format() -> None:
     assert parse_api_keys(f" {CLIENT_KEY}:client ,, a:b:c:{SUPERVISOR_KEY}:Supervisor ") == {
-        CLIENT_KEY: Role.CLIENT, f"a:b:c:{SUPERVISOR_KEY}": Role.SUPERVISOR}
+        CLIENT_KEY: Role.CLIENT,
+        f"a:b:c:{SUPERVISOR_KEY}": Role.SUPERVISOR,
+    }
     assert parse_api_keys("") == {}
 
 
-@pytest.mark.parametrize(("raw", "message"), [
-    (CLIENT_KEY, "entry 1 is not KEY:ROLE"),
-    (f"{CLIENT_KEY}:client,{SUPERVISOR_KEY}:admin", "entry 2 has an unknown role"),
-    ("short-key:client", "at least 16 characters"),
-    (f"{CLIENT_KEY}:client,{CLIENT_KEY}:supervisor", "entry 2 repeats an earlier key"),
-])
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [
+        (CLIENT_KEY, "entry 1 is not KEY:ROLE"),
+        (f"{CLIENT_KEY}:client,{SUPERVISOR_KEY}:admin", "entry 2 has an unknown role"),
+        ("short-key:client", "at least 16 characters"),
+        (f"{CLIENT_KEY}:client,{CLIENT_KEY}:supervisor", "entry 2 repeats an earlier key"),
+    ],
+)
 def test_bad_key_settings_fail_start_up_without_quoting_keys(
-    settings: Settings, raw: str, message: str,
+    settings: Settings,
+    raw: str,
+    message: str,
 ) -> None:
     with pytest.raises(ApiKeysError, match=message) as raised:
         create_app(settings.model_copy(update={"api_keys": SecretStr(raw)}))

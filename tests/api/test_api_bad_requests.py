@@ -23,8 +23,9 @@ TASKS: list[dict[str, Any]] = [
 
 def custom(**changes: Any) -> dict[str, Any]:
     """A valid custom-instance body (deep-copied) with top-level changes; None deletes a key."""
-    body: dict[str, Any] = json.loads(json.dumps({"solver": "dp", "tasks": TASKS,
-                                                  "robots": ROBOTS}))
+    body: dict[str, Any] = json.loads(
+        json.dumps({"solver": "dp", "tasks": TASKS, "robots": ROBOTS})
+    )
     for key, value in changes.items():
         if value is None:
             body.pop(key, None)
@@ -72,67 +73,191 @@ CASES: list[tuple[str, Any, int, list[Any], str | None]] = [
     ("tasks_not_list", custom(tasks={"id": 1}), 422, ["body", "tasks"], None),
     ("robots_not_list", custom(robots="a,b"), 422, ["body", "robots"], None),
     ("task_not_object", custom(tasks=["Lift"]), 422, ["body", "tasks", 0], None),
-    ("duplicate_task_ids", custom(tasks=[*TASKS, {"id": 2, "features": ["heavy"]}]), 422,
-     ["body", "tasks", 3, "id"], "duplicate"),
-    ("duplicate_ids_int_and_str", custom(tasks=[*TASKS, {"action_id": "1", "features": ["heavy"]}]),
-     422, ["body", "tasks", 3, "id"], "duplicate"),
-    ("missing_task_id", custom(tasks=[{"name": "x", "features": ["heavy"]}]), 422,
-     ["body", "tasks", 0, "id"], None),
+    (
+        "duplicate_task_ids",
+        custom(tasks=[*TASKS, {"id": 2, "features": ["heavy"]}]),
+        422,
+        ["body", "tasks", 3, "id"],
+        "duplicate",
+    ),
+    (
+        "duplicate_ids_int_and_str",
+        custom(tasks=[*TASKS, {"action_id": "1", "features": ["heavy"]}]),
+        422,
+        ["body", "tasks", 3, "id"],
+        "duplicate",
+    ),
+    (
+        "missing_task_id",
+        custom(tasks=[{"name": "x", "features": ["heavy"]}]),
+        422,
+        ["body", "tasks", 0, "id"],
+        None,
+    ),
     ("task_id_float", custom(tasks=task(id=1.5)), 422, ["body", "tasks", 0, "id"], "integer"),
     ("task_id_bool", custom(tasks=task(id=True)), 422, ["body", "tasks", 0, "id"], "boolean"),
-    ("task_id_too_long", custom(tasks=task(id="x" * 201)), 422, ["body", "tasks", 0, "id"],
-     "at most 200 characters"),
-    ("task_id_int_too_long", custom(tasks=task(id=10**201)), 422, ["body", "tasks", 0, "id"],
-     "at most 200 characters"),
-    ("unknown_feature", custom(tasks=task(features=["welding"])), 422,
-     ["body", "tasks", 0, "features"], "welding"),
-    ("empty_features", custom(tasks=task(features=[])), 422, ["body", "tasks", 0, "features"],
-     None),
-    ("features_not_list", custom(tasks=task(features="heavy")), 422,
-     ["body", "tasks", 0, "features"], None),
-    ("feature_not_string", custom(tasks=task(features=["heavy", 3])), 422,
-     ["body", "tasks", 0, "features", 1], None),
-    ("probability_negative", custom(robots=rates(heavy=-0.1)), 422,
-     ["body", "robots", 0, "success", "heavy"], None),
-    ("probability_above_one", custom(robots=rates(heavy=1.2)), 422,
-     ["body", "robots", 0, "success", "heavy"], None),
-    ("probability_string", custom(robots=rates(heavy="0.9")), 422,
-     ["body", "robots", 0, "success", "heavy"], None),
-    ("probability_bool", custom(robots=rates(heavy=True)), 422,
-     ["body", "robots", 0, "success", "heavy"], None),
-    ("success_empty", custom(robots=robot(success={})), 422, ["body", "robots", 0, "success"],
-     None),
-    ("success_not_object", custom(robots=robot(success=[0.9])), 422,
-     ["body", "robots", 0, "success"], None),
-    ("feature_unrated_by_a_robot", custom(robots=robot(success={"heavy": 0.9})), 422,
-     ["body", "tasks", 1, "features"], "not rated by robot(s) a"),
-    ("duplicate_robot_names", custom(robots=[ROBOTS[0], ROBOTS[0]]), 422,
-     ["body", "robots", 1, "name"], "duplicate"),
-    ("duplicate_robot_names_by_case", custom(robots=[ROBOTS[0], {**ROBOTS[1], "name": "A"}]),
-     422, ["body", "robots", 1, "name"], "duplicate"),
+    (
+        "task_id_too_long",
+        custom(tasks=task(id="x" * 201)),
+        422,
+        ["body", "tasks", 0, "id"],
+        "at most 200 characters",
+    ),
+    (
+        "task_id_int_too_long",
+        custom(tasks=task(id=10**201)),
+        422,
+        ["body", "tasks", 0, "id"],
+        "at most 200 characters",
+    ),
+    (
+        "unknown_feature",
+        custom(tasks=task(features=["welding"])),
+        422,
+        ["body", "tasks", 0, "features"],
+        "welding",
+    ),
+    (
+        "empty_features",
+        custom(tasks=task(features=[])),
+        422,
+        ["body", "tasks", 0, "features"],
+        None,
+    ),
+    (
+        "features_not_list",
+        custom(tasks=task(features="heavy")),
+        422,
+        ["body", "tasks", 0, "features"],
+        None,
+    ),
+    (
+        "feature_not_string",
+        custom(tasks=task(features=["heavy", 3])),
+        422,
+        ["body", "tasks", 0, "features", 1],
+        None,
+    ),
+    (
+        "probability_negative",
+        custom(robots=rates(heavy=-0.1)),
+        422,
+        ["body", "robots", 0, "success", "heavy"],
+        None,
+    ),
+    (
+        "probability_above_one",
+        custom(robots=rates(heavy=1.2)),
+        422,
+        ["body", "robots", 0, "success", "heavy"],
+        None,
+    ),
+    (
+        "probability_string",
+        custom(robots=rates(heavy="0.9")),
+        422,
+        ["body", "robots", 0, "success", "heavy"],
+        None,
+    ),
+    (
+        "probability_bool",
+        custom(robots=rates(heavy=True)),
+        422,
+        ["body", "robots", 0, "success", "heavy"],
+        None,
+    ),
+    (
+        "success_empty",
+        custom(robots=robot(success={})),
+        422,
+        ["body", "robots", 0, "success"],
+        None,
+    ),
+    (
+        "success_not_object",
+        custom(robots=robot(success=[0.9])),
+        422,
+        ["body", "robots", 0, "success"],
+        None,
+    ),
+    (
+        "feature_unrated_by_a_robot",
+        custom(robots=robot(success={"heavy": 0.9})),
+        422,
+        ["body", "tasks", 1, "features"],
+        "not rated by robot(s) a",
+    ),
+    (
+        "duplicate_robot_names",
+        custom(robots=[ROBOTS[0], ROBOTS[0]]),
+        422,
+        ["body", "robots", 1, "name"],
+        "duplicate",
+    ),
+    (
+        "duplicate_robot_names_by_case",
+        custom(robots=[ROBOTS[0], {**ROBOTS[1], "name": "A"}]),
+        422,
+        ["body", "robots", 1, "name"],
+        "duplicate",
+    ),
     ("empty_robot_name", custom(robots=robot(name="")), 422, ["body", "robots", 0, "name"], None),
-    ("robot_unknown_key", custom(robots=robot(succes={})), 422, ["body", "robots", 0, "succes"],
-     None),
-    ("infeasible_cap", custom(max_deviation=0), 422, ["body", "max_deviation"],
-     "raise max_deviation"),
-    ("infeasible_fractional_cap", custom(tasks=many_tasks(7), robots=[*ROBOTS, {
-        "name": "c", "success": {"heavy": 0.5}}], max_deviation=0.2), 422,
-     ["body", "max_deviation"], "at least 3 and at most 2"),
+    (
+        "robot_unknown_key",
+        custom(robots=robot(succes={})),
+        422,
+        ["body", "robots", 0, "succes"],
+        None,
+    ),
+    (
+        "infeasible_cap",
+        custom(max_deviation=0),
+        422,
+        ["body", "max_deviation"],
+        "raise max_deviation",
+    ),
+    (
+        "infeasible_fractional_cap",
+        custom(
+            tasks=many_tasks(7),
+            robots=[*ROBOTS, {"name": "c", "success": {"heavy": 0.5}}],
+            max_deviation=0.2,
+        ),
+        422,
+        ["body", "max_deviation"],
+        "at least 3 and at most 2",
+    ),
     ("negative_max_deviation", base(max_deviation=-1), 422, ["body", "max_deviation"], None),
     ("max_deviation_string", base(max_deviation="4"), 422, ["body", "max_deviation"], None),
     ("too_many_tasks", custom(tasks=many_tasks(10_001)), 422, ["body", "tasks"], "10000"),
-    ("too_many_robots", custom(robots=[{"name": f"r{i}", "success": {"heavy": 0.5}}
-                                       for i in range(101)], tasks=many_tasks(3)),
-     422, ["body", "robots"], "100"),
-    ("brute_force_too_large", base(solver="brute_force"), 422, ["body", "tasks"],
-     "150,094,635,296,999,121"),
-    ("dp_too_large", custom(tasks=many_tasks(200), robots=[*ROBOTS, {
-        "name": "c", "success": {"heavy": 0.5}}]), 422, ["body", "tasks"], "dp would visit"),
+    (
+        "too_many_robots",
+        custom(
+            robots=[{"name": f"r{i}", "success": {"heavy": 0.5}} for i in range(101)],
+            tasks=many_tasks(3),
+        ),
+        422,
+        ["body", "robots"],
+        "100",
+    ),
+    (
+        "brute_force_too_large",
+        base(solver="brute_force"),
+        422,
+        ["body", "tasks"],
+        "150,094,635,296,999,121",
+    ),
+    (
+        "dp_too_large",
+        custom(tasks=many_tasks(200), robots=[*ROBOTS, {"name": "c", "success": {"heavy": 0.5}}]),
+        422,
+        ["body", "tasks"],
+        "dp would visit",
+    ),
     ("seed_string", base(seed="1"), 422, ["body", "seed"], None),
     ("seed_negative", base(seed=-1), 422, ["body", "seed"], None),
     ("seed_float", base(seed=1.5), 422, ["body", "seed"], None),
-    ("unknown_option", base(options={"bogus": 1}), 422, ["body", "options", "bogus"],
-     "accepts"),
+    ("unknown_option", base(options={"bogus": 1}), 422, ["body", "options", "bogus"], "accepts"),
     ("options_not_object", base(options=[1]), 422, ["body", "options"], None),
     ("unknown_top_level_field", base(solvr="dp"), 422, ["body", "solvr"], None),
     ("non_object_body", [base()], 422, ["body"], None),
@@ -159,8 +284,9 @@ def assert_names(detail: list[dict[str, Any]], loc: list[Any], msg: str | None) 
         assert any(msg in d["msg"] for d in matching), detail
 
 
-@pytest.mark.parametrize(("body", "status", "loc", "msg"), [c[1:] for c in CASES],
-                         ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(
+    ("body", "status", "loc", "msg"), [c[1:] for c in CASES], ids=[c[0] for c in CASES]
+)
 def test_malformed_json_body(
     client: TestClient, body: Any, status: int, loc: list[Any], msg: str | None
 ) -> None:
@@ -173,18 +299,30 @@ JSON = "application/json"
 RAW_CASES = [
     ("malformed_json", '{"solver": "dp", "scenario": ', JSON, 422, "JSON decode error"),
     ("trailing_comma", '{"solver": "dp",}', JSON, 422, "JSON decode error"),
-    ("nan_max_deviation", '{"solver": "dp", "scenario": "baseline", "max_deviation": NaN}',
-     JSON, 422, "finite"),
+    (
+        "nan_max_deviation",
+        '{"solver": "dp", "scenario": "baseline", "max_deviation": NaN}',
+        JSON,
+        422,
+        "finite",
+    ),
     ("empty_body", "", JSON, 422, "required"),
-    ("not_json_content_type", '{"solver": "dp", "scenario": "baseline"}', "text/plain", 422,
-     None),
-    ("unparseable_giant_integer", '{"solver": "dp", "scenario": "baseline", "seed": '
-     + "9" * 5000 + "}", JSON, 400, "parsing the body"),
+    ("not_json_content_type", '{"solver": "dp", "scenario": "baseline"}', "text/plain", 422, None),
+    (
+        "unparseable_giant_integer",
+        '{"solver": "dp", "scenario": "baseline", "seed": ' + "9" * 5000 + "}",
+        JSON,
+        400,
+        "parsing the body",
+    ),
 ]
 
 
-@pytest.mark.parametrize(("content", "content_type", "status", "msg"),
-                         [c[1:] for c in RAW_CASES], ids=[c[0] for c in RAW_CASES])
+@pytest.mark.parametrize(
+    ("content", "content_type", "status", "msg"),
+    [c[1:] for c in RAW_CASES],
+    ids=[c[0] for c in RAW_CASES],
+)
 def test_malformed_raw_body(
     client: TestClient, content: str, content_type: str, status: int, msg: str | None
 ) -> None:
@@ -310,8 +448,10 @@ def test_run_with_101_robots_is_422_naming_the_field(client: TestClient) -> None
 
 
 def test_the_limits_themselves_are_accepted(client: TestClient) -> None:
-    r = client.post("/allocate", json={"solver": "greedy", "tasks": many_tasks(10_000),
-                                       "robots": robots_rating_heavy(100)})
+    r = client.post(
+        "/allocate",
+        json={"solver": "greedy", "tasks": many_tasks(10_000), "robots": robots_rating_heavy(100)},
+    )
     assert r.status_code == 200, r.text[:500]
     assert len(r.json()["assignments"]) == 10_000
     assert len(r.json()["metrics"]["workload"]) == 100

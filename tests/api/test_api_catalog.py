@@ -42,8 +42,12 @@ def test_scenarios_include_tasks_and_robots(client: TestClient) -> None:
     baseline = scenarios["baseline"]
     assert baseline["description"]
     assert len(baseline["tasks"]) == 36
-    assert baseline["tasks"][14] == {"id": 300, "name": "Navigation", "type": "MapGoal",
-                                     "features": ["heavy"]}
+    assert baseline["tasks"][14] == {
+        "id": 300,
+        "name": "Navigation",
+        "type": "MapGoal",
+        "features": ["heavy"],
+    }
     robots = {r["name"]: r for r in baseline["robots"]}
     assert list(robots) == ["light", "medium", "heavy"]
     assert robots["light"]["label"] == "Light Robot"

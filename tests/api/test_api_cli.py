@@ -28,12 +28,31 @@ def without_timing(body: dict[str, Any]) -> dict[str, Any]:
 @pytest.mark.parametrize(
     ("args", "request_body"),
     [
-        (["--solver", "dp", "--scenario", "baseline", "--mode", "balanced"],
-         {"solver": "dp", "scenario": "baseline", "mode": "balanced"}),
-        (["--solver", "optimal", "--scenario", "light_excels", "--mode", "aggressive_balance",
-          "--max-deviation", "2", "--seed", "5"],
-         {"solver": "optimal", "scenario": "light_excels", "mode": "aggressive_balance",
-          "max_deviation": 2, "seed": 5}),
+        (
+            ["--solver", "dp", "--scenario", "baseline", "--mode", "balanced"],
+            {"solver": "dp", "scenario": "baseline", "mode": "balanced"},
+        ),
+        (
+            [
+                "--solver",
+                "optimal",
+                "--scenario",
+                "light_excels",
+                "--mode",
+                "aggressive_balance",
+                "--max-deviation",
+                "2",
+                "--seed",
+                "5",
+            ],
+            {
+                "solver": "optimal",
+                "scenario": "light_excels",
+                "mode": "aggressive_balance",
+                "max_deviation": 2,
+                "seed": 5,
+            },
+        ),
     ],
 )
 def test_allocate_json_equals_the_api_response(
@@ -47,8 +66,19 @@ def test_allocate_json_equals_the_api_response(
 
 
 def test_allocate_prints_assignments_and_metrics_tables(runner: CliRunner) -> None:
-    result = runner.invoke(cli, ["allocate", "--solver", "dp", "--scenario", "baseline",
-                                 "--mode", "balanced", "--show-tasks"])
+    result = runner.invoke(
+        cli,
+        [
+            "allocate",
+            "--solver",
+            "dp",
+            "--scenario",
+            "baseline",
+            "--mode",
+            "balanced",
+            "--show-tasks",
+        ],
+    )
     assert result.exit_code == 0, result.output
     out = result.stdout
     assert "Expected success" in out and "0.786111" in out
@@ -58,14 +88,33 @@ def test_allocate_prints_assignments_and_metrics_tables(runner: CliRunner) -> No
 
 def test_allocate_with_an_instance_file_and_options(runner: CliRunner, tmp_path: Path) -> None:
     path = tmp_path / "instance.json"
-    path.write_text(json.dumps({
-        "tasks": [{"action_id": 1, "action_name": "Lift", "features": ["heavy"]},
-                  {"id": "b", "features": ["heavy"]}],
-        "robots": [{"name": "x", "success": {"heavy": 0.9}},
-                   {"name": "y", "success": {"heavy": 0.4}}],
-    }))
-    result = runner.invoke(cli, ["allocate", "--solver", "brute_force", "--instance", str(path),
-                                 "--mode", "success_focused", "--json"])
+    path.write_text(
+        json.dumps(
+            {
+                "tasks": [
+                    {"action_id": 1, "action_name": "Lift", "features": ["heavy"]},
+                    {"id": "b", "features": ["heavy"]},
+                ],
+                "robots": [
+                    {"name": "x", "success": {"heavy": 0.9}},
+                    {"name": "y", "success": {"heavy": 0.4}},
+                ],
+            }
+        )
+    )
+    result = runner.invoke(
+        cli,
+        [
+            "allocate",
+            "--solver",
+            "brute_force",
+            "--instance",
+            str(path),
+            "--mode",
+            "success_focused",
+            "--json",
+        ],
+    )
     assert result.exit_code == 0, result.output
     body = json.loads(result.stdout)
     assert [a["robot"] for a in body["assignments"]] == ["x", "x"]
@@ -95,14 +144,19 @@ def test_serve_migrates_then_runs_the_factory(
 
     migrated: list[str] = []
     served: dict[str, Any] = {}
-    monkeypatch.setattr(cli_module, "apply_migrations",
-                        lambda settings: migrated.append(settings.db_url))
+    monkeypatch.setattr(
+        cli_module, "apply_migrations", lambda settings: migrated.append(settings.db_url)
+    )
     monkeypatch.setattr(uvicorn, "run", lambda app, **kw: served.update(app=app, **kw))
     result = runner.invoke(cli, ["serve", "--port", "8123"])
     assert result.exit_code == 0, result.output
     assert migrated == [f"sqlite:///{tmp_path.as_posix()}/cli-data/ltaa.db"]
-    assert served == {"app": "app.main:create_app", "factory": True, "host": "127.0.0.1",
-                      "port": 8123}
+    assert served == {
+        "app": "app.main:create_app",
+        "factory": True,
+        "host": "127.0.0.1",
+        "port": 8123,
+    }
 
 
 def test_apply_migrations_creates_the_database(tmp_path: Path) -> None:
@@ -120,8 +174,7 @@ def test_run_completes_with_a_summary(runner: CliRunner) -> None:
     assert "completed" in result.output and "36 of 36" in result.output
 
 
-def test_run_refuses_a_data_directory_a_server_is_using(
-        runner: CliRunner, tmp_path: Path) -> None:
+def test_run_refuses_a_data_directory_a_server_is_using(runner: CliRunner, tmp_path: Path) -> None:
     settings = Settings(data_dir=tmp_path / "cli-data", anthropic_api_key=None)
     with TestClient(create_app(settings)):
         result = runner.invoke(cli, ["run"])
@@ -132,9 +185,15 @@ def test_run_refuses_a_data_directory_a_server_is_using(
 
 def test_run_applies_the_token_budget_setting(runner: CliRunner) -> None:
     with FakeMessagesAPI() as api:
-        result = runner.invoke(cli, ["run", "--reasoner", "anthropic"], env={
-            "ANTHROPIC_API_KEY": "test-key", "LTAA_ANTHROPIC_BASE_URL": api.base_url,
-            "LTAA_RUN_TOKEN_BUDGET": "1"})
+        result = runner.invoke(
+            cli,
+            ["run", "--reasoner", "anthropic"],
+            env={
+                "ANTHROPIC_API_KEY": "test-key",
+                "LTAA_ANTHROPIC_BASE_URL": api.base_url,
+                "LTAA_RUN_TOKEN_BUDGET": "1",
+            },
+        )
         answered = api.answered()
     assert result.exit_code == 0, result.output
     # The first call spends the budget; every later task goes to the rules reasoner.

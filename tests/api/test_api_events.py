@@ -26,8 +26,17 @@ def test_a_watched_run_streams_every_event_in_order_then_ends(client: TestClient
     assert kinds == ["created", "started", *["decision"] * 36, "completed"]
     decisions = [e.data for e in events if e.event == "decision"]
     assert [d["task_index"] for d in decisions] == list(range(36))
-    assert set(decisions[0]) >= {"task_index", "task_id", "task_name", "robot", "phase",
-                                 "quality", "fallback", "regret", "expected_success"}
+    assert set(decisions[0]) >= {
+        "task_index",
+        "task_id",
+        "task_name",
+        "robot",
+        "phase",
+        "quality",
+        "fallback",
+        "regret",
+        "expected_success",
+    }
     assert decisions[0]["phase"] == "early" and decisions[-1]["phase"] == "late"
     assert events[0].retry == 1000 and events[0].id == "1-0" and events[-1].id == "3-36"
     # The stream agrees with the run's own record.
@@ -42,11 +51,13 @@ def test_a_watched_run_streams_every_event_in_order_then_ends(client: TestClient
 def test_last_event_id_continues_where_the_stream_stopped(client: TestClient) -> None:
     run_id = client.post("/runs", json=BASELINE).json()["id"]
     full = stream(client, f"/runs/{run_id}/events")
-    cut = next(i for i, e in enumerate(full) if e.event == "decision"
-               and e.data["task_index"] == 29)
+    cut = next(
+        i for i, e in enumerate(full) if e.event == "decision" and e.data["task_index"] == 29
+    )
     rest = stream(client, f"/runs/{run_id}/events", **{"Last-Event-ID": str(full[cut].id)})
     assert [(e.event, e.id, e.data) for e in rest] == [
-        (e.event, e.id, e.data) for e in full[cut + 1:]]
+        (e.event, e.id, e.data) for e in full[cut + 1 :]
+    ]
     assert [e.data.get("task_index") for e in rest][:6] == list(range(30, 36))
     assert stream(client, f"/runs/{run_id}/events", **{"Last-Event-ID": str(full[-1].id)}) == []
 
@@ -60,6 +71,10 @@ def test_unknown_run_and_bad_last_event_id_are_4xx_in_the_error_shape(
     run_id = client.post("/runs", json=BASELINE).json()["id"]
     bad = client.get(f"/runs/{run_id}/events", headers={"Last-Event-ID": "yesterday"})
     assert bad.status_code == 422
-    assert bad.json()["detail"] == [{"loc": ["header", "last-event-id"], "type": "value_error",
-                                     "msg": "expected an event id sent by this stream, "
-                                            "like '3-17'"}]
+    assert bad.json()["detail"] == [
+        {
+            "loc": ["header", "last-event-id"],
+            "type": "value_error",
+            "msg": "expected an event id sent by this stream, like '3-17'",
+        }
+    ]

@@ -13,8 +13,11 @@ from tests.api.conftest import ClientFactory
 
 def _six_task_run(client: TestClient) -> str:
     baseline = next(s for s in client.get("/scenarios").json() if s["name"] == "baseline")
-    run_id = str(client.post("/runs", json={"tasks": baseline["tasks"][:6],
-                                            "robots": baseline["robots"]}).json()["id"])
+    run_id = str(
+        client.post(
+            "/runs", json={"tasks": baseline["tasks"][:6], "robots": baseline["robots"]}
+        ).json()["id"]
+    )
     deadline = time.monotonic() + 60
     while client.get(f"/runs/{run_id}").json()["status"] != "completed":
         assert time.monotonic() < deadline
@@ -22,8 +25,9 @@ def _six_task_run(client: TestClient) -> str:
     return run_id
 
 
-def test_json_lines_carry_run_id_and_task_index(make_client: ClientFactory,
-                                               capsys: pytest.CaptureFixture[str]) -> None:
+def test_json_lines_carry_run_id_and_task_index(
+    make_client: ClientFactory, capsys: pytest.CaptureFixture[str]
+) -> None:
     run_id = _six_task_run(make_client(log_format="json"))
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     records = [json.loads(line) for line in lines]  # every line is one JSON object
@@ -31,12 +35,12 @@ def test_json_lines_carry_run_id_and_task_index(make_client: ClientFactory,
     decisions = [r for r in records if r.get("run_id") == run_id and "task_index" in r]
     assert [r["task_index"] for r in decisions] == list(range(6))
     assert decisions[0]["message"].startswith("task 0 -> ")
-    assert any(r["level"] == "WARNING" and "access control is off" in r["message"]
-               for r in records)
+    assert any(r["level"] == "WARNING" and "access control is off" in r["message"] for r in records)
 
 
-def test_text_format_names_run_and_task(make_client: ClientFactory,
-                                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_text_format_names_run_and_task(
+    make_client: ClientFactory, capsys: pytest.CaptureFixture[str]
+) -> None:
     run_id = _six_task_run(make_client(log_format="text"))
     err = capsys.readouterr().err
     assert f"[run_id={run_id} task_index=5]" in err

@@ -20,9 +20,11 @@ def scrape(client: TestClient) -> dict[tuple[str, tuple[tuple[str, str], ...]], 
     response = client.get("/metrics")
     assert response.status_code == 200
     assert response.headers["content-type"].startswith("text/plain")
-    return {(s.name, tuple(sorted(s.labels.items()))): s.value
-            for family in text_string_to_metric_families(response.text)
-            for s in family.samples}
+    return {
+        (s.name, tuple(sorted(s.labels.items()))): s.value
+        for family in text_string_to_metric_families(response.text)
+        for s in family.samples
+    }
 
 
 def wait_done(client: TestClient, run_id: str) -> dict[str, Any]:
@@ -44,14 +46,18 @@ def test_counts_after_runs_equal_their_traces(make_client: ClientFactory) -> Non
     with FakeMessagesAPI() as api:
         # Task 0: a 429 (retried by the SDK), then two unusable answers: with one retry
         # allowed, the rules fallback decides. Task 1: unusable, then fixed at tier 1.
-        api.script(Reply.error(429), Reply.answer(GARBAGE), Reply.answer(GARBAGE),
-                   Reply.answer(GARBAGE))
-        client = make_client(anthropic_api_key=SecretStr("test-key"),
-                             anthropic_base_url=api.base_url)
+        api.script(
+            Reply.error(429), Reply.answer(GARBAGE), Reply.answer(GARBAGE), Reply.answer(GARBAGE)
+        )
+        client = make_client(
+            anthropic_api_key=SecretStr("test-key"), anthropic_base_url=api.base_url
+        )
         baseline = next(s for s in client.get("/scenarios").json() if s["name"] == "baseline")
         six_tasks = {"tasks": baseline["tasks"][:6], "robots": baseline["robots"]}
-        llm = client.post("/runs", json={**six_tasks, "reasoner": "anthropic", "max_retries": 1,
-                                         "model": "claude-test"}).json()["id"]
+        llm = client.post(
+            "/runs",
+            json={**six_tasks, "reasoner": "anthropic", "max_retries": 1, "model": "claude-test"},
+        ).json()["id"]
         assert wait_done(client, llm)["status"] == "completed"
         rules = client.post("/runs", json=BASELINE).json()["id"]
         assert wait_done(client, rules)["status"] == "completed"

@@ -20,7 +20,6 @@ BASELINE = {"scenario": "baseline", "mode": "balanced"}
 ZERO_USAGE = {"llm_calls": 0, "input_tokens": 0, "output_tokens": 0}
 
 
-
 def run_to_end(client: TestClient, body: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     created = client.post("/runs", json=body)
     assert created.status_code == 202, created.text
@@ -33,17 +32,44 @@ def poor(request: dict[str, Any]) -> Reply:
     return Reply.answer(poor_answer(context_from_prompt(prompt_of(request))))
 
 
-ATTEMPT_VERDICT = ("attempt", "tier", "parsed", "scores", "quality", "accepted",
-                   "hard_invalid", "feedback", "system_prompt", "user_prompt", "reply")
-DECISION_VERDICT = ("task_index", "robot", "expected_success", "phase", "loads_before",
-                    "loads_after", "reasoning", "confidence", "tradeoff", "quality",
-                    "fallback", "failure_log", "regret")
+ATTEMPT_VERDICT = (
+    "attempt",
+    "tier",
+    "parsed",
+    "scores",
+    "quality",
+    "accepted",
+    "hard_invalid",
+    "feedback",
+    "system_prompt",
+    "user_prompt",
+    "reply",
+)
+DECISION_VERDICT = (
+    "task_index",
+    "robot",
+    "expected_success",
+    "phase",
+    "loads_before",
+    "loads_after",
+    "reasoning",
+    "confidence",
+    "tradeoff",
+    "quality",
+    "fallback",
+    "failure_log",
+    "regret",
+)
 
 
 def verdicts(trace: dict[str, Any]) -> list[dict[str, Any]]:
-    return [{**{k: d[k] for k in DECISION_VERDICT},
-             "attempts": [{k: a[k] for k in ATTEMPT_VERDICT} for a in d["attempts"]]}
-            for d in trace["decisions"]]
+    return [
+        {
+            **{k: d[k] for k in DECISION_VERDICT},
+            "attempts": [{k: a[k] for k in ATTEMPT_VERDICT} for a in d["attempts"]],
+        }
+        for d in trace["decisions"]
+    ]
 
 
 def test_replay_of_an_anthropic_run_with_the_api_stopped_reproduces_it_exactly(
@@ -54,11 +80,15 @@ def test_replay_of_an_anthropic_run_with_the_api_stopped_reproduces_it_exactly(
     # fallback decides. Task 2: a 500 the transport gives up on (a failed attempt with no
     # reply), then a good answer. Every later call: a good answer.
     api.script(poor, Reply.from_prompt(), *[Reply.answer(GARBAGE)] * 4, Reply.error(500))
-    client = make_client(anthropic_api_key="test-key", anthropic_base_url=api.base_url,
-                         anthropic_max_transport_retries=0)
+    client = make_client(
+        anthropic_api_key="test-key",
+        anthropic_base_url=api.base_url,
+        anthropic_max_transport_retries=0,
+    )
     try:
-        original, first = run_to_end(client, {**BASELINE, "reasoner": "anthropic",
-                                              "model": "claude-test"})
+        original, first = run_to_end(
+            client, {**BASELINE, "reasoner": "anthropic", "model": "claude-test"}
+        )
     finally:
         api.stop()
     calls = len(api.requests)
@@ -97,8 +127,9 @@ def test_replay_of_a_run_whose_token_budget_switched_it_to_rules_matches_it(
     api = FakeMessagesAPI().start()
     client = make_client(anthropic_api_key="test-key", anthropic_base_url=api.base_url)
     try:
-        original, first = run_to_end(client, {**BASELINE, "reasoner": "anthropic",
-                                              "token_budget": 3000})
+        original, first = run_to_end(
+            client, {**BASELINE, "reasoner": "anthropic", "token_budget": 3000}
+        )
     finally:
         api.stop()
     calls = len(api.requests)
@@ -115,11 +146,14 @@ def test_replay_of_a_run_whose_token_budget_switched_it_to_rules_matches_it(
 
 
 def test_replay_of_a_rules_run_matches_it(client: TestClient) -> None:
-    original, first = run_to_end(client, {**BASELINE, "mode": "success_focused",
-                                          "guidance": "optimizer", "seed": 7})
+    original, first = run_to_end(
+        client, {**BASELINE, "mode": "success_focused", "guidance": "optimizer", "seed": 7}
+    )
     # Repeating the original's parameters is allowed; the rest is copied.
-    replay, again = run_to_end(client, {"reasoner": "replay", "replay_of": original["id"],
-                                        "scenario": "baseline", "seed": 7})
+    replay, again = run_to_end(
+        client,
+        {"reasoner": "replay", "replay_of": original["id"], "scenario": "baseline", "seed": 7},
+    )
     assert replay["status"] == "completed" and replay["mode"] == "success_focused"
     assert replay["assignments"] == original["assignments"]
     assert replay["metrics"] == original["metrics"]  # same seed: same simulated completion
@@ -129,16 +163,18 @@ def test_replay_of_a_rules_run_matches_it(client: TestClient) -> None:
 
 
 def test_the_synchronous_ltaa_solver_has_no_record_to_replay(client: TestClient) -> None:
-    response = client.post("/allocate", json={**BASELINE, "solver": "ltaa",
-                                              "options": {"reasoner": "replay"}})
+    response = client.post(
+        "/allocate", json={**BASELINE, "solver": "ltaa", "options": {"reasoner": "replay"}}
+    )
     assert response.status_code == 422
     detail = response.json()["detail"][0]
     assert detail["loc"] == ["body", "options", "reasoner"] and "POST /runs" in detail["msg"]
 
 
-ONE_TASK = {"tasks": [{"id": 1, "features": ["heavy"]}],
-            "robots": [{"name": "a", "success": {"heavy": 0.9}},
-                       {"name": "b", "success": {"heavy": 0.4}}]}
+ONE_TASK = {
+    "tasks": [{"id": 1, "features": ["heavy"]}],
+    "robots": [{"name": "a", "success": {"heavy": 0.9}}, {"name": "b", "success": {"heavy": 0.4}}],
+}
 
 
 def bad_replays(done: str, paused: str) -> list[tuple[dict[str, Any], int, str]]:
@@ -151,8 +187,11 @@ def bad_replays(done: str, paused: str) -> list[tuple[dict[str, Any], int, str]]
         ({**ONE_TASK, "replay_of": done}, 422, "replay_of"),  # default reasoner: rules
         ({**ONE_TASK, "reasoner": "anthropic", "replay_of": done}, 422, "replay_of"),
         ({**replay, "scenario": "baseline"}, 422, "scenario"),
-        ({**replay, "tasks": [{"id": 2, "features": ["heavy"]}],
-          "robots": ONE_TASK["robots"]}, 422, "tasks"),
+        (
+            {**replay, "tasks": [{"id": 2, "features": ["heavy"]}], "robots": ONE_TASK["robots"]},
+            422,
+            "tasks",
+        ),
         ({**replay, "mode": "success_focused"}, 422, "mode"),
         ({**replay, "max_deviation": None}, 422, "max_deviation"),
         ({**replay, "seed": 3}, 422, "seed"),
@@ -191,13 +230,22 @@ def test_bad_replay_requests_are_4xx_naming_the_field_and_write_nothing(
     assert cancelled.status_code == 409 and "cancelled" in cancelled.json()["detail"][0]["msg"]
 
     # The original's own values may be repeated (null model/token_budget mean "none").
-    same = client.post("/runs", json={**ONE_TASK, "reasoner": "replay", "replay_of": done["id"],
-                                      "mode": "balanced", "seed": 0, "model": None,
-                                      "token_budget": None})
+    same = client.post(
+        "/runs",
+        json={
+            **ONE_TASK,
+            "reasoner": "replay",
+            "replay_of": done["id"],
+            "mode": "balanced",
+            "seed": 0,
+            "model": None,
+            "token_budget": None,
+        },
+    )
     assert same.status_code == 202, same.text
-    assert wait_until(client, same.json()["id"], ("completed",))["assignments"] \
-        == done["assignments"]
-
+    assert (
+        wait_until(client, same.json()["id"], ("completed",))["assignments"] == done["assignments"]
+    )
 
 
 def test_a_replay_of_that_no_run_id_can_have_is_a_422_naming_the_field(
@@ -208,5 +256,7 @@ def test_a_replay_of_that_no_run_id_can_have_is_a_422_naming_the_field(
         response = client.post("/runs", json={"reasoner": "replay", "replay_of": replay_of})
         assert response.status_code == 422, (replay_of, response.text)
         detail = response.json()["detail"][0]
-        assert (detail["loc"], detail["type"]) == (["body", "replay_of"],
-                                                   "string_pattern_mismatch"), detail
+        assert (detail["loc"], detail["type"]) == (
+            ["body", "replay_of"],
+            "string_pattern_mismatch",
+        ), detail

@@ -18,7 +18,6 @@ from tests.run_polling import wait_until
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
 
 
-
 def test_a_rules_run_completes_with_metrics_and_a_full_trace(client: TestClient) -> None:
     created = client.post("/runs", json=BASELINE)
     assert created.status_code == 202
@@ -44,9 +43,15 @@ def test_a_rules_run_completes_with_metrics_and_a_full_trace(client: TestClient)
     attempt = first["attempts"][0]
     assert attempt["accepted"] is True and attempt["quality"] >= 0.9
     assert set(attempt["scores"]) == {
-        "explanation", "success_accuracy", "tradeoff_analysis",
-        "workload_awareness", "mode_compliance", "phase_consistency",
-        "logical_consistency", "confidence_justification"}
+        "explanation",
+        "success_accuracy",
+        "tradeoff_analysis",
+        "workload_awareness",
+        "mode_compliance",
+        "phase_consistency",
+        "logical_consistency",
+        "confidence_justification",
+    }
     assert attempt["user_prompt"] is None and attempt["reply"] is None
 
     with_prompts = client.get(f"/runs/{run_id}/trace", params={"include": "prompts"}).json()
@@ -60,8 +65,9 @@ def test_a_rules_run_completes_with_metrics_and_a_full_trace(client: TestClient)
 def test_optimizer_guided_run_has_zero_regret_and_unguided_shows_its_gap(
     client: TestClient,
 ) -> None:
-    guided = client.post("/runs", json={**BASELINE, "mode": "aggressive_balance",
-                                        "guidance": "optimizer"}).json()["id"]
+    guided = client.post(
+        "/runs", json={**BASELINE, "mode": "aggressive_balance", "guidance": "optimizer"}
+    ).json()["id"]
     plain = client.post("/runs", json={**BASELINE, "mode": "aggressive_balance"}).json()["id"]
     g = wait_until(client, guided, ("completed",))
     p = wait_until(client, plain, ("completed",))
@@ -117,9 +123,14 @@ def test_commands_on_an_unknown_run_are_404(client: TestClient, action: str) -> 
         ({**BASELINE, "reasoner": "anthropic"}, "reasoner"),
         ({**BASELINE, "mode": "fastest"}, "mode"),
         ({"scenario": "moon_base"}, "scenario"),
-        ({"tasks": [{"id": i, "features": ["heavy"]} for i in range(4)],
-          "robots": [{"name": n, "success": {"heavy": 0.5}} for n in "abc"],
-          "max_deviation": 0}, "max_deviation"),
+        (
+            {
+                "tasks": [{"id": i, "features": ["heavy"]} for i in range(4)],
+                "robots": [{"name": n, "success": {"heavy": 0.5}} for n in "abc"],
+                "max_deviation": 0,
+            },
+            "max_deviation",
+        ),
         ({**BASELINE, "quality_threshold": 1.5}, "quality_threshold"),
         ({**BASELINE, "max_retries": -1}, "max_retries"),
         ({**BASELINE, "temperature": "hot"}, "temperature"),
@@ -143,8 +154,7 @@ def test_status_filter_must_be_a_known_status(client: TestClient) -> None:
     assert response.json()["detail"][0]["loc"] == ["query", "status"]
 
 
-def test_a_run_whose_record_fails_the_integrity_check_is_not_resumed(
-        settings: Settings) -> None:
+def test_a_run_whose_record_fails_the_integrity_check_is_not_resumed(settings: Settings) -> None:
     paused = settings.model_copy(update={"test_pause_at_task": 5})
     with TestClient(create_app(paused)) as first:
         run_id = first.post("/runs", json=BASELINE).json()["id"]
@@ -172,8 +182,9 @@ def test_a_run_whose_record_fails_the_integrity_check_is_not_resumed(
 def _checkpoints_of(settings: Settings, run_id: str) -> int:
     saver = sqlite3.connect(settings.checkpoint_file)
     try:
-        return saver.execute("SELECT count(*) FROM checkpoints WHERE thread_id = ?",
-                             (run_id,)).fetchone()[0]
+        return saver.execute(
+            "SELECT count(*) FROM checkpoints WHERE thread_id = ?", (run_id,)
+        ).fetchone()[0]
     finally:
         saver.close()
 

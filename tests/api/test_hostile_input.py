@@ -19,8 +19,9 @@ from tests.e2e.postgres import fresh_database
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
-def any_db_client(request: pytest.FixtureRequest,
-                  make_client: ClientFactory) -> Iterator[TestClient]:
+def any_db_client(
+    request: pytest.FixtureRequest, make_client: ClientFactory
+) -> Iterator[TestClient]:
     with ExitStack() as stack:
         if request.param == "sqlite":
             yield make_client()
@@ -30,14 +31,21 @@ def any_db_client(request: pytest.FixtureRequest,
         yield make_client(database_url=url)
 
 
-RUN_PATHS = [("GET", "/runs/{}"), ("GET", "/runs/{}/trace"), ("GET", "/runs/{}/trace/verify"),
-             ("GET", "/runs/{}/trace?format=jsonl"), ("GET", "/runs/{}/events"),
-             ("POST", "/runs/{}/resume"), ("POST", "/runs/{}/cancel")]
+RUN_PATHS = [
+    ("GET", "/runs/{}"),
+    ("GET", "/runs/{}/trace"),
+    ("GET", "/runs/{}/trace/verify"),
+    ("GET", "/runs/{}/trace?format=jsonl"),
+    ("GET", "/runs/{}/events"),
+    ("POST", "/runs/{}/resume"),
+    ("POST", "/runs/{}/cancel"),
+]
 
 
 @pytest.mark.parametrize(("method", "path"), RUN_PATHS)
 def test_a_nul_character_in_a_run_id_is_a_4xx_naming_the_path(
-        any_db_client: TestClient, method: str, path: str) -> None:
+    any_db_client: TestClient, method: str, path: str
+) -> None:
     response = any_db_client.request(method, path.format("a%00b"))
     assert 400 <= response.status_code < 500, response.text
     assert response.json()["detail"][0]["loc"] == ["path", "run_id"]
@@ -45,27 +53,35 @@ def test_a_nul_character_in_a_run_id_is_a_4xx_naming_the_path(
 
 def _one_task(**task: Any) -> dict[str, Any]:
     robot = {"name": "crane", "success": {"heavy": 0.9}}
-    return {"tasks": [{"id": 1, "name": "Lift", "features": ["heavy"], **task}],
-            "robots": [robot], "reasoner": "rules"}
+    return {
+        "tasks": [{"id": 1, "name": "Lift", "features": ["heavy"], **task}],
+        "robots": [robot],
+        "reasoner": "rules",
+    }
 
 
 NUL_BODIES = {
     ("tasks", 0, "name"): _one_task(name="Li\x00ft"),
     ("tasks", 0, "id"): _one_task(id="t\x00"),
     ("tasks", 0, "type"): _one_task(type="Cu\x00stom"),
-    ("robots", 0, "name"): {**_one_task(), "robots": [{"name": "cr\x00ane",
-                                                       "success": {"heavy": 0.9}}]},
-    ("robots", 0, "label"): {**_one_task(), "robots": [{"name": "crane", "label": "C\x00",
-                                                        "success": {"heavy": 0.9}}]},
+    ("robots", 0, "name"): {
+        **_one_task(),
+        "robots": [{"name": "cr\x00ane", "success": {"heavy": 0.9}}],
+    },
+    ("robots", 0, "label"): {
+        **_one_task(),
+        "robots": [{"name": "crane", "label": "C\x00", "success": {"heavy": 0.9}}],
+    },
     ("model",): {**_one_task(), "model": "claude\x00"},
 }
 
 
 @pytest.mark.parametrize("loc", list(NUL_BODIES), ids=lambda loc: ".".join(map(str, loc)))
 def test_a_nul_character_in_a_run_request_is_a_422_not_a_failed_run(
-        any_db_client: TestClient, loc: tuple[str | int, ...]) -> None:
+    any_db_client: TestClient, loc: tuple[str | int, ...]
+) -> None:
     response = any_db_client.post("/runs", json=NUL_BODIES[loc])
     assert response.status_code == 422, response.text
-    assert response.json()["detail"][0]["loc"][:len(loc) + 1] == ["body", *loc]
+    assert response.json()["detail"][0]["loc"][: len(loc) + 1] == ["body", *loc]
     assert "NUL" in response.json()["detail"][0]["msg"]
     assert any_db_client.get("/runs").json() == []  # nothing half-written

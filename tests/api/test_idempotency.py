@@ -32,8 +32,9 @@ def post(client: TestClient, body: Any, key: str | None = KEY, **headers: str) -
 
 
 def run_ids(client: TestClient, headers: dict[str, str] | None = None) -> list[str]:
-    return [r["id"] for r in client.get("/runs", params={"limit": 500},
-                                        headers=headers or {}).json()]
+    return [
+        r["id"] for r in client.get("/runs", params={"limit": 500}, headers=headers or {}).json()
+    ]
 
 
 def stored_runs(data_dir: Path) -> list[Run]:
@@ -57,8 +58,11 @@ def test_same_key_and_body_returns_the_first_run(client: TestClient) -> None:
     assert first.status_code == 202, first.text
     assert "idempotent-replayed" not in first.headers
     # The same body with its keys in another order and other whitespace: the same request.
-    again = client.post("/runs", content=json.dumps(dict(reversed(BODY.items())), indent=4),
-                        headers={"Idempotency-Key": KEY, "Content-Type": "application/json"})
+    again = client.post(
+        "/runs",
+        content=json.dumps(dict(reversed(BODY.items())), indent=4),
+        headers={"Idempotency-Key": KEY, "Content-Type": "application/json"},
+    )
     assert again.status_code == 202, again.text
     assert again.json() == first.json()
     assert again.headers["location"] == first.headers["location"] == f"/runs/{first.json()['id']}"
@@ -102,8 +106,9 @@ def test_task_aliases_are_the_same_request(client: TestClient) -> None:
     assert again.json()["id"] == first.json()["id"]
 
 
-@pytest.mark.parametrize(("key", "type_"), [("", "string_too_short"),
-                                            ("k" * 256, "string_too_long")])
+@pytest.mark.parametrize(
+    ("key", "type_"), [("", "string_too_short"), ("k" * 256, "string_too_long")]
+)
 def test_an_empty_or_over_long_key_is_a_422_naming_the_header(
     client: TestClient, key: str, type_: str
 ) -> None:
@@ -138,8 +143,9 @@ def test_the_stored_digest_is_the_canonical_body_digest(client: TestClient, sett
     run_id = post(client, BODY).json()["id"]
     (run,) = stored_runs(settings.data_dir)
     assert (run.id, run.idempotency_key) == (run_id, KEY)
-    assert run.request_digest == request_digest(BODY) == request_digest(
-        dict(reversed(BODY.items())))
+    assert (
+        run.request_digest == request_digest(BODY) == request_digest(dict(reversed(BODY.items())))
+    )
     assert len(run.request_digest) == 64
 
 
@@ -187,8 +193,9 @@ def test_concurrent_retries_against_a_real_server(tmp_path: Path) -> None:
     server = Server(tmp_path / "data", env={"LTAA_MAX_CONCURRENT_RUNS": "1"}).start()
     try:
         with httpx.Client(base_url=server.url, timeout=30) as http:
-            responses = _at_once(10, lambda _i: http.post(
-                "/runs", json=BODY, headers={"Idempotency-Key": KEY}))
+            responses = _at_once(
+                10, lambda _i: http.post("/runs", json=BODY, headers={"Idempotency-Key": KEY})
+            )
             assert {r.status_code for r in responses} == {202}, [r.text for r in responses]
             assert len({r.json()["id"] for r in responses}) == 1
             assert [r["id"] for r in http.get("/runs").json()] == [responses[0].json()["id"]]
@@ -198,7 +205,8 @@ def test_concurrent_retries_against_a_real_server(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("keys", [("key-a", "key-b"), ("key-a", "key-a")])
 def test_two_idempotency_key_headers_are_a_422_naming_the_header(
-        client: TestClient, keys: tuple[str, str]) -> None:
+    client: TestClient, keys: tuple[str, str]
+) -> None:
     # Which key would a retry have to repeat? Picking one silently (or a proxy joining them
     # into "key-a, key-b") would make retries start runs; one key per request.
     r = client.post("/runs", json=BODY, headers=[("Idempotency-Key", k) for k in keys])

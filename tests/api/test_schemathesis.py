@@ -67,8 +67,12 @@ HYPOTHESIS = settings(
     deadline=None,  # in-process calls share 2 cores with other tests; time is bounded by count
     derandomize=True,
     database=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
-                           HealthCheck.data_too_large, HealthCheck.function_scoped_fixture],
+    suppress_health_check=[
+        HealthCheck.too_slow,
+        HealthCheck.filter_too_much,
+        HealthCheck.data_too_large,
+        HealthCheck.function_scoped_fixture,
+    ],
 )
 # Schema-valid bodies that the app still refuses with a 422 are expected: the schema cannot
 # say that a task's features must be rated by every robot, that a scenario or solver name
@@ -80,8 +84,14 @@ EXCLUDED = [schemathesis.checks.positive_data_acceptance]
 def app_settings(settings: Settings) -> Settings:
     # One run at a time and short event streams: POST /runs starts background runs, and a
     # stream stays open while its run is running.
-    return settings.model_copy(update={"api_keys": KEYS, "max_concurrent_runs": 1,
-                                       "events_max_stream_s": 0.5, "events_poll_s": 0.05})
+    return settings.model_copy(
+        update={
+            "api_keys": KEYS,
+            "max_concurrent_runs": 1,
+            "events_max_stream_s": 0.5,
+            "events_poll_s": 0.05,
+        }
+    )
 
 
 @pytest.fixture
@@ -124,5 +134,6 @@ def test_run_endpoints_conform_to_their_schema(
     case.path_parameters = {**(case.path_parameters or {}), "run_id": stored_run}
     # The id is now a real one, whatever was generated; a negative case may have been
     # negative only in the id, so that the app now rightly accepts it.
-    case.call_and_validate(headers=AUTH, excluded_checks=[
-        *EXCLUDED, schemathesis.checks.negative_data_rejection])
+    case.call_and_validate(
+        headers=AUTH, excluded_checks=[*EXCLUDED, schemathesis.checks.negative_data_rejection]
+    )

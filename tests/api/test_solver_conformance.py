@@ -62,10 +62,18 @@ def test_solver_meets_the_contract(client: TestClient, solver: str, body: dict[s
         from app.domain.serialize import instance_from_dict
 
         instance = instance_from_dict(
-            {"tasks": [{"id": t.get("id", t.get("action_id")),
+            {
+                "tasks": [
+                    {
+                        "id": t.get("id", t.get("action_id")),
                         "name": t.get("name", t.get("action_name")),
-                        "features": t["features"]} for t in body["tasks"]],
-             "robots": body["robots"]})
+                        "features": t["features"],
+                    }
+                    for t in body["tasks"]
+                ],
+                "robots": body["robots"],
+            }
+        )
     problem = Problem.build(instance, Mode(body["mode"]))
 
     # Queue order kept; exactly one robot per task.

@@ -66,7 +66,11 @@ def test_a_completed_run_verifies_ok_and_reports_its_chain_heads(client: TestCli
     decisions = [line for line in lines if line["type"] == "decision"]
     events = [line for line in lines if line["type"] == "event"]
     assert report == {
-        "ok": True, "decisions": N_TASKS, "events": 3, "unchained": 0, "broken": None,
+        "ok": True,
+        "decisions": N_TASKS,
+        "events": 3,
+        "unchained": 0,
+        "broken": None,
         "heads": {"decisions": decisions[-1]["chain_hash"], "events": events[-1]["chain_hash"]},
     }
     # Every row carries its own link: no two hashes alike, all of them SHA-256 hex.
@@ -77,51 +81,100 @@ def test_a_completed_run_verifies_ok_and_reports_its_chain_heads(client: TestCli
 # Each tampering as SQL run behind the service's back, and where verify must say it broke.
 TAMPERING: dict[str, tuple[list[str], str, int, str]] = {
     "robot of a decision edited": (
-        ["UPDATE decisions SET robot = (robot + 1) % 3, robot_name = 'heavy' "
-         "WHERE task_index = 7"], "decisions", 7, "does not match its recorded hash"),
+        ["UPDATE decisions SET robot = (robot + 1) % 3, robot_name = 'heavy' WHERE task_index = 7"],
+        "decisions",
+        7,
+        "does not match its recorded hash",
+    ),
     "reasoning of a decision edited": (
         ["UPDATE decisions SET reasoning = reasoning || ' (approved)' WHERE task_index = 20"],
-        "decisions", 20, "does not match its recorded hash"),
+        "decisions",
+        20,
+        "does not match its recorded hash",
+    ),
     "an attempt's reply edited": (
-        ["UPDATE attempts SET reply_text = replace(reply_text, 'Decision', 'Decisión') "
-         "WHERE task_index = 3"], "decisions", 3, "one of its task's attempts"),
+        [
+            "UPDATE attempts SET reply_text = replace(reply_text, 'Decision', 'Decisión') "
+            "WHERE task_index = 3"
+        ],
+        "decisions",
+        3,
+        "one of its task's attempts",
+    ),
     "an attempt's verdict edited": (
         ["UPDATE attempts SET quality = 0.99, accepted = 1 WHERE task_index = 30"],
-        "decisions", 30, "does not match"),
+        "decisions",
+        30,
+        "does not match",
+    ),
     "a decision deleted": (
-        ["DELETE FROM decisions WHERE task_index = 10"], "decisions", 10, "is missing"),
+        ["DELETE FROM decisions WHERE task_index = 10"],
+        "decisions",
+        10,
+        "is missing",
+    ),
     "the last decision deleted": (
-        [f"DELETE FROM decisions WHERE task_index = {N_TASKS - 1}"], "decisions", N_TASKS - 1,
-        "the last decisions were deleted"),
+        [f"DELETE FROM decisions WHERE task_index = {N_TASKS - 1}"],
+        "decisions",
+        N_TASKS - 1,
+        "the last decisions were deleted",
+    ),
     "two decisions swapped": (
-        ["UPDATE decisions SET task_index = -1 WHERE task_index = 4",
-         "UPDATE decisions SET task_index = 4 WHERE task_index = 5",
-         "UPDATE decisions SET task_index = 5 WHERE task_index = -1"],
-        "decisions", 4, "does not match"),
+        [
+            "UPDATE decisions SET task_index = -1 WHERE task_index = 4",
+            "UPDATE decisions SET task_index = 4 WHERE task_index = 5",
+            "UPDATE decisions SET task_index = 5 WHERE task_index = -1",
+        ],
+        "decisions",
+        4,
+        "does not match",
+    ),
     "two decisions' robots swapped": (
-        ["UPDATE decisions SET robot = CASE task_index WHEN 2 THEN (SELECT robot FROM "
-         "decisions WHERE task_index = 3) ELSE (SELECT robot FROM decisions WHERE "
-         "task_index = 2) END WHERE task_index IN (2, 3)"], "decisions", 2, "does not match"),
+        [
+            "UPDATE decisions SET robot = CASE task_index WHEN 2 THEN (SELECT robot FROM "
+            "decisions WHERE task_index = 3) ELSE (SELECT robot FROM decisions WHERE "
+            "task_index = 2) END WHERE task_index IN (2, 3)"
+        ],
+        "decisions",
+        2,
+        "does not match",
+    ),
     "a decision's hash erased": (
-        ["UPDATE decisions SET chain_hash = NULL WHERE task_index = 15"], "decisions", 15,
-        "has no chain hash"),
+        ["UPDATE decisions SET chain_hash = NULL WHERE task_index = 15"],
+        "decisions",
+        15,
+        "has no chain hash",
+    ),
     "an event's detail edited": (
         ["UPDATE run_events SET detail = json_set(detail, '$.tasks', 35) WHERE seq = 2"],
-        "events", 2, "does not match"),
+        "events",
+        2,
+        "does not match",
+    ),
     "an event deleted": (["DELETE FROM run_events WHERE seq = 2"], "events", 2, "is missing"),
     "the last event deleted": (
-        ["DELETE FROM run_events WHERE seq = 3"], "events", 3, "do not end with the "
-        "'completed' event"),
+        ["DELETE FROM run_events WHERE seq = 3"],
+        "events",
+        3,
+        "do not end with the 'completed' event",
+    ),
     "two events swapped": (
-        ["UPDATE run_events SET seq = -1 WHERE seq = 1",
-         "UPDATE run_events SET seq = 1 WHERE seq = 2",
-         "UPDATE run_events SET seq = 2 WHERE seq = -1"], "events", 1, "does not match"),
+        [
+            "UPDATE run_events SET seq = -1 WHERE seq = 1",
+            "UPDATE run_events SET seq = 1 WHERE seq = 2",
+            "UPDATE run_events SET seq = 2 WHERE seq = -1",
+        ],
+        "events",
+        1,
+        "does not match",
+    ),
 }
 
 
 @pytest.mark.parametrize("case", list(TAMPERING))
-def test_verify_finds_the_first_tampered_row(client: TestClient, db: sqlite3.Connection,
-                                              case: str) -> None:
+def test_verify_finds_the_first_tampered_row(
+    client: TestClient, db: sqlite3.Connection, case: str
+) -> None:
     statements, table, key, reason = TAMPERING[case]
     run_id = _completed_run(client)
     before = _verify(client, run_id)
@@ -145,7 +198,8 @@ def test_verify_finds_the_first_tampered_row(client: TestClient, db: sqlite3.Con
 
 
 def test_rows_written_before_chaining_are_unchained_not_ok(
-    client: TestClient, db: sqlite3.Connection,
+    client: TestClient,
+    db: sqlite3.Connection,
 ) -> None:
     run_id = _completed_run(client)
     db.execute("UPDATE decisions SET chain_hash = NULL WHERE run_id = ?", (run_id,))
@@ -159,7 +213,8 @@ def test_rows_written_before_chaining_are_unchained_not_ok(
 
 
 def test_a_decision_upserted_again_with_the_same_content_keeps_its_hash(
-    client: TestClient, settings: Settings,
+    client: TestClient,
+    settings: Settings,
 ) -> None:
     """What happens when the store node re-runs after a crash: the same decision is upserted
     again (with a new created_at); its link, and so every later link, must not change."""
@@ -170,11 +225,9 @@ def test_a_decision_upserted_again_with_the_same_content_keeps_its_hash(
         rows = repo.decisions(session=session, run_id=run_id)
         stored = {d.task_index: d.chain_hash for d in rows}
         for row in (rows[0], rows[17], rows[-1]):
-            repo.upsert_decision(session=session, run_id=run_id,
-                                 record=repo.decision_record(row))
+            repo.upsert_decision(session=session, run_id=run_id, record=repo.decision_record(row))
     with sessions() as session:
-        again = {d.task_index: d.chain_hash for d in repo.decisions(session=session,
-                                                                    run_id=run_id)}
+        again = {d.task_index: d.chain_hash for d in repo.decisions(session=session, run_id=run_id)}
     assert again == stored
     assert _verify(client, run_id) == before
 
@@ -185,7 +238,8 @@ def test_jsonl_streams_the_whole_record_line_by_line(client: TestClient) -> None
     lines = _jsonl(client, run_id)
 
     assert [line["type"] for line in lines] == (
-        ["run"] + ["event"] * 3 + ["decision"] * N_TASKS + ["end"])
+        ["run"] + ["event"] * 3 + ["decision"] * N_TASKS + ["end"]
+    )
     header, end = lines[0], lines[-1]
     assert header["id"] == run_id and header["status"] == "completed"
     assert header["n_tasks"] == N_TASKS and header["request"]["reasoner"] == "rules"
@@ -193,11 +247,13 @@ def test_jsonl_streams_the_whole_record_line_by_line(client: TestClient) -> None
 
     events = [line for line in lines if line["type"] == "event"]
     assert [(e["seq"], e["kind"], e["detail"]) for e in events] == [
-        (e["seq"], e["kind"], e["detail"]) for e in trace["events"]]
+        (e["seq"], e["kind"], e["detail"]) for e in trace["events"]
+    ]
     # Times carry their offset (SQLite hands them back naive; they are UTC).
     for line in [header, *events, *(line for line in lines if line["type"] == "decision")]:
-        assert datetime.fromisoformat(line.get("at") or line["created_at"]).utcoffset() \
-            == timedelta(0)
+        assert datetime.fromisoformat(
+            line.get("at") or line["created_at"]
+        ).utcoffset() == timedelta(0)
     decisions = [line for line in lines if line["type"] == "decision"]
     assert [d["task_index"] for d in decisions] == list(range(N_TASKS))
     for line, shown in zip(decisions, trace["decisions"], strict=True):
@@ -207,8 +263,9 @@ def test_jsonl_streams_the_whole_record_line_by_line(client: TestClient) -> None
         assert len(records) == len(shown["attempts"]) >= 1
         assert records[0]["user_prompt"] == shown["attempts"][0]["user_prompt"]
         assert records[0]["reply_text"] == shown["attempts"][0]["reply"]
-        assert records[0]["system_prompt"] and records[0]["scores"] == shown["attempts"][0][
-            "scores"]
+        assert (
+            records[0]["system_prompt"] and records[0]["scores"] == shown["attempts"][0]["scores"]
+        )
 
 
 def test_the_jsonl_export_alone_suffices_to_recompute_both_chains(client: TestClient) -> None:
@@ -228,7 +285,9 @@ def test_the_jsonl_export_alone_suffices_to_recompute_both_chains(client: TestCl
 
 
 def test_the_record_is_read_in_pages_with_nothing_lost_at_page_boundaries(
-    client: TestClient, settings: Settings, monkeypatch: pytest.MonkeyPatch,
+    client: TestClient,
+    settings: Settings,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     run_id = _completed_run(client)
     monkeypatch.setattr(audit, "DECISIONS_PER_PAGE", 5)
@@ -244,8 +303,10 @@ def test_the_record_is_read_in_pages_with_nothing_lost_at_page_boundaries(
 
 
 def test_unknown_runs_and_formats_are_4xx_in_the_one_error_shape(client: TestClient) -> None:
-    for path, params in [("/runs/nope/trace/verify", {}),
-                         ("/runs/nope/trace", {"format": "jsonl"})]:
+    for path, params in [
+        ("/runs/nope/trace/verify", {}),
+        ("/runs/nope/trace", {"format": "jsonl"}),
+    ]:
         response = client.get(path, params=params)
         assert response.status_code == 404
         assert response.json()["detail"][0]["loc"] == ["path", "run_id"]
@@ -255,8 +316,10 @@ def test_unknown_runs_and_formats_are_4xx_in_the_one_error_shape(client: TestCli
     (error,) = response.json()["detail"]
     assert error["loc"] == ["query", "format"] and "jsonl" in error["msg"]
     # format=json is the default and unchanged.
-    assert client.get(f"/runs/{run_id}/trace", params={"format": "json"}).json() == client.get(
-        f"/runs/{run_id}/trace").json()
+    assert (
+        client.get(f"/runs/{run_id}/trace", params={"format": "json"}).json()
+        == client.get(f"/runs/{run_id}/trace").json()
+    )
 
 
 def test_the_openapi_documents_both_trace_media_types_and_the_verify_shape(
@@ -264,25 +327,37 @@ def test_the_openapi_documents_both_trace_media_types_and_the_verify_shape(
 ) -> None:
     spec = client.get("/openapi.json").json()
     trace = spec["paths"]["/runs/{run_id}/trace"]["get"]
-    assert set(trace["responses"]["200"]["content"]) == {"application/json",
-                                                         "application/x-ndjson"}
+    assert set(trace["responses"]["200"]["content"]) == {"application/json", "application/x-ndjson"}
     params = {p["name"]: p for p in trace["parameters"]}
     assert params["format"]["schema"]["enum"] == ["json", "jsonl"]
     verify = spec["paths"]["/runs/{run_id}/trace/verify"]["get"]
     assert verify["responses"]["200"]["content"]["application/json"]["schema"] == {
-        "$ref": "#/components/schemas/TraceVerifyOut"}
+        "$ref": "#/components/schemas/TraceVerifyOut"
+    }
     assert {"401", "403", "404", "422"} <= set(verify["responses"])
 
 
 def test_every_audited_column_is_in_the_chain() -> None:
     """A column added later must be hashed, or deliberately left out here."""
+
     def columns(model: Any) -> set[str]:
         return {c.name for c in model.__table__.columns}
 
-    assert set(chain.DECISION_FIELDS) == columns(Decision) - {"id", "run_id", "created_at",
-                                                              "chain_hash"}
-    assert set(chain.ATTEMPT_FIELDS) == columns(Attempt) - {"id", "run_id", "task_index",
-                                                            "created_at"}
-    assert set(chain.EVENT_FIELDS) == columns(RunEvent) - {"id", "run_id", "created_at",
-                                                           "chain_hash"}
-
+    assert set(chain.DECISION_FIELDS) == columns(Decision) - {
+        "id",
+        "run_id",
+        "created_at",
+        "chain_hash",
+    }
+    assert set(chain.ATTEMPT_FIELDS) == columns(Attempt) - {
+        "id",
+        "run_id",
+        "task_index",
+        "created_at",
+    }
+    assert set(chain.EVENT_FIELDS) == columns(RunEvent) - {
+        "id",
+        "run_id",
+        "created_at",
+        "chain_hash",
+    }

@@ -52,8 +52,9 @@ def fresh_database(prefix: str = "ltaa_test") -> Iterator[str]:
     finally:
         with psycopg.connect(admin, autocommit=True) as conn:
             # FORCE: a SIGKILLed server's connections may linger for a moment.
-            conn.execute(sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)")
-                         .format(sql.Identifier(name)))
+            conn.execute(
+                sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name))
+            )
 
 
 def query(url: str, statement: str, *params: object) -> list[tuple[object, ...]]:

@@ -25,8 +25,9 @@ def free_port() -> int:
 
 
 class Server:
-    def __init__(self, data_dir: Path, env: dict[str, str] | None = None,
-                 port: int | None = None) -> None:
+    def __init__(
+        self, data_dir: Path, env: dict[str, str] | None = None, port: int | None = None
+    ) -> None:
         self.data_dir = data_dir
         self.port = port or free_port()
         self.env = {**os.environ, "LTAA_DATA_DIR": str(data_dir), **(env or {})}
@@ -42,14 +43,22 @@ class Server:
 
     def start(self, timeout: float = 60.0, **env: str) -> Server:
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        full_env = {**self.env, **env, "LTAA_BIN": f"{BIN}/", "HOST": "127.0.0.1",
-                    "PORT": str(self.port)}
+        full_env = {
+            **self.env,
+            **env,
+            "LTAA_BIN": f"{BIN}/",
+            "HOST": "127.0.0.1",
+            "PORT": str(self.port),
+        }
         with self.log.open("ab") as log:
             # The script `make run` and the Docker image use; it execs uvicorn, so this
             # process is the server and SIGKILL reaches it directly.
             self.proc = subprocess.Popen(
                 ["sh", str(ROOT / "scripts" / "serve.sh")],
-                cwd=ROOT, env=full_env, stdout=log, stderr=subprocess.STDOUT,
+                cwd=ROOT,
+                env=full_env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
             )
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:

@@ -20,17 +20,29 @@ def test_anthropic_run_through_transport_faults_and_a_poor_answer(tmp_path: Path
         # Task 0: 429, then 500 (both retried by the SDK), then an unusable answer
         # (rejected by validation, fixed at tier 1). Every later call is a good answer.
         api.script(Reply.error(429), Reply.error(500), Reply.answer(GARBAGE))
-        server = Server(tmp_path / "data", env={
-            "LTAA_ANTHROPIC_API_KEY": "test-key", "LTAA_ANTHROPIC_BASE_URL": api.base_url,
-        }).start()
+        server = Server(
+            tmp_path / "data",
+            env={
+                "LTAA_ANTHROPIC_API_KEY": "test-key",
+                "LTAA_ANTHROPIC_BASE_URL": api.base_url,
+            },
+        ).start()
         try:
             with server.client() as c:
-                created = c.post("/runs", json={"scenario": "baseline", "mode": "balanced",
-                                                "reasoner": "anthropic", "model": "claude-test"})
+                created = c.post(
+                    "/runs",
+                    json={
+                        "scenario": "baseline",
+                        "mode": "balanced",
+                        "reasoner": "anthropic",
+                        "model": "claude-test",
+                    },
+                )
                 assert created.status_code == 202, created.text
                 run_id = created.json()["id"]
             state: dict[str, Any] = server.wait_for(
-                run_id, lambda s: s["status"] in ("completed", "failed"), timeout=120)
+                run_id, lambda s: s["status"] in ("completed", "failed"), timeout=120
+            )
             with server.client() as c:
                 trace = c.get(f"/runs/{run_id}/trace", params={"include": "prompts"}).json()
         finally:

@@ -26,15 +26,17 @@ def test_over_long_bodies_are_413_over_real_http(tmp_path: Path) -> None:
 
     def chunks() -> Iterator[bytes]:
         for start in range(0, len(body), 256):
-            yield body[start:start + 256]
+            yield body[start : start + 256]
 
     try:
         with httpx.Client(base_url=server.url, timeout=30) as http:
             for path in ("/runs", "/allocate"):
-                declared = http.post(path, content=body,
-                                     headers={"content-type": "application/json"})
-                streamed = http.post(path, content=chunks(),
-                                     headers={"content-type": "application/json"})
+                declared = http.post(
+                    path, content=body, headers={"content-type": "application/json"}
+                )
+                streamed = http.post(
+                    path, content=chunks(), headers={"content-type": "application/json"}
+                )
                 assert "content-length" not in streamed.request.headers
                 assert streamed.request.headers["transfer-encoding"] == "chunked"
                 for r in (declared, streamed):

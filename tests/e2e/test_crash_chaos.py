@@ -33,8 +33,9 @@ def kill_points(seed: int) -> list[PausePoint]:
     sides = {node: rng.random() < 0.5 for node in NODES}
     nodes = [*((node, after) for node, after in sides.items()), ("reason", not sides["reason"])]
     tasks = rng.sample(range(1, N_TASKS), len(nodes))
-    points = [PausePoint(task, node, after)
-              for task, (node, after) in zip(tasks, nodes, strict=True)]
+    points = [
+        PausePoint(task, node, after) for task, (node, after) in zip(tasks, nodes, strict=True)
+    ]
     return sorted(points, key=lambda p: p.task_index)
 
 
@@ -42,12 +43,14 @@ def rejecting_first_tries(retry_tasks: set[int]) -> Any:
     """Fake-API responder: unusable first answers on `retry_tasks` (so build_feedback and
     retry run there), a good answer to every other prompt. Pure, so a reference run gets
     the same replies."""
+
     def respond(request: dict[str, Any]) -> Reply:
         prompt = prompt_of(request)
         ctx = context_from_prompt(prompt)
         if ctx.task_index in retry_tasks and RETRY_MARK not in prompt:
             return Reply.answer(GARBAGE)
         return Reply.answer(compose_answer(ctx))
+
     return respond
 
 
@@ -75,17 +78,22 @@ def test_ten_sigkills_at_every_kind_of_node_change_nothing(tmp_path: Path) -> No
     assert {p.after for p in points if p.node == "reason"} == {True, False}
     retry_tasks = {p.task_index for p in points if p.node in ("build_feedback", "retry")}
     retry_tasks |= {points[0].task_index, points[-1].task_index}  # retries elsewhere, too
-    body = {"scenario": "baseline", "mode": "balanced", "reasoner": "anthropic",
-            "model": "claude-test"}
+    body = {
+        "scenario": "baseline",
+        "mode": "balanced",
+        "reasoner": "anthropic",
+        "model": "claude-test",
+    }
     data = tmp_path / "data"
 
     with FakeMessagesAPI(default=rejecting_first_tries(retry_tasks)) as api:
         env = {"LTAA_ANTHROPIC_API_KEY": "test-key", "LTAA_ANTHROPIC_BASE_URL": api.base_url}
         server = Server(data, env=env)
         for n, point in enumerate(points):
-            server.start(LTAA_TEST_PAUSE_AT_TASK=str(point.task_index),
-                         LTAA_TEST_PAUSE_AT_NODE=f"{point.node}:"
-                                                 f"{'after' if point.after else 'before'}")
+            server.start(
+                LTAA_TEST_PAUSE_AT_TASK=str(point.task_index),
+                LTAA_TEST_PAUSE_AT_NODE=f"{point.node}:{'after' if point.after else 'before'}",
+            )
             if n == 0:
                 with server.client() as c:
                     created = c.post("/runs", json=body)
@@ -102,17 +110,20 @@ def test_ten_sigkills_at_every_kind_of_node_change_nothing(tmp_path: Path) -> No
             with server.client() as c:
                 trace = c.get(f"/runs/{run_id}/trace").json()
                 created = c.post("/runs", json=body)
-            reference = server.wait_for(created.json()["id"],
-                                        lambda s: s["status"] in ("completed", "failed"))
+            reference = server.wait_for(
+                created.json()["id"], lambda s: s["status"] in ("completed", "failed")
+            )
         finally:
             server.stop()
 
     assert resumed["status"] == reference["status"] == "completed", (resumed, reference)
-    assert [(a["task_id"], a["robot"]) for a in resumed["assignments"]] == \
-        [(a["task_id"], a["robot"]) for a in reference["assignments"]]
+    assert [(a["task_id"], a["robot"]) for a in resumed["assignments"]] == [
+        (a["task_id"], a["robot"]) for a in reference["assignments"]
+    ]
     assert [d["task_index"] for d in trace["decisions"]] == list(range(N_TASKS))
-    assert [len(d["attempts"]) for d in trace["decisions"]] == \
-        [2 if t in retry_tasks else 1 for t in range(N_TASKS)]
+    assert [len(d["attempts"]) for d in trace["decisions"]] == [
+        2 if t in retry_tasks else 1 for t in range(N_TASKS)
+    ]
     # Every attempt asked the API exactly once, however many times its node re-ran.
     expected = {(t, 1) for t in range(N_TASKS)} | {(t, 2) for t in retry_tasks}
     assert set(chaos_calls) == expected and set(chaos_calls.values()) == {1}, chaos_calls

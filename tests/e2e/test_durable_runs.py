@@ -70,10 +70,14 @@ def test_run_killed_at_task_18_resumes_at_task_18(tmp_path: Path) -> None:
 def _big_instance(n_tasks: int = 500, seed: int = 11) -> dict[str, Any]:
     rng = random.Random(seed)
     features = ["heavy", "dexterous", "careful"]
-    robots = [{"name": f"r{i}", "success": {f: round(rng.uniform(0.3, 0.99), 2)
-                                            for f in features}} for i in range(4)]
-    tasks = [{"id": t, "name": f"task {t}",
-              "features": rng.sample(features, rng.randint(1, 2))} for t in range(n_tasks)]
+    robots = [
+        {"name": f"r{i}", "success": {f: round(rng.uniform(0.3, 0.99), 2) for f in features}}
+        for i in range(4)
+    ]
+    tasks = [
+        {"id": t, "name": f"task {t}", "features": rng.sample(features, rng.randint(1, 2))}
+        for t in range(n_tasks)
+    ]
     return {"tasks": tasks, "robots": robots, "mode": "balanced", "reasoner": "rules"}
 
 

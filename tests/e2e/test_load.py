@@ -48,7 +48,8 @@ def test_twenty_runs_and_200_allocate_calls_on_one_sqlite_server(tmp_path: Path)
     assert len(runs) == N_RUNS and {r["status"] for r in runs} == {"completed"}
     assert [r["status"] for r in result.runs] == ["completed"] * N_RUNS
     # Nothing lost, nothing doubled, and the same deterministic allocation every time.
-    allocations = {tuple((a["task_index"], a["robot"]) for a in r["assignments"])
-                   for r in result.runs}
+    allocations = {
+        tuple((a["task_index"], a["robot"]) for a in r["assignments"]) for r in result.runs
+    }
     assert len(allocations) == 1
     assert [t for t, _ in allocations.pop()] == list(range(36))

@@ -58,9 +58,15 @@ def make_leased(
     opened: list[LeasedRunWorker] = []
 
     def factory(**overrides: Any) -> LeasedRunWorker:
-        settings = Settings(data_dir=tmp_path / "data", database_url=postgres_url,
-                            anthropic_api_key=None, anthropic_base_url=None, lease_s=0.9,
-                            claim_poll_s=0.2, **overrides)
+        settings = Settings(
+            data_dir=tmp_path / "data",
+            database_url=postgres_url,
+            anthropic_api_key=None,
+            anthropic_base_url=None,
+            lease_s=0.9,
+            claim_poll_s=0.2,
+            **overrides,
+        )
         worker = make_worker(settings=settings, sessions=sessions)
         assert isinstance(worker, LeasedRunWorker)
         opened.append(worker)
@@ -73,8 +79,9 @@ def make_leased(
 
 def _create(sessions: sessionmaker[Session], worker: LeasedRunWorker) -> str:
     spec = RunSpec.for_instance(scenario("baseline").instance, mode="balanced")
-    return service.create_run(sessions=sessions, worker=worker, settings=worker._settings,
-                              spec=spec).id
+    return service.create_run(
+        sessions=sessions, worker=worker, settings=worker._settings, spec=spec
+    ).id
 
 
 def _until(predicate: Callable[[], bool], timeout: float = 60.0) -> None:
@@ -115,17 +122,29 @@ def test_migrations_match_the_models_next_to_the_checkpointer_tables(postgres_ur
 def test_concurrent_claims_never_overlap(sessions: sessionmaker[Session]) -> None:
     ids = [f"claim{i:02d}" for i in range(20)]
     with transaction(sessions) as session:
-        session.add_all(Run(id=i, status="queued", request={}, reasoner="rules",
-                            mode="balanced", n_tasks=1, n_robots=1, resumes=0,
-                            cancel_requested=False) for i in ids)
+        session.add_all(
+            Run(
+                id=i,
+                status="queued",
+                request={},
+                reasoner="rules",
+                mode="balanced",
+                n_tasks=1,
+                n_robots=1,
+                resumes=0,
+                cancel_requested=False,
+            )
+            for i in ids
+        )
     barrier = threading.Barrier(4)
     claimed: dict[str, list[str]] = {}
 
     def claim(owner: str) -> None:
         barrier.wait()
         with transaction(sessions) as session:
-            rows = leases.claim_runs(session=session, owner=owner, lease_s=60, limit=8,
-                                     statuses=["queued"])
+            rows = leases.claim_runs(
+                session=session, owner=owner, lease_s=60, limit=8, statuses=["queued"]
+            )
         claimed[owner] = [r for r, _ in rows if r in ids]
 
     threads = [threading.Thread(target=claim, args=(f"p{n}",)) for n in range(4)]
@@ -136,23 +155,33 @@ def test_concurrent_claims_never_overlap(sessions: sessionmaker[Session]) -> Non
     everything = [r for rows in claimed.values() for r in rows]
     assert sorted(everything) == ids  # each run exactly once, nobody waited on a lock
     with transaction(sessions) as session:
-        assert leases.claim_runs(session=session, owner="late", lease_s=60, limit=20,
-                                 statuses=["queued"]) == []
+        assert (
+            leases.claim_runs(
+                session=session, owner="late", lease_s=60, limit=20, statuses=["queued"]
+            )
+            == []
+        )
         assert not leases.claim_run(session=session, run_id=ids[0], owner="late", lease_s=60)
         session.query(Run).filter(Run.id.in_(ids)).update(
-            {Run.status: "completed", Run.lease_owner: None}, synchronize_session=False)
+            {Run.status: "completed", Run.lease_owner: None}, synchronize_session=False
+        )
 
 
 def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
-    sessions: sessionmaker[Session], make_leased: Callable[..., LeasedRunWorker],
+    sessions: sessionmaker[Session],
+    make_leased: Callable[..., LeasedRunWorker],
     postgres_url: str,
 ) -> None:
     worker = make_leased(test_pause_at_task=3)
     run_id = _create(sessions, worker)
     _until(lambda: _decisions(sessions, run_id) == 3 and worker.is_active(run_id))
     # Another process took the run (as if this one had stalled past its lease).
-    query(postgres_url, "UPDATE runs SET lease_owner = 'thief', "
-                        "lease_expires_at = now() + interval '1 hour' WHERE id = %s", run_id)
+    query(
+        postgres_url,
+        "UPDATE runs SET lease_owner = 'thief', "
+        "lease_expires_at = now() + interval '1 hour' WHERE id = %s",
+        run_id,
+    )
     before = _kinds(sessions, run_id)
     worker.wait(run_id, timeout=10)  # the heartbeat noticed and the run stopped here
 
@@ -163,13 +192,30 @@ def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
 
     # Writes are fenced too, not only the heartbeat: a late write is rolled back.
     stop = RunStop()
-    recorder = SqlRecorder(run_id=run_id, sessions=sessions, stop=stop,
-                           fence=worker._fence(run_id, stop))
+    recorder = SqlRecorder(
+        run_id=run_id, sessions=sessions, stop=stop, fence=worker._fence(run_id, stop)
+    )
     record = DecisionRecord(
-        task_index=3, task_id=3, task_name="t", robot=0, robot_name="light", phase="early",
-        expected_success=0.5, reasoning="", confidence="High", tradeoff="", quality=1.0,
-        fallback=False, attempts=1, failure_log=[], loads_before=[1, 1, 1],
-        loads_after=[2, 1, 1], balance_before=100.0, balance_after=90.0, severity_after="low")
+        task_index=3,
+        task_id=3,
+        task_name="t",
+        robot=0,
+        robot_name="light",
+        phase="early",
+        expected_success=0.5,
+        reasoning="",
+        confidence="High",
+        tradeoff="",
+        quality=1.0,
+        fallback=False,
+        attempts=1,
+        failure_log=[],
+        loads_before=[1, 1, 1],
+        loads_after=[2, 1, 1],
+        balance_before=100.0,
+        balance_after=90.0,
+        severity_after="low",
+    )
     with pytest.raises(LeaseLost):
         recorder.save_decision(record)
     assert stop.lease_lost.is_set()
@@ -177,7 +223,8 @@ def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
 
 
 def test_cancel_reaches_the_process_running_the_run(
-    sessions: sessionmaker[Session], make_leased: Callable[..., LeasedRunWorker],
+    sessions: sessionmaker[Session],
+    make_leased: Callable[..., LeasedRunWorker],
 ) -> None:
     runner = make_leased(test_pause_at_task=3)
     other = make_leased()
@@ -192,7 +239,8 @@ def test_cancel_reaches_the_process_running_the_run(
 
 
 def test_a_draining_process_hands_its_runs_to_another(
-    sessions: sessionmaker[Session], make_leased: Callable[..., LeasedRunWorker],
+    sessions: sessionmaker[Session],
+    make_leased: Callable[..., LeasedRunWorker],
 ) -> None:
     first = make_leased(test_pause_at_task=3)
     run_id = _create(sessions, first)
@@ -207,7 +255,6 @@ def test_a_draining_process_hands_its_runs_to_another(
     assert _run(sessions, run_id).status == "completed"
     assert _decisions(sessions, run_id) == 36
     with sessions() as session:
-        resumed = [e for e in repo.events(session=session, run_id=run_id)
-                   if e.kind == "resumed"]
+        resumed = [e for e in repo.events(session=session, run_id=run_id) if e.kind == "resumed"]
     assert len(resumed) == 1 and resumed[0].detail["worker"] == second.owner
     assert resumed[0].detail["integrity"]["resume_at_task"] == 3

@@ -56,8 +56,10 @@ def _sqlite_reference(data_dir: Path) -> list[list[tuple[Any, str]]]:
     settings = Settings(data_dir=data_dir, anthropic_api_key=None, anthropic_base_url=None)
     results = []
     with TestClient(create_app(settings)) as client:
-        ids = [client.post("/runs", json={**body, "reasoner": "rules"}).json()["id"]
-               for body in REQUESTS]
+        ids = [
+            client.post("/runs", json={**body, "reasoner": "rules"}).json()["id"]
+            for body in REQUESTS
+        ]
         for run_id in ids:
             deadline = time.monotonic() + 120
             while (state := client.get(f"/runs/{run_id}").json())["status"] != "completed":
@@ -85,13 +87,23 @@ def _one(events: list[dict[str, Any]], kind: str) -> dict[str, Any]:
 @pytest.mark.timeout(900)
 def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> None:
     reference = _sqlite_reference(tmp_path / "sqlite")
-    env = {"LTAA_DATABASE_URL": postgres_url, "LTAA_LEASE_S": str(LEASE_S),
-           "LTAA_CLAIM_POLL_S": "0.5"}
-    a = Server(tmp_path / "a", env={**env, "LTAA_WORKER_NAME": "api-a",
-                                    "LTAA_MAX_CONCURRENT_RUNS": str(A_SLOTS),
-                                    "LTAA_TEST_PAUSE_AT_TASK": str(PAUSE_AT)})
-    b = Server(tmp_path / "b", env={**env, "LTAA_WORKER_NAME": "api-b",
-                                    "LTAA_MAX_CONCURRENT_RUNS": "4"})
+    env = {
+        "LTAA_DATABASE_URL": postgres_url,
+        "LTAA_LEASE_S": str(LEASE_S),
+        "LTAA_CLAIM_POLL_S": "0.5",
+    }
+    a = Server(
+        tmp_path / "a",
+        env={
+            **env,
+            "LTAA_WORKER_NAME": "api-a",
+            "LTAA_MAX_CONCURRENT_RUNS": str(A_SLOTS),
+            "LTAA_TEST_PAUSE_AT_TASK": str(PAUSE_AT),
+        },
+    )
+    b = Server(
+        tmp_path / "b", env={**env, "LTAA_WORKER_NAME": "api-b", "LTAA_MAX_CONCURRENT_RUNS": "4"}
+    )
     try:
         a.start()
         with a.client() as c:
@@ -110,14 +122,20 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
             assert state["status"] == "running"
         time.sleep(0.3)
         with a.client() as c:
-            assert all(c.get(f"/runs/{r}").json()["progress"]["allocated"] == PAUSE_AT
-                       for r in held_by_a)
+            assert all(
+                c.get(f"/runs/{r}").json()["progress"]["allocated"] == PAUSE_AT for r in held_by_a
+            )
         killed_at = time.monotonic()
         a.kill()
 
-        finals = [b.wait_for(run_id, lambda s: s["status"] == "completed"
-                             or s["status"] in ("failed", "cancelled"), timeout=300)
-                  for run_id in run_ids]
+        finals = [
+            b.wait_for(
+                run_id,
+                lambda s: s["status"] == "completed" or s["status"] in ("failed", "cancelled"),
+                timeout=300,
+            )
+            for run_id in run_ids
+        ]
         takeover_s = time.monotonic() - killed_at
         events = {run_id: _events(b, run_id) for run_id in run_ids}
     finally:
@@ -128,8 +146,11 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
     assert takeover_s >= LEASE_S  # nobody took A's runs before their leases expired
 
     # Exactly once: 36 decision rows per run, one per task index, no duplicates.
-    rows = query(postgres_url, "SELECT run_id, count(*), count(DISTINCT task_index), "
-                               "min(task_index), max(task_index) FROM decisions GROUP BY run_id")
+    rows = query(
+        postgres_url,
+        "SELECT run_id, count(*), count(DISTINCT task_index), "
+        "min(task_index), max(task_index) FROM decisions GROUP BY run_id",
+    )
     assert {r[0]: r[1:] for r in rows} == {run_id: (36, 36, 0, 35) for run_id in run_ids}
     leases = query(postgres_url, "SELECT count(*) FROM runs WHERE lease_owner IS NOT NULL")
     assert leases == [(0,)]  # every lease released at completion
@@ -149,8 +170,12 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
             assert integrity["decisions_stored"] == PAUSE_AT
             assert state["resumes"] == 1
             kinds = [e["kind"] for e in run_events]
-            assert (kinds.index("started") < kinds.index("interrupted")
-                    < kinds.index("resumed") < kinds.index("completed"))
+            assert (
+                kinds.index("started")
+                < kinds.index("interrupted")
+                < kinds.index("resumed")
+                < kinds.index("completed")
+            )
         else:
             assert started["detail"]["worker"].startswith("api-b:")
             assert not [e for e in run_events if e["kind"] in ("interrupted", "resumed")]

@@ -30,10 +30,14 @@ DRAIN_LIMIT_S = 10
 def instance(seed: int = 3) -> dict[str, Any]:
     rng = random.Random(seed)
     features = ["heavy", "dexterous", "careful"]
-    robots = [{"name": f"r{i}", "success": {f: round(rng.uniform(0.3, 0.99), 2)
-                                            for f in features}} for i in range(4)]
-    tasks = [{"id": t, "name": f"task {t}", "features": rng.sample(features, rng.randint(1, 2))}
-             for t in range(N_TASKS)]
+    robots = [
+        {"name": f"r{i}", "success": {f: round(rng.uniform(0.3, 0.99), 2) for f in features}}
+        for i in range(4)
+    ]
+    tasks = [
+        {"id": t, "name": f"task {t}", "features": rng.sample(features, rng.randint(1, 2))}
+        for t in range(N_TASKS)
+    ]
     return {"tasks": tasks, "robots": robots, "mode": "balanced", "reasoner": "rules"}
 
 
@@ -84,8 +88,9 @@ def test_sigterm_interrupts_runs_at_a_node_boundary_and_the_next_start_resumes_t
         code = server.proc.wait(timeout=DRAIN_LIMIT_S)
     except subprocess.TimeoutExpired:
         server.kill()
-        pytest.fail(f"still running {DRAIN_LIMIT_S} s after SIGTERM:\n"
-                    f"{server.log.read_text()[-3000:]}")
+        pytest.fail(
+            f"still running {DRAIN_LIMIT_S} s after SIGTERM:\n{server.log.read_text()[-3000:]}"
+        )
     watcher.join(timeout=5)
     log = server.log.read_text()
     # uvicorn (>= 0.29) re-raises the signal it shut down for once it is done, so a clean
@@ -117,7 +122,12 @@ def test_sigterm_interrupts_runs_at_a_node_boundary_and_the_next_start_resumes_t
     events = {e["kind"]: e["detail"] for e in trace["events"]}
     # One interrupted event, from the drain: none "found running at start-up".
     assert [e["kind"] for e in trace["events"]] == [
-        "created", "started", "interrupted", "resumed", "completed"], trace["events"]
+        "created",
+        "started",
+        "interrupted",
+        "resumed",
+        "completed",
+    ], trace["events"]
     assert events["interrupted"] == {"reason": "server shutting down"}
     integrity = events["resumed"]["integrity"]
     assert integrity["ok"] is True

@@ -31,8 +31,12 @@ def _create(server: Server) -> str:
 
 def _watch(server: Server, run_id: str, stop_after_decisions: int | None = None) -> list[Event]:
     events: list[Event] = []
-    with httpx.stream("GET", f"{server.url}/runs/{run_id}/events", headers=AS_SUPERVISOR,
-                      timeout=httpx.Timeout(30)) as response:
+    with httpx.stream(
+        "GET",
+        f"{server.url}/runs/{run_id}/events",
+        headers=AS_SUPERVISOR,
+        timeout=httpx.Timeout(30),
+    ) as response:
         assert response.status_code == 200
         for event in parse_events(response.iter_lines()):
             events.append(event)
@@ -46,7 +50,9 @@ def _wait_finished(server: Server, run_id: str) -> dict[str, Any]:
     deadline = time.monotonic() + 60
     with server.client() as c:
         while (state := c.get(f"/runs/{run_id}", headers=AS_SUPERVISOR).json())["status"] in (
-                "queued", "running"):
+            "queued",
+            "running",
+        ):
             assert time.monotonic() < deadline, state
             time.sleep(0.05)
     return dict(state)
@@ -70,7 +76,10 @@ def test_sse_delivers_all_36_decisions_in_order(tmp_path: Path) -> None:
     decisions = [e.data for e in events if e.event == "decision"]
     assert [d["task_index"] for d in decisions] == list(range(36))
     assert [e.data["kind"] for e in events if e.event == "run"] == [
-        "created", "started", "completed"]
+        "created",
+        "started",
+        "completed",
+    ]
     assert events[-1].event == "run" and events[-1].data["kind"] == "completed"
     assert finished["status"] == "completed" and finished["progress"]["allocated"] == 36
     log = server.log.read_text()
@@ -78,10 +87,20 @@ def test_sse_delivers_all_36_decisions_in_order(tmp_path: Path) -> None:
 
 
 def test_serve_refuses_a_public_address_without_keys(tmp_path: Path) -> None:
-    env = {**Server(tmp_path / "data").env, "LTAA_BIN": f"{BIN}/", "HOST": "0.0.0.0",
-           "PORT": str(free_port())}
+    env = {
+        **Server(tmp_path / "data").env,
+        "LTAA_BIN": f"{BIN}/",
+        "HOST": "0.0.0.0",
+        "PORT": str(free_port()),
+    }
     env.pop("LTAA_API_KEYS", None)
-    proc = subprocess.run(["sh", str(ROOT / "scripts" / "serve.sh")], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        ["sh", str(ROOT / "scripts" / "serve.sh")],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode != 0
     assert "refusing to start" in proc.stderr and "LTAA_API_KEYS" in proc.stderr

@@ -36,10 +36,14 @@ def _finished(server: Server, run_id: str) -> tuple[dict[str, Any], dict[str, An
 def _record(state: dict[str, Any], trace: dict[str, Any]) -> dict[str, Any]:
     """What must not depend on a crash: the switch, who answered, what was spent."""
     return {
-        "budget_events": [e["detail"] for e in trace["events"]
-                          if e["kind"] == "budget_exhausted"],
-        "attempts": [[(a["model"], a["input_tokens"], a["output_tokens"], a["accepted"])
-                      for a in d["attempts"]] for d in trace["decisions"]],
+        "budget_events": [e["detail"] for e in trace["events"] if e["kind"] == "budget_exhausted"],
+        "attempts": [
+            [
+                (a["model"], a["input_tokens"], a["output_tokens"], a["accepted"])
+                for a in d["attempts"]
+            ]
+            for d in trace["decisions"]
+        ],
         "assignments": [(a["task_id"], a["robot"]) for a in state["assignments"]],
         "usage": state["usage"],
     }
@@ -54,33 +58,44 @@ def test_a_budgeted_run_killed_before_and_after_its_switch_switches_at_the_same_
         server = Server(data, env=env).start()
         try:
             with server.client() as c:
-                scenario = next(s for s in c.get("/scenarios").json()
-                                if s["name"] == "baseline")
-            body = {"tasks": scenario["tasks"][:N_TASKS], "robots": scenario["robots"],
-                    "reasoner": "anthropic", "model": "claude-test"}
+                scenario = next(s for s in c.get("/scenarios").json() if s["name"] == "baseline")
+            body = {
+                "tasks": scenario["tasks"][:N_TASKS],
+                "robots": scenario["robots"],
+                "reasoner": "anthropic",
+                "model": "claude-test",
+            }
             # What each task costs, from an unlimited run answered first time everywhere.
             _, unlimited = _finished(server, _run(server, body))
-            cost = [sum(a["input_tokens"] + a["output_tokens"] for a in d["attempts"])
-                    for d in unlimited["decisions"]]
+            cost = [
+                sum(a["input_tokens"] + a["output_tokens"] for a in d["attempts"])
+                for d in unlimited["decisions"]
+            ]
             spent_before = [sum(cost[:k]) for k in range(N_TASKS + 1)]
             # Budgets reached exactly before task 3 (the kill lands before the switch)
             # and before task 2 (the kill lands after it: the event is already written).
             budgets = {"at kill": spent_before[PAUSE_AT], "before kill": spent_before[2]}
-            references = {name: _record(*_finished(server, _run(server, {
-                **body, "token_budget": budget}))) for name, budget in budgets.items()}
+            references = {
+                name: _record(*_finished(server, _run(server, {**body, "token_budget": budget})))
+                for name, budget in budgets.items()
+            }
         finally:
             server.stop()
 
         killed = Server(data, env=env).start(LTAA_TEST_PAUSE_AT_TASK=str(PAUSE_AT))
         try:
-            ids = {name: _run(killed, {**body, "token_budget": budget})
-                   for name, budget in budgets.items()}
+            ids = {
+                name: _run(killed, {**body, "token_budget": budget})
+                for name, budget in budgets.items()
+            }
             for run_id in ids.values():
                 killed.wait_for(run_id, lambda s: s["progress"]["allocated"] >= PAUSE_AT)
             time.sleep(0.3)  # both runs are now held inside task 3's reasoning node
             with killed.client() as c:
-                events = {name: [e["kind"] for e in c.get(f"/runs/{i}/trace").json()["events"]]
-                          for name, i in ids.items()}
+                events = {
+                    name: [e["kind"] for e in c.get(f"/runs/{i}/trace").json()["events"]]
+                    for name, i in ids.items()
+                }
         finally:
             killed.kill()
         assert "budget_exhausted" not in events["at kill"]
@@ -93,9 +108,11 @@ def test_a_budgeted_run_killed_before_and_after_its_switch_switches_at_the_same_
             restarted.stop()
 
     assert references["at kill"]["budget_events"] == [
-        {"task_index": 3, "tokens_spent": spent_before[3], "budget": budgets["at kill"]}]
+        {"task_index": 3, "tokens_spent": spent_before[3], "budget": budgets["at kill"]}
+    ]
     assert references["before kill"]["budget_events"] == [
-        {"task_index": 2, "tokens_spent": spent_before[2], "budget": budgets["before kill"]}]
+        {"task_index": 2, "tokens_spent": spent_before[2], "budget": budgets["before kill"]}
+    ]
     for name, (state, trace) in resumed.items():
         assert state["resumes"] == 1
         kinds = [e["kind"] for e in trace["events"]]

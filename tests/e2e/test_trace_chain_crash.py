@@ -25,8 +25,11 @@ def _stored_links(data: Path) -> dict[int, str]:
 
 def _written_at(data: Path, task_index: int) -> str:
     with sqlite3.connect(data / "ltaa.db") as db:
-        return str(db.execute("SELECT created_at FROM decisions WHERE task_index = ?",
-                              (task_index,)).fetchone()[0])
+        return str(
+            db.execute(
+                "SELECT created_at FROM decisions WHERE task_index = ?", (task_index,)
+            ).fetchone()[0]
+        )
 
 
 def test_a_run_killed_mid_write_resumes_with_a_valid_chain(tmp_path: Path) -> None:
@@ -38,8 +41,10 @@ def test_a_run_killed_mid_write_resumes_with_a_valid_chain(tmp_path: Path) -> No
     before_kill: list[dict[int, str]] = []
     server = Server(data)
     for n, point in enumerate(points):
-        server.start(LTAA_TEST_PAUSE_AT_TASK=str(point.task_index),
-                     LTAA_TEST_PAUSE_AT_NODE=f"{point.node}:after")
+        server.start(
+            LTAA_TEST_PAUSE_AT_TASK=str(point.task_index),
+            LTAA_TEST_PAUSE_AT_NODE=f"{point.node}:after",
+        )
         if n == 0:
             with server.client() as c:
                 run_id = c.post("/runs", json=BODY).json()["id"]

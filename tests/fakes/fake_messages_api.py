@@ -114,8 +114,7 @@ class Reply:
     @classmethod
     def garbage(cls) -> Reply:
         """200 with an HTML page, as a misbehaving proxy in front of the API sends."""
-        return cls(body=b"<html><body>upstream says hello</body></html>",
-                   content_type="text/html")
+        return cls(body=b"<html><body>upstream says hello</body></html>", content_type="text/html")
 
     @classmethod
     def dropped(cls, after: int = 40) -> Reply:

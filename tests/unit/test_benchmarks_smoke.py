@@ -72,24 +72,42 @@ def test_figures_render(tmp_path: Path) -> None:
     plots.methods_figure([point], "t", "c", "m.png", tmp_path)
     panel = plots.Panel(["x", "y"], {"A": [1.0, 2.0]}, "v", (0, 3), {"W": 1.5}, (1.0, 2.0))
     plots.panels_figure([panel, panel], "t", "c", "p.png", tmp_path)
-    plots.frontier_figure([("cap 0", 100.0, 76.0), ("no cap", 0.0, 83.0)],
-                          [plots.PlacedPoint("A", 50.0, 79.0)], "t", "c", "f.png", tmp_path)
+    plots.frontier_figure(
+        [("cap 0", 100.0, 76.0), ("no cap", 0.0, 83.0)],
+        [plots.PlacedPoint("A", 50.0, 79.0)],
+        "t",
+        "c",
+        "f.png",
+        tmp_path,
+    )
     plots.seeds_figure({"A": [77.0, 78.0]}, 78.6, 3.0, "t", "c", "s.png", tmp_path)
     plots.hbar_figure([("A", 10.0), ("B", 100.0)], "chars", "t", "c", "h.png", tmp_path)
     plots.latency_histogram_figure({"A": [0.1, 0.2], "B": [0.5]}, "t", "c", "l.png", tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "f.png", "h.png", "l.png", "m.png", "p.png", "s.png"]
+        "f.png",
+        "h.png",
+        "l.png",
+        "m.png",
+        "p.png",
+        "s.png",
+    ]
 
 
 def test_load_round_bookkeeping() -> None:
     bodies = load.allocate_bodies()
     assert len(bodies) == load.N_ALLOCATE
     assert {(b["solver"], b["scenario"]) for b in bodies} == {
-        (s, sc) for s in load.SOLVERS for sc in load.SCENARIOS}
+        (s, sc) for s in load.SOLVERS for sc in load.SCENARIOS
+    }
     ok = load.Call("greedy", 200, 0.1, scenario="baseline", expected_success=80.0)
     broken = load.Call("dp", 500, 0.2, '{"detail": "database is locked"}', "baseline")
-    result = load.LoadResult(calls=[ok, broken], create_statuses=[202], runs=[
-        {"id": "r1", "status": "failed"}], run_seconds=[1.0], allocate_wall_s=1.0)
+    result = load.LoadResult(
+        calls=[ok, broken],
+        create_statuses=[202],
+        runs=[{"id": "r1", "status": "failed"}],
+        run_seconds=[1.0],
+        allocate_wall_s=1.0,
+    )
     log = '{"level": "INFO", "message": "ok"}\n{"level": "ERROR", "message": "boom"}'
     problems = load.failures(result, log)
     assert len(problems) == 4 and sum("database is locked" in p for p in problems) == 2

@@ -37,9 +37,14 @@ def test_success_is_the_mean_over_the_task_features() -> None:
 
 @pytest.mark.parametrize(
     ("loads", "score", "level"),
-    [([12, 12, 12], 100.0, Severity.LOW), ([15, 12, 9], 75.0, Severity.LOW),
-     ([18, 12, 6], 50.0, Severity.MODERATE), ([22, 10, 4], 16.666667, Severity.HIGH),
-     ([36, 0, 0], 0.0, Severity.CRITICAL), ([19, 12, 5], 41.666667, Severity.HIGH)],
+    [
+        ([12, 12, 12], 100.0, Severity.LOW),
+        ([15, 12, 9], 75.0, Severity.LOW),
+        ([18, 12, 6], 50.0, Severity.MODERATE),
+        ([22, 10, 4], 16.666667, Severity.HIGH),
+        ([36, 0, 0], 0.0, Severity.CRITICAL),
+        ([19, 12, 5], 41.666667, Severity.HIGH),
+    ],
 )
 def test_balance_score_and_severity(loads: list[int], score: float, level: Severity) -> None:
     assert balance_score(loads, 12) == pytest.approx(score, abs=1e-5)
@@ -53,8 +58,14 @@ def test_jain_index_bounds() -> None:
 
 @pytest.mark.parametrize(
     ("allocated", "phase"),
-    [(0, Phase.EARLY), (32, Phase.EARLY), (33, Phase.MIDDLE), (66, Phase.MIDDLE),
-     (67, Phase.LATE), (99, Phase.LATE)],
+    [
+        (0, Phase.EARLY),
+        (32, Phase.EARLY),
+        (33, Phase.MIDDLE),
+        (66, Phase.MIDDLE),
+        (67, Phase.LATE),
+        (99, Phase.LATE),
+    ],
 )
 def test_phase_boundaries(allocated: int, phase: Phase) -> None:
     assert detect_phase(allocated, 100) is phase
@@ -102,10 +113,16 @@ def test_metrics_are_consistent() -> None:
         ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}), Robot("A", {"x": 1})), "robots.1.name"),
         ((Task(1, "t", ("x", "x")),), (Robot("a", {"x": 1}),), "tasks.0.features"),
         # A label that is another robot's name would make "**Decision**: b" ambiguous.
-        ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}, label="b"), Robot("b", {"x": 1})),
-         "robots.1.name"),
-        ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}, label="X"),
-                                   Robot("b", {"x": 1}, label="x")), "robots.1.label"),
+        (
+            (Task(1, "t", ("x",)),),
+            (Robot("a", {"x": 1}, label="b"), Robot("b", {"x": 1})),
+            "robots.1.name",
+        ),
+        (
+            (Task(1, "t", ("x",)),),
+            (Robot("a", {"x": 1}, label="X"), Robot("b", {"x": 1}, label="x")),
+            "robots.1.label",
+        ),
         ((Task(1, "t", ("x",)),), (Robot("a", {"x": 1}, label="**bold**"),), "robots.0.label"),
         ((Task(1, "t", ("x",)),), (Robot("a:b", {"x": 1}),), "robots.0.name"),
     ],

@@ -29,9 +29,13 @@ def instances(draw: st.DrawFn) -> tuple[Instance, float | None]:
         Robot(name=f"r{i}", success={f: draw(rate) for f in FEATURES}) for i in range(n_robots)
     )
     tasks = tuple(
-        Task(id=t, name=f"t{t}",
-             features=tuple(draw(st.lists(st.sampled_from(FEATURES), min_size=1, max_size=3,
-                                          unique=True))))
+        Task(
+            id=t,
+            name=f"t{t}",
+            features=tuple(
+                draw(st.lists(st.sampled_from(FEATURES), min_size=1, max_size=3, unique=True))
+            ),
+        )
         for t in range(n_tasks)
     )
     cap = draw(st.one_of(st.none(), st.integers(0, 4), st.floats(0, 4).map(lambda x: round(x, 1))))
@@ -55,8 +59,10 @@ def test_exact_solvers_agree_with_brute_force(case: tuple[Instance, float | None
         assignment = get_solver(name).solve(problem).assignment
         loads = workload(assignment, instance.n_robots)
         assert problem.cap.respected_by(loads), name
-        results[name] = (expected_success(instance, assignment),
-                         deviation_units(loads, instance.n_tasks))
+        results[name] = (
+            expected_success(instance, assignment),
+            deviation_units(loads, instance.n_tasks),
+        )
     reference = results["brute_force"]
     for name, (es, dev) in results.items():
         assert es == pytest.approx(reference[0], abs=1e-7), name
@@ -76,8 +82,11 @@ def test_exact_solvers_refuse_an_infeasible_cap(name: str) -> None:
 
 @pytest.mark.parametrize(
     ("mode", "expected"),
-    [(Mode.SUCCESS_FOCUSED, 0.830556), (Mode.BALANCED, 0.786111),
-     (Mode.AGGRESSIVE_BALANCE, 0.769444)],
+    [
+        (Mode.SUCCESS_FOCUSED, 0.830556),
+        (Mode.BALANCED, 0.786111),
+        (Mode.AGGRESSIVE_BALANCE, 0.769444),
+    ],
 )
 @pytest.mark.parametrize("name", ["dp", "optimal"])
 def test_baseline_scenario_optimum(name: str, mode: Mode, expected: float) -> None:
@@ -102,11 +111,18 @@ def test_brute_force_refuses_large_spaces_with_the_count() -> None:
 
 
 def test_optimal_handles_large_instances() -> None:
-    robots = tuple(Robot(f"r{i}", {f: ((i * 7 + j * 3) % 10) / 10 for j, f in enumerate(FEATURES)})
-                   for i in range(50))
-    tasks = tuple(Task(id=t, name=str(t),
-                       features=tuple(dict.fromkeys((FEATURES[t % 3], FEATURES[(t // 3) % 3]))))
-                  for t in range(10_000))
+    robots = tuple(
+        Robot(f"r{i}", {f: ((i * 7 + j * 3) % 10) / 10 for j, f in enumerate(FEATURES)})
+        for i in range(50)
+    )
+    tasks = tuple(
+        Task(
+            id=t,
+            name=str(t),
+            features=tuple(dict.fromkeys((FEATURES[t % 3], FEATURES[(t // 3) % 3]))),
+        )
+        for t in range(10_000)
+    )
     problem = Problem.build(Instance(tasks=tasks, robots=robots), Mode.BALANCED)
     assignment = get_solver("optimal").solve(problem).assignment
     assert len(assignment) == 10_000

@@ -36,8 +36,9 @@ def test_every_checkpoint_of_a_run_is_consistent_with_the_decisions_then_stored(
         if snapshot.next == ("store_and_route",):
             stored_options.append(index + 1)
         for stored in stored_options:
-            report = check_integrity(decisions=decisions[:stored], n_tasks=12, n_robots=3,
-                                     checkpoint=values)
+            report = check_integrity(
+                decisions=decisions[:stored], n_tasks=12, n_robots=3, checkpoint=values
+            )
             assert report.ok, (snapshot.next, stored, report.problems)
             checked += 1
     assert checked > len(snapshots)
@@ -53,6 +54,5 @@ def test_loads_that_disagree_with_the_decisions_are_reported() -> None:
     values["task_index"] = 6
     values["robot"] = None
     values["loads"] = [6, 0, 0]
-    report = check_integrity(decisions=decisions[:6], n_tasks=12, n_robots=3,
-                             checkpoint=values)
+    report = check_integrity(decisions=decisions[:6], n_tasks=12, n_robots=3, checkpoint=values)
     assert not report.ok and "disagree" in report.problems[0]

@@ -41,10 +41,16 @@ def api() -> Iterator[FakeMessagesAPI]:
 
 @pytest.fixture
 def client(settings: Settings, api: FakeMessagesAPI) -> Iterator[TestClient]:
-    app = create_app(settings.model_copy(update={
-        "anthropic_api_key": SecretStr("test-key"), "anthropic_base_url": api.base_url,
-        "anthropic_max_transport_retries": TRANSPORT_RETRIES, "anthropic_timeout_s": TIMEOUT_S,
-    }))
+    app = create_app(
+        settings.model_copy(
+            update={
+                "anthropic_api_key": SecretStr("test-key"),
+                "anthropic_base_url": api.base_url,
+                "anthropic_max_transport_retries": TRANSPORT_RETRIES,
+                "anthropic_timeout_s": TIMEOUT_S,
+            }
+        )
+    )
     with TestClient(app) as c:
         yield c
 
@@ -52,8 +58,12 @@ def client(settings: Settings, api: FakeMessagesAPI) -> Iterator[TestClient]:
 def llm_run(client: TestClient, n_tasks: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
     """A run of the baseline's first tasks on Claude; its final state and its trace."""
     baseline = next(s for s in client.get("/scenarios").json() if s["name"] == "baseline")
-    body = {"tasks": baseline["tasks"][:n_tasks], "robots": baseline["robots"],
-            "reasoner": "anthropic", "model": "claude-test"}
+    body = {
+        "tasks": baseline["tasks"][:n_tasks],
+        "robots": baseline["robots"],
+        "reasoner": "anthropic",
+        "model": "claude-test",
+    }
     created = client.post("/runs", json=body)
     assert created.status_code == 202, created.text
     run_id = created.json()["id"]
@@ -70,6 +80,7 @@ def assert_completed(state: dict[str, Any], trace: dict[str, Any], n_tasks: int 
 
 
 # ------------------------------------------------------------- transport retries (SDK)
+
 
 @dataclass(frozen=True)
 class TransportFault:
@@ -90,8 +101,9 @@ TRANSPORT_FAULTS = {
 
 
 @pytest.mark.parametrize("fault", TRANSPORT_FAULTS.values(), ids=TRANSPORT_FAULTS.keys())
-def test_a_transport_fault_is_retried_by_the_sdk(client: TestClient, api: FakeMessagesAPI,
-                                                 fault: TransportFault) -> None:
+def test_a_transport_fault_is_retried_by_the_sdk(
+    client: TestClient, api: FakeMessagesAPI, fault: TransportFault
+) -> None:
     api.script(fault.reply)
     state, trace = llm_run(client)
     assert_completed(state, trace)
@@ -101,8 +113,10 @@ def test_a_transport_fault_is_retried_by_the_sdk(client: TestClient, api: FakeMe
     assert attempt["model"] == "claude-test" and attempt["hard_invalid"] is None
     assert not trace["decisions"][0]["fallback"] and trace["decisions"][0]["failure_log"] == []
     first, second = api.requests[:2]
-    assert (first["_headers"]["x-stainless-retry-count"],
-            second["_headers"]["x-stainless-retry-count"]) == ("0", "1")
+    assert (
+        first["_headers"]["x-stainless-retry-count"],
+        second["_headers"]["x-stainless-retry-count"],
+    ) == ("0", "1")
     assert second["_received_at"] - first["_received_at"] >= fault.min_wait_s
     assert api.served[0].status == fault.served_first
     # Only the delivered answer is billed, and the run counts exactly that.
@@ -132,8 +146,7 @@ VALIDATION_FAULTS: dict[str, tuple[Reply | Callable[[dict[str, Any]], Reply], st
 }
 
 
-@pytest.mark.parametrize(("fault", "why"), VALIDATION_FAULTS.values(),
-                         ids=VALIDATION_FAULTS.keys())
+@pytest.mark.parametrize(("fault", "why"), VALIDATION_FAULTS.values(), ids=VALIDATION_FAULTS.keys())
 def test_a_bad_reply_is_a_failed_attempt_retried_at_the_next_tier(
     client: TestClient, api: FakeMessagesAPI, fault: Reply, why: str
 ) -> None:
@@ -161,6 +174,7 @@ def test_a_bad_reply_is_a_failed_attempt_retried_at_the_next_tier(
 
 # ------------------------------------------------------------- the fallback
 
+
 def test_a_transport_that_gives_up_at_every_tier_ends_in_the_fallback(
     client: TestClient, api: FakeMessagesAPI
 ) -> None:
@@ -181,15 +195,27 @@ def test_a_transport_that_gives_up_at_every_tier_ends_in_the_fallback(
 
 
 def test_a_run_whose_every_call_fails_completes_on_fallbacks(settings: Settings) -> None:
-    faults: Iterator[Callable[[], Reply]] = itertools.cycle([
-        Reply.empty, Reply.truncated, Reply.garbage, lambda: Reply(body=b"{}"),
-        lambda: Reply.overloaded(retry_after=0.01), lambda: Reply.error(500, retry_after=0.01),
-        Reply.dropped,
-    ])
+    faults: Iterator[Callable[[], Reply]] = itertools.cycle(
+        [
+            Reply.empty,
+            Reply.truncated,
+            Reply.garbage,
+            lambda: Reply(body=b"{}"),
+            lambda: Reply.overloaded(retry_after=0.01),
+            lambda: Reply.error(500, retry_after=0.01),
+            Reply.dropped,
+        ]
+    )
     with FakeMessagesAPI(default=lambda request: next(faults)()) as api:
-        app = create_app(settings.model_copy(update={
-            "anthropic_api_key": SecretStr("test-key"), "anthropic_base_url": api.base_url,
-            "anthropic_max_transport_retries": 1}))
+        app = create_app(
+            settings.model_copy(
+                update={
+                    "anthropic_api_key": SecretStr("test-key"),
+                    "anthropic_base_url": api.base_url,
+                    "anthropic_max_transport_retries": 1,
+                }
+            )
+        )
         with TestClient(app) as client:
             state, trace = llm_run(client, n_tasks=4)
         statuses = {s.status for s in api.served}
@@ -199,24 +225,33 @@ def test_a_run_whose_every_call_fails_completes_on_fallbacks(settings: Settings)
     assert state["usage"]["llm_calls"] == 0 and state["usage"]["input_tokens"] == 0
     for decision in trace["decisions"]:
         assert decision["fallback"] is True and len(decision["failure_log"]) == 4
-        assert all(a["hard_invalid"].startswith("the reasoner gave no reply")
-                   for a in decision["attempts"])
+        assert all(
+            a["hard_invalid"].startswith("the reasoner gave no reply") for a in decision["attempts"]
+        )
         # The fallback is the rules reasoner's choice, validated like any answer.
         assert decision["quality"] >= 0.9 and "Rule-based choice" in decision["reasoning"]
 
 
-def test_a_resume_without_the_api_key_fails_saying_which_key_to_set(
-        settings: Settings) -> None:
+def test_a_resume_without_the_api_key_fails_saying_which_key_to_set(settings: Settings) -> None:
     with FakeMessagesAPI() as api:
-        keyed = settings.model_copy(update={
-            "anthropic_api_key": SecretStr("test-key"), "anthropic_base_url": api.base_url,
-            "test_pause_at_task": 1})
+        keyed = settings.model_copy(
+            update={
+                "anthropic_api_key": SecretStr("test-key"),
+                "anthropic_base_url": api.base_url,
+                "test_pause_at_task": 1,
+            }
+        )
         with TestClient(create_app(keyed)) as first:
-            baseline = next(s for s in first.get("/scenarios").json()
-                            if s["name"] == "baseline")
-            run_id = first.post("/runs", json={
-                "tasks": baseline["tasks"][:2], "robots": baseline["robots"],
-                "reasoner": "anthropic", "model": "claude-test"}).json()["id"]
+            baseline = next(s for s in first.get("/scenarios").json() if s["name"] == "baseline")
+            run_id = first.post(
+                "/runs",
+                json={
+                    "tasks": baseline["tasks"][:2],
+                    "robots": baseline["robots"],
+                    "reasoner": "anthropic",
+                    "model": "claude-test",
+                },
+            ).json()["id"]
             wait_until(first, run_id, ("running",))
     # The key is gone when the server starts again and resumes the interrupted run.
     with TestClient(create_app(settings)) as second:

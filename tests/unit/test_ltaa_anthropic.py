@@ -140,8 +140,9 @@ def test_an_unknown_model_through_allocate_names_the_option(
     monkeypatch.setenv("LTAA_ANTHROPIC_BASE_URL", api.base_url)
     api.script(Reply.error(404, retry_after=None))
     with pytest.raises(DomainError) as err:
-        get_solver("ltaa").solve(problem(n_tasks=1),
-                                 options={"reasoner": "anthropic", "model": "nope"})
+        get_solver("ltaa").solve(
+            problem(n_tasks=1), options={"reasoner": "anthropic", "model": "nope"}
+        )
     assert err.value.field == "options.model" and err.value.status_code == 422
 
 

@@ -32,14 +32,40 @@ def test_one_decision_per_run_and_task_is_enforced(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'app.db'}"
     upgrade_head(url)
     sessions = make_session_factory(make_engine(url))
-    row = {"task_id": "0", "task_name": "t", "robot": 0, "robot_name": "a", "phase": "early",
-           "expected_success": 0.5, "reasoning": "", "confidence": "High", "tradeoff": "",
-           "quality": 1.0, "fallback": False, "attempts": 1, "failure_log": [],
-           "loads_before": [0], "loads_after": [1], "balance_before": 0.0,
-           "balance_after": 0.0, "severity_after": "low"}
+    row = {
+        "task_id": "0",
+        "task_name": "t",
+        "robot": 0,
+        "robot_name": "a",
+        "phase": "early",
+        "expected_success": 0.5,
+        "reasoning": "",
+        "confidence": "High",
+        "tradeoff": "",
+        "quality": 1.0,
+        "fallback": False,
+        "attempts": 1,
+        "failure_log": [],
+        "loads_before": [0],
+        "loads_after": [1],
+        "balance_before": 0.0,
+        "balance_after": 0.0,
+        "severity_after": "low",
+    }
     with transaction(sessions) as session:
-        session.add(Run(id="r1", status="queued", request={}, reasoner="rules", mode="balanced",
-                        n_tasks=1, n_robots=1, resumes=0, cancel_requested=False))
+        session.add(
+            Run(
+                id="r1",
+                status="queued",
+                request={},
+                reasoner="rules",
+                mode="balanced",
+                n_tasks=1,
+                n_robots=1,
+                resumes=0,
+                cancel_requested=False,
+            )
+        )
         session.flush()
         session.add(Decision(run_id="r1", task_index=0, **row))
     with pytest.raises(IntegrityError), transaction(sessions) as session:
@@ -49,8 +75,11 @@ def test_one_decision_per_run_and_task_is_enforced(tmp_path: Path) -> None:
 @pytest.fixture(params=["sqlite", "postgresql"])
 def migrated_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
     with ExitStack() as stack:
-        url = (f"sqlite:///{tmp_path / 'app.db'}" if request.param == "sqlite"
-               else stack.enter_context(fresh_database()))
+        url = (
+            f"sqlite:///{tmp_path / 'app.db'}"
+            if request.param == "sqlite"
+            else stack.enter_context(fresh_database())
+        )
         upgrade_head(url)
         yield url
 
@@ -63,16 +92,45 @@ def test_the_longest_names_the_api_accepts_fit_the_columns(migrated_url: str) ->
     sessions = make_session_factory(engine)
     try:
         with transaction(sessions) as session:
-            session.add(Run(id="r1", status="running", request={}, reasoner="rules",
-                            mode="balanced", n_tasks=1, n_robots=1, resumes=0,
-                            cancel_requested=False))
+            session.add(
+                Run(
+                    id="r1",
+                    status="running",
+                    request={},
+                    reasoner="rules",
+                    mode="balanced",
+                    n_tasks=1,
+                    n_robots=1,
+                    resumes=0,
+                    cancel_requested=False,
+                )
+            )
             session.flush()
-            repo.upsert_decision(session=session, run_id="r1", record=DecisionRecord(
-                task_index=0, task_id=longest, task_name=longest, robot=0,
-                robot_name=longest, phase="early", expected_success=0.5, reasoning="",
-                confidence="High", tradeoff="", quality=1.0, fallback=False, attempts=1,
-                failure_log=[], loads_before=[0], loads_after=[1], balance_before=0.0,
-                balance_after=1.0, severity_after="low"))
+            repo.upsert_decision(
+                session=session,
+                run_id="r1",
+                record=DecisionRecord(
+                    task_index=0,
+                    task_id=longest,
+                    task_name=longest,
+                    robot=0,
+                    robot_name=longest,
+                    phase="early",
+                    expected_success=0.5,
+                    reasoning="",
+                    confidence="High",
+                    tradeoff="",
+                    quality=1.0,
+                    fallback=False,
+                    attempts=1,
+                    failure_log=[],
+                    loads_before=[0],
+                    loads_after=[1],
+                    balance_before=0.0,
+                    balance_after=1.0,
+                    severity_after="low",
+                ),
+            )
         with sessions() as session:
             stored = repo.decisions(session=session, run_id="r1")[0]
             assert (stored.task_id, stored.robot_name) == (longest, longest)

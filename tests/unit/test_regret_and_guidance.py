@@ -34,7 +34,8 @@ def test_guided_rules_ltaa_has_zero_regret(scenario: str, mode: Mode) -> None:
     solution = get_solver("ltaa").solve(problem, options={"guidance": "optimizer"})
     assert solution.details["regret"] == pytest.approx(0.0, abs=1e-9)
     assert expected_success(problem.instance, solution.assignment) == pytest.approx(
-        _optimum(problem), abs=1e-9)
+        _optimum(problem), abs=1e-9
+    )
     assert solution.details["fallbacks"] == 0
 
 

@@ -26,16 +26,29 @@ def recorded(rec: MemoryRecorder) -> dict[tuple[int, int], RecordedReply]:
     for a in rec.attempts():
         reply = a.reply
         out[(a.task_index, a.attempt)] = RecordedReply(
-            text=reply.text if reply else None, model=reply.model if reply else None,
+            text=reply.text if reply else None,
+            model=reply.model if reply else None,
             input_tokens=reply.input_tokens if reply else 0,
             output_tokens=reply.output_tokens if reply else 0,
-            extra=dict(reply.extra) if reply else {})
+            extra=dict(reply.extra) if reply else {},
+        )
     return out
 
 
 def verdicts(a: AttemptRecord) -> tuple[Any, ...]:
-    return (a.task_index, a.attempt, a.tier, a.user_prompt, a.parsed, a.scores, a.quality,
-            a.accepted, a.hard_invalid, a.feedback, a.reply.text if a.reply else None)
+    return (
+        a.task_index,
+        a.attempt,
+        a.tier,
+        a.user_prompt,
+        a.parsed,
+        a.scores,
+        a.quality,
+        a.accepted,
+        a.hard_invalid,
+        a.feedback,
+        a.reply.text if a.reply else None,
+    )
 
 
 def test_replay_through_the_graph_reproduces_every_verdict_and_costs_nothing() -> None:
@@ -44,9 +57,17 @@ def test_replay_through_the_graph_reproduces_every_verdict_and_costs_nothing() -
     # answer. Task 2: garbage five times (attempts 4 and 5 both at tier 3, so a replay
     # keyed by tier would answer attempt 5 with attempt 4's text), then good at attempt 6.
     # Task 3: garbage to the end: the fallback. Tasks 4-5: good.
-    scripted = ScriptedReasoner(script=[
-        poor_answer, compose_answer, ReasonerError(TRANSPORT_FAILURE), compose_answer,
-        *[GARBAGE] * 5, compose_answer, *[GARBAGE] * 6])
+    scripted = ScriptedReasoner(
+        script=[
+            poor_answer,
+            compose_answer,
+            ReasonerError(TRANSPORT_FAILURE),
+            compose_answer,
+            *[GARBAGE] * 5,
+            compose_answer,
+            *[GARBAGE] * 6,
+        ]
+    )
     original, _ = run(prob, scripted, max_retries=5)
     assert scripted.script == []
     first = original.decisions()
@@ -64,8 +85,12 @@ def test_replay_through_the_graph_reproduces_every_verdict_and_costs_nothing() -
     assert usage_from_attempts(original.attempts()).llm_calls > 0
     reply = again.attempt(0, 1).reply  # type: ignore[union-attr]
     assert reply is not None and reply.model is None and reply.input_tokens == 0
-    assert reply.extra == {"replayed_from": "orig", "original_model": "scripted",
-                           "original_input_tokens": 100, "original_output_tokens": 50}
+    assert reply.extra == {
+        "replayed_from": "orig",
+        "original_model": "scripted",
+        "original_input_tokens": 100,
+        "original_output_tokens": 50,
+    }
     failed = again.attempt(1, 1).reply  # type: ignore[union-attr]
     assert failed is not None and failed.extra["error"] == TRANSPORT_FAILURE
 
@@ -77,8 +102,12 @@ def test_a_replay_of_a_replay_still_names_the_first_model_and_its_tokens() -> No
     twice, _ = run(prob, ReplayReasoner(run_id="b", replies=recorded(once)))
     assert [verdicts(a) for a in twice.attempts()] == [verdicts(a) for a in original.attempts()]
     extra = twice.attempt(0, 2).reply.extra  # type: ignore[union-attr]
-    assert extra == {"replayed_from": "b", "original_model": "scripted",
-                     "original_input_tokens": 100, "original_output_tokens": 50}
+    assert extra == {
+        "replayed_from": "b",
+        "original_model": "scripted",
+        "original_input_tokens": 100,
+        "original_output_tokens": 50,
+    }
 
 
 def test_a_rules_record_replays_as_text_with_no_model() -> None:
@@ -96,7 +125,8 @@ def test_an_attempt_the_original_never_made_fails_loudly() -> None:
         replay.reason("s", "u", context(task_index=0, attempt=2))
     with pytest.raises(ReasonerError, match="no reply was recorded"):
         ReplayReasoner(run_id="x", replies={(0, 1): RecordedReply(text=None)}).reason(
-            "s", "u", context(task_index=0, attempt=1))
+            "s", "u", context(task_index=0, attempt=1)
+        )
 
 
 def test_factory_builds_a_replay_only_from_given_replies() -> None:

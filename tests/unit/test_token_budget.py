@@ -66,16 +66,16 @@ def test_a_retry_after_the_budget_is_spent_goes_to_the_rules_reasoner() -> None:
 
 def test_spent_tokens_are_seeded_and_failed_calls_cost_nothing() -> None:
     told: list[BudgetExhausted] = []
-    llm = ScriptedReasoner([ReasonerError("HTTP 529 after 3 transport retries")],
-                           tokens=(100, 50))
+    llm = ScriptedReasoner([ReasonerError("HTTP 529 after 3 transport retries")], tokens=(100, 50))
     # 200 already spent before a restart: one call (failed, free), one paid, then rules.
     budgeted = TokenBudgetReasoner(llm, budget=300, spent=200, on_exhausted=told.append)
     rec, _ = run(problem(n_tasks=2), budgeted)
     assert [a.reply.model for a in rec.attempts()] == [None, "scripted", None]
     assert budgeted.spent == 350 and told == [BudgetExhausted(1, 350, 300)]
 
-    seeded = TokenBudgetReasoner(ScriptedReasoner(), budget=300, spent=300,
-                                 on_exhausted=told.append)
+    seeded = TokenBudgetReasoner(
+        ScriptedReasoner(), budget=300, spent=300, on_exhausted=told.append
+    )
     rec, _ = run(problem(n_tasks=1), seeded)
     assert rec.attempts()[0].reply.model is None and told[-1].task_index == 0
 
@@ -90,15 +90,28 @@ def api() -> Iterator[FakeMessagesAPI]:
 
 
 def client_for(settings: Settings, api: FakeMessagesAPI, **overrides: Any) -> TestClient:
-    return TestClient(create_app(settings.model_copy(update={
-        "anthropic_api_key": SecretStr("test-key"), "anthropic_base_url": api.base_url,
-        **overrides})))
+    return TestClient(
+        create_app(
+            settings.model_copy(
+                update={
+                    "anthropic_api_key": SecretStr("test-key"),
+                    "anthropic_base_url": api.base_url,
+                    **overrides,
+                }
+            )
+        )
+    )
 
 
 def llm_run(client: TestClient, **extra: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     baseline = next(s for s in client.get("/scenarios").json() if s["name"] == "baseline")
-    body = {"tasks": baseline["tasks"][:N_TASKS], "robots": baseline["robots"],
-            "reasoner": "anthropic", "model": "claude-test", **extra}
+    body = {
+        "tasks": baseline["tasks"][:N_TASKS],
+        "robots": baseline["robots"],
+        "reasoner": "anthropic",
+        "model": "claude-test",
+        **extra,
+    }
     created = client.post("/runs", json=body)
     assert created.status_code == 202, created.text
     run_id = created.json()["id"]
@@ -137,7 +150,8 @@ def test_a_run_switches_to_rules_at_the_task_where_its_budget_is_reached(
     for state, trace, switch in ((exact_state, exact, 2), (over_state, over, 3)):
         budget = spent_before[2] + (switch == 3)
         assert budget_events(trace) == [
-            {"task_index": switch, "tokens_spent": spent_before[switch], "budget": budget}]
+            {"task_index": switch, "tokens_spent": spent_before[switch], "budget": budget}
+        ]
         models = [[a["model"] for a in d["attempts"]] for d in trace["decisions"]]
         assert models == [["claude-test"]] * switch + [[None]] * (N_TASKS - switch)
         for decision in trace["decisions"][switch:]:
@@ -169,8 +183,7 @@ def test_the_server_setting_is_the_default_budget_and_a_request_overrides_it(
     [event] = budget_events(by_setting)
     assert event["task_index"] == 1 and event["budget"] == 1 and event["tokens_spent"] > 1
     assert budget_events(by_request) == []
-    assert all(a["model"] == "claude-test"
-               for d in by_request["decisions"] for a in d["attempts"])
+    assert all(a["model"] == "claude-test" for d in by_request["decisions"] for a in d["attempts"])
     assert refused.status_code == 422
     assert refused.json()["detail"][0]["loc"] == ["body", "token_budget"]
 
@@ -183,15 +196,30 @@ def test_a_process_that_lost_the_run_writes_no_budget_event(tmp_path: Path) -> N
     engine = make_engine(url)
     sessions = make_session_factory(engine)
     with transaction(sessions) as session:
-        session.add(Run(id="r1", status="running", request={}, reasoner="anthropic",
-                        mode="balanced", n_tasks=2, n_robots=3, resumes=0,
-                        cancel_requested=False))
+        session.add(
+            Run(
+                id="r1",
+                status="running",
+                request={},
+                reasoner="anthropic",
+                mode="balanced",
+                n_tasks=2,
+                n_robots=3,
+                resumes=0,
+                cancel_requested=False,
+            )
+        )
 
     def lease_gone(session: Session) -> None:
         raise LeaseLost("r1")
 
-    budgeted = with_token_budget(ScriptedReasoner(tokens=(100, 50)), run_id="r1", budget=100,
-                                 sessions=sessions, fence=lease_gone)
+    budgeted = with_token_budget(
+        ScriptedReasoner(tokens=(100, 50)),
+        run_id="r1",
+        budget=100,
+        sessions=sessions,
+        fence=lease_gone,
+    )
     try:
         with pytest.raises(LeaseLost):
             run(problem(n_tasks=2), budgeted)

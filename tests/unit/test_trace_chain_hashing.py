@@ -24,10 +24,25 @@ from app.store.models import Run
 from tests.e2e.postgres import fresh_database
 
 DECISION = DecisionRecord(
-    task_index=0, task_id=7, task_name="Lift beam", robot=1, robot_name="heavy", phase="early",
-    expected_success=0.9, reasoning="strongest", confidence="high", tradeoff="none",
-    quality=0.95, fallback=False, attempts=1, failure_log=[], loads_before=[0, 0, 0],
-    loads_after=[0, 1, 0], balance_before=1.0, balance_after=0.5, severity_after="low",
+    task_index=0,
+    task_id=7,
+    task_name="Lift beam",
+    robot=1,
+    robot_name="heavy",
+    phase="early",
+    expected_success=0.9,
+    reasoning="strongest",
+    confidence="high",
+    tradeoff="none",
+    quality=0.95,
+    fallback=False,
+    attempts=1,
+    failure_log=[],
+    loads_before=[0, 0, 0],
+    loads_after=[0, 1, 0],
+    balance_before=1.0,
+    balance_after=0.5,
+    severity_after="low",
     regret=0.0,
 )
 
@@ -43,20 +58,31 @@ def test_representations_of_one_stored_value_hash_alike() -> None:
     # stored as a JSON list; an integer task id is stored as text.
     assert _link(replace(DECISION, regret=-0.0)) == base
     assert _link(replace(DECISION, expected_success=np.float64(0.9))) == _link(
-        replace(DECISION, expected_success=0.9))
+        replace(DECISION, expected_success=0.9)
+    )
     assert _link(replace(DECISION, loads_before=(0, 0, 0))) == base  # type: ignore[arg-type]
     assert _link(replace(DECISION, task_id="7")) == base
-    assert _link(replace(DECISION, regret=float("nan"))) == _link(replace(DECISION,
-                                                                          regret=None))
-    assert chain.event_link("p", {"seq": 1, "kind": "k", "detail": {1: (2, 3)}}) == \
-        chain.event_link("p", {"seq": 1, "kind": "k", "detail": {"1": [2, 3]}})
+    assert _link(replace(DECISION, regret=float("nan"))) == _link(replace(DECISION, regret=None))
+    assert chain.event_link(
+        "p", {"seq": 1, "kind": "k", "detail": {1: (2, 3)}}
+    ) == chain.event_link("p", {"seq": 1, "kind": "k", "detail": {"1": [2, 3]}})
 
 
-@pytest.mark.parametrize("change", [
-    {"robot": 2}, {"robot_name": "light"}, {"expected_success": 0.9000000000000001},
-    {"reasoning": "strongest "}, {"fallback": True}, {"failure_log": ["x"]},
-    {"loads_after": [1, 0, 0]}, {"regret": None}, {"task_index": 1}, {"severity_after": "high"},
-])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"robot": 2},
+        {"robot_name": "light"},
+        {"expected_success": 0.9000000000000001},
+        {"reasoning": "strongest "},
+        {"fallback": True},
+        {"failure_log": ["x"]},
+        {"loads_after": [1, 0, 0]},
+        {"regret": None},
+        {"task_index": 1},
+        {"severity_after": "high"},
+    ],
+)
 def test_any_change_of_content_changes_the_link(change: dict[str, Any]) -> None:
     assert _link(replace(DECISION, **change)) != _link(DECISION)
 
@@ -67,11 +93,20 @@ def test_a_link_depends_on_its_predecessor_its_attempts_its_run_and_its_table() 
     assert chain.genesis("decisions", "run-a") != chain.genesis("decisions", "run-b")
     assert chain.genesis("decisions", "run-a") != chain.genesis("events", "run-a")
     attempt = {name: None for name in chain.ATTEMPT_FIELDS} | {
-        "attempt": 1, "tier": 0, "system_prompt": "s", "user_prompt": "u", "input_tokens": 0,
-        "output_tokens": 0, "latency_ms": 1.5, "transport_retries": 0, "reply_extra": {},
-        "scores": {}}
+        "attempt": 1,
+        "tier": 0,
+        "system_prompt": "s",
+        "user_prompt": "u",
+        "input_tokens": 0,
+        "output_tokens": 0,
+        "latency_ms": 1.5,
+        "transport_retries": 0,
+        "reply_extra": {},
+        "scores": {},
+    }
     assert chain.attempts_digest([attempt]) != chain.attempts_digest(
-        [attempt | {"feedback": "try again"}])
+        [attempt | {"feedback": "try again"}]
+    )
     assert chain.attempts_digest([]) != chain.attempts_digest([attempt])
 
 
@@ -79,8 +114,11 @@ def test_a_link_depends_on_its_predecessor_its_attempts_its_run_and_its_table() 
 def sessions(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[sessionmaker[Session]]:
     """Both back-ends: each stores floats and JSON its own way."""
     with ExitStack() as stack:
-        url = (f"sqlite:///{tmp_path / 'ltaa.db'}" if request.param == "sqlite"
-               else stack.enter_context(fresh_database()))
+        url = (
+            f"sqlite:///{tmp_path / 'ltaa.db'}"
+            if request.param == "sqlite"
+            else stack.enter_context(fresh_database())
+        )
         upgrade_head(url)  # the real schema, through the real migrations
         engine = make_engine(url)
         stack.callback(engine.dispose)
@@ -92,24 +130,65 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
 ) -> None:
     """Hashes are computed from the values written and checked against the values read."""
     with transaction(sessions) as session:
-        session.add(Run(id="r1", status="completed", request={}, reasoner="rules", mode="m",
-                        max_deviation=None, n_tasks=3, n_robots=3, resumes=0,
-                        cancel_requested=False))
+        session.add(
+            Run(
+                id="r1",
+                status="completed",
+                request={},
+                reasoner="rules",
+                mode="m",
+                max_deviation=None,
+                n_tasks=3,
+                n_robots=3,
+                resumes=0,
+                cancel_requested=False,
+            )
+        )
         session.flush()
-        repo.add_event(session=session, run_id="r1", kind="created",
-                       detail={"tasks": 3, 4: (1, 2), "share": -0.0, "max_deviation": None})
+        repo.add_event(
+            session=session,
+            run_id="r1",
+            kind="created",
+            detail={"tasks": 3, 4: (1, 2), "share": -0.0, "max_deviation": None},
+        )
     for t in range(3):
         with transaction(sessions) as session:
-            reply = ReasonerReply(text="**Decision**: heavy ✓", input_tokens=10,
-                                  output_tokens=5, latency_ms=np.float64(12.25), model="m",
-                                  transport_retries=0, extra={"stop_reason": "end_turn"})
-            repo.upsert_attempt(session=session, run_id="r1", record=AttemptRecord(
-                task_index=t, attempt=1, tier=0, system_prompt="sys", user_prompt=f"task {t}",
-                reply=reply, parsed={"robot": "heavy", "confidence": 0.5},
-                scores={"explanation": 1.0}, quality=np.float64(1 / 3), accepted=True))
-            repo.upsert_decision(session=session, run_id="r1", record=replace(
-                DECISION, task_index=t, regret=-0.0 if t else None,
-                expected_success=np.float64(0.1 + 0.2), loads_before=(t, 0, 0)))
+            reply = ReasonerReply(
+                text="**Decision**: heavy ✓",
+                input_tokens=10,
+                output_tokens=5,
+                latency_ms=np.float64(12.25),
+                model="m",
+                transport_retries=0,
+                extra={"stop_reason": "end_turn"},
+            )
+            repo.upsert_attempt(
+                session=session,
+                run_id="r1",
+                record=AttemptRecord(
+                    task_index=t,
+                    attempt=1,
+                    tier=0,
+                    system_prompt="sys",
+                    user_prompt=f"task {t}",
+                    reply=reply,
+                    parsed={"robot": "heavy", "confidence": 0.5},
+                    scores={"explanation": 1.0},
+                    quality=np.float64(1 / 3),
+                    accepted=True,
+                ),
+            )
+            repo.upsert_decision(
+                session=session,
+                run_id="r1",
+                record=replace(
+                    DECISION,
+                    task_index=t,
+                    regret=-0.0 if t else None,
+                    expected_success=np.float64(0.1 + 0.2),
+                    loads_before=(t, 0, 0),
+                ),
+            )
     with transaction(sessions) as session:
         repo.add_event(session=session, run_id="r1", kind="completed", detail={"decisions": 3})
 

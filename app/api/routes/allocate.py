@@ -29,16 +29,24 @@ EXAMPLES: dict[str, Example] = {
     ),
     "capped": Example(
         summary="Explicit workload cap",
-        value={"solver": "optimal", "scenario": "heavy_excels", "mode": "aggressive_balance",
-               "max_deviation": 1},
+        value={
+            "solver": "optimal",
+            "scenario": "heavy_excels",
+            "mode": "aggressive_balance",
+            "max_deviation": 1,
+        },
     ),
     "custom": Example(
         summary="Own tasks (TEACh keys) and robots",
         value={
             "solver": "greedy",
             "tasks": [
-                {"action_id": 200, "action_name": "Pickup", "action_type": "ObjectInteraction",
-                 "features": ["heavy"]},
+                {
+                    "action_id": 200,
+                    "action_name": "Pickup",
+                    "action_type": "ObjectInteraction",
+                    "features": ["heavy"],
+                },
                 {"id": "weld-7", "name": "Weld seam", "features": ["dexterous"]},
                 {"id": "lift-2", "name": "Lift beam", "features": ["heavy", "dexterous"]},
             ],
@@ -49,8 +57,12 @@ EXAMPLES: dict[str, Example] = {
     ),
     "q_learning": Example(
         summary="Approximate solver with options",
-        value={"solver": "q_learning", "scenario": "baseline", "seed": 1,
-               "options": {"episodes": 2000}},
+        value={
+            "solver": "q_learning",
+            "scenario": "baseline",
+            "seed": 1,
+            "options": {"episodes": 2000},
+        },
     ),
 }
 

@@ -29,8 +29,15 @@ def list_solvers(caller: ClientDep) -> list[SolverOut]:
             # An optional dependency is missing (e.g. torch for dqn): list what actually works.
             log.warning("solver %s left out of GET /solvers: %s", name, exc.message)
             continue
-        out.append(SolverOut(name=info.name, description=info.description, exact=info.exact,
-                             kind="exact" if info.exact else "approximate", limits=info.limits))
+        out.append(
+            SolverOut(
+                name=info.name,
+                description=info.description,
+                exact=info.exact,
+                kind="exact" if info.exact else "approximate",
+                limits=info.limits,
+            )
+        )
     return out
 
 
@@ -41,11 +48,16 @@ def list_scenarios(caller: ClientDep) -> list[ScenarioOut]:
         ScenarioOut(
             name=sc.name,
             description=sc.description,
-            tasks=[TaskOut(id=t.id, name=t.name, type=t.type, features=list(t.features))
-                   for t in sc.instance.tasks],
-            robots=[RobotOut(name=r.name, label=r.label, description=r.description,
-                             success=dict(r.success))
-                    for r in sc.instance.robots],
+            tasks=[
+                TaskOut(id=t.id, name=t.name, type=t.type, features=list(t.features))
+                for t in sc.instance.tasks
+            ],
+            robots=[
+                RobotOut(
+                    name=r.name, label=r.label, description=r.description, success=dict(r.success)
+                )
+                for r in sc.instance.robots
+            ],
         )
         for sc in catalog.scenarios().values()
     ]

@@ -47,8 +47,14 @@ def _json_value(value: object) -> str:
     return value.isoformat() if isinstance(value, datetime) else str(value)
 
 
-def sse(*, event: str | None = None, id: str | None = None, data: object = None,
-        retry: int | None = None, comment: str | None = None) -> str:
+def sse(
+    *,
+    event: str | None = None,
+    id: str | None = None,
+    data: object = None,
+    retry: int | None = None,
+    comment: str | None = None,
+) -> str:
     """One Server-Sent Event in the text/event-stream wire format."""
     lines = [f": {comment}"] if comment is not None else []
     if id is not None:
@@ -64,8 +70,11 @@ def sse(*, event: str | None = None, id: str | None = None, data: object = None,
 
 # A plain StreamingResponse rather than fastapi.sse.EventSourceResponse: the latter's
 # keep-alive task logs a BrokenResourceError traceback whenever a client hangs up.
-@router.get("/{run_id}/events", response_class=StreamingResponse,
-            responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404)})
+@router.get(
+    "/{run_id}/events",
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404)},
+)
 async def run_events(
     caller: SupervisorDep,  # first: who may ask is settled before whether the run exists
     run_id: Annotated[str, Depends(existing_run)],
@@ -77,17 +86,20 @@ async def run_events(
     finalised decision, in order; the stream ends when the run does. Reconnect with
     Last-Event-ID to continue where a stream stopped."""
     headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
-    return StreamingResponse(_stream(run_id, cursor, runs, settings),
-                             media_type="text/event-stream", headers=headers)
+    return StreamingResponse(
+        _stream(run_id, cursor, runs, settings), media_type="text/event-stream", headers=headers
+    )
 
 
-async def _stream(run_id: str, cursor: Cursor, runs: RunsDep,
-                  settings: SettingsDep) -> AsyncIterator[str]:
+async def _stream(
+    run_id: str, cursor: Cursor, runs: RunsDep, settings: SettingsDep
+) -> AsyncIterator[str]:
     deadline = time.monotonic() + settings.events_max_stream_s
     retry: int | None = RECONNECT_MS
     while True:
-        batch = await run_in_threadpool(read_progress, sessions=runs.sessions, run_id=run_id,
-                                        cursor=cursor)
+        batch = await run_in_threadpool(
+            read_progress, sessions=runs.sessions, run_id=run_id, cursor=cursor
+        )
         if batch is None:
             return
         for item in batch.items:
@@ -101,7 +113,9 @@ async def _stream(run_id: str, cursor: Cursor, runs: RunsDep,
             yield sse(comment="server shutting down; reconnect with Last-Event-ID")
             return
         if time.monotonic() >= deadline:
-            yield sse(comment="stream time limit (LTAA_EVENTS_MAX_STREAM_S) reached; "
-                          "reconnect with Last-Event-ID")
+            yield sse(
+                comment="stream time limit (LTAA_EVENTS_MAX_STREAM_S) reached; "
+                "reconnect with Last-Event-ID"
+            )
             return
         await asyncio.sleep(settings.events_poll_s)

@@ -15,5 +15,8 @@ router = APIRouter(tags=["health"])
 @router.api_route("/health", methods=["GET", "HEAD"], response_model=HealthOut)
 def health(request: Request, settings: SettingsDep) -> HealthOut:
     """Report that the service is up, its version, solvers and default reasoner."""
-    return HealthOut(version=request.app.version, solvers=solver_names(),
-                     default_reasoner=settings.default_reasoner)
+    return HealthOut(
+        version=request.app.version,
+        solvers=solver_names(),
+        default_reasoner=settings.default_reasoner,
+    )

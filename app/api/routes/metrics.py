@@ -12,10 +12,14 @@ from app.observability.metrics import Metrics
 router = APIRouter(tags=["metrics"])
 
 
-@router.get("/metrics", response_class=Response,
-            responses={200: {"content": {CONTENT_TYPE_LATEST: {}},
-                             "description": "Prometheus text format"},
-                       **errors(*SUPERVISOR)})
+@router.get(
+    "/metrics",
+    response_class=Response,
+    responses={
+        200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus text format"},
+        **errors(*SUPERVISOR),
+    },
+)
 def metrics(request: Request, caller: SupervisorDep) -> Response:
     """For supervisors (and the Prometheus scraper): runs, decisions, LLM usage, validation,
     retries, fallbacks and request latency."""

@@ -37,35 +37,60 @@ from app.store.models import Attempt
 router = APIRouter(prefix="/runs", tags=["runs"])
 
 
-@router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=RunCreated,
-             responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409)})
-def create_run(caller: ClientDep, body: Annotated[RunRequest, Body(openapi_examples=RUN_EXAMPLES)],
-               runs: RunsDep, settings: SettingsDep, response: Response,
-               idempotency_key: IdempotencyKey) -> RunCreated:
+@router.post(
+    "",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=RunCreated,
+    responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409)},
+)
+def create_run(
+    caller: ClientDep,
+    body: Annotated[RunRequest, Body(openapi_examples=RUN_EXAMPLES)],
+    runs: RunsDep,
+    settings: SettingsDep,
+    response: Response,
+    idempotency_key: IdempotencyKey,
+) -> RunCreated:
     """Start an LTAA run in the background; poll the Location for progress."""
     reasoner = body.reasoner or settings.default_reasoner
     if reasoner == "replay" or body.replay_of is not None:
-        spec = replay_spec(sessions=runs.sessions, reasoner=reasoner, replay_of=body.replay_of,
-                           sent=_sent_for_replay(body))
+        spec = replay_spec(
+            sessions=runs.sessions,
+            reasoner=reasoner,
+            replay_of=body.replay_of,
+            sent=_sent_for_replay(body),
+        )
     else:
         problem = build_problem(body)
         spec = RunSpec.for_instance(
-            problem.instance, mode=problem.mode.value, max_deviation=problem.cap.max_deviation,
-            seed=body.seed, reasoner=reasoner,
-            quality_threshold=body.quality_threshold, max_retries=body.max_retries,
-            model=body.model, temperature=body.temperature, guidance=body.guidance,
-            token_budget=body.token_budget if body.token_budget is not None
+            problem.instance,
+            mode=problem.mode.value,
+            max_deviation=problem.cap.max_deviation,
+            seed=body.seed,
+            reasoner=reasoner,
+            quality_threshold=body.quality_threshold,
+            max_retries=body.max_retries,
+            model=body.model,
+            temperature=body.temperature,
+            guidance=body.guidance,
+            token_budget=body.token_budget
+            if body.token_budget is not None
             else settings.run_token_budget,
         )
     run, replayed = service.create_or_replay_run(
-        sessions=runs.sessions, worker=runs.worker, settings=settings, spec=spec,
-        idempotency=idempotency_of(idempotency_key, body))
+        sessions=runs.sessions,
+        worker=runs.worker,
+        settings=settings,
+        spec=spec,
+        idempotency=idempotency_of(idempotency_key, body),
+    )
     response.headers["Location"] = f"/runs/{run.id}"
     if replayed:
         response.headers[REPLAYED_HEADER] = "true"
     # A replay answers as the first request was answered, when the run was just queued.
-    return RunCreated(id=run.id, status="queued" if replayed else run.status,
-                      location=f"/runs/{run.id}")
+    return RunCreated(
+        id=run.id, status="queued" if replayed else run.status, location=f"/runs/{run.id}"
+    )
 
 
 def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
@@ -78,8 +103,16 @@ def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
         values[named[0]] = instance_to_dict(resolve_instance(body))
     if "mode" in sent:
         values["mode"] = body.mode.value
-    for name in ("max_deviation", "quality_threshold", "max_retries", "guidance", "seed",
-                 "model", "temperature", "token_budget"):
+    for name in (
+        "max_deviation",
+        "quality_threshold",
+        "max_retries",
+        "guidance",
+        "seed",
+        "model",
+        "temperature",
+        "token_budget",
+    ):
         if name in sent:
             values[name] = getattr(body, name)
     return values
@@ -94,11 +127,20 @@ def list_runs(
     offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
 ) -> list[RunSummary]:
     """List runs, newest first, optionally only those with one status."""
-    rows = service.list_run_rows(sessions=runs.sessions, status=status_, limit=limit,
-                                 offset=offset)
-    return [RunSummary(id=r.id, status=r.status, reasoner=r.reasoner, mode=r.mode,
-                       n_tasks=r.n_tasks, n_robots=r.n_robots, resumes=r.resumes,
-                       created_at=r.created_at) for r in rows]
+    rows = service.list_run_rows(sessions=runs.sessions, status=status_, limit=limit, offset=offset)
+    return [
+        RunSummary(
+            id=r.id,
+            status=r.status,
+            reasoner=r.reasoner,
+            mode=r.mode,
+            n_tasks=r.n_tasks,
+            n_robots=r.n_robots,
+            resumes=r.resumes,
+            created_at=r.created_at,
+        )
+        for r in rows
+    ]
 
 
 def _run_out(view: service.RunView) -> RunOut:
@@ -106,19 +148,32 @@ def _run_out(view: service.RunView) -> RunOut:
     instance = spec.problem.instance
     names = [r.name for r in instance.robots]
     return RunOut(
-        id=run.id, status=run.status, reasoner=run.reasoner, mode=run.mode,
-        max_deviation=run.max_deviation, progress=Progress(**view.progress),
+        id=run.id,
+        status=run.status,
+        reasoner=run.reasoner,
+        mode=run.mode,
+        max_deviation=run.max_deviation,
+        progress=Progress(**view.progress),
         workload=view.workload,
         assignments=[
-            RunAssignment(task_index=d.task_index, task_id=instance.tasks[d.task_index].id,
-                          task_name=d.task_name, robot=names[d.robot],
-                          success=d.expected_success, fallback=d.fallback)
+            RunAssignment(
+                task_index=d.task_index,
+                task_id=instance.tasks[d.task_index].id,
+                task_name=d.task_name,
+                robot=names[d.robot],
+                success=d.expected_success,
+                fallback=d.fallback,
+            )
             for d in view.decisions
         ],
         metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
-        regret=view.regret, usage=UsageOut(**vars(view.usage)), resumes=run.resumes,
+        regret=view.regret,
+        usage=UsageOut(**vars(view.usage)),
+        resumes=run.resumes,
         error=run.error,
-        created_at=run.created_at, updated_at=run.updated_at, finished_at=run.finished_at,
+        created_at=run.created_at,
+        updated_at=run.updated_at,
+        finished_at=run.finished_at,
     )
 
 
@@ -130,10 +185,19 @@ def get_run(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
 
 def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
     return AttemptOut(
-        attempt=a.attempt, tier=a.tier, parsed=a.parsed, scores=a.scores or {},
-        quality=a.quality, accepted=a.accepted, hard_invalid=a.hard_invalid,
-        feedback=a.feedback, input_tokens=a.input_tokens, output_tokens=a.output_tokens,
-        latency_ms=a.latency_ms, transport_retries=a.transport_retries, model=a.reply_model,
+        attempt=a.attempt,
+        tier=a.tier,
+        parsed=a.parsed,
+        scores=a.scores or {},
+        quality=a.quality,
+        accepted=a.accepted,
+        hard_invalid=a.hard_invalid,
+        feedback=a.feedback,
+        input_tokens=a.input_tokens,
+        output_tokens=a.output_tokens,
+        latency_ms=a.latency_ms,
+        transport_retries=a.transport_retries,
+        model=a.reply_model,
         replayed_from=(a.reply_extra or {}).get("replayed_from"),
         original_model=(a.reply_extra or {}).get("original_model"),
         system_prompt=a.system_prompt if prompts else None,
@@ -142,14 +206,23 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
     )
 
 
-@router.get("/{run_id}/trace", response_model=TraceOut,
-            responses={**errors(*SUPERVISOR, 404), 200: JSONL_RESPONSE})
+@router.get(
+    "/{run_id}/trace",
+    response_model=TraceOut,
+    responses={**errors(*SUPERVISOR, 404), 200: JSONL_RESPONSE},
+)
 def get_trace(
-    caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep,
+    caller: SupervisorDep,
+    run_id: RunIdPath,
+    runs: RunsDep,
     include: Annotated[Literal["prompts"] | None, Query()] = None,
-    format_: Annotated[Literal["json", "jsonl"], Query(
-        alias="format", description="jsonl: stream the whole audit record (with prompts) "
-        "as JSON lines")] = "json",
+    format_: Annotated[
+        Literal["json", "jsonl"],
+        Query(
+            alias="format",
+            description="jsonl: stream the whole audit record (with prompts) as JSON lines",
+        ),
+    ] = "json",
 ) -> TraceOut | StreamingResponse:
     """For supervisors: run events and every decision with its validated attempts."""
     if format_ == "jsonl":
@@ -160,20 +233,35 @@ def get_trace(
     names = [r.name for r in instance.robots]
     prompts = include == "prompts"
     return TraceOut(
-        id=trace.run.id, status=trace.run.status, reasoner=trace.run.reasoner,
-        mode=trace.run.mode, max_deviation=trace.run.max_deviation, robots=names,
-        events=[EventOut(seq=e.seq, kind=e.kind, detail=e.detail, at=e.created_at)
-                for e in trace.events],
+        id=trace.run.id,
+        status=trace.run.status,
+        reasoner=trace.run.reasoner,
+        mode=trace.run.mode,
+        max_deviation=trace.run.max_deviation,
+        robots=names,
+        events=[
+            EventOut(seq=e.seq, kind=e.kind, detail=e.detail, at=e.created_at) for e in trace.events
+        ],
         decisions=[
             DecisionOut(
-                task_index=d.task_index, task_id=instance.tasks[d.task_index].id,
-                task_name=d.task_name, robot=names[d.robot],
-                expected_success=d.expected_success, phase=d.phase,
-                loads_before=d.loads_before, loads_after=d.loads_after,
-                balance_before=d.balance_before, balance_after=d.balance_after,
-                severity_after=d.severity_after, reasoning=d.reasoning,
-                confidence=d.confidence, tradeoff=d.tradeoff, quality=d.quality,
-                fallback=d.fallback, failure_log=d.failure_log, regret=d.regret,
+                task_index=d.task_index,
+                task_id=instance.tasks[d.task_index].id,
+                task_name=d.task_name,
+                robot=names[d.robot],
+                expected_success=d.expected_success,
+                phase=d.phase,
+                loads_before=d.loads_before,
+                loads_after=d.loads_after,
+                balance_before=d.balance_before,
+                balance_after=d.balance_after,
+                severity_after=d.severity_after,
+                reasoning=d.reasoning,
+                confidence=d.confidence,
+                tradeoff=d.tradeoff,
+                quality=d.quality,
+                fallback=d.fallback,
+                failure_log=d.failure_log,
+                regret=d.regret,
                 attempts=[_attempt_out(a, prompts) for a in trace.attempts.get(d.task_index, [])],
             )
             for d in trace.decisions
@@ -181,23 +269,27 @@ def get_trace(
     )
 
 
-@router.get("/{run_id}/trace/verify", response_model=TraceVerifyOut,
-            responses=errors(*SUPERVISOR, 404))
+@router.get(
+    "/{run_id}/trace/verify", response_model=TraceVerifyOut, responses=errors(*SUPERVISOR, 404)
+)
 def verify_trace(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> TraceVerifyOut:
     """For supervisors: recompute the run's hash chains; ok, or the first broken link."""
     return verify_out(audit.verify_trace(sessions=runs.sessions, run_id=run_id))
 
 
-@router.post("/{run_id}/resume", status_code=status.HTTP_202_ACCEPTED, response_model=RunOut,
-             responses=errors(*SUPERVISOR, 404, 409))
+@router.post(
+    "/{run_id}/resume",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=RunOut,
+    responses=errors(*SUPERVISOR, 404, 409),
+)
 def resume_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     """For supervisors: resume an interrupted (or failed) run from its last checkpoint."""
     service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
 
 
-@router.post("/{run_id}/cancel", response_model=RunOut,
-             responses=errors(*SUPERVISOR, 404, 409))
+@router.post("/{run_id}/cancel", response_model=RunOut, responses=errors(*SUPERVISOR, 404, 409))
 def cancel_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     """For supervisors: cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)

@@ -32,7 +32,8 @@ def reason(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
         # Transport gave up (after its own retries): a failed attempt, not a failed run.
         # No model answered, so the reply names none and is not counted as an LLM call.
         reply = ReasonerReply(
-            text="", transport_retries=exc.transport_retries,
+            text="",
+            transport_retries=exc.transport_retries,
             extra={"error": str(exc) or type(exc).__name__, "reasoner": ctx.reasoner.name},
         )
     record.reply = reply
