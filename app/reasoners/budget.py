@@ -14,7 +14,8 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
-from app.reasoners.base import DecisionContext, Reasoner, ReasonerReply
+from app.domain.decision import DecisionContext
+from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.factory import close_reasoner
 from app.reasoners.rules import RulesReasoner
 

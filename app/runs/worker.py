@@ -32,6 +32,7 @@ from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import close_reasoner, make_reasoner
+from app.runs import records
 from app.runs.integrity import check_integrity
 from app.runs.recorder import Fence, RunStop, SqlRecorder
 from app.runs.replay import recorded_replies
@@ -225,7 +226,8 @@ class RunWorker:
             problem = spec.problem
             if checkpoint is not None or run.status == "interrupted":
                 stored = [
-                    repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+                    records.decision_record(d)
+                    for d in repo.decisions(session=session, run_id=run_id)
                 ]
                 values = checkpoint.checkpoint["channel_values"] if checkpoint else None
                 report = check_integrity(
