@@ -11,8 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, TypedDict
+from typing import Any, TypedDict
 
+from app.domain.decision import GuidedChoice
 from app.domain.metrics import balance_score, severity
 from app.domain.modes import strategic_weights
 from app.domain.phases import balance_urgency, detect_phase
@@ -24,14 +25,9 @@ from app.reasoners.base import Reasoner
 DEFAULT_MAX_RETRIES = 3
 
 
-class GuidedChoice(Protocol):
-    robot: int
-    costs: tuple[float | None, ...]  # success points each robot would give away
-
-
 # Optimizer guidance: (task index, loads before) -> the robot to prefer (optionally with
 # what each alternative would cost), or None.
-Guidance = Callable[[int, Sequence[int]], "int | GuidedChoice | None"]
+Guidance = Callable[[int, Sequence[int]], int | GuidedChoice | None]
 # Regret: (task index, loads before, robot) -> expected success the decision gave away.
 Regret = Callable[[int, Sequence[int], int], float]
 

@@ -23,8 +23,9 @@ import anthropic
 import pydantic
 from anthropic.types import Message
 
+from app.domain.decision import DecisionContext
 from app.domain.errors import DomainError
-from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
+from app.reasoners.base import ReasonerError, ReasonerReply
 
 # claude-sonnet-4-5 reaches end-of-life on 2026-11-30 (the SDK warns); 4.6 still takes
 # a temperature on API version 2023-06-01.

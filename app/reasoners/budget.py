@@ -14,8 +14,9 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+from app.domain.decision import DecisionContext
 from app.domain.lifecycle import EventKind
-from app.reasoners.base import DecisionContext, Reasoner, ReasonerReply
+from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.factory import close_reasoner
 from app.reasoners.rules import RulesReasoner
 

@@ -15,7 +15,7 @@ from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.runs import lifecycle
+from app.runs import lifecycle, records
 from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
@@ -204,7 +204,7 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
         decisions = [
-            repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+            records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
         ]
         usage = usage_of(repo.attempts(session=session, run_id=run_id))
     metrics = None
@@ -240,7 +240,7 @@ def run_trace(*, sessions: sessionmaker[Session], run_id: str) -> Trace:
             run=run,
             events=repo.events(session=session, run_id=run_id),
             decisions=[
-                repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ],
             attempts=by_task,
         )

@@ -30,7 +30,7 @@ from app.graph.pause import NodeHook
 from app.graph.recorder import RunCancelled
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
-from app.runs import lifecycle
+from app.runs import lifecycle, records
 from app.runs.integrity import check_integrity
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
@@ -245,7 +245,7 @@ class RunWorker:
                 )
                 return Admission(spec=spec, resume=False)
             stored = [
-                repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ]
             values = checkpoint.checkpoint["channel_values"] if checkpoint else None
             report = check_integrity(

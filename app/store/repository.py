@@ -3,8 +3,7 @@ keys, so a node that LangGraph re-executes after a crash rewrites, never duplica
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import asdict
+from collections.abc import Mapping, Sequence
 from functools import cache
 from typing import Any
 
@@ -13,8 +12,6 @@ from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
-from app.graph.recorder import AttemptRecord, DecisionRecord
-from app.reasoners.base import ReasonerReply
 from app.store import chain
 from app.store.models import Attempt, Base, Decision, Run, RunEvent, utcnow
 
@@ -189,76 +186,26 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
 
 
-def upsert_decision(*, session: Session, run_id: str, record: DecisionRecord) -> None:
-    values = asdict(record)
-    values["task_id"] = str(record.task_id)
-    values["chain_hash"] = _decision_chain_hash(session, run_id, values)
+def upsert_decision(*, session: Session, run_id: str, values: Mapping[str, Any]) -> None:
+    """`values`: the decision's columns but run_id, chain_hash and created_at."""
+    row = dict(values)
+    row["chain_hash"] = _decision_chain_hash(session, run_id, row)
     _upsert(
         session,
         Decision,
-        {"run_id": run_id, **values, "created_at": utcnow()},
+        {"run_id": run_id, **row, "created_at": utcnow()},
         ("run_id", "task_index"),
     )
 
 
-def _attempt_values(record: AttemptRecord) -> dict[str, Any]:
-    reply = record.reply
-    return {
-        "tier": record.tier,
-        "system_prompt": record.system_prompt,
-        "user_prompt": record.user_prompt,
-        "reply_text": reply.text if reply else None,
-        "reply_model": reply.model if reply else None,
-        "input_tokens": reply.input_tokens if reply else 0,
-        "output_tokens": reply.output_tokens if reply else 0,
-        "latency_ms": reply.latency_ms if reply else 0.0,
-        "transport_retries": reply.transport_retries if reply else 0,
-        "reply_extra": dict(reply.extra) if reply else {},
-        "parsed": record.parsed,
-        "scores": record.scores,
-        "quality": record.quality,
-        "accepted": record.accepted,
-        "hard_invalid": record.hard_invalid,
-        "feedback": record.feedback,
-    }
-
-
-def upsert_attempt(*, session: Session, run_id: str, record: AttemptRecord) -> None:
-    values = {
-        "run_id": run_id,
-        "task_index": record.task_index,
-        "attempt": record.attempt,
-        **_attempt_values(record),
-        "created_at": utcnow(),
-    }
-    _upsert(session, Attempt, values, ("run_id", "task_index", "attempt"))
-
-
-def attempt_record(row: Attempt) -> AttemptRecord:
-    reply = None
-    if row.reply_text is not None:
-        reply = ReasonerReply(
-            text=row.reply_text,
-            input_tokens=row.input_tokens,
-            output_tokens=row.output_tokens,
-            latency_ms=row.latency_ms,
-            model=row.reply_model,
-            transport_retries=row.transport_retries,
-            extra=dict(row.reply_extra or {}),
-        )
-    return AttemptRecord(
-        task_index=row.task_index,
-        attempt=row.attempt,
-        tier=row.tier,
-        system_prompt=row.system_prompt,
-        user_prompt=row.user_prompt,
-        reply=reply,
-        parsed=row.parsed,
-        scores=dict(row.scores or {}),
-        quality=row.quality,
-        accepted=row.accepted,
-        hard_invalid=row.hard_invalid,
-        feedback=row.feedback,
+def upsert_attempt(*, session: Session, run_id: str, values: Mapping[str, Any]) -> None:
+    """`values`: the attempt's columns (task_index and attempt included) but run_id and
+    created_at."""
+    _upsert(
+        session,
+        Attempt,
+        {"run_id": run_id, **values, "created_at": utcnow()},
+        ("run_id", "task_index", "attempt"),
     )
 
 
@@ -274,11 +221,6 @@ def get_attempt(*, session: Session, run_id: str, task_index: int, attempt: int)
             Attempt.run_id == run_id, Attempt.task_index == task_index, Attempt.attempt == attempt
         )
     )
-
-
-def decision_record(row: Decision) -> DecisionRecord:
-    fields = DecisionRecord.__dataclass_fields__
-    return DecisionRecord(**{name: getattr(row, name) for name in fields})
 
 
 def tokens_spent(*, session: Session, run_id: str) -> int:

@@ -31,9 +31,9 @@ from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
+from app.domain.decision import DecisionContext
 from app.domain.modes import Mode, strategic_weights
 from app.domain.phases import Phase
-from app.reasoners.base import DecisionContext
 from app.reasoners.rules import compose_answer
 
 Responder = Callable[[dict[str, Any]], "Reply"]

@@ -7,6 +7,7 @@ from dataclasses import replace
 from langgraph.checkpoint.memory import InMemorySaver
 
 from app.domain.catalog import scenario, teach_tasks
+from app.domain.decision import DecisionContext
 from app.domain.models import Instance
 from app.domain.modes import Mode, strategic_weights
 from app.domain.phases import Phase
@@ -15,7 +16,7 @@ from app.graph.builder import build_graph
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.runner import run_graph
 from app.graph.state import GraphContext
-from app.reasoners.base import DecisionContext, Reasoner
+from app.reasoners.base import Reasoner
 from app.reasoners.rules import RulesReasoner
 
 

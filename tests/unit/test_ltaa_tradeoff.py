@@ -6,7 +6,7 @@ import pytest
 
 from app.domain.modes import Mode
 from app.domain.phases import Phase
-from app.graph.tradeoff import Branch, apply_rule, expected_confidence
+from app.domain.tradeoff import Branch, apply_rule, expected_confidence
 
 
 def rule(s_best: float, s_fewest: float, mode: Mode = Mode.BALANCED, phase: Phase = Phase.MIDDLE):

@@ -15,7 +15,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
-from app.runs import audit
+from app.runs import audit, records
 from app.store import chain
 from app.store import repository as repo
 from app.store.db import make_engine, transaction
@@ -152,28 +152,32 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
             repo.upsert_attempt(
                 session=session,
                 run_id="r1",
-                record=AttemptRecord(
-                    task_index=t,
-                    attempt=1,
-                    tier=0,
-                    system_prompt="sys",
-                    user_prompt=f"task {t}",
-                    reply=reply,
-                    parsed={"robot": "heavy", "confidence": 0.5},
-                    scores={"explanation": 1.0},
-                    quality=np.float64(1 / 3),
-                    accepted=True,
+                values=records.attempt_values(
+                    AttemptRecord(
+                        task_index=t,
+                        attempt=1,
+                        tier=0,
+                        system_prompt="sys",
+                        user_prompt=f"task {t}",
+                        reply=reply,
+                        parsed={"robot": "heavy", "confidence": 0.5},
+                        scores={"explanation": 1.0},
+                        quality=np.float64(1 / 3),
+                        accepted=True,
+                    )
                 ),
             )
             repo.upsert_decision(
                 session=session,
                 run_id="r1",
-                record=replace(
-                    DECISION,
-                    task_index=t,
-                    regret=-0.0 if t else None,
-                    expected_success=np.float64(0.1 + 0.2),
-                    loads_before=(t, 0, 0),
+                values=records.decision_values(
+                    replace(
+                        DECISION,
+                        task_index=t,
+                        regret=-0.0 if t else None,
+                        expected_success=np.float64(0.1 + 0.2),
+                        loads_before=(t, 0, 0),
+                    )
                 ),
             )
     with transaction(sessions) as session:

@@ -6,13 +6,13 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
+from app.domain.decision import DecisionContext
+from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 from app.graph.context import decision_context
 from app.graph.nodes.common import require_attempt
 from app.graph.nodes.validate import judge
 from app.graph.state import GraphContext, LTAAState
-from app.graph.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 from app.graph.validation import CRITERION_TITLES, WEIGHTS, Validation
-from app.reasoners.base import DecisionContext
 
 _FIXES = {
     "explanation": "write 2-4 sentences that name your robot and cite its S and load against "

@@ -6,12 +6,12 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
+from app.domain.decision import DecisionContext
 from app.graph.context import decision_context
 from app.graph.nodes.common import require_attempt
 from app.graph.recorder import AttemptRecord
 from app.graph.state import GraphContext, LTAAState
 from app.graph.validation import Validation, reasoner_failed, validate_text
-from app.reasoners.base import DecisionContext
 
 
 def judge(record: AttemptRecord, dctx: DecisionContext, threshold: float) -> Validation:
