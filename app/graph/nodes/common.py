@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from app.graph.context import decision_context
 from app.graph.prompts import SYSTEM_PROMPT
 from app.graph.recorder import AttemptRecord, Recorder
+from app.graph.state import GraphContext, LTAAState
+from app.reasoners.base import DecisionContext
 
 
 def save_prompt(recorder: Recorder, task_index: int, attempt: int, tier: int, user: str) -> None:
@@ -34,3 +37,9 @@ def require_attempt(recorder: Recorder, task_index: int, attempt: int) -> Attemp
             "recorder lost a write the graph relies on"
         )
     return record
+
+
+def current_attempt(ctx: GraphContext, state: LTAAState) -> tuple[AttemptRecord, DecisionContext]:
+    """The recorded attempt the state points at, and the true facts it is judged against."""
+    record = require_attempt(ctx.recorder, state["task_index"], state["attempt"])
+    return record, decision_context(ctx.problem, state, tier=state["tier"])

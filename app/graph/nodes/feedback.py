@@ -6,8 +6,7 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
-from app.graph.context import decision_context
-from app.graph.nodes.common import require_attempt
+from app.graph.nodes.common import current_attempt
 from app.graph.nodes.validate import judge
 from app.graph.state import GraphContext, LTAAState
 from app.graph.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
@@ -64,11 +63,11 @@ def compose_feedback(verdict: Validation, dctx: DecisionContext, threshold: floa
 
 def build_feedback(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
-    rec = ctx.recorder
-    rec.check_cancelled()
-    record = require_attempt(rec, state["task_index"], state["attempt"])
-    dctx = decision_context(ctx.problem, state, tier=state["tier"])
-    verdict = judge(record, dctx, ctx.quality_threshold)
+    ctx.recorder.check_cancelled()
+    record, dctx = current_attempt(ctx, state)
+    verdict = ctx.verdicts.recall(state["task_index"], state["attempt"])
+    if verdict is None:  # resumed after validate: its in-memory verdict did not survive
+        verdict = judge(record, dctx, ctx.quality_threshold)
     record.feedback = compose_feedback(verdict, dctx, ctx.quality_threshold)
-    rec.save_attempt(record)
+    ctx.recorder.save_attempt(record)
     return {}
