@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
+from app.domain.usage import ReplyUsage, Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
 from app.runs.errors import RunNotFoundError, RunStateConflictError
@@ -152,23 +153,13 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
         return _require(session, run_id)
 
 
-@dataclass
-class Usage:
-    llm_calls: int = 0
-    input_tokens: int = 0
-    output_tokens: int = 0
-
-
 def usage_of(attempts: list[Attempt]) -> Usage:
-    """LLM calls are attempts answered by a model (the rules reasoner records none);
-    the same rule as app.graph.usage, so a run and the `ltaa` solver count alike."""
-    usage = Usage()
-    for a in attempts:
-        if a.reply_model is not None:
-            usage.llm_calls += 1
-            usage.input_tokens += a.input_tokens
-            usage.output_tokens += a.output_tokens
-    return usage
+    return Usage.from_replies(
+        ReplyUsage(
+            a.reply_model, a.input_tokens, a.output_tokens, a.transport_retries, a.latency_ms
+        )
+        for a in attempts
+    )
 
 
 @dataclass

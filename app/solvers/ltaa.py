@@ -24,7 +24,7 @@ from app.graph.usage import usage_from_attempts
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions, Usage
+from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
 
 
@@ -119,7 +119,7 @@ class LTAASolver(Solver):
         used = usage_from_attempts(recorder.attempts())
         return Solution(
             [d.robot for d in decisions],
-            usage=Usage(used.llm_calls, used.input_tokens, used.output_tokens),
+            usage=used,
             details={
                 "reasoner": reasoner.name,
                 "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),

@@ -291,7 +291,7 @@ def decision_record(row: Decision) -> DecisionRecord:
 
 
 def tokens_spent(*, session: Session, run_id: str) -> int:
-    """Input + output tokens of a run's replies that name a model (as app.graph.usage
+    """Input + output tokens of a run's replies that name a model (as app.domain.usage
     counts them): what its LLM calls have cost so far, from the record."""
     total = session.scalar(
         select(func.sum(Attempt.input_tokens + Attempt.output_tokens)).where(
