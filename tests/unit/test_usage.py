@@ -51,28 +51,17 @@ def test_recorded_attempts_and_stored_rows_count_alike(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'ltaa.db'}"
     upgrade_head(url)
     engine = make_engine(url)
-    sessions = make_session_factory(engine)
     try:
+        sessions = make_session_factory(engine)
+        run = Run(id="r1", status="running", request={}, reasoner="anthropic", mode="balanced")
+        run.n_tasks, run.n_robots = 10, 3
         with transaction(sessions) as session:
-            session.add(
-                Run(
-                    id="r1",
-                    status="running",
-                    request={},
-                    reasoner="anthropic",
-                    mode="balanced",
-                    n_tasks=10,
-                    n_robots=3,
-                    resumes=0,
-                    cancel_requested=False,
-                )
-            )
-        with transaction(sessions) as session:
+            session.add(run)
+            session.flush()  # the attempts' foreign key needs the run row first
             for record in records():
                 repo.upsert_attempt(session=session, run_id="r1", record=record)
         with sessions() as session:
-            rows = repo.attempts(session=session, run_id="r1")
-            stored = usage_of(rows)
+            stored = usage_of(repo.attempts(session=session, run_id="r1"))
             spent = repo.tokens_spent(session=session, run_id="r1")
     finally:
         engine.dispose()
