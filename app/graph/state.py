@@ -10,7 +10,7 @@ derived together share one channel (`view`).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, TypedDict
 
 from app.domain.decision import GuidedChoice
@@ -20,6 +20,7 @@ from app.domain.phases import balance_urgency, detect_phase
 from app.domain.problem import Problem
 from app.graph.recorder import Recorder
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
+from app.graph.verdicts import VerdictCache
 from app.reasoners.base import Reasoner
 
 DEFAULT_MAX_RETRIES = 3
@@ -69,6 +70,7 @@ class GraphContext:
     max_retries: int = DEFAULT_MAX_RETRIES
     guidance: Guidance | None = None
     regret: Regret | None = None
+    verdicts: VerdictCache = field(default_factory=VerdictCache)
 
     @property
     def max_attempts(self) -> int:

@@ -79,15 +79,15 @@ class AnthropicReasoner:
         temperature: float | None = DEFAULT_TEMPERATURE,
         max_tokens: int = DEFAULT_MAX_TOKENS,
         timeout: float = DEFAULT_TIMEOUT_S,
-        max_retries: int = DEFAULT_TRANSPORT_RETRIES,
+        transport_retries: int = DEFAULT_TRANSPORT_RETRIES,
         base_url: str | None = None,
     ) -> None:
         self.model = model
         self.temperature = temperature
         self.max_tokens = max_tokens
-        self.max_retries = max_retries
+        self.transport_retries = transport_retries
         self._client = anthropic.Anthropic(
-            api_key=api_key, base_url=base_url, timeout=timeout, max_retries=max_retries
+            api_key=api_key, base_url=base_url, timeout=timeout, max_retries=transport_retries
         )
 
     def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:

@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.usage import Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 from app.observability.logs import bind
 from app.runs import records
@@ -119,3 +120,7 @@ class SqlRecorder:
                 records.decision_record(row)
                 for row in repo.decisions(session=session, run_id=self.run_id)
             ]
+
+    def usage(self) -> Usage:
+        with self._sessions() as session:
+            return records.usage_of(repo.reply_costs(session=session, run_id=self.run_id))

@@ -6,9 +6,11 @@ the reasoners; this module is the one place that knows how a record maps to its 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import asdict
 from typing import Any
 
+from app.domain.usage import ReplyUsage, Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
 from app.store.models import Attempt, Decision
@@ -77,3 +79,14 @@ def attempt_record(row: Attempt) -> AttemptRecord:
 def decision_record(row: Decision) -> DecisionRecord:
     fields = DecisionRecord.__dataclass_fields__
     return DecisionRecord(**{name: getattr(row, name) for name in fields})
+
+
+def usage_of(rows: Iterable[Any]) -> Usage:
+    """Usage of stored attempt rows (or of repository.reply_costs rows), by the one rule of
+    app.domain.usage."""
+    return Usage.from_replies(
+        ReplyUsage(
+            r.reply_model, r.input_tokens, r.output_tokens, r.transport_retries, r.latency_ms
+        )
+        for r in rows
+    )

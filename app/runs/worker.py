@@ -192,7 +192,7 @@ class RunWorker:
             )
             return
         try:
-            decisions = execute_ltaa(
+            execution = execute_ltaa(
                 spec.problem,
                 graph=self.graph,
                 thread_id=run_id,
@@ -213,7 +213,7 @@ class RunWorker:
             message = f"{type(exc).__name__}: {exc}"
             self._end(run_id, RunStatus.FAILED, {"error": message}, error=message)
         else:
-            self._end(run_id, RunStatus.COMPLETED, {"decisions": len(decisions)})
+            self._end(run_id, RunStatus.COMPLETED, {"decisions": len(execution.decisions)})
 
     def _admit(
         self, run_id: str, stop: RunStop, checkpoint: CheckpointTuple | None

@@ -18,10 +18,17 @@ from typing import Any
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 
 MASKED_Q = -1e6
+
+
+def silent_logger() -> Logger:
+    """A logger with no outputs and no folder. SB3's default (`configure`) makes an empty
+    tempdir/SB3-<time> directory on every `learn`, even with verbose=0."""
+    return Logger(folder=None, output_formats=[])
 
 
 class MaskedQNetwork(QNetwork):

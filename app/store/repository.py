@@ -127,6 +127,22 @@ def attempt_replies(*, session: Session, run_id: str) -> list[Any]:
     )
 
 
+def reply_costs(*, session: Session, run_id: str) -> list[Any]:
+    """Only the cost columns of a run's attempts (no prompts, no replies): what usage
+    counts, without reading megabytes of text per poll of a long run."""
+    return list(
+        session.execute(
+            select(
+                Attempt.reply_model,
+                Attempt.input_tokens,
+                Attempt.output_tokens,
+                Attempt.transport_retries,
+                Attempt.latency_ms,
+            ).where(Attempt.run_id == run_id)
+        )
+    )
+
+
 @cache
 def _upsert_statement(dialect: str, model: type[Base], keys: tuple[str, ...]) -> Any:
     # Built once and executed with parameters, so SQLAlchemy's compiled cache is hit.
@@ -224,7 +240,7 @@ def get_attempt(*, session: Session, run_id: str, task_index: int, attempt: int)
 
 
 def tokens_spent(*, session: Session, run_id: str) -> int:
-    """Input + output tokens of a run's replies that name a model (as app.graph.usage
+    """Input + output tokens of a run's replies that name a model (as app.domain.usage
     counts them): what its LLM calls have cost so far, from the record."""
     total = session.scalar(
         select(func.sum(Attempt.input_tokens + Attempt.output_tokens)).where(

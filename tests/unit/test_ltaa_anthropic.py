@@ -36,7 +36,7 @@ def reasoner(api: FakeMessagesAPI, **kw: object) -> AnthropicReasoner:
         "api_key": "test-key",
         "base_url": api.base_url,
         "timeout": 5.0,
-        "max_retries": 3,
+        "transport_retries": 3,
         **kw,
     }
     return AnthropicReasoner(**options)  # type: ignore[arg-type]
@@ -118,7 +118,7 @@ def test_transport_errors_are_retried_by_the_sdk_then_succeed(api: FakeMessagesA
 
 def test_transport_giving_up_is_a_failed_attempt_not_a_failed_run(api: FakeMessagesAPI) -> None:
     api.script(*[Reply.error(529, retry_after=0.01)] * 2, Reply.from_prompt())
-    rec, _ = run(problem(n_tasks=1), reasoner(api, max_retries=1))
+    rec, _ = run(problem(n_tasks=1), reasoner(api, transport_retries=1))
     first, second = rec.attempts(0)
     assert "HTTP 529" in first.reply.extra["error"] and "no reply" in first.hard_invalid
     assert first.reply.model is None  # nothing answered: not an LLM call
@@ -191,6 +191,6 @@ def test_factory(monkeypatch: pytest.MonkeyPatch) -> None:
         make_reasoner("llama")
     r = make_reasoner("anthropic", settings=FakeSettings(), model="claude-override")
     assert isinstance(r, AnthropicReasoner)
-    assert (r.model, r.max_retries, r.temperature) == ("claude-override", 5, 0.1)
+    assert (r.model, r.transport_retries, r.temperature) == ("claude-override", 5, 0.1)
     monkeypatch.setenv("LTAA_ANTHROPIC_API_KEY", "from-env")
     assert isinstance(make_reasoner("anthropic"), AnthropicReasoner)

@@ -13,9 +13,10 @@ from app.graph.builder import route_after_retry, route_after_store, route_after_
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import RunCancelled
 from app.graph.state import GraphContext, initial_state
+from app.graph.validation import reasoner_failed
 from app.reasoners.base import ReasonerError
 from app.reasoners.rules import RulesReasoner
-from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
+from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner, poor_answer
 from tests.unit.ltaa_support import problem
 
 ALL_NODES = [
@@ -140,6 +141,34 @@ def test_build_feedback_and_retry_escalate() -> None:
     tier1 = rec.attempt(0, 2)
     assert tier1.tier == 1 and feedback in tier1.user_prompt
     assert nodes.retry({**state, "attempt": 2}, rt) == {"fallback": True}  # 1 + max_retries
+
+
+def test_build_feedback_reuses_the_verdict_validate_reached() -> None:
+    rt, rec = setup(ScriptedReasoner([poor_answer]))
+    state = through_validate(rt)
+    assert not state["accepted"]
+    # A stand-in verdict for this very attempt: the feedback must come from it, not a re-judge.
+    rt.context.verdicts.remember(0, 1, reasoner_failed("remembered"))
+    nodes.build_feedback(state, rt)
+    assert rec.attempt(0, 1).feedback.startswith(
+        "Hard invalid (Q=0): the reasoner gave no reply (remembered)."
+    )
+    assert rt.context.verdicts.recall(0, 2) is None  # another attempt: nothing to reuse
+
+
+def test_build_feedback_after_a_resume_rejudges_to_the_same_text() -> None:
+    rt, rec = setup(ScriptedReasoner([poor_answer]))
+    state = through_validate(rt)
+    nodes.build_feedback(state, rt)
+    cached = rec.attempt(0, 1).feedback
+    assert cached.startswith("Q=") and "\n- " in cached
+    # A resumed run gets a fresh context (empty cache) over the same recorded attempt.
+    resumed = Runtime(
+        context=GraphContext(problem=rt.context.problem, reasoner=RulesReasoner(), recorder=rec)
+    )
+    assert resumed.context.verdicts.recall(0, 1) is None
+    nodes.build_feedback(state, resumed)
+    assert rec.attempt(0, 1).feedback == cached
 
 
 def test_finalize_accepted_and_fallback() -> None:

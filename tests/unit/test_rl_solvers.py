@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
 import textwrap
 from pathlib import Path
 
@@ -174,6 +175,21 @@ def test_listing_solvers_does_not_load_torch() -> None:
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
+
+
+def test_dqn_training_writes_nothing_to_the_temp_dir(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # SB3's default logger makes tempdir/SB3-<time> per training; a private temp dir
+    # makes the check exact and safe next to other processes training in parallel.
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    assert tempfile.gettempdir() == str(tmp_path)
+    problem = Problem.build(small_instance(3), Mode.SUCCESS_FOCUSED)
+    get_solver("dqn").solve(problem, seed=1, options={"timesteps": 100})
+    # Only SB3's own entries: torch may keep a per-user cache dir there, made once, not per call.
+    assert sorted(p.name for p in tmp_path.glob("SB3-*")) == []
 
 
 def test_dqn_without_torch_explains_how_to_install() -> None:

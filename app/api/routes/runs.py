@@ -170,7 +170,7 @@ def _run_out(view: service.RunView) -> RunOut:
         ],
         metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
         regret=view.regret,
-        usage=UsageOut(**vars(view.usage)),
+        usage=UsageOut.from_domain(view.usage),
         resumes=run.resumes,
         error=run.error,
         created_at=run.created_at,
