@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeGuard, get_args
 
 from pydantic import AfterValidator, BaseModel, Field
 
@@ -11,6 +11,22 @@ from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOu
 from app.store.models import as_utc
 
 RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "cancelled"]
+_RUN_STATUSES: frozenset[str] = frozenset(get_args(RunStatus))
+
+
+def _is_run_status(value: str) -> TypeGuard[RunStatus]:
+    return value in _RUN_STATUSES
+
+
+def run_status(stored: str) -> RunStatus:
+    """A stored run status as the API's literal. The store is a plain string column; a value
+    outside the literal is a bug in a writer, reported here rather than as a 500 from
+    response validation with no hint of which run."""
+    if _is_run_status(stored):
+        return stored
+    raise ValueError(f"stored run status {stored!r} is not one of {sorted(_RUN_STATUSES)}")
+
+
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
 # database may refuse in a query (PostgreSQL rejects a NUL character with an error, a 500).
 RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"

@@ -18,7 +18,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from langgraph.runtime import Runtime
 
@@ -26,7 +26,14 @@ from app.graph.state import GraphContext, LTAAState
 
 log = logging.getLogger("ltaa.runs")
 
-Node = Callable[[LTAAState, Runtime[GraphContext]], dict[str, Any]]
+
+class Node(Protocol):
+    """A graph node. A protocol, not a Callable alias: LangGraph passes `runtime` by keyword,
+    and its add_node overloads accept only callables whose second parameter is so named."""
+
+    def __call__(self, state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]: ...
+
+
 NodeHook = Callable[[str, Node], Node]
 POLL_S = 0.05
 

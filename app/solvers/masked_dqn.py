@@ -65,7 +65,7 @@ class MaskedDQN(DQN):
             assert self._last_obs is not None
             action = self._random_allowed(self._last_obs)  # type: ignore[arg-type]
         else:
-            action, _ = self.predict(self._last_obs, deterministic=False)  # type: ignore[arg-type]
+            action, _ = self.predict(self._last_obs, deterministic=False)
         return action, action
 
 

@@ -26,6 +26,7 @@ from app.api.run_schemas import (
     RunSummary,
     TraceOut,
     TraceVerifyOut,
+    run_status,
 )
 from app.api.schemas import MetricsOut, UsageOut
 from app.domain.serialize import instance_to_dict
@@ -89,7 +90,9 @@ def create_run(
         response.headers[REPLAYED_HEADER] = "true"
     # A replay answers as the first request was answered, when the run was just queued.
     return RunCreated(
-        id=run.id, status="queued" if replayed else run.status, location=f"/runs/{run.id}"
+        id=run.id,
+        status="queued" if replayed else run_status(run.status),
+        location=f"/runs/{run.id}",
     )
 
 
@@ -131,7 +134,7 @@ def list_runs(
     return [
         RunSummary(
             id=r.id,
-            status=r.status,
+            status=run_status(r.status),
             reasoner=r.reasoner,
             mode=r.mode,
             n_tasks=r.n_tasks,
@@ -149,7 +152,7 @@ def _run_out(view: service.RunView) -> RunOut:
     names = [r.name for r in instance.robots]
     return RunOut(
         id=run.id,
-        status=run.status,
+        status=run_status(run.status),
         reasoner=run.reasoner,
         mode=run.mode,
         max_deviation=run.max_deviation,
@@ -234,7 +237,7 @@ def get_trace(
     prompts = include == "prompts"
     return TraceOut(
         id=trace.run.id,
-        status=trace.run.status,
+        status=run_status(trace.run.status),
         reasoner=trace.run.reasoner,
         mode=trace.run.mode,
         max_deviation=trace.run.max_deviation,
