@@ -11,7 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypedDict
+from typing import Any, Protocol, TypedDict
+
+from langgraph.runtime import Runtime
 
 from app.domain.decision import GuidedChoice
 from app.domain.metrics import balance_score, severity
@@ -115,3 +117,10 @@ def task_view(
         "guided_robot": guided_robot,
         "guided_costs": list(guided_costs) if guided_costs is not None else None,
     }
+
+
+class Node(Protocol):
+    """A graph node. A protocol, not a Callable alias: LangGraph passes `runtime` by keyword,
+    and its add_node overloads accept only callables whose second parameter is so named."""
+
+    def __call__(self, state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]: ...

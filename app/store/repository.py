@@ -5,10 +5,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from functools import cache
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import and_, bindparam, func, select
+from sqlalchemy import BindParameter, Integer, String, Table, and_, bindparam, func, select
+from sqlalchemy.dialects.postgresql import Insert as PostgresqlInsert
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
+from sqlalchemy.dialects.sqlite import Insert as SqliteInsert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
@@ -146,11 +148,13 @@ def reply_costs(*, session: Session, run_id: str) -> list[Any]:
 @cache
 def _upsert_statement(dialect: str, model: type[Base], keys: tuple[str, ...]) -> Any:
     # Built once and executed with parameters, so SQLAlchemy's compiled cache is hit.
-    insert = {"sqlite": sqlite_insert, "postgresql": postgresql_insert}[dialect]
-    stmt = insert(model.__table__)
+    table = cast(Table, model.__table__)
+    stmt: SqliteInsert | PostgresqlInsert = (
+        sqlite_insert(table) if dialect == "sqlite" else postgresql_insert(table)
+    )
     updates = {
         c.name: stmt.excluded[c.name]
-        for c in model.__table__.columns
+        for c in table.columns
         if c.name not in keys and not c.primary_key
     }
     return stmt.on_conflict_do_update(index_elements=list(keys), set_=updates)
@@ -168,7 +172,8 @@ def _upsert(
 def _decision_link_statement() -> Any:
     # Built once (building it took half the helper's time) and executed with parameters.
     d, a = Decision.__table__.c, Attempt.__table__.c
-    run_id, task_index = bindparam("run_id"), bindparam("task_index")
+    run_id: BindParameter[str] = bindparam("run_id", type_=String())
+    task_index: BindParameter[int] = bindparam("task_index", type_=Integer())
     prev = (
         select(func.coalesce(d.chain_hash, chain.UNCHAINED))
         .where(d.run_id == run_id, d.task_index < task_index)

@@ -221,7 +221,8 @@ def test_environment_masks_match_the_cap_and_rewards_are_regret() -> None:
     env = AllocationEnv(s, cap)
     obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(obs)
-    total, chosen, done = 0.0, [], False
+    chosen: list[int] = []
+    total, done = 0.0, False
     while not done:
         allowed = env.action_masks()
         t = len(chosen)

@@ -60,6 +60,7 @@ def test_representations_of_one_stored_value_hash_alike() -> None:
     assert _link(replace(DECISION, expected_success=np.float64(0.9))) == _link(
         replace(DECISION, expected_success=0.9)
     )
+    # A tuple where the record declares a list, on purpose: the stored form is the same.
     assert _link(replace(DECISION, loads_before=(0, 0, 0))) == base  # type: ignore[arg-type]
     assert _link(replace(DECISION, task_id="7")) == base
     assert _link(replace(DECISION, regret=float("nan"))) == _link(replace(DECISION, regret=None))
@@ -136,7 +137,8 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
             session=session,
             run_id="r1",
             kind="created",
-            detail={"tasks": 3, 4: (1, 2), "share": -0.0, "max_deviation": None},
+            # An int key and a tuple on purpose: JSON turns them into "4" and a list.
+            detail={"tasks": 3, 4: (1, 2), "share": -0.0, "max_deviation": None},  # type: ignore[dict-item]
         )
     for t in range(3):
         with transaction(sessions) as session:
@@ -176,7 +178,8 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
                         task_index=t,
                         regret=-0.0 if t else None,
                         expected_success=np.float64(0.1 + 0.2),
-                        loads_before=(t, 0, 0),
+                        # A tuple on purpose: the hash must survive its becoming a JSON list.
+                        loads_before=(t, 0, 0),  # type: ignore[arg-type]
                     )
                 ),
             )

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
 from typing import Any
 
 from langgraph.runtime import Runtime
@@ -12,12 +11,10 @@ from app.domain.decision import DecisionContext
 from app.graph.context import decision_context
 from app.graph.prompts import SYSTEM_PROMPT
 from app.graph.recorder import AttemptRecord, Recorder
-from app.graph.state import GraphContext, LTAAState
-
-NodeFunction = Callable[[LTAAState, Runtime[GraphContext]], dict[str, Any]]
+from app.graph.state import GraphContext, LTAAState, Node
 
 
-def cancellable(node: NodeFunction) -> NodeFunction:
+def cancellable(node: Node) -> Node:
     """Every node starts by checking for cancellation: a cancel, a drain or a lost lease
     stops the run at the next node boundary, before the node does anything."""
 
