@@ -33,7 +33,8 @@ def test_heavy_down_keeps_the_pins_and_balances_the_rest(client: TestClient) -> 
     data = r.json()
     rows = data["assignments"]
     assert [a["robot"] for a in rows[:18]] == [FLEET[i % 3] for i in range(18)]
-    assert all(a["pinned"] for a in rows[:18]) and not any(a["pinned"] for a in rows[18:])
+    assert all(a["pinned"] is True for a in rows[:18])
+    assert not any("pinned" in a for a in rows[18:])  # the field is there only when true
     assert all(a["robot"] != "heavy" for a in rows[18:])
     # W = (18 free + 12 pinned on light and medium) / 2 = 15; the mode default cap is 5.
     assert data["max_deviation"] == 5
@@ -77,7 +78,7 @@ def test_without_pins_nothing_changes(client: TestClient) -> None:
     for data in (plain, empty):
         data.pop("elapsed_ms")
     assert plain == empty
-    assert not any(a["pinned"] for a in plain["assignments"])
+    assert not any("pinned" in a for a in plain["assignments"])
 
 
 def test_pins_that_break_the_cap_say_which_max_deviation_would_do(client: TestClient) -> None:
