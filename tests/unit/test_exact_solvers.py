@@ -153,6 +153,8 @@ def pinned_instances(
     choices = draw(st.lists(st.one_of(st.none(), robot), min_size=n, max_size=n))
     pins = {t: c for t, c in enumerate(choices) if c is not None}
     off = draw(st.frozensets(st.integers(0, r - 1), max_size=r - 1))
+    # Tight caps too, which pins break most often.
+    cap = draw(st.one_of(st.just(cap), st.sampled_from([0, 0.5, 1])))
     return instance, cap, pins, off
 
 
@@ -170,15 +172,15 @@ def test_exact_solvers_agree_given_pins(
             assert exc.suggested_max_deviation is None and "raise max_deviation" in exc.message
             return
         event(f"infeasible ({exc.field})")
-        # The suggested cap is the least that admits a completion given the pins.
+        # The suggested cap is the least that admits a completion given the pins...
         suggested = exc.suggested_max_deviation
         assert suggested is not None and f"{suggested:g}" in exc.message
         assert exc.field in ("pinned", "max_deviation")
-        Problem.build(instance, mode, suggested, pinned=pins, unavailable=off)
         if suggested >= 0.001:
             with pytest.raises(InfeasibleCapError):
                 Problem.build(instance, mode, suggested - 0.001, pinned=pins, unavailable=off)
-        return
+        # ... and the exact solvers must agree at that tightest cap too.
+        problem = Problem.build(instance, mode, suggested, pinned=pins, unavailable=off)
     event("pinned" if pins else "unpinned")
     event("some unavailable" if off else "all available")
     results = {}
