@@ -1,0 +1,97 @@
+"""A real webhook receiver on loopback: records every request; scripted answers."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+from standardwebhooks import Webhook
+
+
+@dataclass
+class Received:
+    path: str
+    headers: dict[str, str]
+    body: bytes
+    at: float
+
+
+@dataclass
+class Receiver:
+    port: int
+    received: list[Received] = field(default_factory=list)
+    # status codes to answer, in order; once used up, 204 for everything
+    script: list[int] = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}/hooks"
+
+    def ids(self) -> set[str]:
+        with self.lock:
+            return {r.headers["webhook-id"] for r in self.received}
+
+    def snapshot(self) -> list[Received]:
+        with self.lock:
+            return list(self.received)
+
+    def wait_for(self, predicate: Callable[[list[Received]], bool], timeout: float = 30) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate(self.snapshot()):
+                return
+            time.sleep(0.05)
+        raise AssertionError(f"receiver: condition not met; got {len(self.snapshot())} request(s)")
+
+    def verified(self, secret: str) -> list[dict[str, Any]]:
+        """Every request's body, each verified with the standardwebhooks library."""
+        wh = Webhook(secret)
+        return [wh.verify(r.body, r.headers) for r in self.snapshot()]
+
+
+def _handler(receiver: Receiver) -> type[BaseHTTPRequestHandler]:
+    class Handler(BaseHTTPRequestHandler):
+        protocol_version = "HTTP/1.1"
+
+        def do_POST(self) -> None:  # noqa: N802 (http.server's naming)
+            length = int(self.headers.get("content-length") or 0)
+            body = self.rfile.read(length)
+            with receiver.lock:
+                receiver.received.append(
+                    Received(
+                        self.path,
+                        {k.lower(): v for k, v in self.headers.items()},
+                        body,
+                        time.time(),
+                    )
+                )
+                code = receiver.script.pop(0) if receiver.script else 204
+            self.send_response(code)
+            self.send_header("content-length", "0")
+            self.end_headers()
+
+        def log_message(self, *args: Any) -> None:
+            pass
+
+    return Handler
+
+
+@contextmanager
+def running_receiver(port: int = 0, script: list[int] | None = None) -> Iterator[Receiver]:
+    server = ThreadingHTTPServer(("127.0.0.1", port), _handler(Receiver(0)))
+    receiver = Receiver(int(server.server_address[1]), script=list(script or []))
+    server.RequestHandlerClass = _handler(receiver)
+    thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05})
+    thread.start()
+    try:
+        yield receiver
+    finally:
+        server.shutdown()
+        server.server_close()
+        thread.join()
