@@ -38,6 +38,13 @@ SUPERVISOR_ENDPOINTS = [
     ("POST", "/runs/{id}/resume"),
     ("POST", "/runs/{id}/cancel"),
     ("GET", "/metrics"),
+    ("POST", "/webhooks"),
+    ("GET", "/webhooks"),
+    ("GET", "/webhooks/{webhook_id}"),
+    ("DELETE", "/webhooks/{webhook_id}"),
+    ("POST", "/webhooks/{webhook_id}/rotate-secret"),
+    ("GET", "/webhooks/{webhook_id}/deliveries"),
+    ("POST", "/webhooks/{webhook_id}/deliveries/{delivery_id}/retry"),
 ]
 
 
