@@ -69,6 +69,13 @@ class Dispatcher:
     # -- lifecycle ---------------------------------------------------------------------
 
     def start(self) -> None:
+        with transaction(self._sessions) as session:
+            if session.get_bind().dialect.name == "sqlite":
+                released = queue.release_all_claims(session=session)
+                if released:
+                    log.info(
+                        "retrying %d webhook delivery(ies) in flight at the last stop", released
+                    )
         self._thread.start()
 
     def wake(self) -> None:

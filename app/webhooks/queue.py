@@ -156,3 +156,17 @@ def record_attempt(
         delivery.next_attempt_at = db_now(session, delay_s)
     delivery.manual_retry = False
     return str(delivery.status)
+
+
+def release_all_claims(*, session: Session) -> int:
+    """Start-up on SQLite, the one-process store: claims left in the table belong to a
+    process that died (it holds the store lock no more), so they are retried now rather
+    than when they expire."""
+    result = session.execute(
+        _no_sync(
+            update(D)
+            .where(D.claimed_by.is_not(None))
+            .values(claimed_by=None, claim_expires_at=None)
+        )
+    )
+    return int(getattr(result, "rowcount", 0) or 0)

@@ -27,6 +27,7 @@ class Receiver:
     received: list[Received] = field(default_factory=list)
     # status codes to answer, in order; once used up, 204 for everything
     script: list[int] = field(default_factory=list)
+    delay_s: float = 0.0  # before answering: widens the window in which an attempt is in flight
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     @property
@@ -62,6 +63,8 @@ def _handler(receiver: Receiver) -> type[BaseHTTPRequestHandler]:
         def do_POST(self) -> None:
             length = int(self.headers.get("content-length") or 0)
             body = self.rfile.read(length)
+            if receiver.delay_s:
+                time.sleep(receiver.delay_s)
             with receiver.lock:
                 receiver.received.append(
                     Received(
@@ -83,9 +86,11 @@ def _handler(receiver: Receiver) -> type[BaseHTTPRequestHandler]:
 
 
 @contextmanager
-def running_receiver(port: int = 0, script: list[int] | None = None) -> Iterator[Receiver]:
+def running_receiver(
+    port: int = 0, script: list[int] | None = None, delay_s: float = 0.0
+) -> Iterator[Receiver]:
     server = ThreadingHTTPServer(("127.0.0.1", port), _handler(Receiver(0)))
-    receiver = Receiver(int(server.server_address[1]), script=list(script or []))
+    receiver = Receiver(int(server.server_address[1]), script=list(script or []), delay_s=delay_s)
     server.RequestHandlerClass = _handler(receiver)
     thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05})
     thread.start()
