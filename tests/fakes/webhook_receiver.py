@@ -18,7 +18,8 @@ class Received:
     path: str
     headers: dict[str, str]
     body: bytes
-    at: float
+    at: float  # when it was answered
+    started: float  # when it arrived
 
 
 @dataclass
@@ -63,6 +64,7 @@ def _handler(receiver: Receiver) -> type[BaseHTTPRequestHandler]:
         def do_POST(self) -> None:
             length = int(self.headers.get("content-length") or 0)
             body = self.rfile.read(length)
+            started = time.time()
             if receiver.delay_s:
                 time.sleep(receiver.delay_s)
             with receiver.lock:
@@ -72,6 +74,7 @@ def _handler(receiver: Receiver) -> type[BaseHTTPRequestHandler]:
                         {k.lower(): v for k, v in self.headers.items()},
                         body,
                         time.time(),
+                        started,
                     )
                 )
                 code = receiver.script.pop(0) if receiver.script else 204
