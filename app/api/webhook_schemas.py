@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -27,7 +27,7 @@ EventName = Literal[
     "budget.exhausted",
 ]
 # One list of names: the Literal (for the OpenAPI enum) is the enum plus "*".
-assert set(EventName.__args__) == {ALL, *WebhookEventType}
+assert set(get_args(EventName)) == {ALL, *WebhookEventType}
 
 DeliveryStatusName = Literal["pending", "delivered", "failed", "cancelled"]
 WEBHOOK_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
