@@ -74,7 +74,13 @@ class SecretBox:
 
     def rotate(self, ciphertext: str) -> str:
         """Re-encrypt under the first key (after a server key rotation)."""
-        return self._fernet.rotate(ciphertext.encode("ascii")).decode("ascii")
+        try:
+            return self._fernet.rotate(ciphertext.encode("ascii")).decode("ascii")
+        except InvalidToken:
+            raise SecretKeyError(
+                "a webhook secret cannot be decrypted with any key of LTAA_SECRET_KEY; "
+                "keep the old key (after the new one) until every secret was re-encrypted"
+            ) from None
 
 
 def _multi(keys: list[bytes]) -> MultiFernet:

@@ -271,3 +271,13 @@ def retry_delivery(
             )
         )
     return DeliveryView(delivery, attempts)
+
+
+def reencrypt_secrets(*, sessions: sessionmaker[Session], box: SecretBox) -> int:
+    """Re-encrypt every stored secret under the first server key (after a new key was put
+    first in LTAA_SECRET_KEY); the old key may then be dropped. Returns how many rows."""
+    with transaction(sessions) as session:
+        rows = list(session.scalars(select(WebhookSecret).with_for_update()))
+        for row in rows:
+            row.ciphertext = box.rotate(row.ciphertext)
+    return len(rows)

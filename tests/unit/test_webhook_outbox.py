@@ -163,3 +163,31 @@ def test_completed_carries_status_and_the_runs_expected_success(
     data = json.loads(stored(sessions)[0].payload)["data"]
     assert data["status"] == "completed" and data["decisions"] == 2
     assert data["expected_success"] == pytest.approx(0.7)
+
+
+def test_server_key_rotation_reencrypts_every_secret(
+    sessions: sessionmaker[Session], tmp_path: Path
+) -> None:
+    from cryptography.fernet import Fernet
+
+    from app.store.webhook_models import WebhookSecret
+    from app.webhooks.errors import SecretKeyError
+    from app.webhooks.secret_box import SecretBox, new_secret
+    from app.webhooks.service import reencrypt_secrets
+
+    old_key, new_key = Fernet.generate_key().decode(), Fernet.generate_key().decode()
+    old = SecretBox.from_setting(old_key, tmp_path)
+    add_subscription(sessions, "all", ["*"])
+    secret = new_secret()
+    with transaction(sessions) as session:
+        session.add(WebhookSecret(subscription_id="all", ciphertext=old.encrypt(secret)))
+    both = SecretBox.from_setting(f"{new_key},{old_key}", tmp_path)
+    assert reencrypt_secrets(sessions=sessions, box=both) == 1
+    only_new = SecretBox.from_setting(new_key, tmp_path)
+    with sessions() as session:
+        (ciphertext,) = [row.ciphertext for row in session.query(WebhookSecret)]
+    assert only_new.decrypt(ciphertext) == secret
+    with pytest.raises(SecretKeyError, match="differs"):
+        old.decrypt(ciphertext)
+    with pytest.raises(SecretKeyError, match="entry 2 is not a Fernet key"):
+        SecretBox.from_setting(f"{new_key},not-a-key", tmp_path)
