@@ -355,3 +355,29 @@ def test_metrics_report_deliveries_attempts_queue_and_latency(
     assert 'ltaa_webhook_attempts_total{outcome="delivered"} 1.0' in text
     assert "ltaa_webhook_queue_depth 0.0" in text
     assert "ltaa_webhook_delivery_latency_seconds_count 2.0" in text
+
+
+def test_an_endless_response_body_is_read_only_up_to_the_cap(
+    make_client: ClientFactory, receiver: Receiver
+) -> None:
+    # The timeout is per read, so without the cap an endless body would hold the attempt
+    # (and its dispatcher thread) forever.
+    client = make_client(webhook_allow_private=True, webhook_max_response_bytes=100_000, **FAST)
+    hook = subscribe(client, receiver.url, ["run.created"])
+    receiver.endless_body = True
+    enqueue(client, "r" * 32)
+    (d,) = wait_deliveries(client, hook["id"], lambda d: d[0]["status"] == "delivered")
+    assert d["attempt_log"][0]["response_excerpt"] == "x" * 512
+
+
+def test_a_receiver_slower_than_the_timeout_is_a_failed_attempt(
+    make_client: ClientFactory, receiver: Receiver
+) -> None:
+    client = make_client(webhook_allow_private=True, webhook_timeout_s=0.3, **FAST)
+    hook = subscribe(client, receiver.url, ["run.created"])
+    receiver.delay_s = 1.0
+    enqueue(client, "r" * 32)
+    (d,) = wait_deliveries(client, hook["id"], lambda d: len(d[0]["attempt_log"]) >= 1)
+    first = d["attempt_log"][0]
+    assert first["outcome"] == "network_error" and "ReadTimeout" in first["error"]
+    assert first["latency_ms"] < 900

@@ -29,6 +29,7 @@ class Receiver:
     # status codes to answer, in order; once used up, 204 for everything
     script: list[int] = field(default_factory=list)
     delay_s: float = 0.0  # before answering: widens the window in which an attempt is in flight
+    endless_body: bool = False  # answer 200 with a body that never ends (until disconnected)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     @property
@@ -78,9 +79,24 @@ def _handler(receiver: Receiver) -> type[BaseHTTPRequestHandler]:
                     )
                 )
                 code = receiver.script.pop(0) if receiver.script else 204
+            if receiver.endless_body:
+                self._endless()
+                return
             self.send_response(code)
             self.send_header("content-length", "0")
             self.end_headers()
+
+        def _endless(self) -> None:
+            self.send_response(200)
+            self.send_header("transfer-encoding", "chunked")
+            self.end_headers()
+            chunk = b"x" * 8192
+            try:
+                while True:
+                    self.wfile.write(b"%x\r\n%s\r\n" % (len(chunk), chunk))
+                    self.wfile.flush()
+            except OSError:
+                self.close_connection = True
 
         def log_message(self, *args: Any) -> None:
             pass
