@@ -21,6 +21,7 @@ from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics
 from app.domain.models import Instance, Robot, Task
 from app.domain.problem import Problem
+from app.reasoners.factory import ReasonerSettings
 from app.solvers.base import Solution, Solver
 from app.solvers.registry import get_solver
 
@@ -72,10 +73,10 @@ def build_problem(request: InstanceRequest) -> Problem:
     )
 
 
-def load_solver(name: str) -> Solver:
+def load_solver(name: str, settings: ReasonerSettings | None = None) -> Solver:
     """The registered solver, or a 4xx-mapped error when its optional dependencies are missing."""
     try:
-        return get_solver(name)
+        return get_solver(name, settings=settings)
     except ImportError as exc:
         raise DomainError(
             "solver",
@@ -113,10 +114,12 @@ def build_response(
     )
 
 
-def allocate(request: AllocateRequest) -> AllocateResponse:
+def allocate(
+    request: AllocateRequest, settings: ReasonerSettings | None = None
+) -> AllocateResponse:
     """Validate, solve and measure. CPU-bound: callers on an event loop use a thread."""
     started = time.perf_counter()
-    solver = load_solver(request.solver)  # unknown solver reported before instance errors
+    solver = load_solver(request.solver, settings)  # unknown solver reported before instance errors
     problem = build_problem(request)
     solution = solver.solve(problem, seed=request.seed, options=request.options)
     _check_solution(problem, solution, request.solver)

@@ -14,11 +14,12 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+from app.domain.lifecycle import EventKind
 from app.reasoners.base import DecisionContext, Reasoner, ReasonerReply
 from app.reasoners.factory import close_reasoner
 from app.reasoners.rules import RulesReasoner
 
-BUDGET_EXHAUSTED = "budget_exhausted"  # the run event recording the switch
+BUDGET_EXHAUSTED = EventKind.BUDGET_EXHAUSTED.value  # the run event recording the switch
 
 
 @dataclass(frozen=True)

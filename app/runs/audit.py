@@ -16,6 +16,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.lifecycle import EventKind, RunStatus
 from app.runs.errors import RunNotFoundError
 from app.store import chain
 from app.store import repository as repo
@@ -129,13 +130,13 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
 
     # The newest rows of a chain leave no gap when deleted; a completed run says where its
     # chains end (n_tasks decisions, and its last event is the one that completed it).
-    if status == "completed" and decisions.last_key != n_tasks - 1:
+    if status == RunStatus.COMPLETED and decisions.last_key != n_tasks - 1:
         last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
         decisions.missing_tail(
             f"the run completed with {n_tasks} tasks but its decisions "
             f"end at {last}: the last decisions were deleted"
         )
-    if status == "completed" and last_kind != "completed":
+    if status == RunStatus.COMPLETED and last_kind != EventKind.COMPLETED:
         events.missing_tail(
             "the run completed but its events do not end with the "
             "'completed' event: the last events were deleted"

@@ -17,10 +17,10 @@ from typing import Any, Literal, TypeVar
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.lifecycle import FINISHED, EventKind
 from app.store.models import Decision, Run, RunEvent, as_utc
 
-ENDED = ("completed", "failed", "cancelled")
-_OPENING = ("created", "started", "resumed")
+_OPENING = (EventKind.CREATED, EventKind.STARTED, EventKind.RESUMED)
 _CURSOR = re.compile(r"^(\d{1,9})-(\d{1,9})$")
 R = TypeVar("R", RunEvent, Decision)
 
@@ -132,4 +132,4 @@ def read_progress(
             else:
                 cursor = Cursor(cursor.events, row.task_index + 1)
                 items.append(ProgressItem("decision", _decision_data(row), at, cursor))
-    return ProgressBatch(items=items, cursor=cursor, ended=status in ENDED)
+    return ProgressBatch(items=items, cursor=cursor, ended=status in FINISHED)

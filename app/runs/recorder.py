@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Callable
 
 from sqlalchemy.orm import Session, sessionmaker
@@ -44,13 +43,11 @@ class SqlRecorder:
         run_id: str,
         sessions: sessionmaker[Session],
         stop: RunStop,
-        pause_at_task: int | None = None,
         fence: Fence | None = None,
     ) -> None:
         self.run_id = run_id
         self._sessions = sessions
         self._stop = stop
-        self._pause_at = pause_at_task
         self._fence = fence
         # Write-through cache: this process wrote these rows, so reads need no query.
         # After a restart the cache starts empty and reads fall through to the table.
@@ -69,11 +66,6 @@ class SqlRecorder:
     def before_reason(self, task_index: int, attempt: int) -> None:
         # Reasoner (and SDK) logs during this node's call name the run and task.
         bind(run_id=self.run_id, task_index=task_index)
-        # Test-only: hold the run inside the reasoning node so a SIGKILL lands exactly there.
-        if self._pause_at is not None and task_index == self._pause_at:
-            while not self._stop.requested():
-                time.sleep(0.05)
-            self.check_cancelled()
 
     def save_attempt(self, record: AttemptRecord) -> None:
         with transaction(self._sessions) as session:

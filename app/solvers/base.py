@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
+from app.reasoners.factory import ReasonerSettings
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,11 @@ class SolverOptions(BaseModel):
 class Solver(ABC):
     info: ClassVar[SolverInfo]
     Options: ClassVar[type[SolverOptions]] = SolverOptions
+
+    def __init__(self, *, settings: ReasonerSettings | None = None) -> None:
+        # The server's settings, for methods that call out (the `ltaa` reasoners); the
+        # exact and learning solvers never read them.
+        self.settings = settings
 
     def parse_options(self, options: Mapping[str, Any] | None) -> SolverOptions:
         try:

@@ -18,8 +18,6 @@ from app.reasoners.base import ReasonerReply
 from app.store import chain
 from app.store.models import Attempt, Base, Decision, Run, RunEvent, utcnow
 
-ACTIVE = ("queued", "running")
-
 
 def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run | None:
     """`for_update` locks the row until the transaction ends (PostgreSQL; SQLite has no
@@ -36,13 +34,6 @@ def list_runs(*, session: Session, status: str | None, limit: int, offset: int) 
 
 def runs_with_status(*, session: Session, statuses: Sequence[str]) -> list[Run]:
     return list(session.scalars(select(Run).where(Run.status.in_(statuses)).order_by(Run.id)))
-
-
-def set_status(*, session: Session, run: Run, status: str, error: str | None = None) -> None:
-    run.status = status
-    run.error = error
-    if status in ("completed", "failed", "cancelled"):
-        run.finished_at = utcnow()
 
 
 def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:

@@ -98,7 +98,7 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
             **env,
             "LTAA_WORKER_NAME": "api-a",
             "LTAA_MAX_CONCURRENT_RUNS": str(A_SLOTS),
-            "LTAA_TEST_PAUSE_AT_TASK": str(PAUSE_AT),
+            "LTAA_TEST_PAUSE": f"{PAUSE_AT}:reason:before",
         },
     )
     b = Server(

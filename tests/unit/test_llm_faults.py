@@ -238,7 +238,7 @@ def test_a_resume_without_the_api_key_fails_saying_which_key_to_set(settings: Se
             update={
                 "anthropic_api_key": SecretStr("test-key"),
                 "anthropic_base_url": api.base_url,
-                "test_pause_at_task": 1,
+                "test_pause": f"{1}:reason:before",
             }
         )
         with TestClient(create_app(keyed)) as first:

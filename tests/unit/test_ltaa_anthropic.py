@@ -8,6 +8,7 @@ import anthropic
 import pytest
 from pydantic import SecretStr
 
+from app.config import Settings
 from app.domain.errors import DomainError
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.prompts import prompt_for
@@ -140,7 +141,7 @@ def test_an_unknown_model_through_allocate_names_the_option(
     monkeypatch.setenv("LTAA_ANTHROPIC_BASE_URL", api.base_url)
     api.script(Reply.error(404, retry_after=None))
     with pytest.raises(DomainError) as err:
-        get_solver("ltaa").solve(
+        get_solver("ltaa", settings=Settings()).solve(
             problem(n_tasks=1), options={"reasoner": "anthropic", "model": "nope"}
         )
     assert err.value.field == "options.model" and err.value.status_code == 422
@@ -159,7 +160,7 @@ def test_ltaa_solver_with_anthropic_options(
     # The key and endpoint come from the server's settings, never from the request.
     monkeypatch.setenv("LTAA_ANTHROPIC_API_KEY", "test")
     monkeypatch.setenv("LTAA_ANTHROPIC_BASE_URL", api.base_url)
-    solution = get_solver("ltaa").solve(
+    solution = get_solver("ltaa", settings=Settings()).solve(
         problem(n_tasks=3),
         options={"reasoner": "anthropic", "model": "claude-test", "temperature": 0.2},
     )

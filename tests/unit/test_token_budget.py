@@ -27,7 +27,7 @@ from app.runs.token_budget import with_token_budget
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
-from app.store.models import Run
+from tests.factories import run_row
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
 from tests.run_polling import wait_until
@@ -196,19 +196,7 @@ def test_a_process_that_lost_the_run_writes_no_budget_event(tmp_path: Path) -> N
     engine = make_engine(url)
     sessions = make_session_factory(engine)
     with transaction(sessions) as session:
-        session.add(
-            Run(
-                id="r1",
-                status="running",
-                request={},
-                reasoner="anthropic",
-                mode="balanced",
-                n_tasks=2,
-                n_robots=3,
-                resumes=0,
-                cancel_requested=False,
-            )
-        )
+        session.add(run_row("r1", "running", reasoner="anthropic", n_tasks=2, n_robots=3))
 
     def lease_gone(session: Session) -> None:
         raise LeaseLost("r1")

@@ -20,8 +20,8 @@ from app.store import chain
 from app.store import repository as repo
 from app.store.db import make_engine, transaction
 from app.store.migrate import upgrade_head
-from app.store.models import Run
 from tests.e2e.postgres import fresh_database
+from tests.factories import run_row
 
 DECISION = DecisionRecord(
     task_index=0,
@@ -130,20 +130,7 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
 ) -> None:
     """Hashes are computed from the values written and checked against the values read."""
     with transaction(sessions) as session:
-        session.add(
-            Run(
-                id="r1",
-                status="completed",
-                request={},
-                reasoner="rules",
-                mode="m",
-                max_deviation=None,
-                n_tasks=3,
-                n_robots=3,
-                resumes=0,
-                cancel_requested=False,
-            )
-        )
+        session.add(run_row("r1", "completed", mode="m", max_deviation=None, n_tasks=3, n_robots=3))
         session.flush()
         repo.add_event(
             session=session,

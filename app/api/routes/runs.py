@@ -89,7 +89,9 @@ def create_run(
         response.headers[REPLAYED_HEADER] = "true"
     # A replay answers as the first request was answered, when the run was just queued.
     return RunCreated(
-        id=run.id, status="queued" if replayed else run.status, location=f"/runs/{run.id}"
+        id=run.id,
+        status=RunStatus.QUEUED if replayed else RunStatus(run.status),
+        location=f"/runs/{run.id}",
     )
 
 

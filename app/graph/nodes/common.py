@@ -2,8 +2,29 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from typing import Any
+
+from langgraph.runtime import Runtime
+
 from app.graph.prompts import SYSTEM_PROMPT
 from app.graph.recorder import AttemptRecord, Recorder
+from app.graph.state import GraphContext, LTAAState
+
+NodeFunction = Callable[[LTAAState, Runtime[GraphContext]], dict[str, Any]]
+
+
+def cancellable(node: NodeFunction) -> NodeFunction:
+    """Every node starts by checking for cancellation: a cancel, a drain or a lost lease
+    stops the run at the next node boundary, before the node does anything."""
+
+    @functools.wraps(node)
+    def checked(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+        runtime.context.recorder.check_cancelled()
+        return node(state, runtime)
+
+    return checked
 
 
 def save_prompt(recorder: Recorder, task_index: int, attempt: int, tier: int, user: str) -> None:
