@@ -29,7 +29,7 @@ EventName = Literal[
 # One list of names: the Literal (for the OpenAPI enum) is the enum plus "*".
 assert set(get_args(EventName)) == {ALL, *WebhookEventType}
 
-DeliveryStatusName = Literal["pending", "delivered", "failed", "cancelled"]
+DeliveryStateName = Literal["pending", "delivered", "failed", "cancelled"]
 WEBHOOK_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
 
 
@@ -114,7 +114,7 @@ class DeliveryOut(BaseModel):
     id: str = Field(description="The `webhook-id` header: the same on every attempt")
     event_type: str
     run_id: str
-    status: DeliveryStatusName
+    status: DeliveryStateName
     attempts: int
     next_attempt_at: Timestamp | None = Field(description="While pending: when it is due")
     last_status_code: int | None
@@ -130,9 +130,9 @@ class DeliveryOut(BaseModel):
             id=row.id,
             event_type=row.event_type,
             run_id=row.run_id,
-            status=row.status,  # type: ignore[arg-type]
+            status=row.state,  # type: ignore[arg-type]
             attempts=row.attempts,
-            next_attempt_at=row.next_attempt_at if row.status == "pending" else None,
+            next_attempt_at=row.next_attempt_at if row.state == "pending" else None,
             last_status_code=row.last_status_code,
             last_error=row.last_error,
             created_at=row.created_at,

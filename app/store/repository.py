@@ -47,16 +47,8 @@ def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any
     seq = last.seq + 1 if last is not None else 1
     prev = chain.next_prev(last.chain_hash) if last is not None else chain.genesis("events", run_id)
     link = chain.event_link(prev, {"seq": seq, "kind": kind, "detail": detail})
-    at = utcnow()
-    event = RunEvent(
-        run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link, created_at=at
-    )
+    event = RunEvent(run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link)
     session.add(event)
-    # TEMPORARY until app.runs.lifecycle owns event writing: the outbox rows go into this
-    # transaction (store should not import webhooks; the lifecycle's writer will call it).
-    from app.webhooks.outbox import enqueue_for_event
-
-    enqueue_for_event(session, run_id=run_id, kind=kind, detail=detail, seq=seq, at=at)
     return event
 
 

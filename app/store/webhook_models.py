@@ -67,7 +67,7 @@ class WebhookDelivery(Base):
         UniqueConstraint(
             "subscription_id", "run_id", "event_seq", name="uq_webhook_deliveries_event"
         ),
-        Index("ix_webhook_deliveries_due", "status", "next_attempt_at"),
+        Index("ix_webhook_deliveries_due", "state", "next_attempt_at"),
     )
 
     # The `webhook-id` header: stable across retries, so receivers can deduplicate.
@@ -80,7 +80,9 @@ class WebhookDelivery(Base):
     event_seq: Mapped[int] = mapped_column(Integer)
     # The exact body bytes (UTF-8 JSON): every attempt sends, and signs, the same payload.
     payload: Mapped[str] = mapped_column(Text)
-    status: Mapped[str] = mapped_column(String(16))
+    # pending | delivered | failed | cancelled (app.webhooks.status.DeliveryState); named
+    # `state` so that nothing but a run has a `status` column (app.runs.lifecycle owns those).
+    state: Mapped[str] = mapped_column(String(16))
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     # A manual retry gets one attempt; it does not restart the automatic schedule.
     manual_retry: Mapped[bool] = mapped_column(Boolean, default=False)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from enum import StrEnum
 
+from app.domain.lifecycle import EventKind, RunStatus
+
 ALL = "*"
 
 
@@ -23,14 +25,15 @@ class WebhookEventType(StrEnum):
 
 # Run event kind -> webhook type. Kinds absent here (started, resumed, ...) send nothing.
 # Features that add event kinds (revisions, reviews, sign-off) add their rows here.
+# The last five name the events SPEC 10-11 features will add to EventKind.
 TYPE_OF_KIND: dict[str, WebhookEventType] = {
-    "created": WebhookEventType.RUN_CREATED,
-    "completed": WebhookEventType.RUN_COMPLETED,
-    "failed": WebhookEventType.RUN_FAILED,
-    "integrity_failed": WebhookEventType.RUN_FAILED,
-    "cancelled": WebhookEventType.RUN_CANCELLED,
-    "interrupted": WebhookEventType.RUN_INTERRUPTED,
-    "budget_exhausted": WebhookEventType.BUDGET_EXHAUSTED,
+    EventKind.CREATED: WebhookEventType.RUN_CREATED,
+    EventKind.COMPLETED: WebhookEventType.RUN_COMPLETED,
+    EventKind.FAILED: WebhookEventType.RUN_FAILED,
+    EventKind.INTEGRITY_FAILED: WebhookEventType.RUN_FAILED,
+    EventKind.CANCELLED: WebhookEventType.RUN_CANCELLED,
+    EventKind.INTERRUPTED: WebhookEventType.RUN_INTERRUPTED,
+    EventKind.BUDGET_EXHAUSTED: WebhookEventType.BUDGET_EXHAUSTED,
     "superseded": WebhookEventType.RUN_SUPERSEDED,
     "revised": WebhookEventType.RUN_REVISED,
     "review_requested": WebhookEventType.REVIEW_REQUESTED,
@@ -39,13 +42,13 @@ TYPE_OF_KIND: dict[str, WebhookEventType] = {
 }
 
 # The run status a kind leaves the run in, for the payload's `data.status`.
-STATUS_OF_KIND: dict[str, str] = {
-    "created": "queued",
-    "completed": "completed",
-    "failed": "failed",
-    "integrity_failed": "failed",
-    "cancelled": "cancelled",
-    "interrupted": "interrupted",
+STATUS_OF_KIND: dict[str, RunStatus] = {
+    EventKind.CREATED: RunStatus.QUEUED,
+    EventKind.COMPLETED: RunStatus.COMPLETED,
+    EventKind.FAILED: RunStatus.FAILED,
+    EventKind.INTEGRITY_FAILED: RunStatus.FAILED,
+    EventKind.CANCELLED: RunStatus.CANCELLED,
+    EventKind.INTERRUPTED: RunStatus.INTERRUPTED,
 }
 
 

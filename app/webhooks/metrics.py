@@ -16,7 +16,7 @@ from sqlalchemy import case, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.store.webhook_models import WebhookAttempt, WebhookDelivery
-from app.webhooks.status import AttemptOutcome, DeliveryStatus
+from app.webhooks.status import AttemptOutcome, DeliveryState
 
 LATENCY_BUCKETS_S = (0.01, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)
 
@@ -32,7 +32,7 @@ def _families(
     by_status = GaugeMetricFamily(
         "ltaa_webhook_deliveries", "Webhook deliveries by current status", labels=["status"]
     )
-    for status in DeliveryStatus:
+    for status in DeliveryState:
         by_status.add_metric([status.value], deliveries.get(status.value, 0))
     yield by_status
     by_outcome = CounterMetricFamily(
@@ -67,7 +67,7 @@ class WebhookTablesCollector(Collector):
         A, D = WebhookAttempt, WebhookDelivery
         with self._sessions() as session:
             deliveries = {
-                s: n for s, n in session.execute(select(D.status, func.count()).group_by(D.status))
+                s: n for s, n in session.execute(select(D.state, func.count()).group_by(D.state))
             }
             attempts = {
                 o: n
@@ -75,7 +75,7 @@ class WebhookTablesCollector(Collector):
             }
             due = session.scalar(
                 select(func.count()).where(
-                    D.status == DeliveryStatus.PENDING,
+                    D.state == DeliveryState.PENDING,
                     D.next_attempt_at <= func.current_timestamp(),
                 )
             )

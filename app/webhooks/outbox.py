@@ -16,10 +16,11 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from app.domain.lifecycle import EventKind
 from app.store.models import Decision, utcnow
 from app.store.webhook_models import WebhookDelivery, WebhookSubscription
 from app.webhooks.events import STATUS_OF_KIND, TYPE_OF_KIND, WebhookEventType, subscribed
-from app.webhooks.status import DeliveryStatus
+from app.webhooks.status import DeliveryState
 
 
 def new_message_id() -> str:
@@ -36,8 +37,8 @@ def _data(
 ) -> dict[str, Any]:
     data: dict[str, Any] = {**detail, "run_id": run_id, "event": kind, "seq": seq}
     if kind in STATUS_OF_KIND:
-        data["status"] = STATUS_OF_KIND[kind]
-    if kind == "completed":
+        data["status"] = STATUS_OF_KIND[kind].value
+    if kind == EventKind.COMPLETED:
         # The run's expected success: the mean success of the stored decisions (SPEC 1),
         # read in this transaction, so it is exactly what the completed run holds.
         count, total = session.execute(
@@ -92,7 +93,7 @@ def enqueue_for_event(
             run_id=run_id,
             event_seq=seq,
             payload=body,
-            status=DeliveryStatus.PENDING,
+            state=DeliveryState.PENDING,
             attempts=0,
             manual_retry=False,
             next_attempt_at=at,

@@ -20,7 +20,7 @@ from sqlalchemy.orm import Session
 
 from app.store.models import utcnow
 from app.store.webhook_models import WebhookAttempt, WebhookDelivery, WebhookSecret
-from app.webhooks.status import AttemptOutcome, DeliveryStatus
+from app.webhooks.status import AttemptOutcome, DeliveryState
 
 D = WebhookDelivery
 JITTER = 0.2  # each delay is stretched or shrunk by up to 20%, so retries do not stampede
@@ -56,7 +56,7 @@ def claim_due(*, session: Session, owner: str, claim_s: float, limit: int) -> li
         session.scalars(
             select(D.id)
             .where(
-                D.status == DeliveryStatus.PENDING,
+                D.state == DeliveryState.PENDING,
                 D.next_attempt_at <= now,
                 or_(D.claim_expires_at.is_(None), D.claim_expires_at < now),
             )
@@ -146,16 +146,16 @@ def record_attempt(
     delivery.last_status_code = result.status_code
     delivery.last_error = result.error
     if result.outcome is AttemptOutcome.DELIVERED:
-        delivery.status = DeliveryStatus.DELIVERED
+        delivery.state = DeliveryState.DELIVERED
         delivery.finished_at = utcnow()
         delivery.last_error = None
     elif delay_s is None or delivery.manual_retry:
-        delivery.status = DeliveryStatus.FAILED
+        delivery.state = DeliveryState.FAILED
         delivery.finished_at = utcnow()
     else:
         delivery.next_attempt_at = db_now(session, delay_s)
     delivery.manual_retry = False
-    return str(delivery.status)
+    return str(delivery.state)
 
 
 def release_all_claims(*, session: Session) -> int:

@@ -30,7 +30,7 @@ from app.webhooks.errors import (
 from app.webhooks.events import ALL
 from app.webhooks.queue import db_now
 from app.webhooks.secret_box import SecretBox, new_secret
-from app.webhooks.status import DeliveryStatus
+from app.webhooks.status import DeliveryState
 
 
 @dataclass(frozen=True)
@@ -159,9 +159,9 @@ def delete_subscription(*, sessions: sessionmaker[Session], webhook_id: str) -> 
             update(WebhookDelivery)
             .where(
                 WebhookDelivery.subscription_id == webhook_id,
-                WebhookDelivery.status == DeliveryStatus.PENDING,
+                WebhookDelivery.state == DeliveryState.PENDING,
             )
-            .values(status=DeliveryStatus.CANCELLED, finished_at=utcnow())
+            .values(state=DeliveryState.CANCELLED, finished_at=utcnow())
             .execution_options(synchronize_session=False)
         )
 
@@ -255,11 +255,11 @@ def retry_delivery(
         delivery = session.get(WebhookDelivery, delivery_id, with_for_update=True)
         if delivery is None or delivery.subscription_id != webhook_id:
             raise DeliveryNotFoundError(webhook_id, delivery_id)
-        if delivery.status == DeliveryStatus.CANCELLED:
-            raise DeliveryStateConflictError(delivery_id, str(delivery.status))
-        if delivery.status != DeliveryStatus.PENDING:
+        if delivery.state == DeliveryState.CANCELLED:
+            raise DeliveryStateConflictError(delivery_id, str(delivery.state))
+        if delivery.state != DeliveryState.PENDING:
             delivery.manual_retry = True
-            delivery.status = DeliveryStatus.PENDING
+            delivery.state = DeliveryState.PENDING
             delivery.finished_at = None
         delivery.next_attempt_at = utcnow() - timedelta(seconds=1)
         session.flush()

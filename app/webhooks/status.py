@@ -5,7 +5,7 @@ from __future__ import annotations
 from enum import StrEnum
 
 
-class DeliveryStatus(StrEnum):
+class DeliveryState(StrEnum):
     PENDING = "pending"  # due at next_attempt_at (claimed while an attempt is in flight)
     DELIVERED = "delivered"  # a 2xx answered
     FAILED = "failed"  # every scheduled attempt failed (or a manual retry did)

@@ -339,7 +339,7 @@ def test_delete_cancels_waiting_deliveries(make_client: ClientFactory, receiver:
     with transaction(client.app.state.webhooks.sessions) as session:  # type: ignore[attr-defined]
         from app.store.webhook_models import WebhookDelivery
 
-        assert [d.status for d in session.query(WebhookDelivery)] == ["cancelled"]
+        assert [d.state for d in session.query(WebhookDelivery)] == ["cancelled"]
 
 
 def test_metrics_report_deliveries_attempts_queue_and_latency(

@@ -40,10 +40,10 @@ def start_run(server: Server) -> str:
 
 
 def outbox(data_dir: Path) -> list[tuple[str, str, str, str]]:
-    """(id, type, run id, status) of every delivery, read from the database file."""
+    """(id, type, run id, state) of every delivery, read from the database file."""
     with sqlite3.connect(data_dir / "ltaa.db") as conn:
         return conn.execute(
-            "SELECT id, event_type, run_id, status FROM webhook_deliveries ORDER BY created_at"
+            "SELECT id, event_type, run_id, state FROM webhook_deliveries ORDER BY created_at"
         ).fetchall()
 
 
@@ -103,7 +103,7 @@ def test_ten_kills_at_random_points_lose_no_webhook(tmp_path: Path) -> None:
             runs = []
             for kill in range(10):
                 if kill:
-                    server.start(LTAA_TEST_PAUSE_AT_TASK=str(3 * kill))
+                    server.start(LTAA_TEST_PAUSE=f"{3 * kill}:reason:before")
                 runs.append(start_run(server))
                 time.sleep(rng.uniform(0.0, 0.6))
                 server.kill()

@@ -32,7 +32,7 @@ def postgres_url() -> Iterator[str]:
 def wait_delivered(url: str, expected: int, timeout: float = 90) -> list[tuple[object, ...]]:
     deadline = time.monotonic() + timeout
     while True:
-        rows = query(url, "SELECT id, status FROM webhook_deliveries")
+        rows = query(url, "SELECT id, state FROM webhook_deliveries")
         if len(rows) >= expected and all(r[1] == "delivered" for r in rows):
             return rows
         assert time.monotonic() < deadline, rows

@@ -12,10 +12,11 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
-from app.store.models import Decision, Run, utcnow
+from app.store.models import Decision, utcnow
 from app.store.webhook_models import WebhookDelivery, WebhookSubscription
 from app.webhooks.events import TYPE_OF_KIND, WebhookEventType
 from app.webhooks.outbox import enqueue_for_event
+from tests.factories import run_row
 
 RUN_ID = "a" * 32
 
@@ -78,7 +79,7 @@ def test_one_delivery_per_matching_live_subscription(sessions: sessionmaker[Sess
         made = enqueue_for_event(session, run_id=RUN_ID, kind="failed", detail={"e": 1}, seq=7)
     assert sorted(d.subscription_id for d in made) == ["all", "failures"]
     rows = stored(sessions)
-    assert [(d.subscription_id, d.event_type, d.event_seq, d.status) for d in rows] == [
+    assert [(d.subscription_id, d.event_type, d.event_seq, d.state) for d in rows] == [
         ("all", "run.failed", 7, "pending"),
         ("failures", "run.failed", 7, "pending"),
     ]
@@ -119,19 +120,7 @@ def test_completed_carries_status_and_the_runs_expected_success(
 ) -> None:
     add_subscription(sessions, "all", ["*"])
     with transaction(sessions) as session:
-        session.add(
-            Run(
-                id=RUN_ID,
-                status="completed",
-                request={},
-                reasoner="rules",
-                mode="balanced",
-                n_tasks=2,
-                n_robots=1,
-                resumes=0,
-                cancel_requested=False,
-            )
-        )
+        session.add(run_row(RUN_ID, "completed", n_tasks=2))
         session.flush()
         for index, success in enumerate((0.8, 0.6)):
             session.add(
