@@ -36,6 +36,10 @@ def dispatcher_id(name: str | None) -> str:
 
 def resolver_from(settings: Settings) -> Resolver:
     if settings.test_webhook_resolve:
+        log.warning(
+            "test seam on: LTAA_TEST_WEBHOOK_RESOLVE answers DNS for some webhook hosts (%s)",
+            settings.test_webhook_resolve,
+        )
         return static_resolver(settings.test_webhook_resolve)
     return system_resolver
 
