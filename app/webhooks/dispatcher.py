@@ -167,6 +167,7 @@ class Dispatcher:
                 resolver=self._resolver,
                 allow_private=self._settings.webhook_allow_private,
                 max_response_bytes=self._settings.webhook_max_response_bytes,
+                timeout_s=self._settings.webhook_timeout_s,
             )
         delay = queue.next_delay(self._settings.webhook_retry_delays_s, claimed.attempt, self._rng)
         with transaction(self._sessions) as session:

@@ -29,12 +29,19 @@ def make_client(timeout_s: float) -> httpx.Client:
     )
 
 
-def _read_capped(response: httpx.Response, cap: int) -> bytes:
+class AttemptTooSlow(httpx.TimeoutException):
+    """The whole attempt took longer than the timeout (httpx times each read separately, so
+    a receiver dripping its answer could otherwise hold an attempt far longer)."""
+
+
+def _read_capped(response: httpx.Response, cap: int, deadline: float) -> bytes:
     body = bytearray()
     for chunk in response.iter_raw():
         body += chunk[: cap - len(body)]
         if len(body) >= cap:
             break  # the rest is never read; closing the response drops the connection
+        if time.monotonic() > deadline:
+            raise AttemptTooSlow("the response took longer than the timeout to arrive")
     return bytes(body)
 
 
@@ -47,9 +54,11 @@ def send(
     resolver: Resolver,
     allow_private: bool,
     max_response_bytes: int,
+    timeout_s: float,
 ) -> AttemptResult:
     started_at = utcnow()
     t0 = time.perf_counter()
+    deadline = time.monotonic() + timeout_s
 
     def elapsed_ms() -> float:
         return (time.perf_counter() - t0) * 1000.0
@@ -73,7 +82,7 @@ def send(
     try:
         response = client.send(request, stream=True)
         try:
-            excerpt = _read_capped(response, max_response_bytes)
+            excerpt = _read_capped(response, max_response_bytes, deadline)
         finally:
             response.close()
     except httpx.HTTPError as exc:

@@ -381,3 +381,17 @@ def test_a_receiver_slower_than_the_timeout_is_a_failed_attempt(
     first = d["attempt_log"][0]
     assert first["outcome"] == "network_error" and "ReadTimeout" in first["error"]
     assert first["latency_ms"] < 900
+
+
+def test_a_dripping_answer_is_cut_off_at_the_timeout(
+    make_client: ClientFactory, receiver: Receiver
+) -> None:
+    # Each read arrives well within the timeout, but the whole answer never ends.
+    client = make_client(webhook_allow_private=True, webhook_timeout_s=0.5, **FAST)
+    hook = subscribe(client, receiver.url, ["run.created"])
+    receiver.endless_body, receiver.drip_s = True, 0.05
+    enqueue(client, "r" * 32)
+    (d,) = wait_deliveries(client, hook["id"], lambda d: len(d[0]["attempt_log"]) >= 1)
+    first = d["attempt_log"][0]
+    assert first["outcome"] == "network_error" and "longer than the timeout" in first["error"]
+    assert 450 < first["latency_ms"] < 1500

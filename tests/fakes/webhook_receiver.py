@@ -30,6 +30,7 @@ class Receiver:
     script: list[int] = field(default_factory=list)
     delay_s: float = 0.0  # before answering: widens the window in which an attempt is in flight
     endless_body: bool = False  # answer 200 with a body that never ends (until disconnected)
+    drip_s: float = 0.0  # with endless_body: the pause between chunks
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     @property
@@ -90,11 +91,12 @@ def _handler(receiver: Receiver) -> type[BaseHTTPRequestHandler]:
             self.send_response(200)
             self.send_header("transfer-encoding", "chunked")
             self.end_headers()
-            chunk = b"x" * 8192
+            chunk = b"x" * (16 if receiver.drip_s else 8192)
             try:
                 while True:
                     self.wfile.write(b"%x\r\n%s\r\n" % (len(chunk), chunk))
                     self.wfile.flush()
+                    time.sleep(receiver.drip_s)
             except OSError:
                 self.close_connection = True
 
