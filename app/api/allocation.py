@@ -105,11 +105,7 @@ def build_response(
             for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
         ],
         metrics=MetricsOut.from_domain(compute_metrics(instance, solution.assignment, seed=seed)),
-        usage=UsageOut(
-            llm_calls=solution.usage.llm_calls,
-            input_tokens=solution.usage.input_tokens,
-            output_tokens=solution.usage.output_tokens,
-        ),
+        usage=UsageOut.from_domain(solution.usage),
         elapsed_ms=elapsed_ms,
     )
 

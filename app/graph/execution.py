@@ -7,14 +7,25 @@ limit, resume-or-start and the completeness check live here once.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from langgraph.graph.state import CompiledStateGraph
 
+from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.graph.runner import run_graph
 from app.graph.state import GraphContext
 from app.reasoners.factory import close_reasoner
+
+
+@dataclass(frozen=True)
+class Execution:
+    """How an execution ended: every decision, in task order, and what its LLM calls used
+    (from the record, so a resumed run counts each call once)."""
+
+    decisions: list[DecisionRecord]
+    usage: Usage
 
 
 class GraphEndedEarly(RuntimeError):
@@ -33,8 +44,8 @@ def execute(
     thread_id: str,
     *,
     resume: bool,
-) -> list[DecisionRecord]:
-    """Run (or resume) the thread to its end and return every decision, in task order.
+) -> Execution:
+    """Run (or resume) the thread to its end; its decisions and usage.
 
     Takes ownership of `context.reasoner`: it is closed (its HTTP pool, for the LLM
     reasoners) however the execution ends. RunCancelled and reasoner errors propagate.
@@ -47,4 +58,4 @@ def execute(
     n_tasks = context.problem.instance.n_tasks
     if [d.task_index for d in decisions] != list(range(n_tasks)):
         raise GraphEndedEarly(len(decisions), n_tasks)
-    return decisions
+    return Execution(decisions=decisions, usage=context.recorder.usage())

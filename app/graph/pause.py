@@ -22,11 +22,11 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
-from app.graph.state import GraphContext, LTAAState
+from app.graph.state import GraphContext, LTAAState, Node
 
 log = logging.getLogger("ltaa.runs")
 
-Node = Callable[[LTAAState, Runtime[GraphContext]], dict[str, Any]]
+
 NodeHook = Callable[[str, Node], Node]
 POLL_S = 0.05
 

@@ -57,7 +57,7 @@ def make_reasoner(
     api_key: SecretStr | str | None = None,
     base_url: str | None = None,
     timeout: float | None = None,
-    max_retries: int | None = None,
+    transport_retries: int | None = None,
     replay_of: str | None = None,
     replies: Mapping[ReplyKey, RecordedReply] | None = None,
 ) -> Reasoner:
@@ -109,8 +109,8 @@ def make_reasoner(
         if temperature is not None
         else anthropic_reasoner.DEFAULT_TEMPERATURE,
         timeout=pick(timeout, "anthropic_timeout_s", anthropic_reasoner.DEFAULT_TIMEOUT_S),
-        max_retries=pick(
-            max_retries,
+        transport_retries=pick(
+            transport_retries,
             "anthropic_max_transport_retries",
             anthropic_reasoner.DEFAULT_TRANSPORT_RETRIES,
         ),

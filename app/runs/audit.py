@@ -121,11 +121,11 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
     last_kind = None
     for event_page in _event_pages(sessions, run_id):
         for e in event_page:
-            events.feed(
-                e.seq,
-                e.chain_hash,
-                lambda prev, e=e: chain.event_link(prev, _columns(e, chain.EVENT_FIELDS)),
-            )
+
+            def event_link(prev: str, e: RunEvent = e) -> str:
+                return chain.event_link(prev, _columns(e, chain.EVENT_FIELDS))
+
+            events.feed(e.seq, e.chain_hash, event_link)
             last_kind = e.kind
 
     # The newest rows of a chain leave no gap when deleted; a completed run says where its

@@ -114,8 +114,10 @@ def read_progress(
             .where(Decision.run_id == run_id, Decision.task_index >= cursor.decisions)
             .order_by(Decision.task_index)
         )
-        rows = [(at, 0 if e.kind in _OPENING else 2, e) for at, e in _monotonic(events)]
-        contiguous = []
+        rows: list[tuple[datetime, int, RunEvent | Decision]] = [
+            (at, 0 if e.kind in _OPENING else 2, e) for at, e in _monotonic(events)
+        ]
+        contiguous: list[Decision] = []
         for d in decisions:
             if d.task_index != cursor.decisions + len(contiguous):
                 break  # never skip a gap: the missing decision is still being written

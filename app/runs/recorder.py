@@ -8,8 +8,10 @@ from collections.abc import Callable
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.usage import Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 from app.observability.logs import bind
+from app.runs import records
 from app.store import repository as repo
 from app.store.db import transaction
 
@@ -71,7 +73,9 @@ class SqlRecorder:
         with transaction(self._sessions) as session:
             if self._fence is not None:
                 self._fence(session)
-            repo.upsert_attempt(session=session, run_id=self.run_id, record=record)
+            repo.upsert_attempt(
+                session=session, run_id=self.run_id, values=records.attempt_values(record)
+            )
         self._attempts[(record.task_index, record.attempt)] = record.copy()
         # Only the current task's attempts are ever read back.
         for key in [k for k in self._attempts if k[0] < record.task_index]:
@@ -90,13 +94,15 @@ class SqlRecorder:
             row = repo.get_attempt(
                 session=session, run_id=self.run_id, task_index=task_index, attempt=attempt
             )
-            return repo.attempt_record(row) if row is not None else None
+            return records.attempt_record(row) if row is not None else None
 
     def save_decision(self, record: DecisionRecord) -> None:
         with transaction(self._sessions) as session:
             if self._fence is not None:
                 self._fence(session)
-            repo.upsert_decision(session=session, run_id=self.run_id, record=record)
+            repo.upsert_decision(
+                session=session, run_id=self.run_id, values=records.decision_values(record)
+            )
         log.log(
             logging.WARNING if record.fallback else logging.INFO,
             "task %d -> %s (Q %.2f, %d attempt(s)%s)",
@@ -111,6 +117,10 @@ class SqlRecorder:
     def decisions(self) -> list[DecisionRecord]:
         with self._sessions() as session:
             return [
-                repo.decision_record(row)
+                records.decision_record(row)
                 for row in repo.decisions(session=session, run_id=self.run_id)
             ]
+
+    def usage(self) -> Usage:
+        with self._sessions() as session:
+            return records.usage_of(repo.reply_costs(session=session, run_id=self.run_id))

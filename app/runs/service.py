@@ -13,9 +13,10 @@ from app.config import Settings
 from app.domain.lifecycle import FINISHED
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
+from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.runs import lifecycle
+from app.runs import lifecycle, records
 from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
@@ -148,25 +149,6 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
 
 
 @dataclass
-class Usage:
-    llm_calls: int = 0
-    input_tokens: int = 0
-    output_tokens: int = 0
-
-
-def usage_of(attempts: list[Attempt]) -> Usage:
-    """LLM calls are attempts answered by a model (the rules reasoner records none);
-    the same rule as app.graph.usage, so a run and the `ltaa` solver count alike."""
-    usage = Usage()
-    for a in attempts:
-        if a.reply_model is not None:
-            usage.llm_calls += 1
-            usage.input_tokens += a.input_tokens
-            usage.output_tokens += a.output_tokens
-    return usage
-
-
-@dataclass
 class RunView:
     run: Run
     spec: RunSpec
@@ -204,9 +186,9 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
         decisions = [
-            repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+            records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
         ]
-        usage = usage_of(repo.attempts(session=session, run_id=run_id))
+        usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
     metrics = None
     if run.status == RunStatus.COMPLETED and len(decisions) == run.n_tasks:
         metrics = compute_metrics(
@@ -240,7 +222,7 @@ def run_trace(*, sessions: sessionmaker[Session], run_id: str) -> Trace:
             run=run,
             events=repo.events(session=session, run_id=run_id),
             decisions=[
-                repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ],
             attempts=by_task,
         )

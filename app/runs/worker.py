@@ -30,7 +30,7 @@ from app.graph.pause import NodeHook
 from app.graph.recorder import RunCancelled
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
-from app.runs import lifecycle
+from app.runs import lifecycle, records
 from app.runs.integrity import check_integrity
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
@@ -192,7 +192,7 @@ class RunWorker:
             )
             return
         try:
-            decisions = execute_ltaa(
+            execution = execute_ltaa(
                 spec.problem,
                 graph=self.graph,
                 thread_id=run_id,
@@ -213,7 +213,7 @@ class RunWorker:
             message = f"{type(exc).__name__}: {exc}"
             self._end(run_id, RunStatus.FAILED, {"error": message}, error=message)
         else:
-            self._end(run_id, RunStatus.COMPLETED, {"decisions": len(decisions)})
+            self._end(run_id, RunStatus.COMPLETED, {"decisions": len(execution.decisions)})
 
     def _admit(
         self, run_id: str, stop: RunStop, checkpoint: CheckpointTuple | None
@@ -245,7 +245,7 @@ class RunWorker:
                 )
                 return Admission(spec=spec, resume=False)
             stored = [
-                repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ]
             values = checkpoint.checkpoint["channel_values"] if checkpoint else None
             report = check_integrity(

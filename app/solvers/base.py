@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
+from app.domain.usage import Usage
 from app.reasoners.factory import ReasonerSettings
 
 
@@ -20,13 +21,6 @@ class SolverInfo:
     description: str
     exact: bool
     limits: str
-
-
-@dataclass
-class Usage:
-    llm_calls: int = 0
-    input_tokens: int = 0
-    output_tokens: int = 0
 
 
 @dataclass

@@ -17,15 +17,14 @@ from pydantic import Field
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.graph.builder import build_graph
-from app.graph.execution import execute
+from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
-from app.graph.recorder import DecisionRecord, Recorder
+from app.graph.recorder import Recorder
 from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
-from app.graph.usage import usage_from_attempts
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
-from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions, Usage
+from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
 
 
@@ -74,7 +73,7 @@ def execute_ltaa(
     max_retries: int,
     guidance: str | None,
     resume: bool = False,
-) -> list[DecisionRecord]:
+) -> Execution:
     """The one execution path of an LTAA problem (durable runs, `ltaa run` and the
     synchronous solver): its context with exact regret (and guidance on request), then
     app.graph.execution.execute. Closes `reasoner`; raises GraphEndedEarly if the graph
@@ -115,7 +114,7 @@ class LTAASolver(Solver):
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
         recorder = MemoryRecorder()
         try:
-            decisions = execute_ltaa(
+            execution = execute_ltaa(
                 problem,
                 graph=build_graph(InMemorySaver()),
                 thread_id=uuid.uuid4().hex,
@@ -130,10 +129,10 @@ class LTAASolver(Solver):
             err = DomainError(f"options.{exc.field}", exc.message, code=exc.code)
             err.status_code = exc.status_code
             raise err from exc
-        used = usage_from_attempts(recorder.attempts())
+        decisions, used = execution.decisions, execution.usage
         return Solution(
             [d.robot for d in decisions],
-            usage=Usage(used.llm_calls, used.input_tokens, used.output_tokens),
+            usage=used,
             details={
                 "reasoner": reasoner.name,
                 "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),

@@ -31,9 +31,9 @@ from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
+from app.domain.decision import DecisionContext
 from app.domain.modes import Mode, strategic_weights
 from app.domain.phases import Phase
-from app.reasoners.base import DecisionContext
 from app.reasoners.rules import compose_answer
 
 Responder = Callable[[dict[str, Any]], "Reply"]
@@ -227,6 +227,7 @@ class FakeMessagesAPI:
     @property
     def base_url(self) -> str:
         host, port = self._server.server_address[:2]
+        assert isinstance(host, str)  # an AF_INET server's host is text (AF_UNIX's is bytes)
         return f"http://{host}:{port}"
 
     def start(self) -> FakeMessagesAPI:
@@ -266,7 +267,7 @@ class FakeMessagesAPI:
         reply = self._next(request)
         if reply.status != 200:
             kind = _ERROR_TYPES.get(reply.status, "api_error")
-            body = {
+            body: dict[str, Any] = {
                 "type": "error",
                 "error": {"type": kind, "message": reply.text or f"fake {reply.status}"},
                 "request_id": f"req_fake_{next(self._ids):05d}",

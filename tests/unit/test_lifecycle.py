@@ -154,7 +154,7 @@ def _status_writes_in(path: Path) -> Iterator[str]:
             if isinstance(target, ast.Attribute) and target.attr == "status":
                 owner = target.value.id if isinstance(target.value, ast.Name) else "?"
                 if (rel, owner) not in NOT_A_RUN:
-                    yield f"{rel}:{node.lineno} assigns {owner}.status"
+                    yield f"{rel}:{getattr(node, 'lineno', 0)} assigns {owner}.status"
         if isinstance(node, ast.Call):
             func = node.func
             name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")

@@ -13,6 +13,7 @@ from sqlalchemy.exc import IntegrityError
 
 from app.domain.models import MAX_NAME_CHARS
 from app.graph.recorder import DecisionRecord
+from app.runs import records
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
@@ -86,26 +87,28 @@ def test_the_longest_names_the_api_accepts_fit_the_columns(migrated_url: str) ->
             repo.upsert_decision(
                 session=session,
                 run_id="r1",
-                record=DecisionRecord(
-                    task_index=0,
-                    task_id=longest,
-                    task_name=longest,
-                    robot=0,
-                    robot_name=longest,
-                    phase="early",
-                    expected_success=0.5,
-                    reasoning="",
-                    confidence="High",
-                    tradeoff="",
-                    quality=1.0,
-                    fallback=False,
-                    attempts=1,
-                    failure_log=[],
-                    loads_before=[0],
-                    loads_after=[1],
-                    balance_before=0.0,
-                    balance_after=1.0,
-                    severity_after="low",
+                values=records.decision_values(
+                    DecisionRecord(
+                        task_index=0,
+                        task_id=longest,
+                        task_name=longest,
+                        robot=0,
+                        robot_name=longest,
+                        phase="early",
+                        expected_success=0.5,
+                        reasoning="",
+                        confidence="High",
+                        tradeoff="",
+                        quality=1.0,
+                        fallback=False,
+                        attempts=1,
+                        failure_log=[],
+                        loads_before=[0],
+                        loads_after=[1],
+                        balance_before=0.0,
+                        balance_after=1.0,
+                        severity_after="low",
+                    )
                 ),
             )
         with sessions() as session:

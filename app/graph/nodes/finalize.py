@@ -35,8 +35,9 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
     # The answer's text stays in the recorder when it is there already (the accepted
     # attempt): copying it into state would put it into several checkpoints per task.
     text: dict[str, Any]
-    if state.get("accepted") and state.get("robot") is not None:
-        robot, fallback = state["robot"], False
+    chosen = state.get("robot")
+    if state.get("accepted") and chosen is not None:
+        robot, fallback = chosen, False
         accepted = next(r for r in reversed(records) if r.accepted)
         quality = accepted.quality or 0.0
         confidence = (accepted.parsed or {}).get("confidence")
