@@ -4,7 +4,6 @@ on loopback (in-process app, real SQLite file, real HTTP)."""
 from __future__ import annotations
 
 import sqlite3
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -17,7 +16,7 @@ from app.store.db import transaction
 from app.webhooks.outbox import enqueue_for_event
 from tests.api.conftest import ClientFactory
 from tests.fakes.webhook_receiver import Receiver, running_receiver
-from tests.run_polling import wait_until
+from tests.polling import eventually, wait_until
 
 FAST = {"webhook_poll_s": 0.05, "webhook_retry_delays_s": [0.05, 0.05, 0.05, 0.05]}
 RUN = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
@@ -50,15 +49,22 @@ def deliveries(client: TestClient, webhook_id: str) -> list[dict[str, Any]]:
 
 
 def wait_deliveries(
-    client: TestClient, webhook_id: str, done: Any, timeout: float = 30
+    client: TestClient, webhook_id: str, done: Any, what: str = "the awaited state"
 ) -> list[dict[str, Any]]:
-    deadline = time.monotonic() + timeout
-    while True:
-        got = deliveries(client, webhook_id)
-        if done(got):
-            return got
-        assert time.monotonic() < deadline, got
-        time.sleep(0.05)
+    return eventually(
+        lambda: deliveries(client, webhook_id),
+        until=lambda got: bool(got) and done(got),
+        what=f"webhook {webhook_id}'s deliveries reached {what}",
+        timeout=30,
+        interval=0.05,
+    )
+
+
+def stored_deliveries(client: TestClient) -> list[Any]:
+    from app.store.webhook_models import WebhookDelivery
+
+    with client.app.state.webhooks.sessions() as session:  # type: ignore[attr-defined]
+        return list(session.query(WebhookDelivery))
 
 
 def one_error(response: Any, status: int) -> dict[str, Any]:
@@ -194,7 +200,7 @@ def test_a_run_sends_created_and_completed_signed(lan: TestClient, receiver: Rec
     run_id = lan.post("/runs", json=RUN).json()["id"]
     state = wait_until(lan, run_id)
     assert state["status"] == "completed"
-    receiver.wait_for(lambda got: len(got) >= 2)
+    receiver.wait_for(lambda got: len(got) >= 2, what="two requests")
     bodies = receiver.verified(hook["secret"])  # raises unless every signature verifies
     by_type = {b["type"]: b for b in bodies}
     assert set(by_type) == {"run.created", "run.completed"}
@@ -211,7 +217,7 @@ def test_three_500s_then_delivered_on_the_fourth_with_one_id(
     hook = subscribe(lan, receiver.url, ["run.created"])
     receiver.script = [500, 500, 500]
     enqueue(lan, "r" * 32)
-    receiver.wait_for(lambda got: len(got) == 4)
+    receiver.wait_for(lambda got: len(got) == 4, what="four attempts")
     got = receiver.snapshot()
     assert len({r.headers["webhook-id"] for r in got}) == 1
     # Each attempt signed afresh: its own timestamp, each signature valid for it.
@@ -276,7 +282,7 @@ def test_with_the_setting_a_name_is_delivered_to_the_checked_address(
     )
     hook = subscribe(client, f"http://hooks.site.example:{receiver.port}/hooks", ["run.created"])
     enqueue(client, "r" * 32)
-    receiver.wait_for(lambda got: len(got) == 1)
+    receiver.wait_for(lambda got: len(got) == 1, what="one request")
     # Connected to the resolved address; the Host header still names the host.
     assert receiver.snapshot()[0].headers["host"] == f"hooks.site.example:{receiver.port}"
     receiver.verified(hook["secret"])
@@ -296,7 +302,7 @@ def test_rotation_signs_with_both_secrets_during_the_grace(
     assert replay.json()["secret"] == rotated.json()["secret"]
     assert replay.headers["idempotent-replayed"] == "true"
     enqueue(lan, "r" * 32)
-    receiver.wait_for(lambda got: len(got) == 1)
+    receiver.wait_for(lambda got: len(got) == 1, what="one request")
     (request,) = receiver.snapshot()
     assert len(request.headers["webhook-signature"].split(" ")) == 2
     Webhook(hook["secret"]).verify(request.body, request.headers)  # old: still valid
@@ -310,7 +316,7 @@ def test_rotated_out_secret_stops_signing_after_the_grace(
     hook = subscribe(client, receiver.url, ["run.created"])
     new = client.post(f"/webhooks/{hook['id']}/rotate-secret").json()["secret"]
     enqueue(client, "r" * 32)
-    receiver.wait_for(lambda got: len(got) == 1)
+    receiver.wait_for(lambda got: len(got) == 1, what="one request")
     (request,) = receiver.snapshot()
     assert len(request.headers["webhook-signature"].split(" ")) == 1
     Webhook(new).verify(request.body, request.headers)
@@ -324,8 +330,9 @@ def test_events_before_a_subscription_and_unsubscribed_types_send_nothing(
     enqueue(lan, "a" * 32, kind="created", seq=2)  # not subscribed
     enqueue(lan, "a" * 32, kind="started", seq=3)  # no webhook type
     enqueue(lan, "a" * 32, kind="integrity_failed", seq=4)
-    receiver.wait_for(lambda got: len(got) == 1)
-    time.sleep(0.3)
+    # Only the subscribed event made a delivery at all: nothing else can arrive later.
+    assert [d.event_type for d in stored_deliveries(lan)] == ["run.failed"]
+    receiver.wait_for(lambda got: len(got) == 1, what="one request")
     (only,) = receiver.verified(hook["secret"])
     assert only["type"] == "run.failed" and only["data"]["status"] == "failed"
 
@@ -336,10 +343,7 @@ def test_delete_cancels_waiting_deliveries(make_client: ClientFactory, receiver:
     enqueue(client, "r" * 32)
     assert [d["status"] for d in deliveries(client, hook["id"])] == ["pending"]
     client.delete(f"/webhooks/{hook['id']}")
-    with transaction(client.app.state.webhooks.sessions) as session:  # type: ignore[attr-defined]
-        from app.store.webhook_models import WebhookDelivery
-
-        assert [d.state for d in session.query(WebhookDelivery)] == ["cancelled"]
+    assert [d.state for d in stored_deliveries(client)] == ["cancelled"]
 
 
 def test_metrics_report_deliveries_attempts_queue_and_latency(

@@ -4,7 +4,6 @@ retried by the other once its claim expires."""
 
 from __future__ import annotations
 
-import time
 from collections import defaultdict
 from collections.abc import Iterator
 from itertools import pairwise
@@ -17,6 +16,7 @@ from tests.e2e.postgres import fresh_database, query
 from tests.e2e.server import Server
 from tests.e2e.test_webhooks_e2e import FAST, start_run, subscribe
 from tests.fakes.webhook_receiver import running_receiver
+from tests.polling import eventually
 
 pytestmark = pytest.mark.e2e
 
@@ -30,13 +30,13 @@ def postgres_url() -> Iterator[str]:
 
 
 def wait_delivered(url: str, expected: int, timeout: float = 90) -> list[tuple[object, ...]]:
-    deadline = time.monotonic() + timeout
-    while True:
-        rows = query(url, "SELECT id, state FROM webhook_deliveries")
-        if len(rows) >= expected and all(r[1] == "delivered" for r in rows):
-            return rows
-        assert time.monotonic() < deadline, rows
-        time.sleep(0.1)
+    return eventually(
+        lambda: query(url, "SELECT id, state FROM webhook_deliveries"),
+        until=lambda rows: len(rows) >= expected and all(r[1] == "delivered" for r in rows),
+        what=f"{expected} deliveries, all delivered",
+        timeout=timeout,
+        interval=0.1,
+    )
 
 
 @pytest.mark.timeout(600)
@@ -80,18 +80,15 @@ def test_two_processes_share_the_outbox_and_take_over_a_dead_ones(
             # answer): the other retries it once the dead one's claim expires, never before.
             receiver.delay_s = 2.0
             last = start_run(a)
-            deadline = time.monotonic() + 60
-            while True:
-                claimed = query(
+            claimed = eventually(
+                lambda: query(
                     postgres_url,
                     "SELECT id, claim_expires_at, claimed_by FROM webhook_deliveries "
                     "WHERE run_id = %s AND claimed_by IS NOT NULL",
                     last,
-                )
-                if claimed:
-                    break
-                assert time.monotonic() < deadline, "no delivery of the last run was claimed"
-                time.sleep(0.02)
+                ),
+                what="a delivery of the last run claimed (in flight)",
+            )
             (stolen, claim_expires_at, claimer) = claimed[0]
             victim, survivor = (b, a) if str(claimer).startswith("hooks-b:") else (a, b)
             victim.kill()

@@ -12,6 +12,8 @@ from typing import Any
 
 from standardwebhooks import Webhook
 
+from tests.polling import eventually
+
 
 @dataclass
 class Received:
@@ -45,13 +47,16 @@ class Receiver:
         with self.lock:
             return list(self.received)
 
-    def wait_for(self, predicate: Callable[[list[Received]], bool], timeout: float = 30) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate(self.snapshot()):
-                return
-            time.sleep(0.05)
-        raise AssertionError(f"receiver: condition not met; got {len(self.snapshot())} request(s)")
+    def wait_for(
+        self, predicate: Callable[[list[Received]], bool], *, what: str, timeout: float = 30
+    ) -> list[Received]:
+        return eventually(
+            self.snapshot,
+            until=predicate,
+            what=f"the receiver got {what}",
+            timeout=timeout,
+            interval=0.05,
+        )
 
     def verified(self, secret: str) -> list[dict[str, Any]]:
         """Every request's body, each verified with the standardwebhooks library."""
