@@ -231,7 +231,9 @@ def _print_report(r: AllocateResponse, *, show_tasks: bool) -> None:
 def run(
     scenario: Annotated[str, typer.Option(help="Built-in scenario")] = "baseline",
     mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
-    reasoner: Annotated[str, typer.Option(help="'rules' (offline) or 'anthropic'")] = "rules",
+    reasoner: Annotated[
+        str, typer.Option(help="'rules' (offline), 'anthropic' or 'openai'")
+    ] = "rules",
     max_deviation: Annotated[
         float | None,
         typer.Option(help="Workload cap, in tasks either side of the target (default: the mode's)"),

@@ -11,5 +11,13 @@ from app.config import Settings
 
 @pytest.fixture
 def settings(tmp_path: Path) -> Settings:
-    """Settings isolated from the developer's environment: a fresh data_dir and no API key."""
-    return Settings(data_dir=tmp_path / "data", anthropic_api_key=None, anthropic_base_url=None)
+    """Settings isolated from the developer's environment: a fresh data_dir, no API key and
+    no LLM server."""
+    return Settings(
+        data_dir=tmp_path / "data",
+        anthropic_api_key=None,
+        anthropic_base_url=None,
+        openai_base_url=None,
+        openai_api_key=None,
+        openai_model=None,
+    )

@@ -25,7 +25,9 @@ class RunRequest(InstanceRequest):
     """An LTAA run on an instance, executed durably in the background."""
 
     reasoner: Name | None = Field(
-        None, description="'rules' (default, offline), 'anthropic', or 'replay' (with replay_of)"
+        None,
+        description="'rules' (default, offline), 'anthropic', 'openai' (the server's "
+        "OpenAI-compatible endpoint, LTAA_OPENAI_BASE_URL), or 'replay' (with replay_of)",
     )
     quality_threshold: float = Field(
         0.6,
@@ -42,7 +44,11 @@ class RunRequest(InstanceRequest):
         strict=True,
         description="Validation retries (tiers 1-3) before the fallback",
     )
-    model: Name | None = Field(None, description="Claude model (anthropic reasoner)")
+    model: Name | None = Field(
+        None,
+        description="Model name: Claude (anthropic) or the OpenAI-compatible server's "
+        "(openai; default LTAA_OPENAI_MODEL)",
+    )
     temperature: float | None = Field(
         None,
         ge=0,

@@ -73,10 +73,11 @@ class LTAASolver(Solver):
     info = SolverInfo(
         name="ltaa",
         description="The LTAA graph (phase detection, reasoning, 8-criterion validation, tiered "
-        "retries, rules fallback), run synchronously; reasoner 'rules' (default) or "
-        "'anthropic'.",
+        "retries, rules fallback), run synchronously; reasoner 'rules' (default), "
+        "'anthropic' or 'openai' (an OpenAI-compatible server, e.g. vLLM or Ollama).",
         exact=False,
-        limits="any size within the request limits; 'anthropic' makes 1-4 API calls per task",
+        limits="any size within the request limits; 'anthropic' and 'openai' make 1-4 API calls "
+        "per task (per contested task with llm_scope 'contested')",
     )
     Options = LTAAOptions
 
