@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from app.config import Settings
+from tests.fakes.llm_providers import PROVIDERS, Provider
 
 
 @pytest.fixture
@@ -21,3 +22,9 @@ def settings(tmp_path: Path) -> Settings:
         openai_api_key=None,
         openai_model=None,
     )
+
+
+@pytest.fixture(params=PROVIDERS.values(), ids=PROVIDERS.keys())
+def provider(request: pytest.FixtureRequest) -> Provider:
+    """Each LLM provider in turn (anthropic, openai): a test taking it runs once for each."""
+    return request.param  # type: ignore[no-any-return]

@@ -21,7 +21,7 @@ from fastapi.testclient import TestClient
 from app.config import Settings
 from app.main import create_app
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, answer_from_prompt, prompt_of
-from tests.fakes.llm_providers import PROVIDERS, Provider
+from tests.fakes.llm_providers import Provider
 from tests.run_polling import wait_until
 
 TRANSPORT_RETRIES = 2  # the SDK's max_retries in these tests
@@ -32,11 +32,6 @@ def unknown_robot(request: dict[str, Any]) -> Reply:
     """A well-formed answer in every section, but naming a robot the instance lacks."""
     _, rest = answer_from_prompt(prompt_of(request)).split("\n", 1)
     return Reply.answer("**Decision**: Flying Robot\n" + rest)
-
-
-@pytest.fixture(params=PROVIDERS.values(), ids=PROVIDERS.keys())
-def provider(request: pytest.FixtureRequest) -> Provider:
-    return request.param  # type: ignore[no-any-return]
 
 
 @pytest.fixture
