@@ -10,6 +10,7 @@ from pydantic import AfterValidator, BaseModel, Field
 from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
 from app.store.models import as_utc
 
+StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
 RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "cancelled"]
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
 # database may refuse in a query (PostgreSQL rejects a NUL character with an error, a 500).
@@ -159,6 +160,15 @@ class AttemptOut(BaseModel):
     latency_ms: float
     transport_retries: int
     model: str | None
+    reasoner: str = Field(
+        description="Who wrote the reply: 'anthropic', 'openai', 'rules' or 'replay'"
+    )
+    why: StandIn | None = Field(
+        None,
+        description="Set when the rules reasoner answered instead of the run's LLM: "
+        "'clear-cut' (llm_scope 'contested' and the decision was not contested) or "
+        "'budget_exhausted' (the run's token budget was spent)",
+    )
     replayed_from: str | None = Field(
         None,
         description="Replay runs: the run whose recorded reply this attempt reused "
@@ -193,6 +203,13 @@ class DecisionOut(BaseModel):
     fallback: bool
     failure_log: list[str]
     regret: float | None
+    reasoner: str = Field(
+        description="Whose answer the decision took: the accepted attempt's reasoner, or "
+        "'rules' when the fallback decided"
+    )
+    why: StandIn | None = Field(
+        None, description="'fallback' when every attempt failed; else the accepted attempt's"
+    )
     attempts: list[AttemptOut]
 
 

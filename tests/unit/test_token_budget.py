@@ -49,7 +49,8 @@ def test_the_switch_comes_once_the_budget_is_reached_and_is_told_once() -> None:
     assert [a.reply.model for a in rec.attempts()] == ["scripted", "scripted", None, None]
     assert told == [BudgetExhausted(task_index=2, tokens_spent=300, budget=300)]
     assert all(a.accepted for a in rec.attempts())
-    assert rec.attempts()[2].reply.extra == {"reasoner": "rules", "reason": "budget_exhausted"}
+    assert rec.attempts()[2].reply.extra == {"reasoner": "rules", "why": "budget_exhausted"}
+    assert rec.attempts()[0].reply.extra["reasoner"] == "scripted"
 
 
 def test_a_retry_after_the_budget_is_spent_goes_to_the_rules_reasoner() -> None:
