@@ -71,6 +71,23 @@ class RunRequest(InstanceRequest):
         description="LLM tokens (input + output) the run may spend; once spent, the "
         "remaining tasks use the offline 'rules' reasoner (default: the server's setting)",
     )
+    llm_scope: Literal["all", "contested"] | None = Field(
+        None,
+        description="'all' (default, the paper): every decision asks the LLM. 'contested': "
+        "only decisions whose trade-off verdict is within llm_margin points of its threshold, "
+        "or where optimizer guidance disagrees with the rule, ask the LLM; the rules reasoner "
+        "answers the clear-cut ones (their attempts say reasoner 'rules', why 'clear-cut'). "
+        "No effect with the 'rules' reasoner",
+    )
+    llm_margin: float | None = Field(
+        None,
+        ge=0,
+        le=100,
+        strict=True,
+        allow_inf_nan=False,
+        description="Points either side of the threshold within which a decision is "
+        "contested (default 5)",
+    )
     replay_of: str | None = Field(
         None,
         min_length=1,
@@ -78,10 +95,10 @@ class RunRequest(InstanceRequest):
         pattern=RUN_ID_PATTERN,
         description="Required by reasoner 'replay', refused with any other: id of a completed "
         "run whose recorded replies are replayed, with no API call. The replay copies that "
-        "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance and "
-        "seed: omit them, or send the original's values (any other value is a 422 naming "
-        "the field); model, temperature and token_budget do not apply. Unknown id: 422; "
-        "a run not completed: 409",
+        "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance, "
+        "seed, llm_scope and llm_margin: omit them, or send the original's values (any "
+        "other value is a 422 naming the field); model, temperature and token_budget do "
+        "not apply. Unknown id: 422; a run not completed: 409",
     )
 
 

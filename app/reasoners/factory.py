@@ -66,12 +66,47 @@ def make_reasoner(
     max_retries: int | None = None,
     replay_of: str | None = None,
     replies: Mapping[ReplyKey, RecordedReply] | None = None,
+    llm_scope: str = "all",
+    llm_margin: float | None = None,
 ) -> Reasoner:
     """Explicit arguments win over settings, which win over the reasoner's defaults.
 
     'replay' reads no database: the caller loads the recorded replies of run `replay_of`
-    and passes them in `replies`.
+    and passes them in `replies`. `llm_scope` 'contested' asks an LLM reasoner only for
+    contested decisions (app.reasoners.scope); 'rules' and 'replay' answer every one.
     """
+    reasoner = _make_reasoner(
+        name,
+        settings=settings,
+        model=model,
+        temperature=temperature,
+        api_key=api_key,
+        base_url=base_url,
+        timeout=timeout,
+        max_retries=max_retries,
+        replay_of=replay_of,
+        replies=replies,
+    )
+    if name not in LLM_REASONERS:
+        return reasoner
+    from app.reasoners.scope import DEFAULT_LLM_MARGIN, scoped
+
+    return scoped(reasoner, llm_scope, DEFAULT_LLM_MARGIN if llm_margin is None else llm_margin)
+
+
+def _make_reasoner(
+    name: str,
+    *,
+    settings: ReasonerSettings | None,
+    model: str | None,
+    temperature: float | None,
+    api_key: SecretStr | str | None,
+    base_url: str | None,
+    timeout: float | None,
+    max_retries: int | None,
+    replay_of: str | None,
+    replies: Mapping[ReplyKey, RecordedReply] | None,
+) -> Reasoner:
     if name == "rules":
         return RulesReasoner()
     if name == "replay":

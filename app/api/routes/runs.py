@@ -79,6 +79,7 @@ def create_run(
             token_budget=body.token_budget
             if body.token_budget is not None
             else settings.run_token_budget,
+            **scope_of(body),
         )
     run, replayed = service.create_or_replay_run(
         sessions=runs.sessions,
@@ -94,6 +95,16 @@ def create_run(
     return RunCreated(
         id=run.id, status="queued" if replayed else run.status, location=f"/runs/{run.id}"
     )
+
+
+def scope_of(body: RunRequest) -> dict[str, Any]:
+    """The request's LLM scope as a run spec stores it (omitted: the defaults)."""
+    scope: dict[str, Any] = {}
+    if body.llm_scope is not None:
+        scope["llm_scope"] = body.llm_scope
+    if body.llm_margin is not None:
+        scope["llm_margin"] = float(body.llm_margin)
+    return scope
 
 
 def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
@@ -115,6 +126,8 @@ def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
         "model",
         "temperature",
         "token_budget",
+        "llm_scope",
+        "llm_margin",
     ):
         if name in sent:
             values[name] = getattr(body, name)
