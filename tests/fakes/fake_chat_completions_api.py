@@ -17,10 +17,17 @@ Run standalone:  python -m tests.fakes.fake_chat_completions_api --port 0
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 from typing import Any
 
-from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, Served, good_responder
+from tests.fakes.fake_messages_api import (
+    FakeMessagesAPI,
+    Reply,
+    Responder,
+    Served,
+    good_responder,
+)
 
 __all__ = ["FakeChatCompletionsAPI", "Reply", "Served", "good_responder"]
 
@@ -86,11 +93,27 @@ class FakeChatCompletionsAPI(FakeMessagesAPI):
         return usage.get("prompt_tokens", 0), usage.get("completion_tokens", 0)
 
 
+def unusable_every(n: int) -> Responder:
+    """Good answers, but every n-th reply an unusable one (a validation retry follows)."""
+    from tests.fakes.scripted_reasoner import GARBAGE
+
+    count = itertools.count(1)
+
+    def respond(request: dict[str, Any]) -> Reply:
+        return Reply.answer(GARBAGE) if next(count) % n == 0 else good_responder(request)
+
+    return respond
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--port", type=int, default=0)
+    parser.add_argument(
+        "--unusable-every", type=int, default=0, help="every N-th reply is unusable (0: none)"
+    )
     args = parser.parse_args()
-    api = FakeChatCompletionsAPI(port=args.port).start()
+    default = unusable_every(args.unusable_every) if args.unusable_every else good_responder
+    api = FakeChatCompletionsAPI(port=args.port, default=default).start()
     print(api.base_url, flush=True)
     try:
         while True:
