@@ -28,13 +28,16 @@ migrate: install
 run: install
 	LTAA_BIN=$(BIN)/ HOST=$(HOST) PORT=$(PORT) sh scripts/serve.sh
 
-test: install
-	$(BIN)/ruff check app tests benchmarks
-	$(BIN)/python -m pytest -q
-
+# The static checks, in order; make stops at the first that fails. mypy and lint-imports
+# read their configuration (and what to check) from pyproject.toml.
 lint: install
-	$(BIN)/ruff check app tests benchmarks
 	$(BIN)/ruff format --check app tests benchmarks
+	$(BIN)/ruff check app tests benchmarks
+	$(BIN)/mypy
+	$(BIN)/lint-imports
+
+test: lint
+	$(BIN)/python -m pytest -q
 
 bench: install
 	$(BIN)/ltaa bench
@@ -45,4 +48,4 @@ bench-llm: install
 	$(BIN)/ltaa bench-llm $(ARGS)
 
 clean:
-	rm -rf $(VENV) data .pytest_cache .ruff_cache
+	rm -rf $(VENV) data .pytest_cache .ruff_cache .mypy_cache

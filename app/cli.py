@@ -20,6 +20,7 @@ from app.api.errors import domain_error_body, validation_error_body
 from app.api.schemas import AllocateRequest, AllocateResponse
 from app.config import Settings, get_settings
 from app.domain.errors import DomainError
+from app.domain.lifecycle import RunStatus
 from app.domain.modes import Mode
 
 cli = typer.Typer(
@@ -103,7 +104,7 @@ def allocate(
     else:
         body.update(_read_instance(instance, as_json))
     try:
-        response = run_allocation(AllocateRequest.model_validate(body))
+        response = run_allocation(AllocateRequest.model_validate(body), get_settings())
     except ValidationError as exc:
         _fail(validation_error_body(exc.errors(include_input=False), root=("body",)), as_json)
     except DomainError as exc:
@@ -264,7 +265,7 @@ def run(
         Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
         raise typer.Exit(code=1) from None
     print_summary(view, console)
-    if view.run.status != "completed":
+    if view.run.status != RunStatus.COMPLETED:
         raise typer.Exit(1)
 
 

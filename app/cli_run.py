@@ -14,6 +14,7 @@ from rich.table import Table
 
 from app.config import Settings
 from app.domain.catalog import scenario as builtin_scenario
+from app.domain.lifecycle import ACTIVE
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.runs import service
@@ -61,7 +62,7 @@ def run_locally(
             while True:
                 view = service.run_view(sessions=sessions, run_id=run.id)
                 bar.update(task, completed=view.progress["allocated"], phase=view.progress["phase"])
-                if view.run.status not in ("queued", "running"):
+                if view.run.status not in ACTIVE:
                     break
                 time.sleep(0.05)
         return view

@@ -74,12 +74,10 @@ class Settings(BaseSettings):
     # then its remaining tasks go to the offline rules reasoner. None: no limit.
     run_token_budget: int | None = Field(None, ge=1)
 
-    # Test-only: a durable run pauses before reasoning about this task index, so
-    # end-to-end tests can kill the server at a known point.
-    test_pause_at_task: int | None = Field(None, ge=0)
-    # Test-only, with test_pause_at_task: hold the run at `<node>:before` or `<node>:after`
-    # of that task instead (any of the nine nodes; see app.graph.pause).
-    test_pause_at_node: str | None = Field(None, pattern=r"^[a-z_]+(:(before|after))?$")
+    # Test-only seam: every durable run holds at `<task index>:<node>:<before|after>` (any
+    # of the nine nodes; see app.graph.pause), logging where it holds, so an end-to-end test
+    # can SIGKILL or SIGTERM the server at a known point. Warned about at start-up.
+    test_pause: str | None = Field(None, pattern=r"^[0-9]+:[a-z_]+:(before|after)$")
 
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
 

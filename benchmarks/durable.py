@@ -13,8 +13,8 @@ from pathlib import Path
 from app.config import Settings
 from app.domain.models import Instance
 from app.runs import service
+from app.runs.factory import make_worker
 from app.runs.spec import RunSpec
-from app.runs.worker import RunWorker
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory
 from app.store.migrate import upgrade_head
@@ -68,7 +68,7 @@ def measure_durable(
         upgrade_head(settings.db_url)
         engine = make_engine(settings.db_url)
         sessions = make_session_factory(engine)
-        worker = RunWorker(settings=settings, sessions=sessions)
+        worker = make_worker(settings=settings, sessions=sessions)
         cp = Path(settings.checkpoint_file)
         db = Path(tmp) / "ltaa.db"
         times: list[float] = []

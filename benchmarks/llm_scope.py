@@ -24,12 +24,13 @@ from dataclasses import dataclass
 from langgraph.checkpoint.memory import InMemorySaver
 
 from app.domain.catalog import scenario, scenarios
+from app.domain.decision import DecisionContext
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.graph.builder import build_graph
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.runner import run_graph
-from app.reasoners.base import DecisionContext, Reasoner, ReasonerReply
+from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.rules import choose, compose_answer
 from app.reasoners.scope import DEFAULT_LLM_MARGIN, LLMScope, scoped
 from app.solvers.ltaa import graph_context

@@ -10,6 +10,7 @@ import statistics
 import tempfile
 import time
 import uuid
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -181,7 +182,7 @@ def saver_rows(problem: Problem, workdir: Path) -> list[list[Any]]:
         for sync in (None, "NORMAL"):
             path = workdir / f"cp-{compact}-{sync}.sqlite"
             saver = open_sqlite_saver(path, compact=compact, synchronous=sync)
-            seconds = median_seconds(lambda s=saver: one_run(s), SAVER_REPEATS)
+            seconds = median_seconds(partial(one_run, saver), SAVER_REPEATS)
             saver.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
             per_task = path.stat().st_size / (SAVER_REPEATS + 1) / problem.instance.n_tasks
             rows.append(

@@ -361,7 +361,7 @@ def claude_part() -> str:
         Instance(tasks=base.tasks[:CLAUDE_TASKS], robots=base.robots), Mode.BALANCED
     )
     start = time.perf_counter()
-    sol = get_solver("ltaa").solve(problem, options={"reasoner": "anthropic"})
+    sol = get_solver("ltaa", settings=settings).solve(problem, options={"reasoner": "anthropic"})
     seconds = time.perf_counter() - start
     n = problem.instance.n_tasks
     es = compute_metrics(problem.instance, sol.assignment).expected_success

@@ -5,10 +5,9 @@ the smoke test can draw them from toy data without running the bench.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import matplotlib
 
@@ -16,6 +15,7 @@ matplotlib.use("Agg")  # headless: the bench runs in CI and over SSH
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.artist import Artist
 from matplotlib.figure import Figure
 
 from benchmarks.common import IMG
@@ -35,12 +35,14 @@ def save(fig: Figure, name: str, directory: Path = IMG) -> str:
 def _footer(
     fig: Figure,
     caption: str,
-    handles: list[Any] | None = None,
-    labels: list[str] | None = None,
+    legend: tuple[list[Artist], list[str]] | None = None,
     ncol: int = 3,
 ) -> None:
-    """Legend and caption under the axes, so neither hides data."""
+    """Legend and caption under the axes, so neither hides data.
+
+    `legend` is what get_legend_handles_labels returns: handles and labels go together."""
     rows = 0
+    handles, labels = legend or ([], [])
     if handles:
         fig.legend(
             handles,
@@ -106,14 +108,14 @@ def methods_figure(
     ax.set_title(title)
     ax.grid(axis="x", alpha=0.3)
     handles, labels = ax.get_legend_handles_labels()
-    _footer(fig, caption, handles, labels, ncol=2)
+    _footer(fig, caption, (handles, labels), ncol=2)
     return save(fig, name, directory)
 
 
 @dataclass(frozen=True)
 class Panel:
     categories: Sequence[str]
-    series: dict[str, Sequence[float]]  # legend label -> one value per category
+    series: Mapping[str, Sequence[float]]  # legend label -> one value per category
     ylabel: str
     ylim: tuple[float, float] | None = None
     hlines: dict[str, float] = field(default_factory=dict)  # label -> y
@@ -171,7 +173,7 @@ def panels_figure(
     fig.tight_layout()
     # Every panel plots the same series: one legend for the figure.
     handles, labels = axes[0][0].get_legend_handles_labels()
-    _footer(fig, caption, handles, labels, ncol=min(len(handles), 6))
+    _footer(fig, caption, (handles, labels), ncol=min(len(handles), 6))
     return save(fig, name, directory)
 
 
@@ -289,7 +291,7 @@ def seeds_figure(
     ax.set_title(title)
     ax.grid(axis="y", alpha=0.3)
     handles, labels = ax.get_legend_handles_labels()
-    _footer(fig, caption, handles, labels, ncol=2)
+    _footer(fig, caption, (handles, labels), ncol=2)
     return save(fig, name, directory)
 
 
@@ -327,7 +329,7 @@ def latency_histogram_figure(
     """Stacked histogram of request latencies (seconds) by label, p50/p95/p99 of all marked."""
     everything = [v for values in latencies.values() for v in values]
     fig, ax = plt.subplots(figsize=(8.5, 3.6))
-    bins = np.linspace(0, max(everything, default=1.0), 41)
+    bins = np.linspace(0, max(everything, default=1.0), 41).tolist()
     labels = list(latencies)
     ax.hist(
         [latencies[k] for k in labels],
@@ -352,5 +354,5 @@ def latency_histogram_figure(
     ax.set_title(title)
     ax.grid(axis="y", alpha=0.3)
     handles, names = ax.get_legend_handles_labels()
-    _footer(fig, caption, handles, names, ncol=len(labels))
+    _footer(fig, caption, (handles, names), ncol=len(labels))
     return save(fig, name, directory)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import statistics
+from functools import partial
 from typing import Any
 
 from app.domain.catalog import scenario
@@ -73,7 +74,7 @@ def exact_small_rows(n_tasks: int = 12, repeats: int = 3) -> list[list[Any]]:
     for name in ("brute_force", "dp", "optimal"):
         solver = get_solver(name)
         es = compute_metrics(problem.instance, solver.solve(problem).assignment).expected_success
-        seconds = median_seconds(lambda s=solver: s.solve(problem), repeats)
+        seconds = median_seconds(partial(solver.solve, problem), repeats)
         rows.append([f"`{name}`", f"{es:.6f}", fmt_time(seconds), repeats])
     return rows
 
@@ -88,7 +89,7 @@ def large_rows() -> tuple[list[list[Any]], dict[tuple[int, int, int], float]]:
         for name in ("optimal", "greedy"):
             solver = get_solver(name)
             m = compute_metrics(big.instance, solver.solve(big).assignment, seed=0)
-            seconds = median_seconds(lambda s=solver, b=big: s.solve(b), repeats=5)
+            seconds = median_seconds(partial(solver.solve, big), repeats=5)
             if name == "optimal":
                 optimal_seconds[(n_tasks, n_robots, n_features)] = seconds
             rows.append(

@@ -24,7 +24,8 @@ def settings(tmp_path: Path) -> Settings:
     )
 
 
-@pytest.fixture(params=PROVIDERS.values(), ids=PROVIDERS.keys())
+@pytest.fixture(params=list(PROVIDERS.values()), ids=list(PROVIDERS))
 def provider(request: pytest.FixtureRequest) -> Provider:
     """Each LLM provider in turn (anthropic, openai): a test taking it runs once for each."""
-    return request.param  # type: ignore[no-any-return]
+    provider: Provider = request.param
+    return provider

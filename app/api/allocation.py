@@ -21,6 +21,7 @@ from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics
 from app.domain.models import Instance, Robot, Task
 from app.domain.problem import Problem
+from app.reasoners.factory import ReasonerSettings
 from app.solvers.base import Solution, Solver
 from app.solvers.registry import get_solver
 
@@ -72,10 +73,10 @@ def build_problem(request: InstanceRequest) -> Problem:
     )
 
 
-def load_solver(name: str) -> Solver:
+def load_solver(name: str, settings: ReasonerSettings | None = None) -> Solver:
     """The registered solver, or a 4xx-mapped error when its optional dependencies are missing."""
     try:
-        return get_solver(name)
+        return get_solver(name, settings=settings)
     except ImportError as exc:
         raise DomainError(
             "solver",
@@ -104,19 +105,17 @@ def build_response(
             for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
         ],
         metrics=MetricsOut.from_domain(compute_metrics(instance, solution.assignment, seed=seed)),
-        usage=UsageOut(
-            llm_calls=solution.usage.llm_calls,
-            input_tokens=solution.usage.input_tokens,
-            output_tokens=solution.usage.output_tokens,
-        ),
+        usage=UsageOut.from_domain(solution.usage),
         elapsed_ms=elapsed_ms,
     )
 
 
-def allocate(request: AllocateRequest) -> AllocateResponse:
+def allocate(
+    request: AllocateRequest, settings: ReasonerSettings | None = None
+) -> AllocateResponse:
     """Validate, solve and measure. CPU-bound: callers on an event loop use a thread."""
     started = time.perf_counter()
-    solver = load_solver(request.solver)  # unknown solver reported before instance errors
+    solver = load_solver(request.solver, settings)  # unknown solver reported before instance errors
     problem = build_problem(request)
     solution = solver.solve(problem, seed=request.seed, options=request.options)
     _check_solution(problem, solution, request.solver)

@@ -8,10 +8,10 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, BaseModel, Field
 
 from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
+from app.domain.lifecycle import RunStatus
 from app.store.models import as_utc
 
 StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
-RunStatus = Literal["queued", "running", "interrupted", "completed", "failed", "cancelled"]
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
 # database may refuse in a query (PostgreSQL rejects a NUL character with an error, a 500).
 RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"

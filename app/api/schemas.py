@@ -19,6 +19,7 @@ from pydantic_core import PydanticCustomError
 from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS
 from app.domain.modes import Mode
+from app.domain.usage import Usage
 
 
 def _no_nul(value: str) -> str:
@@ -168,6 +169,13 @@ class UsageOut(BaseModel):
     llm_calls: int = 0
     input_tokens: int = 0
     output_tokens: int = 0
+
+    @classmethod
+    def from_domain(cls, u: Usage) -> UsageOut:
+        # Transport retries and latency stay internal: the contract is these three counts.
+        return cls(
+            llm_calls=u.llm_calls, input_tokens=u.input_tokens, output_tokens=u.output_tokens
+        )
 
 
 class AllocateResponse(BaseModel):

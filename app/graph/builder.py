@@ -18,8 +18,8 @@ from langgraph.graph import END, START, StateGraph
 from langgraph.graph.state import CompiledStateGraph
 
 from app.graph import nodes
-from app.graph.pause import Node, NodeHook
-from app.graph.state import GraphContext, LTAAState
+from app.graph.pause import NodeHook
+from app.graph.state import GraphContext, LTAAState, Node
 
 NODES: dict[str, Node] = {
     "detect_phase": nodes.detect_phase,

@@ -44,7 +44,7 @@ def open_postgres_saver(
         name="ltaa-checkpoints",
         open=True,
     )
-    saver = PostgresSaver(pool)  # type: ignore[arg-type]
+    saver = PostgresSaver(pool)
     try:
         with psycopg.connect(conninfo, autocommit=True) as lock_conn:
             lock_conn.execute("SELECT pg_advisory_lock(%s)", (SETUP_LOCK_KEY,))

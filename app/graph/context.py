@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from app.domain.decision import DecisionContext
 from app.domain.modes import strategic_weights
 from app.domain.phases import Phase
 from app.domain.problem import Problem
-from app.reasoners.base import DecisionContext
 
 
 def decision_context(

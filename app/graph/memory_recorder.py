@@ -9,7 +9,9 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable
 
+from app.domain.usage import Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
+from app.graph.usage import usage_from_attempts
 
 BeforeReasonHook = Callable[[int, int], None]
 
@@ -61,6 +63,9 @@ class MemoryRecorder:
 
     def decisions(self) -> list[DecisionRecord]:
         return [_copy_decision(self._decisions[t]) for t in sorted(self._decisions)]
+
+    def usage(self) -> Usage:
+        return usage_from_attempts(self._attempts.values())
 
     def assignment(self) -> list[int]:
         return [d.robot for d in self.decisions()]

@@ -22,11 +22,11 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
-from app.graph.state import GraphContext, LTAAState
+from app.graph.state import GraphContext, LTAAState, Node
 
 log = logging.getLogger("ltaa.runs")
 
-Node = Callable[[LTAAState, Runtime[GraphContext]], dict[str, Any]]
+
 NodeHook = Callable[[str, Node], Node]
 POLL_S = 0.05
 
@@ -44,6 +44,14 @@ class PausePoint:
         if when not in ("", "before", "after"):
             raise ValueError(f"pause point {spec!r}: write <node>:before or <node>:after")
         return cls(task_index=task_index, node=node, after=when != "before")
+
+    @classmethod
+    def from_setting(cls, value: str) -> PausePoint:
+        """`LTAA_TEST_PAUSE`: `<task index>:<node>:<before|after>`."""
+        task, _, spec = value.partition(":")
+        if not task.isdigit() or spec.count(":") != 1:
+            raise ValueError(f"LTAA_TEST_PAUSE={value!r}: write <task index>:<node>:<before|after>")
+        return cls.parse(int(task), spec)
 
     def message(self) -> str:
         """The log line's text; end-to-end tests wait for it before killing the server."""

@@ -8,11 +8,11 @@ drops explanation in favour of a step-by-step fill-in template.
 
 from __future__ import annotations
 
+from app.domain.decision import DecisionContext, percent
 from app.domain.modes import MODE_DESCRIPTIONS, tradeoff_threshold
 from app.domain.phases import Phase
-from app.graph.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
+from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
-from app.reasoners.base import DecisionContext, percent
 
 TARGET_USER_PROMPT_CHARS = 2_500
 

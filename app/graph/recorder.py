@@ -11,6 +11,7 @@ import copy
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from app.domain.usage import Usage
 from app.reasoners.base import ReasonerReply
 
 
@@ -85,3 +86,6 @@ class Recorder(Protocol):
 
     def decisions(self) -> list[DecisionRecord]:
         """All finalised decisions, in task order."""
+
+    def usage(self) -> Usage:
+        """What the run's recorded LLM calls used (app.domain.usage's rule)."""

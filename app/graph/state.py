@@ -10,28 +10,27 @@ derived together share one channel (`view`).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, TypedDict
 
+from langgraph.runtime import Runtime
+
+from app.domain.decision import GuidedChoice
 from app.domain.metrics import balance_score, severity
 from app.domain.modes import strategic_weights
 from app.domain.phases import balance_urgency, detect_phase
 from app.domain.problem import Problem
 from app.graph.recorder import Recorder
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
+from app.graph.verdicts import VerdictCache
 from app.reasoners.base import Reasoner
 
 DEFAULT_MAX_RETRIES = 3
 
 
-class GuidedChoice(Protocol):
-    robot: int
-    costs: tuple[float | None, ...]  # success points each robot would give away
-
-
 # Optimizer guidance: (task index, loads before) -> the robot to prefer (optionally with
 # what each alternative would cost), or None.
-Guidance = Callable[[int, Sequence[int]], "int | GuidedChoice | None"]
+Guidance = Callable[[int, Sequence[int]], int | GuidedChoice | None]
 # Regret: (task index, loads before, robot) -> expected success the decision gave away.
 Regret = Callable[[int, Sequence[int], int], float]
 
@@ -73,6 +72,7 @@ class GraphContext:
     max_retries: int = DEFAULT_MAX_RETRIES
     guidance: Guidance | None = None
     regret: Regret | None = None
+    verdicts: VerdictCache = field(default_factory=VerdictCache)
 
     @property
     def max_attempts(self) -> int:
@@ -117,3 +117,10 @@ def task_view(
         "guided_robot": guided_robot,
         "guided_costs": list(guided_costs) if guided_costs is not None else None,
     }
+
+
+class Node(Protocol):
+    """A graph node. A protocol, not a Callable alias: LangGraph passes `runtime` by keyword,
+    and its add_node overloads accept only callables whose second parameter is so named."""
+
+    def __call__(self, state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]: ...

@@ -9,14 +9,14 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+from app.domain.decision import DecisionContext, percent
+from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
 from app.graph.parsing import (
     ParsedResponse,
     count_sentences,
     mentioned_robots,
     parse_response,
 )
-from app.graph.tradeoff import TradeOff, expected_confidence, rule_for
-from app.reasoners.base import DecisionContext, percent
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
 

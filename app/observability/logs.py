@@ -82,7 +82,7 @@ class TextFormatter(logging.Formatter):
 class StderrHandler(logging.StreamHandler[TextIO]):
     """Writes to whatever sys.stderr is *now* (test runners swap it between tests)."""
 
-    @property  # type: ignore[override]
+    @property
     def stream(self) -> TextIO:
         return sys.stderr
 

@@ -23,9 +23,10 @@ from sqlalchemy import case, func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from app.domain.lifecycle import RunStatus
 from app.store.models import Attempt, Decision, Run
 
-RUN_STATUSES = ("queued", "running", "interrupted", "completed", "failed", "cancelled")
+RUN_STATUSES = tuple(s.value for s in RunStatus)
 RETRY_TIERS = ("1", "2", "3")
 
 

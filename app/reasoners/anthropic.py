@@ -21,8 +21,9 @@ import anthropic
 import pydantic
 from anthropic.types import Message
 
+from app.domain.decision import DecisionContext
 from app.domain.errors import DomainError
-from app.reasoners.base import DecisionContext, ReasonerReply
+from app.reasoners.base import ReasonerReply
 from app.reasoners.transport import (
     ReasonerRejectedError,
     gave_up,
@@ -71,15 +72,15 @@ class AnthropicReasoner:
         temperature: float | None = DEFAULT_TEMPERATURE,
         max_tokens: int = DEFAULT_MAX_TOKENS,
         timeout: float = DEFAULT_TIMEOUT_S,
-        max_retries: int = DEFAULT_TRANSPORT_RETRIES,
+        transport_retries: int = DEFAULT_TRANSPORT_RETRIES,
         base_url: str | None = None,
     ) -> None:
         self.model = model
         self.temperature = temperature
         self.max_tokens = max_tokens
-        self.max_retries = max_retries
+        self.transport_retries = transport_retries
         self._client = anthropic.Anthropic(
-            api_key=api_key, base_url=base_url, timeout=timeout, max_retries=max_retries
+            api_key=api_key, base_url=base_url, timeout=timeout, max_retries=transport_retries
         )
 
     def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:

@@ -5,48 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from app.domain.modes import Mode, Weights
-from app.domain.phases import Phase
-
-
-@dataclass(frozen=True)
-class DecisionContext:
-    """The true facts of one decision, for reasoners that compute rather than read prompts."""
-
-    task_index: int
-    total_tasks: int
-    task_name: str
-    features: tuple[str, ...]
-    robot_names: tuple[str, ...]
-    robot_labels: tuple[str, ...]
-    success: tuple[float, ...]  # S per robot for this task
-    loads: tuple[int, ...]  # before this decision
-    target: float
-    feasible: tuple[int, ...]  # robots whose choice keeps the cap satisfiable
-    phase: Phase
-    mode: Mode
-    weights: Weights
-    tier: int = 0  # 0 first try; 1-3 retry tiers
-    guided_robot: int | None = None  # optimizer guidance, when enabled
-    # With guidance: success points each robot would give away (None: cap forbids it).
-    guided_costs: tuple[float | None, ...] | None = None
-    task_type: str = ""
-    load_bounds: tuple[int, int] | None = None  # final-load range the cap allows; None = no cap
-    # 1-based attempt at this task (tiers stop at 3; attempts do not): the key, with
-    # task_index, of a recorded reply, for reasoners that replay a run's record.
-    attempt: int = 1
-
-    @property
-    def labels(self) -> tuple[str, ...]:
-        """How prompts and replies name each robot: its label, else its key."""
-        return tuple(
-            label or name for label, name in zip(self.robot_labels, self.robot_names, strict=True)
-        )
-
-
-def percent(x: float) -> str:
-    """A success probability as prompts and replies write it: 0.7 -> '70.0%'."""
-    return f"{x * 100:.1f}%"
+from app.domain.decision import DecisionContext
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """A run's token budget: once its LLM calls have spent it, the offline rules reasoner answers.
 
 The check is made before each call: a call starts only while the tokens spent (input +
-output of replies that name a model, as app.graph.usage counts them) are below the
+output of replies that name a model, as app.domain.usage counts them) are below the
 budget, so a run spends at most the budget plus one call. The wrapper itself holds no
 truth: whoever builds it seeds `spent` from the run's record, so a run restarted after a
 crash switches at the same call, and `on_exhausted` must be idempotent (it may be told
@@ -14,12 +14,14 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from app.domain.decision import DecisionContext
+from app.domain.lifecycle import EventKind
 from app.reasoners.attribution import Why, stood_in
-from app.reasoners.base import DecisionContext, Reasoner, ReasonerReply
+from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.factory import close_reasoner
 from app.reasoners.rules import RulesReasoner
 
-BUDGET_EXHAUSTED = Why.BUDGET_EXHAUSTED.value  # the run event recording the switch
+BUDGET_EXHAUSTED = EventKind.BUDGET_EXHAUSTED.value  # the run event recording the switch
 
 
 @dataclass(frozen=True)

@@ -63,7 +63,7 @@ def make_reasoner(
     api_key: SecretStr | str | None = None,
     base_url: str | None = None,
     timeout: float | None = None,
-    max_retries: int | None = None,
+    transport_retries: int | None = None,
     replay_of: str | None = None,
     replies: Mapping[ReplyKey, RecordedReply] | None = None,
     llm_scope: str = "all",
@@ -83,7 +83,7 @@ def make_reasoner(
         api_key=api_key,
         base_url=base_url,
         timeout=timeout,
-        max_retries=max_retries,
+        transport_retries=transport_retries,
         replay_of=replay_of,
         replies=replies,
     )
@@ -103,7 +103,7 @@ def _make_reasoner(
     api_key: SecretStr | str | None,
     base_url: str | None,
     timeout: float | None,
-    max_retries: int | None,
+    transport_retries: int | None,
     replay_of: str | None,
     replies: Mapping[ReplyKey, RecordedReply] | None,
 ) -> Reasoner:
@@ -139,7 +139,7 @@ def _make_reasoner(
             api_key=api_key,
             base_url=base_url,
             timeout=timeout,
-            max_retries=max_retries,
+            transport_retries=transport_retries,
         )
     key = resolve_api_key(api_key, settings)
     if key is None:
@@ -161,8 +161,8 @@ def _make_reasoner(
         if temperature is not None
         else anthropic_reasoner.DEFAULT_TEMPERATURE,
         timeout=pick(timeout, "anthropic_timeout_s", anthropic_reasoner.DEFAULT_TIMEOUT_S),
-        max_retries=pick(
-            max_retries,
+        transport_retries=pick(
+            transport_retries,
             "anthropic_max_transport_retries",
             anthropic_reasoner.DEFAULT_TRANSPORT_RETRIES,
         ),
@@ -188,7 +188,7 @@ def _openai_reasoner(
     api_key: SecretStr | str | None,
     base_url: str | None,
     timeout: float | None,
-    max_retries: int | None,
+    transport_retries: int | None,
 ) -> Reasoner:
     """Base URL and model are required; nothing falls back to OPENAI_* or a default host."""
     url = pick(base_url, "openai_base_url", None)
@@ -206,7 +206,9 @@ def _openai_reasoner(
         api_key=_secret(api_key) or _secret(pick(None, "openai_api_key", None)),
         temperature=temperature if temperature is not None else openai_reasoner.DEFAULT_TEMPERATURE,
         timeout=pick(timeout, "openai_timeout_s", openai_reasoner.DEFAULT_TIMEOUT_S),
-        max_retries=pick(
-            max_retries, "openai_max_transport_retries", openai_reasoner.DEFAULT_TRANSPORT_RETRIES
+        transport_retries=pick(
+            transport_retries,
+            "openai_max_transport_retries",
+            openai_reasoner.DEFAULT_TRANSPORT_RETRIES,
         ),
     )

@@ -29,8 +29,9 @@ import pydantic
 from openai._legacy_response import LegacyAPIResponse
 from openai.types.chat import ChatCompletion
 
+from app.domain.decision import DecisionContext
 from app.domain.errors import DomainError
-from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
+from app.reasoners.base import ReasonerError, ReasonerReply
 from app.reasoners.transport import gave_up, rejected, transient, unreadable
 
 DEFAULT_TEMPERATURE = 0.1
@@ -76,19 +77,19 @@ class OpenAIReasoner:
         temperature: float | None = DEFAULT_TEMPERATURE,
         max_tokens: int = DEFAULT_MAX_TOKENS,
         timeout: float = DEFAULT_TIMEOUT_S,
-        max_retries: int = DEFAULT_TRANSPORT_RETRIES,
+        transport_retries: int = DEFAULT_TRANSPORT_RETRIES,
     ) -> None:
         self.model = model
         self.temperature = temperature
         self.max_tokens = max_tokens
-        self.max_retries = max_retries
+        self.transport_retries = transport_retries
         self.base_url = base_url
         self._http = httpx2.Client(trust_env=False, follow_redirects=False, timeout=timeout)
         self._client = openai.OpenAI(
             api_key=api_key or NO_KEY,
             base_url=base_url,
             timeout=timeout,
-            max_retries=max_retries,
+            max_retries=transport_retries,
             http_client=self._http,
             default_headers={},
         )

@@ -21,7 +21,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
+from app.domain.decision import DecisionContext
+from app.reasoners.base import ReasonerError, ReasonerReply
 
 ReplyKey = tuple[int, int]  # (task_index, attempt)
 

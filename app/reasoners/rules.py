@@ -6,8 +6,9 @@ true DecisionContext rather than the prompt, so it is also the graph's fallback.
 
 from __future__ import annotations
 
-from app.graph.tradeoff import TradeOff, expected_confidence, rule_for
-from app.reasoners.base import DecisionContext, ReasonerReply, percent
+from app.domain.decision import DecisionContext, percent
+from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
+from app.reasoners.base import ReasonerReply
 
 
 def choose(ctx: DecisionContext) -> tuple[int, TradeOff]:

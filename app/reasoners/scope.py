@@ -16,9 +16,10 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-from app.graph.tradeoff import rule_for
+from app.domain.decision import DecisionContext
+from app.domain.tradeoff import rule_for
 from app.reasoners.attribution import Why, stood_in
-from app.reasoners.base import DecisionContext, Reasoner, ReasonerReply
+from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.factory import close_reasoner
 from app.reasoners.rules import RulesReasoner
 

@@ -16,6 +16,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.lifecycle import EventKind, RunStatus
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
 from app.runs.errors import RunNotFoundError
 from app.store import chain
@@ -121,22 +122,22 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
     last_kind = None
     for event_page in _event_pages(sessions, run_id):
         for e in event_page:
-            events.feed(
-                e.seq,
-                e.chain_hash,
-                lambda prev, e=e: chain.event_link(prev, _columns(e, chain.EVENT_FIELDS)),
-            )
+
+            def event_link(prev: str, e: RunEvent = e) -> str:
+                return chain.event_link(prev, _columns(e, chain.EVENT_FIELDS))
+
+            events.feed(e.seq, e.chain_hash, event_link)
             last_kind = e.kind
 
     # The newest rows of a chain leave no gap when deleted; a completed run says where its
     # chains end (n_tasks decisions, and its last event is the one that completed it).
-    if status == "completed" and decisions.last_key != n_tasks - 1:
+    if status == RunStatus.COMPLETED and decisions.last_key != n_tasks - 1:
         last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
         decisions.missing_tail(
             f"the run completed with {n_tasks} tasks but its decisions "
             f"end at {last}: the last decisions were deleted"
         )
-    if status == "completed" and last_kind != "completed":
+    if status == RunStatus.COMPLETED and last_kind != EventKind.COMPLETED:
         events.missing_tail(
             "the run completed but its events do not end with the "
             "'completed' event: the last events were deleted"

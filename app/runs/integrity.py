@@ -73,7 +73,7 @@ def check_integrity(
             # whose decision is stored only by the next node: its robot is then the
             # checkpoint's own `robot`.
             current = decisions[cp_index] if cp_index < len(decisions) else None
-            robot = current.robot if current is not None else checkpoint.get("robot")
+            robot = current.robot if current is not None else (checkpoint or {}).get("robot")
             counted = expected.copy()
             if isinstance(robot, int) and 0 <= robot < n_robots:
                 counted[robot] += 1

@@ -24,12 +24,13 @@ import uuid
 from collections.abc import Callable
 from typing import Any
 
-from langgraph.checkpoint.base import BaseCheckpointSaver
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
+from app.runs import lifecycle
+from app.runs.lifecycle import EventKind, RunStatus
+from app.runs.ownership import Slots
 from app.runs.recorder import Fence, LeaseLost, RunStop
-from app.runs.worker import RunWorker
 from app.store import leases
 from app.store import repository as repo
 from app.store.db import transaction
@@ -70,29 +71,32 @@ class Periodic:
                 log.exception("%s failed; retrying in %.1f s", self._thread.name, self._interval_s)
 
 
-class LeasedRunWorker(RunWorker):
+class LeaseOwnership:
+    """The Ownership strategy of a process sharing runs with others on PostgreSQL."""
+
     def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
         self.owner = lease_owner_id(settings.worker_name)
+        self._settings = settings
+        self._sessions = sessions
         self._lease_s = settings.lease_s
+        self._slots: Slots | None = None
         # Serialises this process's claims so that free slots are counted once.
         self._claim_lock = threading.Lock()
-        super().__init__(settings=settings, sessions=sessions)
         self._heartbeat = Periodic("ltaa-lease-heartbeat", settings.lease_s / 3, self._renew)
         self._poller = Periodic("ltaa-run-claims", settings.claim_poll_s, self._poll)
+
+    def attach(self, slots: Slots) -> None:
+        self._slots = slots
         # Started now, not in recover(): `ltaa run` claims runs without ever polling.
         self._heartbeat.start()
 
-    def _claim_store(self) -> Callable[[], None]:
-        return lambda: None  # several processes share PostgreSQL; leases arbitrate the runs
+    @property
+    def slots(self) -> Slots:
+        if self._slots is None:
+            raise RuntimeError("LeaseOwnership is used before a worker attached it")
+        return self._slots
 
-    def _open_checkpointer(self) -> tuple[BaseCheckpointSaver[Any], Callable[[], None]]:
-        from app.graph.checkpoint_postgres import open_postgres_saver
-
-        return open_postgres_saver(
-            self._settings.db_url, max_connections=self._settings.max_concurrent_runs
-        )
-
-    # -- lifecycle ---------------------------------------------------------------------
+    # -- the Ownership protocol --------------------------------------------------------
 
     def recover(self) -> list[str]:
         """Start-up: take what is waiting now, then keep polling. Runs that other live
@@ -101,18 +105,17 @@ class LeasedRunWorker(RunWorker):
         self._poller.start()
         return resumed
 
-    def close(self) -> None:
+    def stop_taking(self) -> None:
         self._poller.stop()
-        # Draining runs mark themselves interrupted and release their leases, so a peer
-        # resumes them at its next poll instead of after lease expiry.
-        super().close()
-        self._heartbeat.stop()
 
-    # -- commands ----------------------------------------------------------------------
+    def close(self) -> None:
+        # Draining runs have marked themselves interrupted and released their leases, so a
+        # peer resumes them at its next poll instead of after lease expiry.
+        self._heartbeat.stop()
 
     def submit(self, run_id: str) -> None:
         with self._claim_lock:
-            if self._free_slots() > 0:
+            if self.slots.free_slots() > 0:
                 with transaction(self._sessions) as session:
                     claimed = leases.claim_run(
                         session=session, run_id=run_id, owner=self.owner, lease_s=self._lease_s
@@ -123,94 +126,24 @@ class LeasedRunWorker(RunWorker):
         # No room here, or another process has it: queued runs go to whichever process
         # has a free slot first, so an explicitly resumed run is queued too.
         with transaction(self._sessions) as session:
-            leases.requeue(session=session, run_id=run_id)
+            lifecycle.move_where(
+                session,
+                run_id=run_id,
+                current=RunStatus.INTERRUPTED,
+                to=RunStatus.QUEUED,
+                where=(leases.unleased(),),
+            )
 
     def is_active(self, run_id: str) -> bool:
-        if super().is_active(run_id):
-            return True
         with self._sessions() as session:
             return leases.is_leased(session=session, run_id=run_id)
 
-    # -- claim, renew, take over --------------------------------------------------------
-
-    def _free_slots(self) -> int:
-        with self._lock:
-            return self._settings.max_concurrent_runs - len(self._futures)
-
-    def _start_claimed(self, run_id: str) -> None:
-        if not self._start(run_id):  # closing: hand the run straight back
-            self._release(run_id)
-
-    def _poll(self) -> list[str]:
-        """Reap expired leases, then claim up to the free slots; returns resumed run ids."""
-        with transaction(self._sessions) as session:
-            for run, previous in leases.reap_expired(session=session):
-                repo.add_event(
-                    session=session,
-                    run_id=run.id,
-                    kind="interrupted",
-                    detail={
-                        "reason": f"the lease of {previous or 'no process'} "
-                        "expired: the process running it stopped",
-                        "lease_owner": previous,
-                        "worker": self.owner,
-                    },
-                )
-        statuses = ["queued", "interrupted"] if self._settings.auto_resume else ["queued"]
-        with self._claim_lock:
-            with transaction(self._sessions) as session:
-                claimed = leases.claim_runs(
-                    session=session,
-                    owner=self.owner,
-                    lease_s=self._lease_s,
-                    limit=self._free_slots(),
-                    statuses=statuses,
-                )
-            for run_id, _ in claimed:
-                self._start_claimed(run_id)
-        if claimed:
-            log.info("claimed %d run(s): %s", len(claimed), ", ".join(r for r, _ in claimed))
-        return [run_id for run_id, status in claimed if status == "interrupted"]
-
-    def _renew(self) -> None:
-        with self._lock:
-            held = dict(self._stops)
-        if not held:
-            return
-        with transaction(self._sessions) as session:
-            alive = leases.renew(
-                session=session, owner=self.owner, run_ids=list(held), lease_s=self._lease_s
-            )
-        for run_id, stop in held.items():
-            if run_id not in alive:
-                if self._is_local(run_id) and not stop.lease_lost.is_set():
-                    log.warning("lost the lease of run %s; stopping it here", run_id)
-                stop.lease_lost.set()
-            elif alive[run_id]:
-                stop.cancelled.set()  # cancelled through another process
-
-    def _is_local(self, run_id: str) -> bool:
-        return super().is_active(run_id)
-
-    def _release(self, run_id: str) -> None:
-        with transaction(self._sessions) as session:
-            leases.release(session=session, run_id=run_id, owner=self.owner)
-
-    # -- scale-out hooks ---------------------------------------------------------------
-
-    def _execute(self, run_id: str, stop: RunStop) -> None:
-        try:
-            super()._execute(run_id, stop)
-        finally:
-            if not stop.lease_lost.is_set():
-                self._release(run_id)
-
-    def _owned_run(self, session: Session, run_id: str) -> Run | None:
+    def owned_run(self, session: Session, run_id: str) -> Run | None:
         # The row lock makes "still mine" hold until this transaction commits.
         run = repo.get_run(session=session, run_id=run_id, for_update=True)
         return run if run is not None and run.lease_owner == self.owner else None
 
-    def _fence(self, run_id: str, stop: RunStop) -> Fence:
+    def fence(self, run_id: str, stop: RunStop) -> Fence:
         def fence(session: Session) -> None:
             alive = leases.renew(
                 session=session, owner=self.owner, run_ids=[run_id], lease_s=self._lease_s
@@ -223,5 +156,71 @@ class LeasedRunWorker(RunWorker):
 
         return fence
 
-    def _event_detail(self) -> dict[str, Any]:
+    def event_detail(self) -> dict[str, Any]:
         return {"worker": self.owner}
+
+    def finished(self, run_id: str, stop: RunStop) -> None:
+        if not stop.lease_lost.is_set():
+            self._release(run_id)
+
+    # -- claim, renew, take over --------------------------------------------------------
+
+    def _start_claimed(self, run_id: str) -> None:
+        if not self.slots.start(run_id):  # closing: hand the run straight back
+            self._release(run_id)
+
+    def _poll(self) -> list[str]:
+        """Reap expired leases, then claim up to the free slots; returns resumed run ids."""
+        with transaction(self._sessions) as session:
+            for run, previous in leases.expired_running(session=session):
+                lifecycle.move(
+                    session,
+                    run,
+                    RunStatus.INTERRUPTED,
+                    event=EventKind.INTERRUPTED,
+                    detail={
+                        "reason": f"the lease of {previous or 'no process'} "
+                        "expired: the process running it stopped",
+                        "lease_owner": previous,
+                        "worker": self.owner,
+                    },
+                )
+        statuses = (
+            [RunStatus.QUEUED, RunStatus.INTERRUPTED]
+            if self._settings.auto_resume
+            else [RunStatus.QUEUED]
+        )
+        with self._claim_lock:
+            with transaction(self._sessions) as session:
+                claimed = leases.claim_runs(
+                    session=session,
+                    owner=self.owner,
+                    lease_s=self._lease_s,
+                    limit=self.slots.free_slots(),
+                    statuses=statuses,
+                )
+            for run_id, _ in claimed:
+                self._start_claimed(run_id)
+        if claimed:
+            log.info("claimed %d run(s): %s", len(claimed), ", ".join(r for r, _ in claimed))
+        return [run_id for run_id, status in claimed if status == RunStatus.INTERRUPTED]
+
+    def _renew(self) -> None:
+        held = self.slots.held()
+        if not held:
+            return
+        with transaction(self._sessions) as session:
+            alive = leases.renew(
+                session=session, owner=self.owner, run_ids=list(held), lease_s=self._lease_s
+            )
+        for run_id, stop in held.items():
+            if run_id not in alive:
+                if not stop.lease_lost.is_set():
+                    log.warning("lost the lease of run %s; stopping it here", run_id)
+                stop.lease_lost.set()
+            elif alive[run_id]:
+                stop.cancelled.set()  # cancelled through another process
+
+    def _release(self, run_id: str) -> None:
+        with transaction(self._sessions) as session:
+            leases.release(session=session, run_id=run_id, owner=self.owner)

@@ -17,10 +17,10 @@ from typing import Any, Literal, TypeVar
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.lifecycle import FINISHED, EventKind
 from app.store.models import Decision, Run, RunEvent, as_utc
 
-ENDED = ("completed", "failed", "cancelled")
-_OPENING = ("created", "started", "resumed")
+_OPENING = (EventKind.CREATED, EventKind.STARTED, EventKind.RESUMED)
 _CURSOR = re.compile(r"^(\d{1,9})-(\d{1,9})$")
 R = TypeVar("R", RunEvent, Decision)
 
@@ -114,8 +114,10 @@ def read_progress(
             .where(Decision.run_id == run_id, Decision.task_index >= cursor.decisions)
             .order_by(Decision.task_index)
         )
-        rows = [(at, 0 if e.kind in _OPENING else 2, e) for at, e in _monotonic(events)]
-        contiguous = []
+        rows: list[tuple[datetime, int, RunEvent | Decision]] = [
+            (at, 0 if e.kind in _OPENING else 2, e) for at, e in _monotonic(events)
+        ]
+        contiguous: list[Decision] = []
         for d in decisions:
             if d.task_index != cursor.decisions + len(contiguous):
                 break  # never skip a gap: the missing decision is still being written
@@ -132,4 +134,4 @@ def read_progress(
             else:
                 cursor = Cursor(cursor.events, row.task_index + 1)
                 items.append(ProgressItem("decision", _decision_data(row), at, cursor))
-    return ProgressBatch(items=items, cursor=cursor, ended=status in ENDED)
+    return ProgressBatch(items=items, cursor=cursor, ended=status in FINISHED)

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Callable
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.usage import Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 from app.observability.logs import bind
+from app.runs import records
 from app.store import repository as repo
 from app.store.db import transaction
 
@@ -44,13 +45,11 @@ class SqlRecorder:
         run_id: str,
         sessions: sessionmaker[Session],
         stop: RunStop,
-        pause_at_task: int | None = None,
         fence: Fence | None = None,
     ) -> None:
         self.run_id = run_id
         self._sessions = sessions
         self._stop = stop
-        self._pause_at = pause_at_task
         self._fence = fence
         # Write-through cache: this process wrote these rows, so reads need no query.
         # After a restart the cache starts empty and reads fall through to the table.
@@ -69,17 +68,14 @@ class SqlRecorder:
     def before_reason(self, task_index: int, attempt: int) -> None:
         # Reasoner (and SDK) logs during this node's call name the run and task.
         bind(run_id=self.run_id, task_index=task_index)
-        # Test-only: hold the run inside the reasoning node so a SIGKILL lands exactly there.
-        if self._pause_at is not None and task_index == self._pause_at:
-            while not self._stop.requested():
-                time.sleep(0.05)
-            self.check_cancelled()
 
     def save_attempt(self, record: AttemptRecord) -> None:
         with transaction(self._sessions) as session:
             if self._fence is not None:
                 self._fence(session)
-            repo.upsert_attempt(session=session, run_id=self.run_id, record=record)
+            repo.upsert_attempt(
+                session=session, run_id=self.run_id, values=records.attempt_values(record)
+            )
         self._attempts[(record.task_index, record.attempt)] = record.copy()
         # Only the current task's attempts are ever read back.
         for key in [k for k in self._attempts if k[0] < record.task_index]:
@@ -98,13 +94,15 @@ class SqlRecorder:
             row = repo.get_attempt(
                 session=session, run_id=self.run_id, task_index=task_index, attempt=attempt
             )
-            return repo.attempt_record(row) if row is not None else None
+            return records.attempt_record(row) if row is not None else None
 
     def save_decision(self, record: DecisionRecord) -> None:
         with transaction(self._sessions) as session:
             if self._fence is not None:
                 self._fence(session)
-            repo.upsert_decision(session=session, run_id=self.run_id, record=record)
+            repo.upsert_decision(
+                session=session, run_id=self.run_id, values=records.decision_values(record)
+            )
         log.log(
             logging.WARNING if record.fallback else logging.INFO,
             "task %d -> %s (Q %.2f, %d attempt(s)%s)",
@@ -119,6 +117,10 @@ class SqlRecorder:
     def decisions(self) -> list[DecisionRecord]:
         with self._sessions() as session:
             return [
-                repo.decision_record(row)
+                records.decision_record(row)
                 for row in repo.decisions(session=session, run_id=self.run_id)
             ]
+
+    def usage(self) -> Usage:
+        with self._sessions() as session:
+            return records.usage_of(repo.reply_costs(session=session, run_id=self.run_id))

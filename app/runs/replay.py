@@ -16,6 +16,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.errors import DomainError
+from app.domain.lifecycle import RunStatus
 from app.reasoners.replay import RecordedReply, ReplyKey
 from app.runs.spec import RunSpec
 from app.store import repository as repo
@@ -45,7 +46,7 @@ class ReplaySourceNotFinishedError(DomainError):
     def __init__(self, run_id: str, status: str) -> None:
         hint = (
             "wait until it completes"
-            if status in ("queued", "running", "interrupted")
+            if status in (RunStatus.QUEUED, RunStatus.RUNNING, RunStatus.INTERRUPTED)
             else "only a completed run has a full record to replay"
         )
         super().__init__(
@@ -80,7 +81,7 @@ def original_spec(*, session: Session, replay_of: str) -> RunSpec:
             f"no run with id '{replay_of}' to replay; list runs with GET /runs?status=completed",
             code="unknown_run",
         )
-    if run.status != "completed":
+    if run.status != RunStatus.COMPLETED:
         raise ReplaySourceNotFinishedError(replay_of, run.status)
     return RunSpec.from_json(run.request)
 

@@ -10,20 +10,22 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
+from app.domain.lifecycle import FINISHED
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
+from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
+from app.runs import lifecycle, records
 from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
+from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import validate_replay
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import Attempt, Run, RunEvent
-
-TERMINAL = ("completed", "failed", "cancelled")
 
 
 def create_run(
@@ -47,9 +49,9 @@ def create_run(
         )
     run_id = uuid.uuid4().hex
     with transaction(sessions) as session:
-        run = Run(
-            id=run_id,
-            status="queued",
+        run = lifecycle.new_run(
+            session,
+            run_id=run_id,
             request=spec.to_json(),
             reasoner=spec.reasoner,
             mode=spec.mode,
@@ -60,14 +62,7 @@ def create_run(
             cancel_requested=False,
             idempotency_key=idempotency.key if idempotency else None,
             request_digest=idempotency.digest if idempotency else None,
-        )
-        session.add(run)
-        session.flush()
-        repo.add_event(
-            session=session,
-            run_id=run_id,
-            kind="created",
-            detail={
+            created={
                 "reasoner": spec.reasoner,
                 "mode": spec.mode,
                 "tasks": problem.instance.n_tasks,
@@ -117,16 +112,17 @@ def _require(session: Session, run_id: str, *, lock: bool = False) -> Run:
 def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: str) -> Run:
     with transaction(sessions) as session:
         run = _require(session, run_id)
-        if run.status == "completed":
+        if run.status == RunStatus.COMPLETED:
             raise RunStateConflictError(
                 run_id, run.status, "resume", "A completed run has nothing left to do."
             )
-        if run.status == "cancelled":
+        if run.status == RunStatus.CANCELLED:
             raise RunStateConflictError(run_id, run.status, "resume", "Create a new run instead.")
-        if run.status in ("queued", "running") or worker.is_active(run_id):
+        if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
-        if run.status == "failed":
-            run.status = "interrupted"
+        if run.status == RunStatus.FAILED:
+            # Its error stays readable until a worker takes it up again.
+            lifecycle.move(session, run, RunStatus.INTERRUPTED, error=run.error)
     worker.submit(run_id)
     with sessions() as session:
         return _require(session, run_id)
@@ -136,39 +132,20 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
     with transaction(sessions) as session:
         # Locked: with several processes, none may claim the run while this decides.
         run = _require(session, run_id, lock=True)
-        if run.status in TERMINAL:
+        if run.status in FINISHED:
             raise RunStateConflictError(run_id, run.status, "cancel", "It has already ended.")
         run.cancel_requested = True
         if not worker.is_active(run_id):
-            repo.set_status(session=session, run=run, status="cancelled")
-            repo.add_event(
-                session=session,
-                run_id=run_id,
-                kind="cancelled",
+            lifecycle.move(
+                session,
+                run,
+                RunStatus.CANCELLED,
+                event=EventKind.CANCELLED,
                 detail={"reason": "cancel requested before it ran"},
             )
     worker.cancel(run_id)
     with sessions() as session:
         return _require(session, run_id)
-
-
-@dataclass
-class Usage:
-    llm_calls: int = 0
-    input_tokens: int = 0
-    output_tokens: int = 0
-
-
-def usage_of(attempts: list[Attempt]) -> Usage:
-    """LLM calls are attempts answered by a model (the rules reasoner records none);
-    the same rule as app.graph.usage, so a run and the `ltaa` solver count alike."""
-    usage = Usage()
-    for a in attempts:
-        if a.reply_model is not None:
-            usage.llm_calls += 1
-            usage.input_tokens += a.input_tokens
-            usage.output_tokens += a.output_tokens
-    return usage
 
 
 @dataclass
@@ -209,11 +186,11 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
         decisions = [
-            repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+            records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
         ]
-        usage = usage_of(repo.attempts(session=session, run_id=run_id))
+        usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
     metrics = None
-    if run.status == "completed" and len(decisions) == run.n_tasks:
+    if run.status == RunStatus.COMPLETED and len(decisions) == run.n_tasks:
         metrics = compute_metrics(
             spec.problem.instance, [d.robot for d in decisions], seed=spec.seed
         )
@@ -245,7 +222,7 @@ def run_trace(*, sessions: sessionmaker[Session], run_id: str) -> Trace:
             run=run,
             events=repo.events(session=session, run_id=run_id),
             decisions=[
-                repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ],
             attempts=by_task,
         )

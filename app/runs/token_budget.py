@@ -11,8 +11,10 @@ import logging
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.lifecycle import EventKind
 from app.reasoners.base import Reasoner
 from app.reasoners.budget import BUDGET_EXHAUSTED, BudgetExhausted, TokenBudgetReasoner
+from app.runs import lifecycle
 from app.runs.recorder import Fence
 from app.store import repository as repo
 from app.store.db import transaction
@@ -43,8 +45,11 @@ def with_token_budget(
             # A run restarted after the switch is told again: the event stays single.
             if repo.has_event(session=session, run_id=run_id, kind=BUDGET_EXHAUSTED):
                 return
-            repo.add_event(
-                session=session, run_id=run_id, kind=BUDGET_EXHAUSTED, detail=exhausted.as_dict()
+            lifecycle.record_event(
+                session,
+                run_id=run_id,
+                kind=EventKind.BUDGET_EXHAUSTED,
+                detail=exhausted.as_dict(),
             )
         log.warning(
             "token budget spent (%d of %d tokens): the rules reasoner decides from "

@@ -1,13 +1,13 @@
 """Executes durable runs: one compiled graph, one checkpointer, a bounded pool of threads.
 
-Each run is an app-owned task, not tied to an HTTP request. The LangGraph SQLite
-checkpointer (durability "sync") makes the graph resumable; the app tables hold the
-record. A run found `running` at start-up belonged to a process that died: it is marked
-interrupted and, with auto-resume on, resumed from its last checkpoint.
+Each run is an app-owned task, not tied to an HTTP request. The LangGraph checkpointer
+(durability "sync") makes the graph resumable; the app tables hold the record. Which runs
+this process executes is its `Ownership`'s business (app.runs.ownership: the SQLite
+process lock, or PostgreSQL leases); app.runs.factory.make_worker composes the two.
 
-This is the single-process worker of the embedded SQLite default. Several processes on
-one PostgreSQL database use `app.runs.leased.LeasedRunWorker`, which overrides the
-hooks marked "scale-out hook" below; `app.runs.factory.make_worker` picks one.
+A run's execution, in order: admit it (integrity gate, `started`/`resumed`, status
+running), build its reasoner, execute the graph (app.solvers.ltaa.execute_ltaa, the one
+execution path), then record how it ended.
 """
 
 from __future__ import annotations
@@ -16,47 +16,61 @@ import logging
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
-from langgraph.checkpoint.base import BaseCheckpointSaver
-from sqlalchemy.engine import make_url
+from langgraph.checkpoint.base import BaseCheckpointSaver, CheckpointTuple
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
 from app.domain.errors import DomainError
-from app.graph.builder import NODES, build_graph
-from app.graph.checkpoint import open_sqlite_saver
-from app.graph.pause import NodeHook, PausePoint, pause_hook
+from app.graph.builder import build_graph
+from app.graph.execution import GraphEndedEarly
+from app.graph.pause import NodeHook
 from app.graph.recorder import RunCancelled
-from app.graph.runner import run_graph
 from app.reasoners.base import Reasoner
-from app.reasoners.factory import close_reasoner, make_reasoner
+from app.reasoners.factory import make_reasoner
+from app.runs import lifecycle, records
 from app.runs.integrity import check_integrity
+from app.runs.lifecycle import EventKind, RunStatus
+from app.runs.ownership import Ownership
 from app.runs.recorder import Fence, RunStop, SqlRecorder
 from app.runs.replay import recorded_replies
 from app.runs.spec import RunSpec
-from app.runs.store_lock import StoreLock
 from app.runs.token_budget import with_token_budget
-from app.solvers.ltaa import graph_context
+from app.solvers.ltaa import execute_ltaa
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Run
 
 log = logging.getLogger("ltaa.runs")
 
+# A saver and how to close it.
+Checkpointer = tuple[BaseCheckpointSaver[Any], Callable[[], None]]
+
+
+@dataclass(frozen=True)
+class Admission:
+    """A run admitted for execution: what it was asked to do, and whether it resumes."""
+
+    spec: RunSpec
+    resume: bool
+
 
 class RunWorker:
-    def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
+    def __init__(
+        self,
+        *,
+        settings: Settings,
+        sessions: sessionmaker[Session],
+        ownership: Ownership,
+        checkpointer: Checkpointer,
+        node_hook: NodeHook | None = None,
+    ) -> None:
         self._settings = settings
         self._sessions = sessions
-        self._release_store = self._claim_store()
-        try:
-            self.checkpointer, self._close_checkpointer = self._open_checkpointer()
-        except BaseException:
-            self._release_store()
-            raise
-        self.graph = build_graph(self.checkpointer, node_hook=self._pause_hook())
+        self.ownership = ownership
+        self.checkpointer, self._close_checkpointer = checkpointer
+        self.graph = build_graph(self.checkpointer, node_hook=node_hook)
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
         )
@@ -64,60 +78,13 @@ class RunWorker:
         self._stops: dict[str, RunStop] = {}
         self._futures: dict[str, Future[None]] = {}
         self._closing = False
-
-    def _claim_store(self) -> Callable[[], None]:
-        """Scale-out hook: make this the only process on the embedded store (raises
-        StoreInUseError otherwise); returns how to let go."""
-        url = make_url(self._settings.db_url)
-        database = url.database
-        if url.get_backend_name() != "sqlite" or not database or database == ":memory:":
-            return lambda: None
-        lock = StoreLock(Path(database))
-        lock.acquire()
-        return lock.release
-
-    def _open_checkpointer(self) -> tuple[BaseCheckpointSaver[Any], Callable[[], None]]:
-        """Scale-out hook: the saver and how to close it."""
-        path = Path(self._settings.checkpoint_file)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        # One connection for the process (SqliteSaver serialises on its own lock), a
-        # generous busy timeout instead of "database is locked" under load, integer channel
-        # versions (half the bytes per checkpoint) and synchronous=NORMAL: in WAL mode a
-        # kill -9 loses nothing committed; only an OS crash could lose the last steps.
-        saver = open_sqlite_saver(path, compact=True, synchronous="NORMAL")
-        return saver, saver.conn.close
-
-    def _pause_hook(self) -> NodeHook | None:
-        """Test-only: hold runs at one node of one task (LTAA_TEST_PAUSE_AT_NODE)."""
-        task, node = self._settings.test_pause_at_task, self._settings.test_pause_at_node
-        if task is None or node is None:
-            return None
-        return pause_hook(PausePoint.parse(task, node), frozenset(NODES))
+        ownership.attach(self)
 
     # -- lifecycle ---------------------------------------------------------------------
 
     def recover(self) -> list[str]:
-        """Start-up: mark runs orphaned by a dead process interrupted; resume or restart them."""
-        with transaction(self._sessions) as session:
-            orphans = repo.runs_with_status(session=session, statuses=["running"])
-            for run in orphans:
-                repo.set_status(session=session, run=run, status="interrupted")
-                repo.add_event(
-                    session=session,
-                    run_id=run.id,
-                    kind="interrupted",
-                    detail={"reason": "found running at start-up; the process that ran it stopped"},
-                )
-            queued = [r.id for r in repo.runs_with_status(session=session, statuses=["queued"])]
-            interrupted = [
-                r.id for r in repo.runs_with_status(session=session, statuses=["interrupted"])
-            ]
-        for run_id in queued:
-            self.submit(run_id)
-        if self._settings.auto_resume:
-            for run_id in interrupted:
-                self.submit(run_id)
-        return interrupted if self._settings.auto_resume else []
+        """Start-up: take up queued and interrupted runs; returns the interrupted ones resumed."""
+        return self.ownership.recover()
 
     def begin_drain(self) -> int:
         """Take no more runs; running ones stop at their next node boundary and are marked
@@ -134,17 +101,15 @@ class RunWorker:
 
     def close(self) -> None:
         """Drain, wait for the runs to stop, close the checkpointer. Queued runs stay queued."""
+        self.ownership.stop_taking()
         self.begin_drain()
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._close_checkpointer()
-        self._release_store()
+        self.ownership.close()
 
-    # -- commands ----------------------------------------------------------------------
+    # -- slots (what the ownership strategy drives) --------------------------------------
 
-    def submit(self, run_id: str) -> None:
-        self._start(run_id)
-
-    def _start(self, run_id: str) -> bool:
+    def start(self, run_id: str) -> bool:
         with self._lock:
             if self._closing or run_id in self._futures:
                 return False
@@ -153,9 +118,24 @@ class RunWorker:
             self._futures[run_id] = self._pool.submit(self._execute, run_id, stop)
             return True
 
+    def free_slots(self) -> int:
+        with self._lock:
+            return self._settings.max_concurrent_runs - len(self._futures)
+
+    def held(self) -> dict[str, RunStop]:
+        with self._lock:
+            return dict(self._stops)
+
+    # -- commands ----------------------------------------------------------------------
+
+    def submit(self, run_id: str) -> None:
+        self.ownership.submit(run_id)
+
     def is_active(self, run_id: str) -> bool:
         with self._lock:
-            return run_id in self._futures
+            if run_id in self._futures:
+                return True
+        return self.ownership.is_active(run_id)
 
     def cancel(self, run_id: str) -> None:
         with self._lock:
@@ -171,175 +151,142 @@ class RunWorker:
 
     # -- execution ---------------------------------------------------------------------
 
-    def _config(self, run_id: str) -> dict[str, Any]:
-        return {"configurable": {"thread_id": run_id}}
-
-    def _owned_run(self, session: Session, run_id: str) -> Run | None:
-        """Scale-out hook: the run, if this process may write its status."""
-        return repo.get_run(session=session, run_id=run_id)
-
-    def _fence(self, run_id: str, stop: RunStop) -> Fence | None:
-        """Scale-out hook: a check made inside every recorder write."""
-        return None
-
-    def _event_detail(self) -> dict[str, Any]:
-        """Scale-out hook: added to started/resumed events (which process ran it)."""
-        return {}
-
     def _execute(self, run_id: str, stop: RunStop) -> None:
         try:
             self._run(run_id, stop)
         except Exception:  # a bug must not kill the worker thread silently
             log.exception("run %s crashed", run_id)
-            with transaction(self._sessions) as session:
-                run = self._owned_run(session, run_id)
-                if run is not None and run.status == "running":
-                    repo.set_status(
-                        session=session,
-                        run=run,
-                        status="failed",
-                        error="internal error; see the server log",
-                    )
-                    repo.add_event(
-                        session=session,
-                        run_id=run_id,
-                        kind="failed",
-                        detail={"error": "internal error"},
-                    )
+            self._end(
+                run_id,
+                RunStatus.FAILED,
+                {"error": "internal error"},
+                error="internal error; see the server log",
+                only_if_running=True,
+            )
         finally:
             with self._lock:
                 self._futures.pop(run_id, None)
                 self._stops.pop(run_id, None)
+            self.ownership.finished(run_id, stop)
 
     def _run(self, run_id: str, stop: RunStop) -> None:
         if stop.shutting_down.is_set():
             return  # draining before it began: it stays queued (or interrupted) for the next start
-        checkpoint = self.checkpointer.get_tuple(self._config(run_id))
-        with transaction(self._sessions) as session:
-            run = self._owned_run(session, run_id)
-            if run is None or run.status not in ("queued", "interrupted"):
-                return
-            if run.cancel_requested:
-                stop.cancelled.set()
-            spec = RunSpec.from_json(run.request)
-            problem = spec.problem
-            if checkpoint is not None or run.status == "interrupted":
-                stored = [
-                    repo.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
-                ]
-                values = checkpoint.checkpoint["channel_values"] if checkpoint else None
-                report = check_integrity(
-                    decisions=stored,
-                    n_tasks=problem.instance.n_tasks,
-                    n_robots=problem.instance.n_robots,
-                    checkpoint=values,
-                )
-                if not report.ok:
-                    # Resuming would build on a record that the checkpoint contradicts, and
-                    # its final allocation could not be trusted: stop here, say why.
-                    repo.add_event(
-                        session=session,
-                        run_id=run_id,
-                        kind="integrity_failed",
-                        detail={"integrity": report.as_dict(), **self._event_detail()},
-                    )
-                    repo.set_status(
-                        session=session,
-                        run=run,
-                        status="failed",
-                        error="not resumed: the integrity check failed ("
-                        + "; ".join(report.problems)
-                        + "). The stored decisions and the "
-                        "checkpoint disagree; inspect GET /runs/{id}/trace and "
-                        "/trace/verify, then start a new run.",
-                    )
-                    return
-                run.resumes += 1
-                repo.add_event(
-                    session=session,
-                    run_id=run_id,
-                    kind="resumed",
-                    detail={
-                        "integrity": report.as_dict(),
-                        "from_checkpoint": checkpoint is not None,
-                        **self._event_detail(),
-                    },
-                )
-            else:
-                repo.add_event(
-                    session=session,
-                    run_id=run_id,
-                    kind="started",
-                    detail={
-                        "reasoner": spec.reasoner,
-                        "mode": spec.mode,
-                        "tasks": problem.instance.n_tasks,
-                        **self._event_detail(),
-                    },
-                )
-            repo.set_status(session=session, run=run, status="running")
-
-        fence = self._fence(run_id, stop)
-        recorder = SqlRecorder(
-            run_id=run_id,
-            sessions=self._sessions,
-            stop=stop,
-            pause_at_task=None
-            if self._settings.test_pause_at_node
-            else self._settings.test_pause_at_task,
-            fence=fence,
-        )
+        checkpoint = self.checkpointer.get_tuple({"configurable": {"thread_id": run_id}})
+        admission = self._admit(run_id, stop, checkpoint)
+        if admission is None:
+            return
+        spec = admission.spec
+        fence = self.ownership.fence(run_id, stop)
+        recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop, fence=fence)
         try:
             reasoner = self._reasoner(run_id, spec, fence)
         except DomainError as exc:
             # The configuration changed since the run was accepted (e.g. the API key was
             # removed before a resume): fail with the reason and the fix, not "internal error".
-            self._finish(
+            self._end(
                 run_id,
-                "failed",
+                RunStatus.FAILED,
                 {"error": exc.message, "field": exc.field},
                 error=f"cannot resume: {exc.message}",
             )
             return
-        context = graph_context(
-            problem,
-            reasoner=reasoner,
-            recorder=recorder,
-            quality_threshold=spec.quality_threshold,
-            max_retries=spec.max_retries,
-            guidance=spec.guidance,
-        )
         try:
-            run_graph(self.graph, context, run_id, resume=checkpoint is not None)
+            execution = execute_ltaa(
+                spec.problem,
+                graph=self.graph,
+                thread_id=run_id,
+                reasoner=reasoner,
+                recorder=recorder,
+                quality_threshold=spec.quality_threshold,
+                max_retries=spec.max_retries,
+                guidance=spec.guidance,
+                resume=checkpoint is not None,
+            )
         except RunCancelled:
-            self._finish_stopped(run_id, stop)
-            return
+            self._end_stopped(run_id, stop)
+        except GraphEndedEarly as exc:
+            # Completion is judged by our own record, never by the graph returning.
+            self._end(run_id, RunStatus.FAILED, {"error": str(exc)}, error="graph ended early")
         except Exception as exc:
             log.exception("run %s failed", run_id)
-            self._finish(
-                run_id,
-                "failed",
-                {"error": f"{type(exc).__name__}: {exc}"},
-                error=f"{type(exc).__name__}: {exc}",
+            message = f"{type(exc).__name__}: {exc}"
+            self._end(run_id, RunStatus.FAILED, {"error": message}, error=message)
+        else:
+            self._end(run_id, RunStatus.COMPLETED, {"decisions": len(execution.decisions)})
+
+    def _admit(
+        self, run_id: str, stop: RunStop, checkpoint: CheckpointTuple | None
+    ) -> Admission | None:
+        """Move a claimable run to running with its `started` or `resumed` event, after the
+        integrity check when it resumes; None if it is not this worker's to run now."""
+        detail = self.ownership.event_detail()
+        with transaction(self._sessions) as session:
+            run = self.ownership.owned_run(session, run_id)
+            if run is None or run.status not in (RunStatus.QUEUED, RunStatus.INTERRUPTED):
+                return None
+            if run.cancel_requested:
+                stop.cancelled.set()
+            spec = RunSpec.from_json(run.request)
+            instance = spec.problem.instance
+            resume = checkpoint is not None or run.status == RunStatus.INTERRUPTED
+            if not resume:
+                lifecycle.move(
+                    session,
+                    run,
+                    RunStatus.RUNNING,
+                    event=EventKind.STARTED,
+                    detail={
+                        "reasoner": spec.reasoner,
+                        "mode": spec.mode,
+                        "tasks": instance.n_tasks,
+                        **detail,
+                    },
+                )
+                return Admission(spec=spec, resume=False)
+            stored = [
+                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+            ]
+            values = checkpoint.checkpoint["channel_values"] if checkpoint else None
+            report = check_integrity(
+                decisions=stored,
+                n_tasks=instance.n_tasks,
+                n_robots=instance.n_robots,
+                checkpoint=values,
             )
-            return
-        finally:
-            close_reasoner(reasoner)  # its HTTP connection pool, for the anthropic one
-        stored = recorder.decisions()
-        if [d.task_index for d in stored] != list(range(problem.instance.n_tasks)):
-            # A graph can end without routing (a raising router, LangGraph #8834):
-            # completion is judged by our own record, never by the graph returning.
-            self._finish(
-                run_id,
-                "failed",
-                {
-                    "error": f"graph ended with {len(stored)} of "
-                    f"{problem.instance.n_tasks} decisions stored"
+            if not report.ok:
+                # Resuming would build on a record that the checkpoint contradicts, and its
+                # final allocation could not be trusted: stop here, say why.
+                lifecycle.record_event(
+                    session,
+                    run_id=run_id,
+                    kind=EventKind.INTEGRITY_FAILED,
+                    detail={"integrity": report.as_dict(), **detail},
+                )
+                lifecycle.move(
+                    session,
+                    run,
+                    RunStatus.FAILED,
+                    error="not resumed: the integrity check failed ("
+                    + "; ".join(report.problems)
+                    + "). The stored decisions and the "
+                    "checkpoint disagree; inspect GET /runs/{id}/trace and /trace/verify, "
+                    "then start a new run.",
+                )
+                return None
+            run.resumes += 1
+            lifecycle.move(
+                session,
+                run,
+                RunStatus.RUNNING,
+                event=EventKind.RESUMED,
+                detail={
+                    "integrity": report.as_dict(),
+                    "from_checkpoint": checkpoint is not None,
+                    **detail,
                 },
-                error="graph ended early",
             )
-            return
-        self._finish(run_id, "completed", {"decisions": len(stored)})
+            return Admission(spec=spec, resume=True)
 
     def _reasoner(self, run_id: str, spec: RunSpec, fence: Fence | None = None) -> Reasoner:
         """The reasoner a run's graph calls, built afresh at every (re)start."""
@@ -362,34 +309,34 @@ class RunWorker:
             reasoner, run_id=run_id, budget=spec.token_budget, sessions=self._sessions, fence=fence
         )
 
-    def _finish_stopped(self, run_id: str, stop: RunStop) -> None:
+    def _end_stopped(self, run_id: str, stop: RunStop) -> None:
         if stop.lease_lost.is_set():
             # Another process owns the run now; its record is no longer ours to write.
             log.warning("run %s stopped here: its lease passed to another process", run_id)
             return
         if stop.cancelled.is_set():
-            self._finish(run_id, "cancelled", {"reason": "cancel requested"})
+            self._end(run_id, RunStatus.CANCELLED, {"reason": "cancel requested"})
         else:
-            self._finish(
-                run_id, "interrupted", {"reason": "server shutting down"}, event="interrupted"
-            )
+            self._end(run_id, RunStatus.INTERRUPTED, {"reason": "server shutting down"})
 
-    def _finish(
+    def _end(
         self,
         run_id: str,
-        status: str,
+        status: RunStatus,
         detail: dict[str, Any],
         *,
         error: str | None = None,
-        event: str | None = None,
+        only_if_running: bool = False,
     ) -> None:
+        """Move the run to how it ended, with the event of the same name."""
         with transaction(self._sessions) as session:
-            run = self._owned_run(session, run_id)
-            if run is None:
+            run = self.ownership.owned_run(session, run_id)
+            if run is None or (only_if_running and run.status != RunStatus.RUNNING):
                 return
-            repo.set_status(session=session, run=run, status=status, error=error)
-            repo.add_event(session=session, run_id=run_id, kind=event or status, detail=detail)
-        if status in ("completed", "cancelled"):
+            lifecycle.move(
+                session, run, status, event=EventKind(status.value), detail=detail, error=error
+            )
+        if status in (RunStatus.COMPLETED, RunStatus.CANCELLED):
             self._prune_checkpoints(run_id)
 
     def _prune_checkpoints(self, run_id: str) -> None:

@@ -11,6 +11,8 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
+from app.domain.usage import Usage
+from app.reasoners.factory import ReasonerSettings
 
 
 @dataclass(frozen=True)
@@ -19,13 +21,6 @@ class SolverInfo:
     description: str
     exact: bool
     limits: str
-
-
-@dataclass
-class Usage:
-    llm_calls: int = 0
-    input_tokens: int = 0
-    output_tokens: int = 0
 
 
 @dataclass
@@ -46,6 +41,11 @@ class SolverOptions(BaseModel):
 class Solver(ABC):
     info: ClassVar[SolverInfo]
     Options: ClassVar[type[SolverOptions]] = SolverOptions
+
+    def __init__(self, *, settings: ReasonerSettings | None = None) -> None:
+        # The server's settings, for methods that call out (the `ltaa` reasoners); the
+        # exact and learning solvers never read them.
+        self.settings = settings
 
     def parse_options(self, options: Mapping[str, Any] | None) -> SolverOptions:
         try:

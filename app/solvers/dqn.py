@@ -138,6 +138,7 @@ class DQNSolver(Solver):
                 device="cpu",
                 verbose=0,
             )
+            model.set_logger(masked_dqn.silent_logger())
             model.learn(total_timesteps=opts.timesteps)
             assignment = _act(
                 model, allocation_env.AllocationEnv(success, problem.cap), masked_dqn.q_values

@@ -11,21 +11,21 @@ import uuid
 from typing import Any, Literal
 
 from langgraph.checkpoint.memory import InMemorySaver
+from langgraph.graph.state import CompiledStateGraph
 from pydantic import Field
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.graph.builder import build_graph
+from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import Recorder
-from app.graph.runner import run_graph
 from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
-from app.graph.usage import usage_from_attempts
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
-from app.reasoners.factory import close_reasoner, make_reasoner
+from app.reasoners.factory import make_reasoner
 from app.reasoners.scope import DEFAULT_LLM_MARGIN
-from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions, Usage
+from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
 
 
@@ -67,11 +67,31 @@ def graph_context(
     )
 
 
-def _settings() -> Any:
-    # Read at solve time (not import): LTAA_* / ANTHROPIC_* variables may change in tests.
-    from app.config import get_settings
-
-    return get_settings()
+def execute_ltaa(
+    problem: Problem,
+    *,
+    graph: CompiledStateGraph[Any, Any, Any, Any],
+    thread_id: str,
+    reasoner: Reasoner,
+    recorder: Recorder,
+    quality_threshold: float,
+    max_retries: int,
+    guidance: str | None,
+    resume: bool = False,
+) -> Execution:
+    """The one execution path of an LTAA problem (durable runs, `ltaa run` and the
+    synchronous solver): its context with exact regret (and guidance on request), then
+    app.graph.execution.execute. Closes `reasoner`; raises GraphEndedEarly if the graph
+    returned before every task was decided."""
+    context = graph_context(
+        problem,
+        reasoner=reasoner,
+        recorder=recorder,
+        quality_threshold=quality_threshold,
+        max_retries=max_retries,
+        guidance=guidance,
+    )
+    return execute(graph, context, thread_id, resume=resume)
 
 
 class LTAASolver(Solver):
@@ -91,7 +111,7 @@ class LTAASolver(Solver):
         try:
             reasoner = make_reasoner(
                 opts.reasoner,
-                settings=_settings() if opts.reasoner != "rules" else None,
+                settings=self.settings,
                 model=opts.model,
                 temperature=opts.temperature,
                 timeout=opts.timeout,
@@ -101,33 +121,26 @@ class LTAASolver(Solver):
         except DomainError as exc:
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
         recorder = MemoryRecorder()
-        context = graph_context(
-            problem,
-            reasoner=reasoner,
-            recorder=recorder,
-            quality_threshold=opts.quality_threshold,
-            max_retries=opts.max_retries,
-            guidance=opts.guidance,
-        )
         try:
-            run_graph(build_graph(InMemorySaver()), context, uuid.uuid4().hex, resume=False)
+            execution = execute_ltaa(
+                problem,
+                graph=build_graph(InMemorySaver()),
+                thread_id=uuid.uuid4().hex,
+                reasoner=reasoner,
+                recorder=recorder,
+                quality_threshold=opts.quality_threshold,
+                max_retries=opts.max_retries,
+                guidance=opts.guidance,
+            )
         except DomainError as exc:
             # e.g. the Messages API refusing the model: point at the request's option.
             err = DomainError(f"options.{exc.field}", exc.message, code=exc.code)
             err.status_code = exc.status_code
             raise err from exc
-        finally:
-            close_reasoner(reasoner)
-        decisions = recorder.decisions()
-        if [d.task_index for d in decisions] != list(range(problem.instance.n_tasks)):
-            raise RuntimeError(
-                f"the LTAA graph ended with {len(decisions)} of {problem.instance.n_tasks} "
-                "decisions"
-            )
-        used = usage_from_attempts(recorder.attempts())
+        decisions, used = execution.decisions, execution.usage
         return Solution(
             [d.robot for d in decisions],
-            usage=Usage(used.llm_calls, used.input_tokens, used.output_tokens),
+            usage=used,
             details={
                 "reasoner": reasoner.name,
                 "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),

@@ -17,11 +17,19 @@ from typing import Any
 
 import numpy as np
 import torch as th
+from gymnasium import spaces
 from stable_baselines3 import DQN
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 
 MASKED_Q = -1e6
+
+
+def silent_logger() -> Logger:
+    """A logger with no outputs and no folder. SB3's default (`configure`) makes an empty
+    tempdir/SB3-<time> directory on every `learn`, even with verbose=0."""
+    return Logger(folder=None, output_formats=[])
 
 
 class MaskedQNetwork(QNetwork):
@@ -39,11 +47,11 @@ class MaskedDQNPolicy(DQNPolicy):
 
 class MaskedDQN(DQN):
     def _random_allowed(self, observation: np.ndarray) -> np.ndarray:
-        n = int(self.action_space.n)  # type: ignore[attr-defined]
+        space = self.action_space
+        assert isinstance(space, spaces.Discrete)  # one robot per action (AllocationEnv)
+        n = int(space.n)
         rows = np.asarray(observation).reshape(-1, np.asarray(observation).shape[-1])
-        return np.array(
-            [self.action_space.sample(mask=(row[:n] > 0.5).astype(np.int8)) for row in rows]
-        )
+        return np.array([space.sample(mask=(row[:n] > 0.5).astype(np.int8)) for row in rows])
 
     def predict(
         self,
@@ -62,10 +70,11 @@ class MaskedDQN(DQN):
         self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
         if self.num_timesteps < learning_starts:
-            assert self._last_obs is not None
-            action = self._random_allowed(self._last_obs)  # type: ignore[arg-type]
+            # AllocationEnv's observations are one Box, never a dict of them.
+            assert isinstance(self._last_obs, np.ndarray)
+            action = self._random_allowed(self._last_obs)
         else:
-            action, _ = self.predict(self._last_obs, deterministic=False)  # type: ignore[arg-type]
+            action, _ = self.predict(self._last_obs, deterministic=False)
         return action, action
 
 

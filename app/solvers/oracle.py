@@ -10,21 +10,13 @@ equal optimal's expected success minus the run's.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from app.domain.decision import GuidedChoice
 from app.domain.errors import InfeasibleCapError
 from app.domain.problem import Problem
 from app.solvers.optimal import TaskClasses, class_allocation
-
-
-@dataclass(frozen=True)
-class GuidedChoice:
-    robot: int
-    # Success points (sum of S x 100 over the rest of the queue) each robot would give away;
-    # None where choosing it would make the cap unsatisfiable.
-    costs: tuple[float | None, ...]
 
 
 class CompletionOracle:

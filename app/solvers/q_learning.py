@@ -82,9 +82,9 @@ def enumerate_states(problem: Problem) -> StateSpace:
     allowed = np.zeros((len(order), r), dtype=bool)
     successor = np.zeros((len(order), r), dtype=np.int64)
     for state, row in enumerate(moves):
-        for robot, child in row:
+        for robot, child_id in row:
             allowed[state, robot] = True
-            successor[state, robot] = child
+            successor[state, robot] = child_id
     task = np.fromiter((sum(loads) for loads in order), dtype=np.int64, count=len(order))
     return StateSpace(task=task, allowed=allowed, successor=successor)
 

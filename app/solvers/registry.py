@@ -5,6 +5,7 @@ from __future__ import annotations
 from importlib import import_module
 
 from app.domain.errors import DomainError
+from app.reasoners.factory import ReasonerSettings
 from app.solvers.base import Solver
 
 _SOLVERS: dict[str, str] = {
@@ -22,7 +23,7 @@ def solver_names() -> list[str]:
     return list(_SOLVERS)
 
 
-def get_solver(name: str) -> Solver:
+def get_solver(name: str, *, settings: ReasonerSettings | None = None) -> Solver:
     target = _SOLVERS.get(name)
     if target is None:
         raise DomainError(
@@ -32,7 +33,7 @@ def get_solver(name: str) -> Solver:
         )
     module, cls = target.split(":")
     solver_cls: type[Solver] = getattr(import_module(module), cls)
-    return solver_cls()
+    return solver_cls(settings=settings)
 
 
 def register(name: str, target: str) -> None:

@@ -146,7 +146,7 @@ def genesis(table: Table, run_id: str) -> str:
     return _sha256(f"{SCHEME}|{table}|{run_id}")
 
 
-def attempts_digest(attempts: Iterable[Mapping[str, Any]]) -> str:
+def attempts_digest(attempts: Iterable[Mapping[Any, Any]]) -> str:
     """One task's attempts, in attempt order."""
     return _sha256(canonical_json([_content(ATTEMPT_FIELDS, a) for a in attempts]))
 

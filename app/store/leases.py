@@ -16,16 +16,19 @@ from typing import Any
 from sqlalchemy import ColumnElement, and_, func, or_, select, update
 from sqlalchemy.orm import Session
 
+from app.domain.lifecycle import CLAIMABLE as CLAIMABLE_STATUSES
+from app.domain.lifecycle import RunStatus
 from app.store.models import Run
 
-CLAIMABLE = ("queued", "interrupted")
+CLAIMABLE = tuple(sorted(CLAIMABLE_STATUSES))
 
 
 def _expires(lease_s: float) -> Any:
     return func.now() + timedelta(seconds=lease_s)
 
 
-def _unleased() -> ColumnElement[bool]:
+def unleased() -> ColumnElement[bool]:
+    """Nobody holds the run's lease (never leased, released, or expired)."""
     return or_(Run.lease_expires_at.is_(None), Run.lease_expires_at < func.now())
 
 
@@ -34,19 +37,19 @@ def _no_sync(stmt: Any) -> Any:
     return stmt.execution_options(synchronize_session=False)
 
 
-def reap_expired(*, session: Session) -> list[tuple[Run, str | None]]:
-    """Runs `running` under an expired lease: their process died or stalled. Each is set
-    `interrupted` and unleased (returned with its previous owner, for the event)."""
+def expired_running(*, session: Session) -> list[tuple[Run, str | None]]:
+    """Runs `running` under an expired lease: their process died or stalled. Each is locked
+    and unleased, and returned with its previous owner; the caller moves it to interrupted
+    (app.runs.lifecycle) in the same transaction."""
     rows = session.scalars(
         select(Run)
-        .where(Run.status == "running", _unleased())
+        .where(Run.status == RunStatus.RUNNING, unleased())
         .order_by(Run.created_at)
         .with_for_update(skip_locked=True)
     ).all()
     reaped = []
     for run in rows:
         reaped.append((run, run.lease_owner))
-        run.status = "interrupted"
         run.lease_owner = None
         run.lease_expires_at = None
     return reaped
@@ -60,7 +63,7 @@ def claim_runs(
         return []
     rows = session.execute(
         select(Run.id, Run.status)
-        .where(Run.status.in_(statuses), _unleased())
+        .where(Run.status.in_(statuses), unleased())
         .order_by(Run.created_at, Run.id)
         .limit(limit)
         .with_for_update(skip_locked=True)
@@ -81,7 +84,7 @@ def claim_run(*, session: Session, run_id: str, owner: str, lease_s: float) -> b
     """Lease one run if it is claimable and nobody holds it (one conditional UPDATE)."""
     stmt = (
         update(Run)
-        .where(Run.id == run_id, Run.status.in_(CLAIMABLE), _unleased())
+        .where(Run.id == run_id, Run.status.in_(CLAIMABLE), unleased())
         .values(lease_owner=owner, lease_expires_at=_expires(lease_s))
         .returning(Run.id)
     )
@@ -110,17 +113,6 @@ def release(*, session: Session, run_id: str, owner: str) -> None:
             update(Run)
             .where(Run.id == run_id, Run.lease_owner == owner)
             .values(lease_owner=None, lease_expires_at=None)
-        )
-    )
-
-
-def requeue(*, session: Session, run_id: str) -> None:
-    """Hand an unleased interrupted run to whichever process has a free slot first."""
-    session.execute(
-        _no_sync(
-            update(Run)
-            .where(Run.id == run_id, Run.status == "interrupted", _unleased())
-            .values(status="queued")
         )
     )
 

@@ -6,6 +6,9 @@ a run lives here, keyed so that a node re-executed after a crash upserts, never 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from datetime import UTC, datetime
 from typing import Any, ClassVar
 
@@ -20,8 +23,10 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
 )
-from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+from sqlalchemy import event as orm_event
+from sqlalchemy.orm import DeclarativeBase, Mapped, ORMExecuteState, Session, mapped_column
 
+from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_NAME_CHARS
 
 
@@ -145,3 +150,53 @@ class Attempt(Base):
     hard_invalid: Mapped[str | None] = mapped_column(Text, nullable=True)
     feedback: Mapped[str | None] = mapped_column(Text, nullable=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+# -- one writer of runs.status -------------------------------------------------------------
+# A run's status is moved only by app.runs.lifecycle, which checks the move against the
+# transition table and writes the matching event. These guards make the rule hold at run
+# time: an assignment to Run.status, or a bulk UPDATE of runs that sets status, outside
+# `status_writes()` raises. (tests/unit/test_lifecycle_guard.py also scans the source.)
+_status_writer: ContextVar[bool] = ContextVar("ltaa_status_writer", default=False)
+
+
+class StatusWriteError(RuntimeError):
+    """Code outside app.runs.lifecycle tried to write a run's status."""
+
+
+@contextmanager
+def status_writes() -> Iterator[None]:
+    """Only app.runs.lifecycle enters this."""
+    token = _status_writer.set(True)
+    try:
+        yield
+    finally:
+        _status_writer.reset(token)
+
+
+def _refuse(how: str) -> StatusWriteError:
+    return StatusWriteError(
+        f"runs.status was written {how} outside app.runs.lifecycle; move a run with "
+        "app.runs.lifecycle.move() so the transition is checked and its event recorded"
+    )
+
+
+@orm_event.listens_for(Run.status, "set", propagate=True)
+def _guard_status_set(target: Run, value: Any, old: Any, initiator: Any) -> None:
+    if not _status_writer.get():
+        raise _refuse(f"by assignment ({old!r} -> {value!r})")
+    RunStatus(value)  # only statuses the lifecycle knows
+
+
+@orm_event.listens_for(Session, "do_orm_execute")
+def _guard_bulk_status(state: ORMExecuteState) -> None:
+    if not state.is_update or _status_writer.get():
+        return
+    statement: Any = state.statement
+    # The statement holds an annotated copy of the table, so compare by name.
+    if getattr(getattr(statement, "table", None), "name", None) != Run.__tablename__:
+        return
+    # `_values` is the UPDATE's SET clause (no public accessor): keys are columns or names.
+    values = getattr(statement, "_values", None) or {}
+    if any(getattr(key, "key", key) == "status" for key in values):
+        raise _refuse("by a bulk UPDATE")

@@ -3,22 +3,19 @@ keys, so a node that LangGraph re-executes after a crash rewrites, never duplica
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import asdict
+from collections.abc import Mapping, Sequence
 from functools import cache
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import and_, bindparam, func, select
+from sqlalchemy import BindParameter, Integer, String, Table, and_, bindparam, func, select
+from sqlalchemy.dialects.postgresql import Insert as PostgresqlInsert
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
+from sqlalchemy.dialects.sqlite import Insert as SqliteInsert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
-from app.graph.recorder import AttemptRecord, DecisionRecord
-from app.reasoners.base import ReasonerReply
 from app.store import chain
 from app.store.models import Attempt, Base, Decision, Run, RunEvent, utcnow
-
-ACTIVE = ("queued", "running")
 
 
 def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run | None:
@@ -36,13 +33,6 @@ def list_runs(*, session: Session, status: str | None, limit: int, offset: int) 
 
 def runs_with_status(*, session: Session, statuses: Sequence[str]) -> list[Run]:
     return list(session.scalars(select(Run).where(Run.status.in_(statuses)).order_by(Run.id)))
-
-
-def set_status(*, session: Session, run: Run, status: str, error: str | None = None) -> None:
-    run.status = status
-    run.error = error
-    if status in ("completed", "failed", "cancelled"):
-        run.finished_at = utcnow()
 
 
 def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:
@@ -139,14 +129,32 @@ def attempt_replies(*, session: Session, run_id: str) -> list[Any]:
     )
 
 
+def reply_costs(*, session: Session, run_id: str) -> list[Any]:
+    """Only the cost columns of a run's attempts (no prompts, no replies): what usage
+    counts, without reading megabytes of text per poll of a long run."""
+    return list(
+        session.execute(
+            select(
+                Attempt.reply_model,
+                Attempt.input_tokens,
+                Attempt.output_tokens,
+                Attempt.transport_retries,
+                Attempt.latency_ms,
+            ).where(Attempt.run_id == run_id)
+        )
+    )
+
+
 @cache
 def _upsert_statement(dialect: str, model: type[Base], keys: tuple[str, ...]) -> Any:
     # Built once and executed with parameters, so SQLAlchemy's compiled cache is hit.
-    insert = {"sqlite": sqlite_insert, "postgresql": postgresql_insert}[dialect]
-    stmt = insert(model.__table__)
+    table = cast(Table, model.__table__)
+    stmt: SqliteInsert | PostgresqlInsert = (
+        sqlite_insert(table) if dialect == "sqlite" else postgresql_insert(table)
+    )
     updates = {
         c.name: stmt.excluded[c.name]
-        for c in model.__table__.columns
+        for c in table.columns
         if c.name not in keys and not c.primary_key
     }
     return stmt.on_conflict_do_update(index_elements=list(keys), set_=updates)
@@ -164,7 +172,8 @@ def _upsert(
 def _decision_link_statement() -> Any:
     # Built once (building it took half the helper's time) and executed with parameters.
     d, a = Decision.__table__.c, Attempt.__table__.c
-    run_id, task_index = bindparam("run_id"), bindparam("task_index")
+    run_id: BindParameter[str] = bindparam("run_id", type_=String())
+    task_index: BindParameter[int] = bindparam("task_index", type_=Integer())
     prev = (
         select(func.coalesce(d.chain_hash, chain.UNCHAINED))
         .where(d.run_id == run_id, d.task_index < task_index)
@@ -198,76 +207,26 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
 
 
-def upsert_decision(*, session: Session, run_id: str, record: DecisionRecord) -> None:
-    values = asdict(record)
-    values["task_id"] = str(record.task_id)
-    values["chain_hash"] = _decision_chain_hash(session, run_id, values)
+def upsert_decision(*, session: Session, run_id: str, values: Mapping[str, Any]) -> None:
+    """`values`: the decision's columns but run_id, chain_hash and created_at."""
+    row = dict(values)
+    row["chain_hash"] = _decision_chain_hash(session, run_id, row)
     _upsert(
         session,
         Decision,
-        {"run_id": run_id, **values, "created_at": utcnow()},
+        {"run_id": run_id, **row, "created_at": utcnow()},
         ("run_id", "task_index"),
     )
 
 
-def _attempt_values(record: AttemptRecord) -> dict[str, Any]:
-    reply = record.reply
-    return {
-        "tier": record.tier,
-        "system_prompt": record.system_prompt,
-        "user_prompt": record.user_prompt,
-        "reply_text": reply.text if reply else None,
-        "reply_model": reply.model if reply else None,
-        "input_tokens": reply.input_tokens if reply else 0,
-        "output_tokens": reply.output_tokens if reply else 0,
-        "latency_ms": reply.latency_ms if reply else 0.0,
-        "transport_retries": reply.transport_retries if reply else 0,
-        "reply_extra": dict(reply.extra) if reply else {},
-        "parsed": record.parsed,
-        "scores": record.scores,
-        "quality": record.quality,
-        "accepted": record.accepted,
-        "hard_invalid": record.hard_invalid,
-        "feedback": record.feedback,
-    }
-
-
-def upsert_attempt(*, session: Session, run_id: str, record: AttemptRecord) -> None:
-    values = {
-        "run_id": run_id,
-        "task_index": record.task_index,
-        "attempt": record.attempt,
-        **_attempt_values(record),
-        "created_at": utcnow(),
-    }
-    _upsert(session, Attempt, values, ("run_id", "task_index", "attempt"))
-
-
-def attempt_record(row: Attempt) -> AttemptRecord:
-    reply = None
-    if row.reply_text is not None:
-        reply = ReasonerReply(
-            text=row.reply_text,
-            input_tokens=row.input_tokens,
-            output_tokens=row.output_tokens,
-            latency_ms=row.latency_ms,
-            model=row.reply_model,
-            transport_retries=row.transport_retries,
-            extra=dict(row.reply_extra or {}),
-        )
-    return AttemptRecord(
-        task_index=row.task_index,
-        attempt=row.attempt,
-        tier=row.tier,
-        system_prompt=row.system_prompt,
-        user_prompt=row.user_prompt,
-        reply=reply,
-        parsed=row.parsed,
-        scores=dict(row.scores or {}),
-        quality=row.quality,
-        accepted=row.accepted,
-        hard_invalid=row.hard_invalid,
-        feedback=row.feedback,
+def upsert_attempt(*, session: Session, run_id: str, values: Mapping[str, Any]) -> None:
+    """`values`: the attempt's columns (task_index and attempt included) but run_id and
+    created_at."""
+    _upsert(
+        session,
+        Attempt,
+        {"run_id": run_id, **values, "created_at": utcnow()},
+        ("run_id", "task_index", "attempt"),
     )
 
 
@@ -285,13 +244,8 @@ def get_attempt(*, session: Session, run_id: str, task_index: int, attempt: int)
     )
 
 
-def decision_record(row: Decision) -> DecisionRecord:
-    fields = DecisionRecord.__dataclass_fields__
-    return DecisionRecord(**{name: getattr(row, name) for name in fields})
-
-
 def tokens_spent(*, session: Session, run_id: str) -> int:
-    """Input + output tokens of a run's replies that name a model (as app.graph.usage
+    """Input + output tokens of a run's replies that name a model (as app.domain.usage
     counts them): what its LLM calls have cost so far, from the record."""
     total = session.scalar(
         select(func.sum(Attempt.input_tokens + Attempt.output_tokens)).where(

@@ -7,6 +7,7 @@ import time
 from typing import Any
 
 import pytest
+from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
@@ -210,7 +211,9 @@ def test_keys_never_appear_in_logs(
     logged += capsys.readouterr().err
     for secret in (CLIENT_KEY, SUPERVISOR_KEY, near_miss):
         assert secret not in logged
-    settings = client.app.state.settings  # type: ignore[attr-defined]
+    app = client.app
+    assert isinstance(app, FastAPI)
+    settings = app.state.settings
     assert SUPERVISOR_KEY not in repr(settings) and SUPERVISOR_KEY not in str(
         settings.model_dump(mode="json")
     )

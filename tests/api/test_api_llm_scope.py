@@ -97,14 +97,9 @@ def test_a_bad_scope_is_a_422_naming_the_field(
     assert response.json()["detail"][0]["loc"] == loc
 
 
-def test_allocate_with_a_contested_scope(
-    make_client: ClientFactory, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_allocate_with_a_contested_scope(make_client: ClientFactory) -> None:
     with OPENAI.fake() as api:
-        # The synchronous solver reads the server's settings from the environment.
-        monkeypatch.setenv("LTAA_OPENAI_BASE_URL", api.base_url)
-        monkeypatch.setenv("LTAA_OPENAI_MODEL", OPENAI.model)
-        client = make_client()
+        client = make_client(**OPENAI.settings(api))
         answers = {}
         for scope in ("all", "contested"):
             response = client.post(

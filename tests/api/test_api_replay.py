@@ -205,7 +205,7 @@ def test_bad_replay_requests_are_4xx_naming_the_field_and_write_nothing(
     make_client: ClientFactory,
 ) -> None:
     # Runs hold before task 1: a one-task run completes, the baseline run stays running.
-    client = make_client(test_pause_at_task=1)
+    client = make_client(test_pause="1:reason:before")
     done, _ = run_to_end(client, {**ONE_TASK, "mode": "balanced"})
     assert done["status"] == "completed", done
     paused = client.post("/runs", json=BASELINE).json()["id"]

@@ -91,7 +91,7 @@ def test_resuming_a_completed_run_is_a_conflict(client: TestClient) -> None:
 
 
 def test_cancel_stops_a_running_run(make_client: ClientFactory) -> None:
-    client = make_client(test_pause_at_task=5)
+    client = make_client(test_pause="5:reason:before")
     run_id = client.post("/runs", json=BASELINE).json()["id"]
     deadline = time.monotonic() + 30
     while client.get(f"/runs/{run_id}").json()["progress"]["allocated"] < 5:
@@ -155,7 +155,7 @@ def test_status_filter_must_be_a_known_status(client: TestClient) -> None:
 
 
 def test_a_run_whose_record_fails_the_integrity_check_is_not_resumed(settings: Settings) -> None:
-    paused = settings.model_copy(update={"test_pause_at_task": 5})
+    paused = settings.model_copy(update={"test_pause": f"{5}:reason:before"})
     with TestClient(create_app(paused)) as first:
         run_id = first.post("/runs", json=BASELINE).json()["id"]
         deadline = time.monotonic() + 30
@@ -190,7 +190,7 @@ def _checkpoints_of(settings: Settings, run_id: str) -> int:
 
 
 def test_checkpoints_go_when_a_run_can_no_longer_resume(settings: Settings) -> None:
-    paused = settings.model_copy(update={"test_pause_at_task": 3})
+    paused = settings.model_copy(update={"test_pause": f"{3}:reason:before"})
     with TestClient(create_app(paused)) as client:
         held = client.post("/runs", json=BASELINE).json()["id"]
         wait_until(client, held, ("running",))

@@ -23,11 +23,11 @@ def test_environment_with_prefix(monkeypatch: pytest.MonkeyPatch, tmp_path: Path
     monkeypatch.setenv("LTAA_DATA_DIR", str(tmp_path))
     monkeypatch.setenv("LTAA_MAX_CONCURRENT_RUNS", "7")
     monkeypatch.setenv("LTAA_AUTO_RESUME", "false")
-    monkeypatch.setenv("LTAA_TEST_PAUSE_AT_TASK", "18")
+    monkeypatch.setenv("LTAA_TEST_PAUSE", "18:reason:before")
     monkeypatch.setenv("LTAA_DATABASE_URL", "postgresql://db/ltaa")
     s = get_settings()
     assert s.max_concurrent_runs == 7 and s.auto_resume is False
-    assert s.test_pause_at_task == 18
+    assert s.test_pause == "18:reason:before"
     assert s.database_url == "postgresql://db/ltaa"
     assert s.checkpoint_path == tmp_path / "checkpoints.sqlite"
 

@@ -169,7 +169,11 @@ def _at_once(n: int, call: Callable[[int], Any]) -> list[Any]:
 def test_concurrent_retries_create_one_run(client: TestClient, settings: Any) -> None:
     for round_ in range(3):
         key = f"{KEY}-{round_}"
-        responses = _at_once(8, lambda _i, key=key: post(client, BODY, key=key))
+
+        def send(_i: int, key: str = key) -> Any:
+            return post(client, BODY, key=key)
+
+        responses = _at_once(8, send)
         assert {r.status_code for r in responses} == {202}, [r.text for r in responses]
         assert len({r.json()["id"] for r in responses}) == 1
         # One request created it; every other one was answered with that run.

@@ -16,7 +16,7 @@ BASELINE = {"scenario": "baseline", "mode": "balanced"}
 
 
 def test_a_second_server_on_the_same_store_refuses_to_start(settings: Settings) -> None:
-    paused = settings.model_copy(update={"test_pause_at_task": 3})
+    paused = settings.model_copy(update={"test_pause": f"{3}:reason:before"})
     with TestClient(create_app(paused)) as first:
         run_id = first.post("/runs", json=BASELINE).json()["id"]
         wait_until(first, run_id, ("running",))

@@ -19,7 +19,7 @@ from sqlalchemy import create_engine
 from sqlalchemy.orm import sessionmaker
 
 from app.config import Settings
-from app.runs import audit
+from app.runs import audit, records
 from app.store import chain
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, RunEvent
@@ -225,7 +225,11 @@ def test_a_decision_upserted_again_with_the_same_content_keeps_its_hash(
         rows = repo.decisions(session=session, run_id=run_id)
         stored = {d.task_index: d.chain_hash for d in rows}
         for row in (rows[0], rows[17], rows[-1]):
-            repo.upsert_decision(session=session, run_id=run_id, record=repo.decision_record(row))
+            repo.upsert_decision(
+                session=session,
+                run_id=run_id,
+                values=records.decision_values(records.decision_record(row)),
+            )
     with sessions() as session:
         again = {d.task_index: d.chain_hash for d in repo.decisions(session=session, run_id=run_id)}
     assert again == stored

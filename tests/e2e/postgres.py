@@ -30,6 +30,7 @@ def fresh_database(prefix: str = "ltaa_test") -> Iterator[str]:
     """Create a uniquely named database next to the configured one; drop it afterwards."""
     base = make_url(base_url())
     admin = libpq_url(base.render_as_string(hide_password=False))
+    error: str | None
     try:
         conn = psycopg.connect(admin, autocommit=True, connect_timeout=5)
     except psycopg.Error as exc:

@@ -95,8 +95,8 @@ def test_ten_sigkills_at_every_kind_of_node_change_nothing(
         server = Server(data, env=env)
         for n, point in enumerate(points):
             server.start(
-                LTAA_TEST_PAUSE_AT_TASK=str(point.task_index),
-                LTAA_TEST_PAUSE_AT_NODE=f"{point.node}:{'after' if point.after else 'before'}",
+                LTAA_TEST_PAUSE=f"{point.task_index}:{point.node}:"
+                f"{'after' if point.after else 'before'}",
             )
             if n == 0:
                 with server.client() as c:

@@ -33,7 +33,7 @@ def _completed(state: dict[str, Any]) -> bool:
 
 def test_run_killed_at_task_18_resumes_at_task_18(tmp_path: Path) -> None:
     body = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
-    first = Server(tmp_path / "data").start(LTAA_TEST_PAUSE_AT_TASK="18")
+    first = Server(tmp_path / "data").start(LTAA_TEST_PAUSE="18:reason:before")
     try:
         run_id = _create(first, body)
         state = first.wait_for(run_id, lambda s: s["progress"]["allocated"] >= 18)

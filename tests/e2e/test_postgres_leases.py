@@ -1,7 +1,7 @@
 """Run leases on a real PostgreSQL database, in process: claims never overlap, a process
 that lost a lease writes nothing more, cancel and drain work across processes.
 
-Two `LeasedRunWorker`s in one test process stand for two API processes: each has its own
+Two `RunWorker`s in one test process stand for two API processes: each has its own
 lease owner id, checkpointer pool and threads, and they share only the database.
 """
 
@@ -24,15 +24,17 @@ from app.graph.checkpoint_postgres import open_postgres_saver
 from app.graph.recorder import DecisionRecord
 from app.runs import service
 from app.runs.factory import make_worker
-from app.runs.leased import LeasedRunWorker
+from app.runs.leased import LeaseOwnership
 from app.runs.recorder import LeaseLost, RunStop, SqlRecorder
 from app.runs.spec import RunSpec
+from app.runs.worker import RunWorker
 from app.store import leases
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
-from app.store.models import Run
+from app.store.models import Run, status_writes
 from tests.e2e.postgres import fresh_database, query
+from tests.factories import run_row
 
 pytestmark = pytest.mark.e2e
 
@@ -54,10 +56,10 @@ def sessions(postgres_url: str) -> Iterator[sessionmaker[Session]]:
 @pytest.fixture
 def make_leased(
     tmp_path: Path, postgres_url: str, sessions: sessionmaker[Session]
-) -> Iterator[Callable[..., LeasedRunWorker]]:
-    opened: list[LeasedRunWorker] = []
+) -> Iterator[Callable[..., RunWorker]]:
+    opened: list[RunWorker] = []
 
-    def factory(**overrides: Any) -> LeasedRunWorker:
+    def factory(**overrides: Any) -> RunWorker:
         settings = Settings(
             data_dir=tmp_path / "data",
             database_url=postgres_url,
@@ -68,7 +70,7 @@ def make_leased(
             **overrides,
         )
         worker = make_worker(settings=settings, sessions=sessions)
-        assert isinstance(worker, LeasedRunWorker)
+        assert isinstance(worker.ownership, LeaseOwnership)
         opened.append(worker)
         return worker
 
@@ -77,7 +79,12 @@ def make_leased(
         worker.close()
 
 
-def _create(sessions: sessionmaker[Session], worker: LeasedRunWorker) -> str:
+def lease(worker: RunWorker) -> LeaseOwnership:
+    assert isinstance(worker.ownership, LeaseOwnership)
+    return worker.ownership
+
+
+def _create(sessions: sessionmaker[Session], worker: RunWorker) -> str:
     spec = RunSpec.for_instance(scenario("baseline").instance, mode="balanced")
     return service.create_run(
         sessions=sessions, worker=worker, settings=worker._settings, spec=spec
@@ -122,20 +129,7 @@ def test_migrations_match_the_models_next_to_the_checkpointer_tables(postgres_ur
 def test_concurrent_claims_never_overlap(sessions: sessionmaker[Session]) -> None:
     ids = [f"claim{i:02d}" for i in range(20)]
     with transaction(sessions) as session:
-        session.add_all(
-            Run(
-                id=i,
-                status="queued",
-                request={},
-                reasoner="rules",
-                mode="balanced",
-                n_tasks=1,
-                n_robots=1,
-                resumes=0,
-                cancel_requested=False,
-            )
-            for i in ids
-        )
+        session.add_all(run_row(i, "queued") for i in ids)
     barrier = threading.Barrier(4)
     claimed: dict[str, list[str]] = {}
 
@@ -162,17 +156,18 @@ def test_concurrent_claims_never_overlap(sessions: sessionmaker[Session]) -> Non
             == []
         )
         assert not leases.claim_run(session=session, run_id=ids[0], owner="late", lease_s=60)
-        session.query(Run).filter(Run.id.in_(ids)).update(
-            {Run.status: "completed", Run.lease_owner: None}, synchronize_session=False
-        )
+        with status_writes():  # clean-up of the test's own rows, not a run's life
+            session.query(Run).filter(Run.id.in_(ids)).update(
+                {Run.status: "completed", Run.lease_owner: None}, synchronize_session=False
+            )
 
 
 def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
     sessions: sessionmaker[Session],
-    make_leased: Callable[..., LeasedRunWorker],
+    make_leased: Callable[..., RunWorker],
     postgres_url: str,
 ) -> None:
-    worker = make_leased(test_pause_at_task=3)
+    worker = make_leased(test_pause="3:reason:before")
     run_id = _create(sessions, worker)
     _until(lambda: _decisions(sessions, run_id) == 3 and worker.is_active(run_id))
     # Another process took the run (as if this one had stalled past its lease).
@@ -193,7 +188,7 @@ def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
     # Writes are fenced too, not only the heartbeat: a late write is rolled back.
     stop = RunStop()
     recorder = SqlRecorder(
-        run_id=run_id, sessions=sessions, stop=stop, fence=worker._fence(run_id, stop)
+        run_id=run_id, sessions=sessions, stop=stop, fence=lease(worker).fence(run_id, stop)
     )
     record = DecisionRecord(
         task_index=3,
@@ -224,9 +219,9 @@ def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
 
 def test_cancel_reaches_the_process_running_the_run(
     sessions: sessionmaker[Session],
-    make_leased: Callable[..., LeasedRunWorker],
+    make_leased: Callable[..., RunWorker],
 ) -> None:
-    runner = make_leased(test_pause_at_task=3)
+    runner = make_leased(test_pause="3:reason:before")
     other = make_leased()
     run_id = _create(sessions, runner)
     _until(lambda: _decisions(sessions, run_id) == 3)
@@ -240,9 +235,9 @@ def test_cancel_reaches_the_process_running_the_run(
 
 def test_a_draining_process_hands_its_runs_to_another(
     sessions: sessionmaker[Session],
-    make_leased: Callable[..., LeasedRunWorker],
+    make_leased: Callable[..., RunWorker],
 ) -> None:
-    first = make_leased(test_pause_at_task=3)
+    first = make_leased(test_pause="3:reason:before")
     run_id = _create(sessions, first)
     _until(lambda: _decisions(sessions, run_id) == 3)
     first.close()  # SIGTERM: interrupted at a node boundary, lease released at once
@@ -256,5 +251,5 @@ def test_a_draining_process_hands_its_runs_to_another(
     assert _decisions(sessions, run_id) == 36
     with sessions() as session:
         resumed = [e for e in repo.events(session=session, run_id=run_id) if e.kind == "resumed"]
-    assert len(resumed) == 1 and resumed[0].detail["worker"] == second.owner
+    assert len(resumed) == 1 and resumed[0].detail["worker"] == lease(second).owner
     assert resumed[0].detail["integrity"]["resume_at_task"] == 3

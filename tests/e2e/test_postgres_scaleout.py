@@ -98,7 +98,7 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
             **env,
             "LTAA_WORKER_NAME": "api-a",
             "LTAA_MAX_CONCURRENT_RUNS": str(A_SLOTS),
-            "LTAA_TEST_PAUSE_AT_TASK": str(PAUSE_AT),
+            "LTAA_TEST_PAUSE": f"{PAUSE_AT}:reason:before",
         },
     )
     b = Server(
@@ -112,7 +112,9 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
         run_ids = [str(r.json()["id"]) for r in created]
         # A claimed one run per free slot as they arrived; the rest wait, queued, for B.
         held_by_a = run_ids[:A_SLOTS]
-        owners = dict(query(postgres_url, "SELECT id, lease_owner FROM runs"))
+        owners = {
+            run: owner for run, owner in query(postgres_url, "SELECT id, lease_owner FROM runs")
+        }
         assert all(str(owners[r]).startswith("api-a:") for r in held_by_a), owners
         assert all(owners[r] is None for r in run_ids[A_SLOTS:]), owners
 

@@ -82,7 +82,7 @@ def test_a_budgeted_run_killed_before_and_after_its_switch_switches_at_the_same_
         finally:
             server.stop()
 
-        killed = Server(data, env=env).start(LTAA_TEST_PAUSE_AT_TASK=str(PAUSE_AT))
+        killed = Server(data, env=env).start(LTAA_TEST_PAUSE=f"{PAUSE_AT}:reason:before")
         try:
             ids = {
                 name: _run(killed, {**body, "token_budget": budget})

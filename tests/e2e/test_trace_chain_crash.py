@@ -42,8 +42,7 @@ def test_a_run_killed_mid_write_resumes_with_a_valid_chain(tmp_path: Path) -> No
     server = Server(data)
     for n, point in enumerate(points):
         server.start(
-            LTAA_TEST_PAUSE_AT_TASK=str(point.task_index),
-            LTAA_TEST_PAUSE_AT_NODE=f"{point.node}:after",
+            LTAA_TEST_PAUSE=f"{point.task_index}:{point.node}:after",
         )
         if n == 0:
             with server.client() as c:

@@ -31,9 +31,9 @@ from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Self
 
+from app.domain.decision import DecisionContext
 from app.domain.modes import Mode, strategic_weights
 from app.domain.phases import Phase
-from app.reasoners.base import DecisionContext
 from app.reasoners.rules import compose_answer
 
 Responder = Callable[[dict[str, Any]], "Reply"]
@@ -233,6 +233,7 @@ class FakeMessagesAPI:
     @property
     def base_url(self) -> str:
         host, port = self._server.server_address[:2]
+        assert isinstance(host, str)  # an AF_INET server's host is text (AF_UNIX's is bytes)
         return f"http://{host}:{port}"
 
     def start(self) -> Self:

@@ -9,7 +9,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from app.reasoners.base import DecisionContext, ReasonerError, ReasonerReply
+from app.domain.decision import DecisionContext
+from app.reasoners.base import ReasonerError, ReasonerReply
 from app.reasoners.rules import compose_answer
 
 Answer = str | Callable[[DecisionContext], str] | ReasonerError

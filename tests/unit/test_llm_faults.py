@@ -240,7 +240,9 @@ def test_a_resume_without_the_configuration_fails_saying_what_to_set(
     settings: Settings, provider: Provider
 ) -> None:
     with provider.fake() as api:
-        keyed = settings.model_copy(update={**provider.settings(api), "test_pause_at_task": 1})
+        keyed = settings.model_copy(
+            update={**provider.settings(api), "test_pause": f"{1}:reason:before"}
+        )
         with TestClient(create_app(keyed)) as first:
             baseline = next(s for s in first.get("/scenarios").json() if s["name"] == "baseline")
             run_id = first.post(

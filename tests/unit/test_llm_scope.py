@@ -7,7 +7,7 @@ import pytest
 
 from app.domain.modes import Mode
 from app.domain.phases import Phase
-from app.graph.tradeoff import rule_for
+from app.domain.tradeoff import rule_for
 from app.reasoners.factory import make_reasoner
 from app.reasoners.scope import ContestedOnlyReasoner, LLMScope, is_contested, scoped
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
 import anthropic
 import pytest
 from pydantic import SecretStr
 
+from app.config import Settings
 from app.domain.errors import DomainError
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.prompts import prompt_for
@@ -19,7 +21,7 @@ from app.reasoners.rules import RulesReasoner
 from app.solvers.registry import get_solver
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, answer_from_prompt
 from tests.fakes.scripted_reasoner import GARBAGE
-from tests.unit.ltaa_support import context, problem, run
+from tests.unit.ltaa_support import context, problem, reply_of, run
 
 POOR = "**Decision**: Light Robot\n**Expected Success**: 3%"
 
@@ -30,15 +32,15 @@ def api() -> Iterator[FakeMessagesAPI]:
         yield server
 
 
-def reasoner(api: FakeMessagesAPI, **kw: object) -> AnthropicReasoner:
-    options = {
+def reasoner(api: FakeMessagesAPI, **kw: Any) -> AnthropicReasoner:
+    options: dict[str, Any] = {
         "api_key": "test-key",
         "base_url": api.base_url,
         "timeout": 5.0,
-        "max_retries": 3,
+        "transport_retries": 3,
         **kw,
     }
-    return AnthropicReasoner(**options)  # type: ignore[arg-type]
+    return AnthropicReasoner(**options)
 
 
 def assert_usage_matches_server(rec: MemoryRecorder, api: FakeMessagesAPI) -> None:
@@ -54,8 +56,9 @@ def test_good_answers_are_accepted_at_attempt_1(api: FakeMessagesAPI) -> None:
     assert [d.robot for d in rec.decisions()] == [d.robot for d in rules.decisions()]
     assert_usage_matches_server(rec, api)
     first = rec.attempts()[0]
-    assert first.reply.model == "claude-sonnet-4-6" and first.reply.latency_ms > 0
-    assert first.reply.input_tokens > 0 and first.reply.transport_retries == 0
+    reply = reply_of(first)
+    assert reply.model == "claude-sonnet-4-6" and reply.latency_ms > 0
+    assert reply.input_tokens > 0 and reply.transport_retries == 0
     body = api.requests[0]
     assert body["messages"][0]["content"] == first.user_prompt
     assert body["system"] == first.system_prompt
@@ -74,7 +77,8 @@ def test_poor_answer_is_rejected_then_fixed_at_tier_1(api: FakeMessagesAPI) -> N
     api.script(Reply.answer(POOR))
     rec, _ = run(problem(n_tasks=2), reasoner(api))
     first, second = rec.attempts(0)
-    assert not first.accepted and first.hard_invalid is None and first.quality < 0.6
+    assert not first.accepted and first.hard_invalid is None
+    assert first.quality is not None and first.quality < 0.6
     assert second.tier == 1 and second.accepted
     assert "Your previous answer scored" in api.requests[1]["messages"][0]["content"]
     assert rec.decisions()[0].attempts == 2
@@ -102,7 +106,7 @@ def test_transport_errors_are_retried_by_the_sdk_then_succeed(api: FakeMessagesA
     )
     rec, _ = run(problem(n_tasks=3), reasoner(api, timeout=0.5))
     assert all(d.attempts == 1 and not d.fallback for d in rec.decisions())
-    assert [a.reply.transport_retries for a in rec.attempts()] == [1, 1, 1]
+    assert [reply_of(a).transport_retries for a in rec.attempts()] == [1, 1, 1]
     assert [r["_headers"]["x-stainless-retry-count"] for r in api.requests] == [
         "0",
         "1",
@@ -117,10 +121,12 @@ def test_transport_errors_are_retried_by_the_sdk_then_succeed(api: FakeMessagesA
 
 def test_transport_giving_up_is_a_failed_attempt_not_a_failed_run(api: FakeMessagesAPI) -> None:
     api.script(*[Reply.error(529, retry_after=0.01)] * 2, Reply.from_prompt())
-    rec, _ = run(problem(n_tasks=1), reasoner(api, max_retries=1))
+    rec, _ = run(problem(n_tasks=1), reasoner(api, transport_retries=1))
     first, second = rec.attempts(0)
-    assert "HTTP 529" in first.reply.extra["error"] and "no reply" in first.hard_invalid
-    assert first.reply.model is None  # nothing answered: not an LLM call
+    error = reply_of(first).extra["error"]
+    assert isinstance(error, str) and "HTTP 529" in error
+    assert first.hard_invalid is not None and "no reply" in first.hard_invalid
+    assert reply_of(first).model is None  # nothing answered: not an LLM call
     assert second.accepted and second.tier == 1
     assert_usage_matches_server(rec, api)
 
@@ -140,7 +146,7 @@ def test_an_unknown_model_through_allocate_names_the_option(
     monkeypatch.setenv("LTAA_ANTHROPIC_BASE_URL", api.base_url)
     api.script(Reply.error(404, retry_after=None))
     with pytest.raises(DomainError) as err:
-        get_solver("ltaa").solve(
+        get_solver("ltaa", settings=Settings()).solve(
             problem(n_tasks=1), options={"reasoner": "anthropic", "model": "nope"}
         )
     assert err.value.field == "options.model" and err.value.status_code == 422
@@ -159,7 +165,7 @@ def test_ltaa_solver_with_anthropic_options(
     # The key and endpoint come from the server's settings, never from the request.
     monkeypatch.setenv("LTAA_ANTHROPIC_API_KEY", "test")
     monkeypatch.setenv("LTAA_ANTHROPIC_BASE_URL", api.base_url)
-    solution = get_solver("ltaa").solve(
+    solution = get_solver("ltaa", settings=Settings()).solve(
         problem(n_tasks=3),
         options={"reasoner": "anthropic", "model": "claude-test", "temperature": 0.2},
     )
@@ -170,11 +176,17 @@ def test_ltaa_solver_with_anthropic_options(
 
 
 class FakeSettings:
-    anthropic_api_key = SecretStr("from-settings")
-    anthropic_base_url = "http://127.0.0.1:9"
+    # Typed as ReasonerSettings declares them: its attributes are mutable, hence invariant.
+    anthropic_api_key: SecretStr | None = SecretStr("from-settings")
+    anthropic_base_url: str | None = "http://127.0.0.1:9"
     anthropic_timeout_s = 12.0
     anthropic_max_transport_retries = 5
     default_model = "claude-settings"
+    openai_base_url: str | None = None
+    openai_api_key: SecretStr | None = None
+    openai_model: str | None = None
+    openai_timeout_s = 60.0
+    openai_max_transport_retries = 3
 
 
 def test_factory(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -190,6 +202,6 @@ def test_factory(monkeypatch: pytest.MonkeyPatch) -> None:
         make_reasoner("llama")
     r = make_reasoner("anthropic", settings=FakeSettings(), model="claude-override")
     assert isinstance(r, AnthropicReasoner)
-    assert (r.model, r.max_retries, r.temperature) == ("claude-override", 5, 0.1)
+    assert (r.model, r.transport_retries, r.temperature) == ("claude-override", 5, 0.1)
     monkeypatch.setenv("LTAA_ANTHROPIC_API_KEY", "from-env")
     assert isinstance(make_reasoner("anthropic"), AnthropicReasoner)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -37,8 +38,8 @@ def reference() -> list[int]:
     return [d.robot for d in rec.decisions()]
 
 
-def crash_once(at_task: int):
-    fired = []
+def crash_once(at_task: int) -> Callable[[int, int], None]:
+    fired: list[int] = []
 
     def hook(task_index: int, attempt: int) -> None:
         if task_index == at_task and not fired:

@@ -72,7 +72,8 @@ def test_poor_answer_is_rejected_then_fixed_at_tier_1() -> None:
     reasoner = ScriptedReasoner([poor_answer])
     rec, _ = run(prob, reasoner)
     first, second = rec.attempts(0)
-    assert not first.accepted and first.quality < 0.6 and first.hard_invalid is None
+    assert not first.accepted and first.quality is not None and first.quality < 0.6
+    assert first.hard_invalid is None and first.feedback is not None
     assert first.feedback.startswith(f"Q={first.quality:.2f} below the threshold 0.60")
     assert "success-rate accuracy" in first.feedback and "Fix:" in first.feedback
     assert second.tier == 1 and second.accepted and first.feedback in second.user_prompt

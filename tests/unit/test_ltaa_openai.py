@@ -98,7 +98,7 @@ def test_a_redirect_is_not_followed(api: FakeChatCompletionsAPI) -> None:
         target = f"{elsewhere.base_url}/chat/completions"
         api.script(Reply(status=307, headers={"location": target}))
         with pytest.raises(ReasonerRejectedError) as err:
-            run(problem(n_tasks=1), reasoner(api, max_retries=0))
+            run(problem(n_tasks=1), reasoner(api, transport_retries=0))
         assert elsewhere.requests == []
     # A server that sends the prompt elsewhere is misconfigured: the run stops, saying so.
     assert "HTTP 307" in err.value.message and "LTAA_OPENAI_BASE_URL" in err.value.message
@@ -118,7 +118,9 @@ def test_an_unknown_model_through_allocate_names_the_option(
     monkeypatch.setenv("LTAA_OPENAI_BASE_URL", api.base_url)
     api.script(Reply.error(404, retry_after=None))
     with pytest.raises(DomainError) as err:
-        get_solver("ltaa").solve(problem(n_tasks=1), options={"reasoner": "openai", "model": "no"})
+        get_solver("ltaa", settings=Settings()).solve(
+            problem(n_tasks=1), options={"reasoner": "openai", "model": "no"}
+        )
     assert err.value.field == "options.model" and err.value.status_code == 422
     assert err.value.code == "unknown_model"
 
@@ -128,7 +130,7 @@ def test_ltaa_solver_with_openai_options(
 ) -> None:
     monkeypatch.setenv("LTAA_OPENAI_BASE_URL", api.base_url)
     monkeypatch.setenv("LTAA_OPENAI_MODEL", "from-settings")
-    solution = get_solver("ltaa").solve(
+    solution = get_solver("ltaa", settings=Settings()).solve(
         problem(n_tasks=3), options={"reasoner": "openai", "temperature": 0.3}
     )
     assert solution.usage.llm_calls == 3
@@ -159,7 +161,7 @@ def test_the_factory_needs_a_base_url_and_a_model(monkeypatch: pytest.MonkeyPatc
     )
     built = make_reasoner("openai", settings=configured, model="override")
     assert isinstance(built, OpenAIReasoner)
-    assert (built.model, built.max_retries, built.temperature) == ("override", 5, 0.1)
+    assert (built.model, built.transport_retries, built.temperature) == ("override", 5, 0.1)
     assert built.base_url == "http://127.0.0.1:9/v1"
     built.close()
 

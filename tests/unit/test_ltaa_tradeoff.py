@@ -6,10 +6,12 @@ import pytest
 
 from app.domain.modes import Mode
 from app.domain.phases import Phase
-from app.graph.tradeoff import Branch, apply_rule, expected_confidence
+from app.domain.tradeoff import Branch, TradeOff, apply_rule, expected_confidence
 
 
-def rule(s_best: float, s_fewest: float, mode: Mode = Mode.BALANCED, phase: Phase = Phase.MIDDLE):
+def rule(
+    s_best: float, s_fewest: float, mode: Mode = Mode.BALANCED, phase: Phase = Phase.MIDDLE
+) -> TradeOff:
     # robot 0 is the most capable but loaded; robot 1 is the least loaded.
     return apply_rule([s_best, s_fewest], [5, 2], [0, 1], mode, phase)
 

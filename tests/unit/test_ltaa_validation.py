@@ -8,6 +8,7 @@ from dataclasses import replace
 import pytest
 
 from app.graph.validation import WEIGHTS, validate_text
+from app.reasoners.base import DecisionContext
 from app.reasoners.rules import compose_answer
 from tests.unit.ltaa_support import context
 
@@ -28,7 +29,7 @@ def section(text: str, name: str, value: str | None) -> str:
     return "\n".join(out)
 
 
-def scores(text: str, ctx=CTX) -> dict[str, float]:
+def scores(text: str, ctx: DecisionContext = CTX) -> dict[str, float]:
     return validate_text(text, ctx).scores
 
 
@@ -137,7 +138,7 @@ def test_confidence_justification() -> None:
         (GOOD, replace(CTX, feasible=(0, 1)), "workload cap infeasible"),
     ],
 )
-def test_hard_invalids_score_zero(text: str, ctx, why: str) -> None:
+def test_hard_invalids_score_zero(text: str, ctx: DecisionContext, why: str) -> None:
     v = validate_text(text, ctx)
     assert v.quality == 0.0 and not v.accepted
     assert v.hard_invalid is not None and why in v.hard_invalid

@@ -13,11 +13,13 @@ from sqlalchemy.exc import IntegrityError
 
 from app.domain.models import MAX_NAME_CHARS
 from app.graph.recorder import DecisionRecord
+from app.runs import records
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
-from app.store.models import Decision, Run
+from app.store.models import Decision
 from tests.e2e.postgres import fresh_database
+from tests.factories import run_row
 
 
 def test_upgrade_head_matches_the_models(tmp_path: Path) -> None:
@@ -53,19 +55,7 @@ def test_one_decision_per_run_and_task_is_enforced(tmp_path: Path) -> None:
         "severity_after": "low",
     }
     with transaction(sessions) as session:
-        session.add(
-            Run(
-                id="r1",
-                status="queued",
-                request={},
-                reasoner="rules",
-                mode="balanced",
-                n_tasks=1,
-                n_robots=1,
-                resumes=0,
-                cancel_requested=False,
-            )
-        )
+        session.add(run_row("r1", "queued"))
         session.flush()
         session.add(Decision(run_id="r1", task_index=0, **row))
     with pytest.raises(IntegrityError), transaction(sessions) as session:
@@ -92,43 +82,33 @@ def test_the_longest_names_the_api_accepts_fit_the_columns(migrated_url: str) ->
     sessions = make_session_factory(engine)
     try:
         with transaction(sessions) as session:
-            session.add(
-                Run(
-                    id="r1",
-                    status="running",
-                    request={},
-                    reasoner="rules",
-                    mode="balanced",
-                    n_tasks=1,
-                    n_robots=1,
-                    resumes=0,
-                    cancel_requested=False,
-                )
-            )
+            session.add(run_row("r1", "running"))
             session.flush()
             repo.upsert_decision(
                 session=session,
                 run_id="r1",
-                record=DecisionRecord(
-                    task_index=0,
-                    task_id=longest,
-                    task_name=longest,
-                    robot=0,
-                    robot_name=longest,
-                    phase="early",
-                    expected_success=0.5,
-                    reasoning="",
-                    confidence="High",
-                    tradeoff="",
-                    quality=1.0,
-                    fallback=False,
-                    attempts=1,
-                    failure_log=[],
-                    loads_before=[0],
-                    loads_after=[1],
-                    balance_before=0.0,
-                    balance_after=1.0,
-                    severity_after="low",
+                values=records.decision_values(
+                    DecisionRecord(
+                        task_index=0,
+                        task_id=longest,
+                        task_name=longest,
+                        robot=0,
+                        robot_name=longest,
+                        phase="early",
+                        expected_success=0.5,
+                        reasoning="",
+                        confidence="High",
+                        tradeoff="",
+                        quality=1.0,
+                        fallback=False,
+                        attempts=1,
+                        failure_log=[],
+                        loads_before=[0],
+                        loads_after=[1],
+                        balance_before=0.0,
+                        balance_after=1.0,
+                        severity_after="low",
+                    )
                 ),
             )
         with sessions() as session:

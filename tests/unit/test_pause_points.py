@@ -31,9 +31,9 @@ def test_parse() -> None:
 
 
 def test_setting_is_checked() -> None:
-    assert Settings(test_pause_at_node="reason:after").test_pause_at_node == "reason:after"
+    assert Settings(test_pause="3:reason:after").test_pause == "3:reason:after"
     with pytest.raises(ValidationError):
-        Settings(test_pause_at_node="reason at the end")
+        Settings(test_pause="3:reason at the end")
 
 
 @pytest.mark.parametrize("after", [False, True])

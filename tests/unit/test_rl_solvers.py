@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
 import textwrap
 from pathlib import Path
 
@@ -176,6 +177,21 @@ def test_listing_solvers_does_not_load_torch() -> None:
     assert result.stdout.strip() == "[]"
 
 
+def test_dqn_training_writes_nothing_to_the_temp_dir(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # SB3's default logger makes tempdir/SB3-<time> per training; a private temp dir
+    # makes the check exact and safe next to other processes training in parallel.
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    assert tempfile.gettempdir() == str(tmp_path)
+    problem = Problem.build(small_instance(3), Mode.SUCCESS_FOCUSED)
+    get_solver("dqn").solve(problem, seed=1, options={"timesteps": 100})
+    # Only SB3's own entries: torch may keep a per-user cache dir there, made once, not per call.
+    assert sorted(p.name for p in tmp_path.glob("SB3-*")) == []
+
+
 def test_dqn_without_torch_explains_how_to_install() -> None:
     result = _run_python(
         """
@@ -205,7 +221,8 @@ def test_environment_masks_match_the_cap_and_rewards_are_regret() -> None:
     env = AllocationEnv(s, cap)
     obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(obs)
-    total, chosen, done = 0.0, [], False
+    chosen: list[int] = []
+    total, done = 0.0, False
     while not done:
         allowed = env.action_masks()
         t = len(chosen)

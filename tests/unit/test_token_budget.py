@@ -27,11 +27,11 @@ from app.runs.token_budget import with_token_budget
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
-from app.store.models import Run
+from tests.factories import run_row
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
 from tests.run_polling import wait_until
-from tests.unit.ltaa_support import problem, run
+from tests.unit.ltaa_support import problem, reply_of, run
 
 N_TASKS = 6
 
@@ -46,11 +46,11 @@ def test_the_switch_comes_once_the_budget_is_reached_and_is_told_once() -> None:
 
     # Tasks 0 and 1 spend 300 = the budget: tasks 2 and 3 are the rules reasoner's.
     assert [c.task_index for c in llm.calls] == [0, 1]
-    assert [a.reply.model for a in rec.attempts()] == ["scripted", "scripted", None, None]
+    assert [reply_of(a).model for a in rec.attempts()] == ["scripted", "scripted", None, None]
     assert told == [BudgetExhausted(task_index=2, tokens_spent=300, budget=300)]
     assert all(a.accepted for a in rec.attempts())
-    assert rec.attempts()[2].reply.extra == {"reasoner": "rules", "why": "budget_exhausted"}
-    assert rec.attempts()[0].reply.extra["reasoner"] == "scripted"
+    assert reply_of(rec.attempts()[2]).extra == {"reasoner": "rules", "why": "budget_exhausted"}
+    assert reply_of(rec.attempts()[0]).extra["reasoner"] == "scripted"
 
 
 def test_a_retry_after_the_budget_is_spent_goes_to_the_rules_reasoner() -> None:
@@ -60,8 +60,8 @@ def test_a_retry_after_the_budget_is_spent_goes_to_the_rules_reasoner() -> None:
     budgeted = TokenBudgetReasoner(llm, budget=250, spent=0, on_exhausted=told.append)
     rec, _ = run(problem(n_tasks=2), budgeted)
     first, second = rec.attempts(0)
-    assert first.reply.model == "scripted" and not first.accepted
-    assert second.reply.model is None and second.accepted and second.tier == 1
+    assert reply_of(first).model == "scripted" and not first.accepted
+    assert reply_of(second).model is None and second.accepted and second.tier == 1
     assert len(llm.calls) == 1 and told == [BudgetExhausted(0, 300, 250)]
 
 
@@ -71,14 +71,14 @@ def test_spent_tokens_are_seeded_and_failed_calls_cost_nothing() -> None:
     # 200 already spent before a restart: one call (failed, free), one paid, then rules.
     budgeted = TokenBudgetReasoner(llm, budget=300, spent=200, on_exhausted=told.append)
     rec, _ = run(problem(n_tasks=2), budgeted)
-    assert [a.reply.model for a in rec.attempts()] == [None, "scripted", None]
+    assert [reply_of(a).model for a in rec.attempts()] == [None, "scripted", None]
     assert budgeted.spent == 350 and told == [BudgetExhausted(1, 350, 300)]
 
     seeded = TokenBudgetReasoner(
         ScriptedReasoner(), budget=300, spent=300, on_exhausted=told.append
     )
     rec, _ = run(problem(n_tasks=1), seeded)
-    assert rec.attempts()[0].reply.model is None and told[-1].task_index == 0
+    assert reply_of(rec.attempts()[0]).model is None and told[-1].task_index == 0
 
 
 # ------------------------------------------------------------------ durable runs
@@ -197,19 +197,7 @@ def test_a_process_that_lost_the_run_writes_no_budget_event(tmp_path: Path) -> N
     engine = make_engine(url)
     sessions = make_session_factory(engine)
     with transaction(sessions) as session:
-        session.add(
-            Run(
-                id="r1",
-                status="running",
-                request={},
-                reasoner="anthropic",
-                mode="balanced",
-                n_tasks=2,
-                n_robots=3,
-                resumes=0,
-                cancel_requested=False,
-            )
-        )
+        session.add(run_row("r1", "running", reasoner="anthropic", n_tasks=2, n_robots=3))
 
     def lease_gone(session: Session) -> None:
         raise LeaseLost("r1")

@@ -9,7 +9,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.openapi.models import Example
 
 from app.api.allocation import allocate as run_allocation
-from app.api.deps import ClientDep
+from app.api.deps import ClientDep, SettingsDep
 from app.api.responses import BODY, CLIENT, errors
 from app.api.schemas import AllocateRequest, AllocateResponse
 
@@ -71,10 +71,11 @@ EXAMPLES: dict[str, Example] = {
 async def allocate(
     caller: ClientDep,
     body: Annotated[AllocateRequest, Body(openapi_examples=EXAMPLES)],
+    settings: SettingsDep,
 ) -> AllocateResponse:
     """Allocate every task to a robot with the chosen solver, respecting the workload cap."""
     # Solving is CPU-bound, so it goes to the threadpool (the event loop stays free for
     # health checks and run status) as ONE job. A plain `def` route would queue the solve
     # and the response's validation as separate first-come jobs: under a burst, every
     # response then waited for every solve sent before it, even a 3 ms greedy one.
-    return await run_in_threadpool(run_allocation, body)
+    return await run_in_threadpool(run_allocation, body, settings)

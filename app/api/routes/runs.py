@@ -93,7 +93,9 @@ def create_run(
         response.headers[REPLAYED_HEADER] = "true"
     # A replay answers as the first request was answered, when the run was just queued.
     return RunCreated(
-        id=run.id, status="queued" if replayed else run.status, location=f"/runs/{run.id}"
+        id=run.id,
+        status=RunStatus.QUEUED if replayed else RunStatus(run.status),
+        location=f"/runs/{run.id}",
     )
 
 
@@ -147,7 +149,7 @@ def list_runs(
     return [
         RunSummary(
             id=r.id,
-            status=r.status,
+            status=RunStatus(r.status),
             reasoner=r.reasoner,
             mode=r.mode,
             n_tasks=r.n_tasks,
@@ -165,7 +167,7 @@ def _run_out(view: service.RunView) -> RunOut:
     names = [r.name for r in instance.robots]
     return RunOut(
         id=run.id,
-        status=run.status,
+        status=RunStatus(run.status),
         reasoner=run.reasoner,
         mode=run.mode,
         max_deviation=run.max_deviation,
@@ -184,7 +186,7 @@ def _run_out(view: service.RunView) -> RunOut:
         ],
         metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
         regret=view.regret,
-        usage=UsageOut(**vars(view.usage)),
+        usage=UsageOut.from_domain(view.usage),
         resumes=run.resumes,
         error=run.error,
         created_at=run.created_at,
@@ -253,7 +255,7 @@ def get_trace(
     prompts = include == "prompts"
     return TraceOut(
         id=trace.run.id,
-        status=trace.run.status,
+        status=RunStatus(trace.run.status),
         reasoner=trace.run.reasoner,
         mode=trace.run.mode,
         max_deviation=trace.run.max_deviation,

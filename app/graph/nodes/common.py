@@ -2,8 +2,28 @@
 
 from __future__ import annotations
 
+import functools
+from typing import Any
+
+from langgraph.runtime import Runtime
+
+from app.domain.decision import DecisionContext
+from app.graph.context import decision_context
 from app.graph.prompts import SYSTEM_PROMPT
 from app.graph.recorder import AttemptRecord, Recorder
+from app.graph.state import GraphContext, LTAAState, Node
+
+
+def cancellable(node: Node) -> Node:
+    """Every node starts by checking for cancellation: a cancel, a drain or a lost lease
+    stops the run at the next node boundary, before the node does anything."""
+
+    @functools.wraps(node)
+    def checked(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
+        runtime.context.recorder.check_cancelled()
+        return node(state, runtime)
+
+    return checked
 
 
 def save_prompt(recorder: Recorder, task_index: int, attempt: int, tier: int, user: str) -> None:
@@ -34,3 +54,9 @@ def require_attempt(recorder: Recorder, task_index: int, attempt: int) -> Attemp
             "recorder lost a write the graph relies on"
         )
     return record
+
+
+def current_attempt(ctx: GraphContext, state: LTAAState) -> tuple[AttemptRecord, DecisionContext]:
+    """The recorded attempt the state points at, and the true facts it is judged against."""
+    record = require_attempt(ctx.recorder, state["task_index"], state["attempt"])
+    return record, decision_context(ctx.problem, state, tier=state["tier"])

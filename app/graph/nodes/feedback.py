@@ -6,13 +6,12 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
-from app.graph.context import decision_context
-from app.graph.nodes.common import require_attempt
+from app.domain.decision import DecisionContext
+from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
+from app.graph.nodes.common import cancellable, current_attempt
 from app.graph.nodes.validate import judge
 from app.graph.state import GraphContext, LTAAState
-from app.graph.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 from app.graph.validation import CRITERION_TITLES, WEIGHTS, Validation
-from app.reasoners.base import DecisionContext
 
 _FIXES = {
     "explanation": "write 2-4 sentences that name your robot and cite its S and load against "
@@ -62,13 +61,13 @@ def compose_feedback(verdict: Validation, dctx: DecisionContext, threshold: floa
     return "\n".join(lines)
 
 
+@cancellable
 def build_feedback(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
-    rec = ctx.recorder
-    rec.check_cancelled()
-    record = require_attempt(rec, state["task_index"], state["attempt"])
-    dctx = decision_context(ctx.problem, state, tier=state["tier"])
-    verdict = judge(record, dctx, ctx.quality_threshold)
+    record, dctx = current_attempt(ctx, state)
+    verdict = ctx.verdicts.recall(state["task_index"], state["attempt"])
+    if verdict is None:  # resumed after validate: its in-memory verdict did not survive
+        verdict = judge(record, dctx, ctx.quality_threshold)
     record.feedback = compose_feedback(verdict, dctx, ctx.quality_threshold)
-    rec.save_attempt(record)
+    ctx.recorder.save_attempt(record)
     return {}

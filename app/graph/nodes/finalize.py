@@ -7,6 +7,7 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
+from app.graph.nodes.common import cancellable
 from app.graph.recorder import AttemptRecord
 from app.graph.state import GraphContext, LTAAState
 from app.graph.validation import validate_text
@@ -23,10 +24,10 @@ def failure_line(record: AttemptRecord, threshold: float) -> str:
     return f"attempt {record.attempt} (tier {record.tier}): {why}"
 
 
+@cancellable
 def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
     rec = ctx.recorder
-    rec.check_cancelled()
     t, a = state["task_index"], state["attempt"]
     dctx = decision_context(ctx.problem, state)
     records = [r for k in range(1, a + 1) if (r := rec.attempt(t, k)) is not None]
@@ -34,8 +35,9 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
     # The answer's text stays in the recorder when it is there already (the accepted
     # attempt): copying it into state would put it into several checkpoints per task.
     text: dict[str, Any]
-    if state.get("accepted") and state.get("robot") is not None:
-        robot, fallback = state["robot"], False
+    chosen = state.get("robot")
+    if state.get("accepted") and chosen is not None:
+        robot, fallback = chosen, False
         accepted = next(r for r in reversed(records) if r.accepted)
         quality = accepted.quality or 0.0
         confidence = (accepted.parsed or {}).get("confidence")

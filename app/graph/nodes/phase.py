@@ -6,12 +6,13 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
+from app.graph.nodes.common import cancellable
 from app.graph.state import GraphContext, LTAAState, task_view
 
 
+@cancellable
 def detect_phase(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
-    ctx.recorder.check_cancelled()
     t, loads = state["task_index"], state["loads"]
     guided = ctx.guidance(t, tuple(loads)) if ctx.guidance is not None else None
     if guided is None or isinstance(guided, int):

@@ -7,14 +7,14 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
-from app.graph.nodes.common import save_prompt
+from app.graph.nodes.common import cancellable, save_prompt
 from app.graph.prompts import user_prompt
 from app.graph.state import GraphContext, LTAAState
 
 
+@cancellable
 def build_prompt(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
-    ctx.recorder.check_cancelled()
     dctx = decision_context(ctx.problem, state, tier=0)
     save_prompt(ctx.recorder, state["task_index"], 1, 0, user_prompt(dctx))
     # A task's flags are reset where the task starts, not where the previous one ended:

@@ -11,16 +11,16 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
-from app.graph.nodes.common import require_attempt
+from app.graph.nodes.common import cancellable, require_attempt
 from app.graph.state import GraphContext, LTAAState
 from app.reasoners.attribution import attributed
 from app.reasoners.base import ReasonerError, ReasonerReply
 
 
+@cancellable
 def reason(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
     rec = ctx.recorder
-    rec.check_cancelled()
     t, a = state["task_index"], state["attempt"]
     record = require_attempt(rec, t, a)
     if record.reply is not None:

@@ -7,17 +7,17 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
-from app.graph.nodes.common import require_attempt, save_prompt
+from app.graph.nodes.common import cancellable, require_attempt, save_prompt
 from app.graph.prompts import retry_prompt
 from app.graph.state import GraphContext, LTAAState
 
 MAX_TIER = 3
 
 
+@cancellable
 def retry(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
     rec = ctx.recorder
-    rec.check_cancelled()
     t, a = state["task_index"], state["attempt"]
     if a >= ctx.max_attempts:
         return {"fallback": True}

@@ -6,15 +6,15 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
-from app.graph.nodes.common import require_attempt
+from app.graph.nodes.common import cancellable, require_attempt
 from app.graph.recorder import DecisionRecord
 from app.graph.state import GraphContext, LTAAState
 
 
+@cancellable
 def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
     rec = ctx.recorder
-    rec.check_cancelled()
     inst = ctx.problem.instance
     t, robot, d = state["task_index"], state["robot"], state["decision"]
     if robot is None or d is None:

@@ -7,12 +7,13 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.domain.metrics import balance_score, severity
+from app.graph.nodes.common import cancellable
 from app.graph.state import GraphContext, LTAAState
 
 
+@cancellable
 def update_workload(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
-    ctx.recorder.check_cancelled()
     robot = state["robot"]
     if robot is None:
         raise RuntimeError(f"task index {state['task_index']} reached update_workload undecided")

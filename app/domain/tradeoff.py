@@ -10,9 +10,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
+from app.domain.decision import DecisionContext
 from app.domain.modes import Mode, tradeoff_threshold
 from app.domain.phases import Phase
-from app.reasoners.base import DecisionContext
 
 DECISIVE_GAP = 25.0  # points: above this the best robot wins in every mode
 NEGLIGIBLE_GAP = 5.0  # points: below this the least-loaded robot wins in every mode

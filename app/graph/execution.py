@@ -1,0 +1,61 @@
+"""The one way an LTAA problem is executed against a compiled graph and a recorder.
+
+Used by the synchronous `ltaa` solver (in memory), the durable run worker and `ltaa run`
+(both through app.solvers.ltaa.execute_ltaa): the reasoner's lifetime, the recursion
+limit, resume-or-start and the completeness check live here once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from langgraph.graph.state import CompiledStateGraph
+
+from app.domain.usage import Usage
+from app.graph.recorder import DecisionRecord
+from app.graph.runner import run_graph
+from app.graph.state import GraphContext
+from app.reasoners.factory import close_reasoner
+
+
+@dataclass(frozen=True)
+class Execution:
+    """How an execution ended: every decision, in task order, and what its LLM calls used
+    (from the record, so a resumed run counts each call once)."""
+
+    decisions: list[DecisionRecord]
+    usage: Usage
+
+
+class GraphEndedEarly(RuntimeError):
+    """The graph returned before every task had a stored decision (a router that raised,
+    LangGraph #8834): completion is judged by the record, never by the graph returning."""
+
+    def __init__(self, stored: int, total: int) -> None:
+        super().__init__(f"graph ended with {stored} of {total} decisions stored")
+        self.stored = stored
+        self.total = total
+
+
+def execute(
+    graph: CompiledStateGraph[Any, Any, Any, Any],
+    context: GraphContext,
+    thread_id: str,
+    *,
+    resume: bool,
+) -> Execution:
+    """Run (or resume) the thread to its end; its decisions and usage.
+
+    Takes ownership of `context.reasoner`: it is closed (its HTTP pool, for the LLM
+    reasoners) however the execution ends. RunCancelled and reasoner errors propagate.
+    """
+    try:
+        run_graph(graph, context, thread_id, resume=resume)
+    finally:
+        close_reasoner(context.reasoner)
+    decisions = context.recorder.decisions()
+    n_tasks = context.problem.instance.n_tasks
+    if [d.task_index for d in decisions] != list(range(n_tasks)):
+        raise GraphEndedEarly(len(decisions), n_tasks)
+    return Execution(decisions=decisions, usage=context.recorder.usage())

@@ -1,0 +1,92 @@
+"""The graph's records as the store's rows, both ways.
+
+The store takes and returns plain column values so that it never depends on the graph or
+the reasoners; this module is the one place that knows how a record maps to its columns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import asdict
+from typing import Any
+
+from app.domain.usage import ReplyUsage, Usage
+from app.graph.recorder import AttemptRecord, DecisionRecord
+from app.reasoners.base import ReasonerReply
+from app.store.models import Attempt, Decision
+
+
+def decision_values(record: DecisionRecord) -> dict[str, Any]:
+    """A decision's column values, without run_id, chain_hash and created_at (the store's)."""
+    values = asdict(record)
+    values["task_id"] = str(record.task_id)
+    return values
+
+
+def attempt_values(record: AttemptRecord) -> dict[str, Any]:
+    """An attempt's column values, keys included, without run_id and created_at."""
+    reply = record.reply
+    return {
+        "task_index": record.task_index,
+        "attempt": record.attempt,
+        "tier": record.tier,
+        "system_prompt": record.system_prompt,
+        "user_prompt": record.user_prompt,
+        "reply_text": reply.text if reply else None,
+        "reply_model": reply.model if reply else None,
+        "input_tokens": reply.input_tokens if reply else 0,
+        "output_tokens": reply.output_tokens if reply else 0,
+        "latency_ms": reply.latency_ms if reply else 0.0,
+        "transport_retries": reply.transport_retries if reply else 0,
+        "reply_extra": dict(reply.extra) if reply else {},
+        "parsed": record.parsed,
+        "scores": record.scores,
+        "quality": record.quality,
+        "accepted": record.accepted,
+        "hard_invalid": record.hard_invalid,
+        "feedback": record.feedback,
+    }
+
+
+def attempt_record(row: Attempt) -> AttemptRecord:
+    reply = None
+    if row.reply_text is not None:
+        reply = ReasonerReply(
+            text=row.reply_text,
+            input_tokens=row.input_tokens,
+            output_tokens=row.output_tokens,
+            latency_ms=row.latency_ms,
+            model=row.reply_model,
+            transport_retries=row.transport_retries,
+            extra=dict(row.reply_extra or {}),
+        )
+    return AttemptRecord(
+        task_index=row.task_index,
+        attempt=row.attempt,
+        tier=row.tier,
+        system_prompt=row.system_prompt,
+        user_prompt=row.user_prompt,
+        reply=reply,
+        parsed=row.parsed,
+        scores=dict(row.scores or {}),
+        quality=row.quality,
+        accepted=row.accepted,
+        hard_invalid=row.hard_invalid,
+        feedback=row.feedback,
+    )
+
+
+def decision_record(row: Decision) -> DecisionRecord:
+    fields = DecisionRecord.__dataclass_fields__
+    return DecisionRecord(**{name: getattr(row, name) for name in fields})
+
+
+def usage_of(rows: Iterable[Any]) -> Usage:
+    """Usage of stored attempt rows (or of repository.reply_costs rows), by the one rule of
+    app.domain.usage."""
+    return Usage.from_replies(
+        ReplyUsage(
+            r.reply_model, r.input_tokens, r.output_tokens, r.transport_retries, r.latency_ms
+        )
+        for r in rows
+    )
