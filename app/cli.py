@@ -22,6 +22,7 @@ from app.config import Settings, get_settings
 from app.domain.errors import DomainError
 from app.domain.lifecycle import RunStatus
 from app.domain.modes import Mode
+from app.reasoners.scope import LLMScope
 
 cli = typer.Typer(
     name="ltaa",
@@ -243,6 +244,10 @@ def run(
         str | None,
         typer.Option(help="'optimizer' to give the reasoner the optimal completion's choice"),
     ] = None,
+    llm_scope: Annotated[
+        LLMScope,
+        typer.Option(help="'contested': ask an LLM reasoner only for contested decisions"),
+    ] = LLMScope.ALL,
 ) -> None:
     """Run the LTAA graph durably in the local data directory, with a progress bar."""
     from app.cli_run import print_summary, run_locally
@@ -258,6 +263,7 @@ def run(
             max_deviation=max_deviation,
             guidance=guidance,
             console=console,
+            llm_scope=llm_scope.value,
         )
     except DomainError as exc:
         _fail(domain_error_body(exc), as_json=False)
