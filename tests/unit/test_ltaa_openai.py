@@ -169,3 +169,12 @@ def test_the_factory_needs_a_base_url_and_a_model(monkeypatch: pytest.MonkeyPatc
 def test_a_base_url_must_be_http() -> None:
     with pytest.raises(ValueError, match="openai_base_url"):
         Settings(openai_base_url="file:///etc/passwd")
+
+
+def test_a_completion_without_choices_is_a_failed_attempt(api: FakeChatCompletionsAPI) -> None:
+    empty = b'{"id": "c", "object": "chat.completion", "created": 1, "model": "m", "choices": []}'
+    api.script(Reply(body=empty))
+    rec, _ = run(problem(n_tasks=1), reasoner(api))
+    failed, fixed = rec.attempts(0)
+    assert failed.reply is not None and "no choices" in str(failed.reply.extra["error"])
+    assert failed.reply.model is None and fixed.accepted and fixed.tier == 1
