@@ -99,6 +99,21 @@ class RunAssignment(BaseModel):
     fallback: bool
 
 
+class SignedHeadsOut(BaseModel):
+    decisions: str | None = Field(description="Head of the decision chain when signed")
+    events: str | None = Field(description="Head of the event chain when signed")
+
+
+class SignOffOut(BaseModel):
+    signer: str = Field(description="The signing API key's name (never the key)")
+    at: Timestamp
+    heads: SignedHeadsOut = Field(
+        description="The chain heads signed; trace/verify's signoffs_ok says whether the "
+        "record still ends there"
+    )
+    statement: str
+
+
 class RunOut(BaseModel):
     id: str
     status: RunStatus
@@ -119,6 +134,9 @@ class RunOut(BaseModel):
     created_at: Timestamp
     updated_at: Timestamp
     finished_at: Timestamp | None
+    signoffs: list[SignOffOut] = Field(
+        default_factory=list, description="Sign-offs of the completed run, oldest first"
+    )
 
 
 class RunSummary(BaseModel):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from sqlalchemy.exc import IntegrityError
@@ -21,6 +21,7 @@ from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import validate_replay
+from app.runs.signoff import SignOff, signoffs
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import repository as repo
@@ -155,6 +156,7 @@ class RunView:
     decisions: list[DecisionRecord]
     usage: Usage
     metrics: Metrics | None
+    signoffs: list[SignOff] = field(default_factory=list)
 
     @property
     def progress(self) -> dict[str, Any]:
@@ -189,12 +191,15 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
             records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
         ]
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
+        signed = signoffs(session=session, run_id=run_id)
     metrics = None
     if run.status == RunStatus.COMPLETED and len(decisions) == run.n_tasks:
         metrics = compute_metrics(
             spec.problem.instance, [d.robot for d in decisions], seed=spec.seed
         )
-    return RunView(run=run, spec=spec, decisions=decisions, usage=usage, metrics=metrics)
+    return RunView(
+        run=run, spec=spec, decisions=decisions, usage=usage, metrics=metrics, signoffs=signed
+    )
 
 
 def list_run_rows(

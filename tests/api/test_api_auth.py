@@ -38,6 +38,7 @@ SUPERVISOR_ENDPOINTS = [
     ("GET", "/runs/{id}/events"),
     ("POST", "/runs/{id}/resume"),
     ("POST", "/runs/{id}/cancel"),
+    ("POST", "/runs/{id}/signoff"),
     ("GET", "/metrics"),
 ]
 

@@ -12,6 +12,7 @@ from app.api.audit import JSONL_RESPONSE, jsonl_trace, verify_out
 from app.api.deps import ClientDep, RunIdPath, RunsDep, SettingsDep, SupervisorDep
 from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey, idempotency_of
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
+from app.api.routes.signoffs import signoff_out
 from app.api.run_examples import RUN_EXAMPLES
 from app.api.run_schemas import (
     AttemptOut,
@@ -176,6 +177,7 @@ def _run_out(view: service.RunView) -> RunOut:
         created_at=run.created_at,
         updated_at=run.updated_at,
         finished_at=run.finished_at,
+        signoffs=[signoff_out(s) for s in view.signoffs],
     )
 
 
