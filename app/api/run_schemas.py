@@ -9,6 +9,7 @@ from pydantic import AfterValidator, BaseModel, Field
 
 from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
 from app.domain.lifecycle import RunStatus
+from app.domain.review import ReviewAction, ReviewOn
 from app.store.models import as_utc
 
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
@@ -19,6 +20,42 @@ RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
 # A date-time without an offset is not RFC 3339 (OpenAPI's format): a client cannot place
 # it, and SQLite hands stored times back without one.
 Timestamp = Annotated[datetime, AfterValidator(as_utc)]
+
+
+class ReviewPolicyIn(BaseModel):
+    """Which decisions wait for a supervisor (SPEC 11). A decision needs review when any
+    listed condition holds; the run pauses before the decision is stored."""
+
+    model_config = {"extra": "forbid"}
+
+    on: list[ReviewOn] = Field(
+        default_factory=list,
+        max_length=3,
+        description="'fallback' (the rules fallback decided), 'low_confidence' (the accepted "
+        "reply's Confidence Level is Low), 'every_decision'",
+    )
+    quality_below: float | None = Field(
+        None, ge=0, le=1, allow_inf_nan=False, description="Review when Q is below this"
+    )
+    regret_above: float | None = Field(
+        None,
+        ge=0,
+        allow_inf_nan=False,
+        description="Review when the proposal gives away more than this many success points "
+        "over the rest of the queue against the exact optimum (the unit of the guidance "
+        "costs, not divided by the number of tasks)",
+    )
+    task_ids: list[int | str] = Field(
+        default_factory=list, max_length=10_000, description="Review these tasks"
+    )
+    features: list[Name] = Field(
+        default_factory=list, max_length=100, description="Review tasks needing any of these"
+    )
+    robots: list[Name] = Field(
+        default_factory=list,
+        max_length=100,
+        description="Review decisions proposing any of these robots",
+    )
 
 
 class RunRequest(InstanceRequest):
@@ -64,6 +101,9 @@ class RunRequest(InstanceRequest):
         description="LLM tokens (input + output) the run may spend; once spent, the "
         "remaining tasks use the offline 'rules' reasoner (default: the server's setting)",
     )
+    review: ReviewPolicyIn | None = Field(
+        None, description="Supervisor review of decisions (default: none); see GET /reviews"
+    )
     replay_of: str | None = Field(
         None,
         min_length=1,
@@ -90,6 +130,19 @@ class Progress(BaseModel):
     phase: Literal["early", "middle", "late"]
 
 
+class DecisionReviewOut(BaseModel):
+    """A supervisor's review of a decision (SPEC 11); covered by the decision's chain hash."""
+
+    action: ReviewAction
+    reviewer: str = Field(description="The resolving API key's name")
+    reason: str | None
+    at: Timestamp
+    triggers: list[str]
+    overridden_from: str | None = Field(
+        None, description="override: the robot the run had proposed"
+    )
+
+
 class RunAssignment(BaseModel):
     task_index: int
     task_id: int | str
@@ -97,6 +150,7 @@ class RunAssignment(BaseModel):
     robot: str
     success: float
     fallback: bool
+    review: DecisionReviewOut | None = None
 
 
 class SignedHeadsOut(BaseModel):
@@ -205,6 +259,7 @@ class DecisionOut(BaseModel):
     fallback: bool
     failure_log: list[str]
     regret: float | None
+    review: DecisionReviewOut | None = None
     attempts: list[AttemptOut]
 
 

@@ -16,7 +16,7 @@ from app.domain.phases import detect_phase
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.runs import lifecycle, records
+from app.runs import lifecycle, records, reviews
 from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
@@ -119,6 +119,14 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
             )
         if run.status == RunStatus.CANCELLED:
             raise RunStateConflictError(run_id, run.status, "resume", "Create a new run instead.")
+        if run.status == RunStatus.AWAITING_REVIEW:
+            raise RunStateConflictError(
+                run_id,
+                run.status,
+                "resume",
+                "It waits for a supervisor: resolve its review (GET /reviews, "
+                "POST /runs/{id}/reviews/{task_index}).",
+            )
         if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
         if run.status == RunStatus.FAILED:
@@ -136,7 +144,17 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
         if run.status in FINISHED:
             raise RunStateConflictError(run_id, run.status, "cancel", "It has already ended.")
         run.cancel_requested = True
-        if not worker.is_active(run_id):
+        if run.status == RunStatus.AWAITING_REVIEW:
+            # Nobody holds it: close its review, then cancel (the last event is `cancelled`).
+            reviews.close_pending(session, run_id, "the run was cancelled")
+            lifecycle.move(
+                session,
+                run,
+                RunStatus.CANCELLED,
+                event=EventKind.CANCELLED,
+                detail={"reason": "cancel requested while awaiting review"},
+            )
+        elif not worker.is_active(run_id):
             lifecycle.move(
                 session,
                 run,

@@ -9,6 +9,7 @@ from typing import Any
 from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.problem import Problem
+from app.domain.review import ReviewPolicy
 from app.domain.serialize import instance_from_dict, instance_to_dict
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
@@ -32,6 +33,12 @@ class RunSpec:
     token_budget: int | None = None
     # reasoner 'replay': the finished run whose recorded replies are replayed.
     replay_of: str | None = None
+    # app.domain.review.ReviewPolicy as JSON; None: no review.
+    review: dict[str, Any] | None = None
+
+    @property
+    def review_policy(self) -> ReviewPolicy | None:
+        return None if self.review is None else ReviewPolicy.from_json(self.review)
 
     @classmethod
     def for_instance(cls, instance: Instance, **params: Any) -> RunSpec:

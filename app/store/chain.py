@@ -107,7 +107,10 @@ DECISION_FIELDS: dict[str, Normaliser] = {
     "balance_after": _float,
     "severity_after": _str,
     "regret": _float,
+    "review": _json,
 }
+# Hashed only when set, so decisions stored before the column existed keep their links.
+OPTIONAL_DECISION_FIELDS = frozenset({"review"})
 ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "attempt": _int,
     "tier": _int,
@@ -158,7 +161,11 @@ def attempts_digest(attempts: Iterable[Mapping[Any, Any]]) -> str:
 
 def decision_link(prev: str, decision: Mapping[str, Any], attempts: str) -> str:
     """`decision`: the DECISION_FIELDS columns; `attempts`: attempts_digest of its task."""
-    content = _content(DECISION_FIELDS, decision)
+    content = {
+        name: normalise(decision.get(name))
+        for name, normalise in DECISION_FIELDS.items()
+        if name not in OPTIONAL_DECISION_FIELDS or decision.get(name) is not None
+    }
     return _sha256(canonical_json({"prev": prev, "decision": content, "attempts": attempts}))
 
 

@@ -17,6 +17,7 @@ from app.api.run_examples import RUN_EXAMPLES
 from app.api.run_schemas import (
     AttemptOut,
     DecisionOut,
+    DecisionReviewOut,
     EventOut,
     Progress,
     RunAssignment,
@@ -30,7 +31,7 @@ from app.api.run_schemas import (
 )
 from app.api.schemas import MetricsOut, UsageOut
 from app.domain.serialize import instance_to_dict
-from app.runs import audit, service
+from app.runs import audit, reviews, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
 from app.store.models import Attempt
@@ -77,6 +78,10 @@ def create_run(
             token_budget=body.token_budget
             if body.token_budget is not None
             else settings.run_token_budget,
+            review=reviews.policy_for(
+                body.review.model_dump(mode="json") if body.review is not None else None,
+                problem.instance,
+            ),
         )
     run, replayed = service.create_or_replay_run(
         sessions=runs.sessions,
@@ -146,6 +151,10 @@ def list_runs(
     ]
 
 
+def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
+    return None if review is None else DecisionReviewOut.model_validate(review)
+
+
 def _run_out(view: service.RunView) -> RunOut:
     run, spec = view.run, view.spec
     instance = spec.problem.instance
@@ -166,6 +175,7 @@ def _run_out(view: service.RunView) -> RunOut:
                 robot=names[d.robot],
                 success=d.expected_success,
                 fallback=d.fallback,
+                review=_review_out(d.review),
             )
             for d in view.decisions
         ],
@@ -266,6 +276,7 @@ def get_trace(
                 fallback=d.fallback,
                 failure_log=d.failure_log,
                 regret=d.regret,
+                review=_review_out(d.review),
                 attempts=[_attempt_out(a, prompts) for a in trace.attempts.get(d.task_index, [])],
             )
             for d in trace.decisions
