@@ -1,0 +1,234 @@
+"""Supervisor reviews against the real server (uvicorn subprocess, SIGKILL), the real
+Anthropic SDK against the fake Messages API, and two processes on PostgreSQL."""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from app.api.auth import key_fingerprint
+from app.reasoners.rules import compose_answer
+from tests.e2e.postgres import fresh_database, query
+from tests.e2e.server import Server
+from tests.e2e.test_crash_chaos import wait_for_log
+from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_prompt, prompt_of
+from tests.fakes.scripted_reasoner import GARBAGE
+
+pytestmark = pytest.mark.e2e
+
+SUPERVISOR_KEY = "supervisor-key-Jm3Kd8Qw2Vx6Bn5Y"
+CLIENT_KEY = "client-key-7Hq2vN9xLp4Rt8Zw"
+KEYS = {
+    "LTAA_API_KEYS": f"{SUPERVISOR_KEY}:supervisor,{CLIENT_KEY}:client",
+    "LTAA_API_KEY_NAMES": f"{key_fingerprint(SUPERVISOR_KEY)}=Dana Safety",
+}
+AS_SUPERVISOR = {"Authorization": f"Bearer {SUPERVISOR_KEY}"}
+AS_CLIENT = {"Authorization": f"Bearer {CLIENT_KEY}"}
+INVALID_TASK = 5
+
+
+def _client(server: Server) -> httpx.Client:
+    return httpx.Client(base_url=server.url, timeout=30, headers=AS_SUPERVISOR)
+
+
+def _wait(server: Server, run_id: str, statuses: tuple[str, ...]) -> dict[str, Any]:
+    deadline = time.monotonic() + 120
+    with _client(server) as c:
+        while True:
+            state: dict[str, Any] = c.get(f"/runs/{run_id}").json()
+            if state["status"] in statuses:
+                return state
+            assert time.monotonic() < deadline, state
+            time.sleep(0.05)
+
+
+def _events(server: Server, run_id: str) -> list[dict[str, Any]]:
+    with _client(server) as c:
+        events: list[dict[str, Any]] = c.get(f"/runs/{run_id}/trace").json()["events"]
+    return events
+
+
+def invalid_at_task_5(request: dict[str, Any]) -> Reply:
+    ctx = context_from_prompt(prompt_of(request))
+    return Reply.answer(GARBAGE if ctx.task_index == INVALID_TASK else compose_answer(ctx))
+
+
+def test_fallback_review_survives_sigkill_and_an_override_completes_the_run(
+    tmp_path: Path,
+) -> None:
+    body = {
+        "scenario": "baseline",
+        "reasoner": "anthropic",
+        "model": "claude-test",
+        "review": {"on": ["fallback"]},
+    }
+    data = tmp_path / "data"
+    with FakeMessagesAPI(default=invalid_at_task_5) as api:
+        env = {
+            **KEYS,
+            "LTAA_ANTHROPIC_API_KEY": "test-key",
+            "LTAA_ANTHROPIC_BASE_URL": api.base_url,
+        }
+        server = Server(data, env=env).start()
+        try:
+            with _client(server) as c:
+                run_id = c.post("/runs", json=body, headers=AS_CLIENT).json()["id"]
+            _wait(server, run_id, ("awaiting_review",))
+            with _client(server) as c:
+                reviews = c.get("/reviews").json()
+                assert c.get("/reviews", headers=AS_CLIENT).status_code == 403
+            assert len(reviews) == 1
+            review = reviews[0]
+            assert (review["run_id"], review["task_index"]) == (run_id, INVALID_TASK)
+            assert review["triggers"] == ["fallback"] and review["proposal"]["fallback"] is True
+            assert [a["robot"] for a in review["alternatives"]] == ["light", "medium", "heavy"]
+            calls_before = len(api.requests)
+            # Tasks 0-4 once each; task 5 four times (first try and three retries).
+            assert calls_before == INVALID_TASK + 4
+        finally:
+            server.kill()
+
+        server = Server(data, env=env).start()
+        try:
+            assert _wait(server, run_id, ("awaiting_review",))["status"] == "awaiting_review"
+            kinds = [e["kind"] for e in _events(server, run_id)]
+            assert kinds == ["created", "started", "review_requested"]
+            assert len(api.requests) == calls_before  # nothing re-ran after the restart
+            with _client(server) as c:
+                answer = c.post(
+                    f"/runs/{run_id}/reviews/{INVALID_TASK}",
+                    json={
+                        "action": "override",
+                        "robot": "medium",
+                        "reason": "light is on the scaffold",
+                    },
+                )
+                assert answer.status_code == 200, answer.text
+                done = _wait(server, run_id, ("completed", "failed"))
+                trace = c.get(f"/runs/{run_id}/trace").json()
+                verify = c.get(f"/runs/{run_id}/trace/verify").json()
+        finally:
+            server.stop()
+
+    assert done["status"] == "completed", done
+    decision = trace["decisions"][INVALID_TASK]
+    assert decision["robot"] == "medium" and decision["fallback"] is True
+    assert decision["review"]["overridden_from"] == review["proposal"]["robot"] != "medium"
+    assert decision["review"]["reviewer"] == "Dana Safety"
+    assert decision["review"]["reason"] == "light is on the scaffold"
+    medium = 1
+    assert decision["loads_after"][medium] == decision["loads_before"][medium] + 1
+    assert trace["decisions"][INVALID_TASK + 1]["loads_before"] == decision["loads_after"]
+    assert done["assignments"][INVALID_TASK]["robot"] == "medium"
+    assert sum(done["workload"].values()) == 36
+    assert verify["ok"] is True
+    # Every attempt asked the API exactly once.
+    per_task = Counter(context_from_prompt(prompt_of(r)).task_index for r in api.requests)
+    assert per_task[INVALID_TASK] == 4 and all(
+        n == 1 for t, n in per_task.items() if t != INVALID_TASK
+    )
+    assert len(per_task) == 36 and done["resumes"] == 0
+
+
+def test_an_approval_killed_at_the_resumes_first_node_is_applied_once(tmp_path: Path) -> None:
+    body = {"scenario": "baseline", "review": {"task_ids": [str(INVALID_TASK)]}}
+    data = tmp_path / "data"
+    # Held after finalize of task 5 on its second pass (the first pass pauses for review
+    # inside finalize, before the hold): the resolution is applied, nothing stored yet.
+    server = Server(data, env=KEYS).start(LTAA_TEST_PAUSE=f"{INVALID_TASK}:finalize:after")
+    try:
+        with _client(server) as c:
+            run_id = c.post("/runs", json=body).json()["id"]
+        _wait(server, run_id, ("awaiting_review",))
+        with _client(server) as c:
+            answer = c.post(f"/runs/{run_id}/reviews/{INVALID_TASK}", json={"action": "approve"})
+        assert answer.status_code == 200, answer.text
+        wait_for_log(server, f"holding task {INVALID_TASK} after finalize")
+    finally:
+        server.kill()
+
+    server = Server(data, env=KEYS).start()
+    try:
+        done = _wait(server, run_id, ("completed", "failed", "awaiting_review"))
+        with _client(server) as c:
+            trace = c.get(f"/runs/{run_id}/trace").json()
+            verify = c.get(f"/runs/{run_id}/trace/verify").json()
+    finally:
+        server.stop()
+    assert done["status"] == "completed", done
+    kinds = [e["kind"] for e in trace["events"]]
+    assert kinds.count("review_requested") == kinds.count("review_resolved") == 1
+    assert kinds.count("resumed") == 1 and done["resumes"] == 1  # the kill, not the review
+    reviewed = [d for d in trace["decisions"] if d["review"] is not None]
+    assert [d["task_index"] for d in reviewed] == [INVALID_TASK]
+    assert reviewed[0]["review"]["action"] == "approve"
+    assert [d["task_index"] for d in trace["decisions"]] == list(range(36))
+    assert verify["ok"] is True
+
+
+@pytest.fixture
+def postgres_url() -> Iterator[str]:
+    with fresh_database("ltaa_reviews") as url:
+        yield url
+
+
+def test_postgres_two_processes_apply_each_resolution_once_and_never_claim_a_waiting_run(
+    tmp_path: Path, postgres_url: str
+) -> None:
+    env = {**KEYS, "LTAA_DATABASE_URL": postgres_url, "LTAA_CLAIM_POLL_S": "0.2"}
+    a = Server(tmp_path / "a", env={**env, "LTAA_WORKER_NAME": "api-a"}).start()
+    b = Server(tmp_path / "b", env={**env, "LTAA_WORKER_NAME": "api-b"}).start()
+    tasks = [{"id": f"T{i}", "features": ["heavy" if i % 2 else "careful"]} for i in range(6)]
+    robots = [
+        {"name": "x", "success": {"heavy": 0.9, "careful": 0.4}},
+        {"name": "y", "success": {"heavy": 0.5, "careful": 0.8}},
+    ]
+    body = {"tasks": tasks, "robots": robots, "review": {"on": ["every_decision"]}}
+    try:
+        with _client(a) as c:
+            run_id = c.post("/runs", json=body).json()["id"]
+        for task_index in range(6):
+            _wait(a, run_id, ("awaiting_review",))
+            # A waiting run is nobody's: no lease, and no poller takes it (several polls).
+            deadline = time.monotonic() + 1.0
+            while time.monotonic() < deadline:
+                status, owner = query(
+                    postgres_url, "SELECT status, lease_owner FROM runs WHERE id = %s", run_id
+                )[0]
+                assert (status, owner) == ("awaiting_review", None)
+                time.sleep(0.1)
+            resolver = a if task_index % 2 else b  # each process resolves every other one
+            with _client(resolver) as c:
+                answer = c.post(
+                    f"/runs/{run_id}/reviews/{task_index}",
+                    json={"action": "override", "robot": "x", "reason": "x is on site"}
+                    if task_index == 0
+                    else {"action": "approve"},
+                )
+            assert answer.status_code == 200, answer.text
+            with _client(a if resolver is b else b) as c:  # the other process: too late
+                late = c.post(f"/runs/{run_id}/reviews/{task_index}", json={"action": "approve"})
+            assert late.status_code == 409
+        done = _wait(b, run_id, ("completed", "failed"))
+        events = _events(b, run_id)
+    finally:
+        a.stop()
+        b.stop()
+    assert done["status"] == "completed", done
+    kinds = [e["kind"] for e in events]
+    assert kinds.count("review_requested") == kinds.count("review_resolved") == 6
+    assert kinds.count("started") == 1 and "resumed" not in kinds
+    rows = query(
+        postgres_url,
+        "SELECT task_index, robot_name, review IS NOT NULL FROM decisions "
+        "WHERE run_id = %s ORDER BY task_index",
+        run_id,
+    )
+    assert [r[0] for r in rows] == list(range(6)) and all(r[2] for r in rows)
+    assert rows[0][1] == "x"
