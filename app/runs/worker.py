@@ -154,8 +154,9 @@ class RunWorker:
     # -- execution ---------------------------------------------------------------------
 
     def _execute(self, run_id: str, stop: RunStop) -> None:
+        paused = False
         try:
-            self._run(run_id, stop)
+            paused = self._run(run_id, stop)
         except Exception:  # a bug must not kill the worker thread silently
             log.exception("run %s crashed", run_id)
             self._end(
@@ -170,14 +171,23 @@ class RunWorker:
                 self._futures.pop(run_id, None)
                 self._stops.pop(run_id, None)
             self.ownership.finished(run_id, stop)
+        if paused:
+            # A resolution that came while this thread was still winding down found the
+            # run held here (submit refused it): pick it up now that the slot is free.
+            with self._sessions() as session:
+                run = repo.get_run(session=session, run_id=run_id)
+                queued = run is not None and run.status == RunStatus.QUEUED
+            if queued:
+                self.submit(run_id)
 
-    def _run(self, run_id: str, stop: RunStop) -> None:
+    def _run(self, run_id: str, stop: RunStop) -> bool:
+        """Execute the run; True if it paused for a review."""
         if stop.shutting_down.is_set():
-            return  # draining before it began: it stays queued (or interrupted) for the next start
+            return False  # draining before it began: it stays queued (or interrupted)
         checkpoint = self.checkpointer.get_tuple({"configurable": {"thread_id": run_id}})
         admission = self._admit(run_id, stop, checkpoint)
         if admission is None:
-            return
+            return False
         spec = admission.spec
         fence = self.ownership.fence(run_id, stop)
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop, fence=fence)
@@ -192,7 +202,7 @@ class RunWorker:
                 {"error": exc.message, "field": exc.field},
                 error=f"cannot resume: {exc.message}",
             )
-            return
+            return False
         recorded = None
         if spec.replay_of is not None:
             # A replay re-applies the original's resolutions and never waits for a review.
@@ -225,8 +235,9 @@ class RunWorker:
         else:
             if execution.paused is not None:
                 self._pause(run_id, stop, execution.paused)
-            else:
-                self._end(run_id, RunStatus.COMPLETED, {"decisions": len(execution.decisions)})
+                return True
+            self._end(run_id, RunStatus.COMPLETED, {"decisions": len(execution.decisions)})
+        return False
 
     def _pause(self, run_id: str, stop: RunStop, payload: dict[str, Any]) -> None:
         """The graph paused for a review: record it and let go of the run (no slot is held

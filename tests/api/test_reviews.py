@@ -15,6 +15,7 @@ from pydantic import SecretStr
 from app.api.auth import key_fingerprint
 from tests.api.conftest import ClientFactory
 from tests.run_polling import wait_until
+from tests.sse import parse_events
 
 WAITING = ("awaiting_review", "completed", "failed", "cancelled")
 EVERY = {"on": ["every_decision"]}
@@ -331,3 +332,22 @@ def test_a_client_key_may_not_list_or_resolve_reviews(make_client: ClientFactory
         f"/runs/{'0' * 32}/reviews/0", json={"action": "approve"}, headers=headers
     )
     assert response.status_code == 403
+
+
+def test_review_requests_and_resolutions_stream_as_review_events(
+    make_client: ClientFactory,
+) -> None:
+    client = make_client(events_max_stream_s=0.5)
+    run_id = client.post("/runs", json={**TIGHT, "review": EVERY}).json()["id"]
+    _awaiting(client, run_id)
+    client.post(f"/runs/{run_id}/reviews/0", json={"action": "approve"})
+    _awaiting(client, run_id)
+    with client.stream("GET", f"/runs/{run_id}/events") as response:
+        events = list(parse_events(response.iter_lines()))
+    reviews = [
+        (e.data["kind"], e.data["detail"]["task_index"]) for e in events if e.event == "review"
+    ]
+    assert reviews == [("review_requested", 0), ("review_resolved", 0), ("review_requested", 1)]
+    decisions = [e.data for e in events if e.event == "decision"]
+    assert len(decisions) == 1 and decisions[0]["review"]["action"] == "approve"
+    assert "review_requested" not in [e.data["kind"] for e in events if e.event == "run"]
