@@ -232,3 +232,56 @@ def test_postgres_two_processes_apply_each_resolution_once_and_never_claim_a_wai
     )
     assert [r[0] for r in rows] == list(range(6)) and all(r[2] for r in rows)
     assert rows[0][1] == "x"
+
+
+def test_the_cli_lists_and_resolves_reviews_against_a_real_server(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from app.cli import cli
+
+    runner = CliRunner()
+    server = Server(tmp_path / "data", env=KEYS).start()
+    try:
+        with _client(server) as c:
+            run_id = c.post("/runs", json={"scenario": "baseline", "review": {"task_ids": ["3"]}})
+            run_id = run_id.json()["id"]
+        _wait(server, run_id, ("awaiting_review",))
+        base = ["--url", server.url, "--key", SUPERVISOR_KEY]
+        listed = runner.invoke(cli, ["reviews", *base], env={"COLUMNS": "240"})
+        assert listed.exit_code == 0, listed.output
+        assert run_id in listed.output and "3 (3: Backward)" in listed.output
+        refused = runner.invoke(cli, ["reviews", "--url", server.url, "--key", CLIENT_KEY])
+        assert refused.exit_code == 1 and "403" in refused.output
+
+        no_reason = runner.invoke(cli, ["review", run_id, "3", "--override", "light", *base])
+        assert no_reason.exit_code == 2 and "--reason" in no_reason.output
+        both = runner.invoke(cli, ["review", run_id, "3", "--approve", "--override", "x", *base])
+        assert both.exit_code == 2
+        unknown = runner.invoke(
+            cli, ["review", run_id, "3", "--override", "crane", "--reason", "r", *base]
+        )
+        assert unknown.exit_code == 1 and "crane" in unknown.output
+
+        done = runner.invoke(
+            cli,
+            [
+                "review",
+                run_id,
+                "3",
+                "--override",
+                "light",
+                "--reason",
+                "heavy is refuelling",
+                *base,
+            ],
+        )
+        assert done.exit_code == 0, done.output
+        assert "overridden to light by Dana Safety" in done.output
+        state = _wait(server, run_id, ("completed", "failed"))
+        again = runner.invoke(cli, ["review", run_id, "3", "--approve", *base])
+        assert again.exit_code == 1 and "409" in again.output
+    finally:
+        server.stop()
+    assert state["status"] == "completed"
+    assert state["assignments"][3]["robot"] == "light"
+    assert state["assignments"][3]["review"]["reviewer"] == "Dana Safety"
