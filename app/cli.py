@@ -56,6 +56,30 @@ def serve(
     )
 
 
+@cli.command("reencrypt-webhook-secrets")
+def reencrypt_webhook_secrets() -> None:
+    """Re-encrypt every webhook secret under the first key of LTAA_SECRET_KEY (after a
+    server key rotation: new key first, old key after it; then drop the old key)."""
+    from app.store.db import make_engine, make_session_factory
+    from app.webhooks.errors import SecretKeyError
+    from app.webhooks.secret_box import SecretBox
+    from app.webhooks.service import reencrypt_secrets
+
+    settings = get_settings()
+    apply_migrations(settings)
+    raw = settings.secret_key.get_secret_value() if settings.secret_key else None
+    engine = make_engine(settings.db_url)
+    try:
+        box = SecretBox.from_setting(raw, settings.data_dir)
+        count = reencrypt_secrets(sessions=make_session_factory(engine), box=box)
+    except SecretKeyError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=1) from None
+    finally:
+        engine.dispose()
+    typer.echo(f"re-encrypted {count} webhook secret(s) under the first key")
+
+
 def apply_migrations(settings: Settings) -> None:
     """Bring the database to the latest schema before serving (never at import)."""
     from app.store.migrate import upgrade_head  # alembic loads only for this command

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 DEFAULT_MAX_BODY_BYTES = 10 * 1024 * 1024  # 10,000 tasks with TEACh metadata fit comfortably
+# Seconds between a webhook's failed attempts (8 attempts over ~27.6 h, as Svix does): a
+# receiver down for a day still gets every event. Jitter of +-20% is added to each.
+DEFAULT_WEBHOOK_RETRY_DELAYS_S = (5.0, 300.0, 1800.0, 7200.0, 18000.0, 36000.0, 36000.0)
 
 
 class Settings(BaseSettings):
@@ -82,6 +85,46 @@ class Settings(BaseSettings):
     # A stream ends after this long even if the run has not; EventSource reconnects with
     # Last-Event-ID and misses nothing. (A shutdown ends every stream at once.)
     events_max_stream_s: float = Field(300.0, gt=0)
+
+    # -- webhooks (docs/webhooks.md) -----------------------------------------------------
+    # Fernet keys (comma-separated; the first encrypts, all decrypt) protecting webhook
+    # secrets at rest. Unset: a key file generated in data_dir on first use (one process);
+    # processes sharing a PostgreSQL database must share this setting.
+    secret_key: SecretStr | None = None
+    # Deliver to private, loopback, link-local... addresses (tests; site LANs).
+    webhook_allow_private: bool = False
+    webhook_retry_delays_s: Annotated[list[float], NoDecode] = Field(
+        default_factory=lambda: list(DEFAULT_WEBHOOK_RETRY_DELAYS_S),
+        description="Comma-separated seconds between attempts; then the delivery fails",
+    )
+    webhook_timeout_s: float = Field(10.0, gt=0, le=60)
+    webhook_max_response_bytes: int = Field(64 * 1024, ge=0)
+    webhook_poll_s: float = Field(0.5, gt=0, le=60)
+    # How long a process holds a claimed delivery; past it, another process may retry it
+    # (its owner died). Longer than the timeout, so a live process always finishes first.
+    webhook_claim_s: float = Field(60.0, gt=0)
+    webhook_concurrency: int = Field(4, ge=1, le=64)
+    webhook_secret_grace_s: float = Field(
+        86400.0, ge=0, description="How long a rotated-out secret keeps signing"
+    )
+    # Ops/test: off, deliveries wait in the outbox (a restart with it on sends them).
+    webhook_dispatch: bool = True
+    # Test-only resolver seam: "host=ip,host=ip" answers DNS for these names.
+    test_webhook_resolve: str | None = None
+
+    @field_validator("webhook_retry_delays_s", mode="before")
+    @classmethod
+    def _delays(cls, value: object) -> object:
+        if isinstance(value, str):
+            return [part.strip() for part in value.split(",") if part.strip()]
+        return value
+
+    @field_validator("webhook_retry_delays_s")
+    @classmethod
+    def _non_negative(cls, value: list[float]) -> list[float]:
+        if any(delay < 0 for delay in value):
+            raise ValueError("retry delays must be >= 0 seconds")
+        return value
 
     @field_validator("log_level", mode="before")
     @classmethod

@@ -1,7 +1,7 @@
 """run_annotations: the append-only chain of records made about a run after it finished
 
 Revision ID: 0007_reviews_annotations
-Revises: 0004
+Revises: 0005
 Create Date: 2026-12-01 20:45:00.000000
 """
 from alembic import op
@@ -9,7 +9,7 @@ import sqlalchemy as sa
 
 
 revision = '0007_reviews_annotations'
-down_revision = '0004'
+down_revision = '0005'
 branch_labels = None
 depends_on = None
 

@@ -14,7 +14,7 @@ from fastapi.testclient import TestClient
 from tests.api.conftest import ClientFactory
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_prompt, prompt_of
 from tests.fakes.scripted_reasoner import GARBAGE, poor_answer
-from tests.run_polling import wait_until
+from tests.polling import wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
 ZERO_USAGE = {"llm_calls": 0, "input_tokens": 0, "output_tokens": 0}

@@ -5,7 +5,6 @@ uninterrupted run's allocation, one decision per task, and no LLM call paid twic
 from __future__ import annotations
 
 import random
-import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -62,16 +61,6 @@ def calls_per_attempt(api: FakeMessagesAPI, first: int = 0) -> Counter[tuple[int
     return Counter(keys)
 
 
-def wait_for_log(server: Server, text: str, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        assert server.proc is not None and server.proc.poll() is None, server.log.read_text()
-        if text in server.log.read_text():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"server never logged {text!r}:\n{server.log.read_text()[-3000:]}")
-
-
 def test_ten_sigkills_at_every_kind_of_node_change_nothing(tmp_path: Path) -> None:
     points = kill_points(seed=6)
     assert {p.node for p in points} == set(NODES)
@@ -90,16 +79,13 @@ def test_ten_sigkills_at_every_kind_of_node_change_nothing(tmp_path: Path) -> No
         env = {"LTAA_ANTHROPIC_API_KEY": "test-key", "LTAA_ANTHROPIC_BASE_URL": api.base_url}
         server = Server(data, env=env)
         for n, point in enumerate(points):
-            server.start(
-                LTAA_TEST_PAUSE=f"{point.task_index}:{point.node}:"
-                f"{'after' if point.after else 'before'}",
-            )
+            server.start(pause=point)
             if n == 0:
                 with server.client() as c:
                     created = c.post("/runs", json=body)
                 assert created.status_code == 202, created.text
                 run_id = created.json()["id"]
-            wait_for_log(server, point.message())
+            server.wait_for_log(point.message())
             server.kill()
             server = Server(data, env=env)
 

@@ -21,7 +21,7 @@ from pydantic import SecretStr
 from app.config import Settings
 from app.main import create_app
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, answer_from_prompt, prompt_of
-from tests.run_polling import wait_until
+from tests.polling import wait_until
 
 TRANSPORT_RETRIES = 2  # the SDK's max_retries in these tests
 TIMEOUT_S = 2.0  # the client's timeout; a "slow" reply takes longer

@@ -30,7 +30,7 @@ from app.store.migrate import upgrade_head
 from tests.factories import run_row
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
-from tests.run_polling import wait_until
+from tests.polling import wait_until
 from tests.unit.ltaa_support import problem, reply_of, run
 
 N_TASKS = 6
