@@ -4,7 +4,6 @@ hash-chained, checked by trace/verify beside (never inside) the decision and eve
 from __future__ import annotations
 
 import sqlite3
-import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -18,16 +17,14 @@ from app.runs import lifecycle
 from app.store import chain
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.models import RunAnnotation
+from tests.polling import wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
 
 
 def _completed_run(client: TestClient) -> str:
     run_id = str(client.post("/runs", json=BASELINE).json()["id"])
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{run_id}").json()["status"] != "completed":
-        assert time.monotonic() < deadline, "run did not complete"
-        time.sleep(0.02)
+    assert wait_until(client, run_id)["status"] == "completed"
     return run_id
 
 

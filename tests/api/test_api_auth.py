@@ -39,6 +39,8 @@ SUPERVISOR_ENDPOINTS = [
     ("POST", "/runs/{id}/resume"),
     ("POST", "/runs/{id}/cancel"),
     ("POST", "/runs/{id}/signoff"),
+    ("GET", "/reviews"),
+    ("POST", "/runs/{id}/reviews/{task_index}"),
     ("GET", "/metrics"),
     ("POST", "/webhooks"),
     ("GET", "/webhooks"),

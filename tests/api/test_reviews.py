@@ -14,7 +14,7 @@ from pydantic import SecretStr
 
 from app.api.auth import key_fingerprint
 from tests.api.conftest import ClientFactory
-from tests.run_polling import wait_until
+from tests.polling import wait_until
 from tests.sse import parse_events
 
 WAITING = ("awaiting_review", "completed", "failed", "cancelled")

@@ -4,7 +4,6 @@ trace/verify's signoffs_ok against later edits of the record."""
 from __future__ import annotations
 
 import sqlite3
-import time
 
 import pytest
 from fastapi.testclient import TestClient
@@ -13,6 +12,7 @@ from pydantic import SecretStr
 from app.api.auth import key_fingerprint
 from app.config import Settings
 from tests.api.conftest import ClientFactory
+from tests.polling import wait_until
 
 CLIENT_KEY = "client-key-7Hq2vN9xLp4Rt8Zw"
 SUPERVISOR_KEY = "supervisor:key-Jm3Kd8Qw2Vx6Bn5Y"  # with a colon: the role is after the last
@@ -31,10 +31,7 @@ def secured(make_client: ClientFactory) -> TestClient:
 
 
 def _wait(client: TestClient, run_id: str, status: str) -> None:
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{run_id}", headers=AS_CLIENT).json()["status"] != status:
-        assert time.monotonic() < deadline, f"run did not reach {status}"
-        time.sleep(0.02)
+    wait_until(client, run_id, (status,), headers=AS_CLIENT)
 
 
 def _completed(client: TestClient) -> str:

@@ -13,12 +13,13 @@ import httpx
 import pytest
 
 from app.api.auth import key_fingerprint
+from app.graph.pause import PausePoint
 from app.reasoners.rules import compose_answer
 from tests.e2e.postgres import fresh_database, query
 from tests.e2e.server import Server
-from tests.e2e.test_crash_chaos import wait_for_log
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_prompt, prompt_of
 from tests.fakes.scripted_reasoner import GARBAGE
+from tests.polling import eventually
 
 pytestmark = pytest.mark.e2e
 
@@ -38,14 +39,14 @@ def _client(server: Server) -> httpx.Client:
 
 
 def _wait(server: Server, run_id: str, statuses: tuple[str, ...]) -> dict[str, Any]:
-    deadline = time.monotonic() + 120
     with _client(server) as c:
-        while True:
-            state: dict[str, Any] = c.get(f"/runs/{run_id}").json()
-            if state["status"] in statuses:
-                return state
-            assert time.monotonic() < deadline, state
-            time.sleep(0.05)
+        state: dict[str, Any] = eventually(
+            lambda: c.get(f"/runs/{run_id}").json(),
+            until=lambda s: s["status"] in statuses,
+            timeout=120,
+            what=f"run {run_id} reached {' or '.join(statuses)}",
+        )
+    return state
 
 
 def _events(server: Server, run_id: str) -> list[dict[str, Any]]:
@@ -141,7 +142,7 @@ def test_an_approval_killed_at_the_resumes_first_node_is_applied_once(tmp_path: 
     data = tmp_path / "data"
     # Held after finalize of task 5 on its second pass (the first pass pauses for review
     # inside finalize, before the hold): the resolution is applied, nothing stored yet.
-    server = Server(data, env=KEYS).start(LTAA_TEST_PAUSE=f"{INVALID_TASK}:finalize:after")
+    server = Server(data, env=KEYS).start(pause=PausePoint(INVALID_TASK, "finalize", after=True))
     try:
         with _client(server) as c:
             run_id = c.post("/runs", json=body).json()["id"]
@@ -149,7 +150,7 @@ def test_an_approval_killed_at_the_resumes_first_node_is_applied_once(tmp_path: 
         with _client(server) as c:
             answer = c.post(f"/runs/{run_id}/reviews/{INVALID_TASK}", json={"action": "approve"})
         assert answer.status_code == 200, answer.text
-        wait_for_log(server, f"holding task {INVALID_TASK} after finalize")
+        server.wait_for_log(PausePoint(INVALID_TASK, "finalize", after=True).message())
     finally:
         server.kill()
 
@@ -195,7 +196,8 @@ def test_postgres_two_processes_apply_each_resolution_once_and_never_claim_a_wai
             run_id = c.post("/runs", json=body).json()["id"]
         for task_index in range(6):
             _wait(a, run_id, ("awaiting_review",))
-            # A waiting run is nobody's: no lease, and no poller takes it (several polls).
+            # A waiting run is nobody's: no lease, and no poller takes it. A property that
+            # must hold for a while, so it is sampled over five claim polls of each process.
             deadline = time.monotonic() + 1.0
             while time.monotonic() < deadline:
                 status, owner = query(
