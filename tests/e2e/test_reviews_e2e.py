@@ -3,6 +3,7 @@ Anthropic SDK against the fake Messages API, and two processes on PostgreSQL."""
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import Counter
 from collections.abc import Iterator
@@ -197,14 +198,32 @@ def test_postgres_two_processes_apply_each_resolution_once_and_never_claim_a_wai
         for task_index in range(6):
             _wait(a, run_id, ("awaiting_review",))
             # A waiting run is nobody's: no lease, and no poller takes it. A property that
-            # must hold for a while, so it is sampled over five claim polls of each process.
-            deadline = time.monotonic() + 1.0
+            # must hold for a while, so it is sampled over three claim polls of each process.
+            deadline = time.monotonic() + 0.6
             while time.monotonic() < deadline:
                 status, owner = query(
                     postgres_url, "SELECT status, lease_owner FROM runs WHERE id = %s", run_id
                 )[0]
                 assert (status, owner) == ("awaiting_review", None)
                 time.sleep(0.1)
+            if task_index == 2:
+                # Both processes at once: the database lets exactly one through.
+                barrier = threading.Barrier(2)
+                codes: list[int] = []
+
+                def race(server: Server) -> None:
+                    with _client(server) as c:
+                        barrier.wait()
+                        url = f"/runs/{run_id}/reviews/2"
+                        codes.append(c.post(url, json={"action": "approve"}).status_code)
+
+                threads = [threading.Thread(target=race, args=(s,)) for s in (a, b)]
+                for t in threads:
+                    t.start()
+                for t in threads:
+                    t.join()
+                assert sorted(codes) == [200, 409]
+                continue
             resolver = a if task_index % 2 else b  # each process resolves every other one
             with _client(resolver) as c:
                 answer = c.post(
