@@ -211,7 +211,9 @@ def test_postgres_two_processes_apply_each_resolution_once_and_never_claim_a_wai
                 barrier = threading.Barrier(2)
                 codes: list[int] = []
 
-                def race(server: Server) -> None:
+                def race(
+                    server: Server, barrier: threading.Barrier = barrier, codes: list[int] = codes
+                ) -> None:
                     with _client(server) as c:
                         barrier.wait()
                         url = f"/runs/{run_id}/reviews/2"
