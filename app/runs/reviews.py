@@ -28,6 +28,7 @@ from app.domain.review import (
 )
 from app.runs import lifecycle
 from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind, RunStatus
 from app.store import repository as repo
 from app.store.db import transaction
@@ -183,6 +184,7 @@ class Resolved:
     task_index: int
     resolution: dict[str, Any]
     waited_s: float  # from the request to this resolution
+    replayed: bool = False  # an Idempotency-Key retry of the resolution that won
 
 
 def resolve(
@@ -194,9 +196,11 @@ def resolve(
     robot: str | None,
     reason: str | None,
     reviewer: str,
+    idempotency: Idempotency | None = None,
 ) -> Resolved:
     """Store the resolution and queue the run again, in one transaction: of two concurrent
-    resolutions the conditional UPDATE lets exactly one through (the other: 409)."""
+    resolutions the conditional UPDATE lets exactly one through (the other: 409). A retry
+    with the Idempotency-Key of the resolution that won gets its answer again."""
     reason = (reason or "").strip() or None
     if action is ReviewAction.OVERRIDE and reason is None:
         raise DomainError("reason", "an override needs a reason", code="missing")
@@ -214,6 +218,9 @@ def resolve(
         )
         if review is None:
             raise ReviewConflictError(run_id, task_index, "the run never paused for it")
+        earlier = _retried(review, idempotency)
+        if earlier is not None:
+            return earlier
         if review.state != ReviewState.PENDING:
             raise ReviewConflictError(run_id, task_index, f"it is {review.state}")
         payload = dict(review.proposal)
@@ -252,7 +259,13 @@ def resolve(
                 Review.task_index == task_index,
                 Review.state == ReviewState.PENDING.value,
             )
-            .values(state=ReviewState.RESOLVED.value, resolution=resolution, resolved_at=now)
+            .values(
+                state=ReviewState.RESOLVED.value,
+                resolution=resolution,
+                resolved_at=now,
+                idempotency_key=idempotency.key if idempotency else None,
+                request_digest=idempotency.digest if idempotency else None,
+            )
             .returning(Review.requested_at)
             .execution_options(synchronize_session=False)
         ).first()
@@ -270,3 +283,18 @@ def resolve(
         )
     waited = (now - as_utc(won.requested_at)).total_seconds()
     return Resolved(run_id=run_id, task_index=task_index, resolution=resolution, waited_s=waited)
+
+
+def _retried(review: Review, idempotency: Idempotency | None) -> Resolved | None:
+    """The stored answer, if this request repeats the one that resolved the review."""
+    if idempotency is None or review.idempotency_key != idempotency.key:
+        return None
+    if review.request_digest != idempotency.digest:
+        raise IdempotencyKeyReusedError(review.run_id)
+    return Resolved(
+        run_id=review.run_id,
+        task_index=review.task_index,
+        resolution=dict(review.resolution or {}),
+        waited_s=0.0,
+        replayed=True,
+    )

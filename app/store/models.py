@@ -164,6 +164,10 @@ class Review(Base):
     requested_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     resolution: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     resolved_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    # The Idempotency-Key of the resolving POST and a digest of its body: a retry gets the
+    # same answer instead of a 409, a reused key with another body is refused.
+    idempotency_key: Mapped[str | None] = mapped_column(String(255), nullable=True)
+    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class Attempt(Base):

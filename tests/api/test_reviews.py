@@ -351,3 +351,22 @@ def test_review_requests_and_resolutions_stream_as_review_events(
     decisions = [e.data for e in events if e.event == "decision"]
     assert len(decisions) == 1 and decisions[0]["review"]["action"] == "approve"
     assert "review_requested" not in [e.data["kind"] for e in events if e.event == "run"]
+
+
+def test_a_resolution_retried_with_its_idempotency_key_gets_the_same_answer(
+    client: TestClient,
+) -> None:
+    run_id = client.post("/runs", json={**TIGHT, "review": EVERY}).json()["id"]
+    _awaiting(client, run_id)
+    url, key = f"/runs/{run_id}/reviews/0", {"Idempotency-Key": "review-0"}
+    first = client.post(url, json={"action": "approve"}, headers=key)
+    again = client.post(url, json={"action": "approve"}, headers=key)
+    assert first.status_code == again.status_code == 200
+    assert again.json() == first.json() and again.headers["Idempotent-Replayed"] == "true"
+    other = client.post(url, json={"action": "override", "robot": "c", "reason": "x"}, headers=key)
+    assert (
+        other.status_code == 409 and other.json()["detail"][0]["type"] == "idempotency_key_reused"
+    )
+    assert client.post(url, json={"action": "approve"}).status_code == 409  # no key: a conflict
+    _awaiting(client, run_id)
+    assert _events(client, run_id).count("review_resolved") == 1

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Path, Request
+from fastapi import APIRouter, Path, Request, Response
 
 from app.api.deps import RunIdPath, RunsDep, SupervisorDep
+from app.api.idempotency import REPLAYED_HEADER, IdempotencyKey, idempotency_of
 from app.api.responses import BODY, SUPERVISOR, errors
 from app.api.review_schemas import (
     AlternativeOut,
@@ -54,6 +55,8 @@ def resolve_review(
     body: ReviewRequest,
     runs: RunsDep,
     request: Request,
+    response: Response,
+    idempotency_key: IdempotencyKey,
 ) -> ReviewResolvedOut:
     """For supervisors: approve the proposal or override it with another robot (a reason is
     required). The run is queued again and goes on with this decision."""
@@ -65,9 +68,13 @@ def resolve_review(
         robot=body.robot,
         reason=body.reason,
         reviewer=caller.name,
+        idempotency=idempotency_of(idempotency_key, body),
     )
-    request.app.state.metrics.review_resolved(resolved.waited_s)
-    runs.worker.submit(run_id)
+    if resolved.replayed:
+        response.headers[REPLAYED_HEADER] = "true"
+    else:
+        request.app.state.metrics.review_resolved(resolved.waited_s)
+        runs.worker.submit(run_id)
     r = resolved.resolution
     return ReviewResolvedOut(
         run_id=run_id,
