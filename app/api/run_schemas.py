@@ -204,9 +204,11 @@ class TraceOut(BaseModel):
 class BrokenLinkOut(BaseModel):
     """Where a run's hash chain first fails to verify."""
 
-    table: Literal["decisions", "events"]
+    table: Literal["decisions", "events", "annotations"]
     task_index: int | None = Field(description="The decision (decisions table), else null")
-    seq: int | None = Field(description="The event (events table), else null")
+    seq: int | None = Field(
+        description="The event (events table) or annotation (annotations table), else null"
+    )
     expected: str | None = Field(
         description="The hash recomputed from the row's content and the previous link; null "
         "when the row is missing or has no stored hash"
@@ -221,11 +223,25 @@ class ChainHeadsOut(BaseModel):
 
 
 class TraceVerifyOut(BaseModel):
-    """The result of recomputing a run's two hash chains (decisions, events) from its rows."""
+    """The result of recomputing a run's three hash chains (decisions, events, and the
+    annotations recorded after it finished) from its rows."""
 
     ok: bool = Field(description="Every row present, chained and unaltered")
     decisions: int = Field(description="Decision rows checked")
     events: int = Field(description="Event rows checked")
+    annotations: int = Field(
+        default=0, description="Annotation rows checked (records made after the run finished)"
+    )
+    annotations_head: str | None = Field(
+        default=None,
+        description="Stored hash of the newest annotation (records made after the run "
+        "finished, such as sign-offs): outside `heads`, which is what a sign-off signs",
+    )
+    signoffs_ok: bool = Field(
+        default=True,
+        description="Every sign-off's heads are still the heads of the decision and event "
+        "chains, and both verify (true when there is no sign-off)",
+    )
     unchained: int = Field(
         description="Rows with no chain hash (written before tamper evidence existed); "
         "any makes ok false"

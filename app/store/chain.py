@@ -3,6 +3,9 @@ hash over its audited content and the hash of the previous row of its run (a has
 
 Two chains per run, one per table. Decisions are linked in `task_index` order and events in
 `seq` order, each starting from a genesis value derived from the table and the run id.
+A third, `annotations`, links what is recorded about a run after it finished (sign-offs),
+in `seq` order: a completed run's decision and event chains never change, so a sign-off
+can name their heads, and the annotations that follow stay checkable too.
 Why not one chain over both tables: events are written by the run service and worker and
 decisions by the graph's store node, at unrelated moments (and, on PostgreSQL, possibly from
 different processes); one interleaved chain would need a global order across both tables and
@@ -43,7 +46,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
-Table = Literal["decisions", "events"]
+Table = Literal["decisions", "events", "annotations"]
 # The previous row exists but was written before chaining: later links hang off this marker.
 UNCHAINED = "0" * 64
 SCHEME = "ltaa-trace-chain/v1"
@@ -125,6 +128,8 @@ ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "feedback": _opt_str,
 }
 EVENT_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
+# Records made after a run finished (app.domain.annotations), chained like the events.
+ANNOTATION_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
 
 
 def canonical_json(value: Any) -> str:
@@ -160,6 +165,12 @@ def decision_link(prev: str, decision: Mapping[str, Any], attempts: str) -> str:
 def event_link(prev: str, event: Mapping[str, Any]) -> str:
     """`event`: the EVENT_FIELDS columns."""
     return _sha256(canonical_json({"prev": prev, "event": _content(EVENT_FIELDS, event)}))
+
+
+def annotation_link(prev: str, annotation: Mapping[str, Any]) -> str:
+    """`annotation`: the ANNOTATION_FIELDS columns."""
+    content = _content(ANNOTATION_FIELDS, annotation)
+    return _sha256(canonical_json({"prev": prev, "annotation": content}))
 
 
 def next_prev(stored: str | None) -> str:

@@ -92,6 +92,28 @@ class RunEvent(Base):
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
+class RunAnnotation(Base):
+    """A record made about a run after it finished (app.domain.annotations): append-only,
+    hash-chained per run in `seq` order like the events."""
+
+    __tablename__ = "run_annotations"
+    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_run_annotations_run_seq"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    seq: Mapped[int] = mapped_column(Integer)
+    kind: Mapped[str] = mapped_column(String(32))
+    detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # The Idempotency-Key of the POST that made it (keys are global, as for runs), and a
+    # digest of that request, so a retry returns this row and a reused key is refused.
+    idempotency_key: Mapped[str | None] = mapped_column(
+        String(255), nullable=True, unique=True, index=True
+    )
+    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
+
+
 class Decision(Base):
     __tablename__ = "decisions"
     __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_decisions_run_task"),)
