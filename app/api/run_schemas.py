@@ -222,6 +222,17 @@ class ChainHeadsOut(BaseModel):
     events: str | None = Field(description="Stored hash of the newest event")
 
 
+class ParentLinkOut(BaseModel):
+    """A revision's link to the run it revised (SPEC 10)."""
+
+    run_id: str = Field(description="The parent run")
+    ok: bool = Field(
+        description="The revision's chains start from the parent's heads and its change set, "
+        "the parent names this run as superseded_by, and still holds those heads"
+    )
+    reason: str
+
+
 class TraceVerifyOut(BaseModel):
     """The result of recomputing a run's three hash chains (decisions, events, and the
     annotations recorded after it finished) from its rows."""
@@ -241,6 +252,9 @@ class TraceVerifyOut(BaseModel):
         default=True,
         description="Every sign-off's heads are still the heads of the decision and event "
         "chains, and both verify (true when there is no sign-off)",
+    )
+    parent: ParentLinkOut | None = Field(
+        default=None, description="Revisions: the checked link to the parent run"
     )
     unchained: int = Field(
         description="Rows with no chain hash (written before tamper evidence existed); "

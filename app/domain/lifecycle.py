@@ -1,7 +1,7 @@
 """A run's life: its statuses, the events of its record, and which moves are allowed.
 
 Pure vocabulary and rules; `app.runs.lifecycle` is the only code that applies them to the
-database. A new status (issues to come: `awaiting_review`, `blocked`, `superseded`) is a
+database. A new status (issues to come: `awaiting_review`, `blocked`) is a
 member here, a row in `STATUS_RULES` and its rows in `TRANSITIONS`; nothing else needs
 hunting down.
 """
@@ -19,6 +19,8 @@ class RunStatus(StrEnum):
     COMPLETED = "completed"
     FAILED = "failed"
     CANCELLED = "cancelled"
+    # Replaced by a revision before it finished (SPEC 10): terminal, never claimed again.
+    SUPERSEDED = "superseded"
 
 
 class EventKind(StrEnum):
@@ -33,6 +35,11 @@ class EventKind(StrEnum):
     CANCELLED = "cancelled"
     INTEGRITY_FAILED = "integrity_failed"
     BUDGET_EXHAUSTED = "budget_exhausted"
+    # SPEC 10: a revision's first event, and its unfinished parent's last.
+    REVISED = "revised"
+    SUPERSEDED = "superseded"
+    # Execution reports while the run is unfinished (after completion: annotations).
+    EXECUTION_REPORTED = "execution_reported"
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,7 @@ STATUS_RULES: dict[RunStatus, StatusRule] = {
     RunStatus.COMPLETED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.FAILED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.CANCELLED: StatusRule(finished=True, claimable=False, active=False),
+    RunStatus.SUPERSEDED: StatusRule(finished=True, claimable=False, active=False),
 }
 
 FINISHED: frozenset[RunStatus] = frozenset(s for s, r in STATUS_RULES.items() if r.finished)
@@ -69,6 +77,9 @@ TRANSITIONS: dict[tuple[RunStatus, RunStatus], str] = {
     (RunStatus.INTERRUPTED, RunStatus.CANCELLED): "cancelled while interrupted",
     (RunStatus.INTERRUPTED, RunStatus.FAILED): "refused on resume (integrity check, settings)",
     (RunStatus.FAILED, RunStatus.INTERRUPTED): "a supervisor asked to resume it",
+    (RunStatus.QUEUED, RunStatus.SUPERSEDED): "revised before it ran",
+    (RunStatus.RUNNING, RunStatus.SUPERSEDED): "revised while running (its writes are fenced)",
+    (RunStatus.INTERRUPTED, RunStatus.SUPERSEDED): "revised while interrupted",
 }
 
 
