@@ -17,7 +17,7 @@ from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
 from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
-from app.api.routes import allocate, catalog, events, health, metrics, runs
+from app.api.routes import allocate, catalog, events, health, metrics, revisions, runs
 from app.config import Settings, get_settings
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
@@ -115,6 +115,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (health, catalog, allocate, runs, events, metrics):
+    for module in (health, catalog, allocate, runs, revisions, events, metrics):
         app.include_router(module.router)
     return app

@@ -90,6 +90,12 @@ class Progress(BaseModel):
     phase: Literal["early", "middle", "late"]
 
 
+class ExecutionStateOut(BaseModel):
+    state: Literal["started", "done", "failed"]
+    started_at: Timestamp | None
+    ended_at: Timestamp | None
+
+
 class RunAssignment(BaseModel):
     task_index: int
     task_id: int | str
@@ -97,6 +103,10 @@ class RunAssignment(BaseModel):
     robot: str
     success: float
     fallback: bool
+    pinned: bool = Field(False, description="Revisions: kept from the parent (SPEC 10)")
+    execution: ExecutionStateOut | None = Field(
+        None, description="The latest execution report on this task, if any"
+    )
 
 
 class RunOut(BaseModel):
@@ -116,6 +126,9 @@ class RunOut(BaseModel):
     usage: UsageOut
     resumes: int
     error: str | None
+    revision_of: str | None = Field(None, description="The run this one revises")
+    revision: int = Field(0, description="Place in the lineage: 0 for a root run")
+    superseded_by: str | None = Field(None, description="The revision that replaced this run")
     created_at: Timestamp
     updated_at: Timestamp
     finished_at: Timestamp | None

@@ -55,7 +55,10 @@ def execute(
     finally:
         close_reasoner(context.reasoner)
     decisions = context.recorder.decisions()
-    n_tasks = context.problem.instance.n_tasks
-    if [d.task_index for d in decisions] != list(range(n_tasks)):
-        raise GraphEndedEarly(len(decisions), n_tasks)
+    problem = context.problem
+    # Pins are decided before the graph runs (a revision's own rows) or not recorded at all
+    # (/allocate `pinned`): the graph is complete when every free task has its decision.
+    decided = [d.task_index for d in decisions if d.task_index not in problem.pinned]
+    if decided != list(problem.free_tasks):
+        raise GraphEndedEarly(len(decided), len(problem.free_tasks))
     return Execution(decisions=decisions, usage=context.recorder.usage())

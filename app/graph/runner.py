@@ -50,7 +50,7 @@ def run_graph(
     and duplicates work. A resume of a thread that never reached its first checkpoint
     starts it fresh; starting a thread that already has checkpoints is refused.
     """
-    n = context.problem.instance.n_tasks
+    n = len(context.problem.free_tasks)  # pinned tasks take no super-step
     config = thread_config(thread_id, n, context.max_retries)
     exists = has_checkpoint(graph, thread_id)
     if not resume and exists:

@@ -177,7 +177,9 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
 
     # The newest rows of a chain leave no gap when deleted; a completed run says where its
     # chains end (n_tasks decisions, and its last event is the one that completed it).
-    complete = decisions.count == n_tasks if order is not None else decisions.last_key == n_tasks - 1
+    complete = (
+        decisions.count == n_tasks if order is not None else decisions.last_key == n_tasks - 1
+    )
     if status == RunStatus.COMPLETED and not complete:
         last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
         decisions.missing_tail(

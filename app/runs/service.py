@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import statistics
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from sqlalchemy.exc import IntegrityError
@@ -25,7 +26,7 @@ from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Attempt, Run, RunEvent
+from app.store.models import Attempt, ExecutionReport, Run, RunEvent
 
 
 def create_run(
@@ -155,6 +156,8 @@ class RunView:
     decisions: list[DecisionRecord]
     usage: Usage
     metrics: Metrics | None
+    execution: dict[int, ExecutionReport] = field(default_factory=dict)
+    pinned: frozenset[int] = frozenset()
 
     @property
     def progress(self) -> dict[str, Any]:
@@ -189,12 +192,33 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
             records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
         ]
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
+        execution = {
+            r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
+        }
     metrics = None
+    problem = spec.problem
     if run.status == RunStatus.COMPLETED and len(decisions) == run.n_tasks:
         metrics = compute_metrics(
-            spec.problem.instance, [d.robot for d in decisions], seed=spec.seed
+            problem.instance,
+            [d.robot for d in decisions],
+            seed=spec.seed,
+            scope=problem.balance_scope,
         )
-    return RunView(run=run, spec=spec, decisions=decisions, usage=usage, metrics=metrics)
+        if problem.pinned:
+            # A pin keeps the success it was decided with, whatever set_rates changed.
+            metrics = replace(
+                metrics,
+                expected_success=statistics.fmean(d.expected_success for d in decisions),
+            )
+    return RunView(
+        run=run,
+        spec=spec,
+        decisions=decisions,
+        usage=usage,
+        metrics=metrics,
+        execution=execution,
+        pinned=frozenset(problem.pinned),
+    )
 
 
 def list_run_rows(

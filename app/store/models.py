@@ -175,6 +175,19 @@ class ExecutionReport(Base):
     )
 
 
+class RequestKey(Base):
+    """The Idempotency-Key of a POST that created no run of its own (execution reports),
+    with a digest of its body: a retry answers as before, a reused key is refused."""
+
+    __tablename__ = "request_keys"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    key: Mapped[str] = mapped_column(String(255), unique=True, index=True)
+    request_digest: Mapped[str] = mapped_column(String(64))
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
 class Attempt(Base):
     __tablename__ = "attempts"
     __table_args__ = (

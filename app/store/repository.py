@@ -7,15 +7,36 @@ from collections.abc import Mapping, Sequence
 from functools import cache
 from typing import Any, cast
 
-from sqlalchemy import BindParameter, Integer, String, Table, and_, bindparam, func, select
+from sqlalchemy import (
+    BindParameter,
+    Integer,
+    String,
+    Table,
+    and_,
+    bindparam,
+    func,
+    select,
+    update,
+)
 from sqlalchemy.dialects.postgresql import Insert as PostgresqlInsert
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import Insert as SqliteInsert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
+from app.domain.lifecycle import RunStatus
 from app.store import chain
-from app.store.models import Attempt, Base, Decision, Run, RunAnnotation, RunEvent, utcnow
+from app.store.models import (
+    Attempt,
+    Base,
+    Decision,
+    ExecutionReport,
+    RequestKey,
+    Run,
+    RunAnnotation,
+    RunEvent,
+    utcnow,
+)
 
 
 def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run | None:
@@ -108,6 +129,19 @@ def annotation_for_key(*, session: Session, idempotency_key: str) -> RunAnnotati
     return session.scalar(
         select(RunAnnotation).where(RunAnnotation.idempotency_key == idempotency_key)
     )
+
+
+def still_running(*, session: Session, run_id: str) -> bool:
+    """Write-lock the run's row if it is still running (a conditional UPDATE that changes
+    nothing), else False: the fence of every recorder write."""
+    stmt = (
+        update(Run)
+        .where(Run.id == run_id, Run.status == RunStatus.RUNNING.value)
+        .values(updated_at=Run.updated_at)
+        .returning(Run.id)
+        .execution_options(synchronize_session=False)
+    )
+    return session.execute(stmt).first() is not None
 
 
 def chain_anchor(*, session: Session, run_id: str) -> str | None:
@@ -363,6 +397,15 @@ def decided_indexes(*, session: Session, run_id: str, pinned: bool | None = None
     return list(session.scalars(query.order_by(Decision.task_index)))
 
 
+def last_event_hash(*, session: Session, run_id: str) -> str | None:
+    return session.scalar(
+        select(RunEvent.chain_hash)
+        .where(RunEvent.run_id == run_id)
+        .order_by(RunEvent.seq.desc())
+        .limit(1)
+    )
+
+
 def has_event_hash(*, session: Session, run_id: str, chain_hash: str) -> bool:
     return (
         session.scalar(
@@ -381,3 +424,31 @@ def has_event(*, session: Session, run_id: str, kind: str) -> bool:
         )
         is not None
     )
+
+
+def execution_reports(*, session: Session, run_id: str) -> list[ExecutionReport]:
+    return list(
+        session.scalars(
+            select(ExecutionReport)
+            .where(ExecutionReport.run_id == run_id)
+            .order_by(ExecutionReport.task_index)
+        )
+    )
+
+
+def decided_task_ids(session: Session, run_id: str) -> list[Any]:
+    """(task_id, task_index) of every stored decision of a run."""
+    return list(
+        session.execute(
+            select(Decision.task_id, Decision.task_index).where(Decision.run_id == run_id)
+        )
+    )
+
+
+def queue_task_ids(run: Run) -> set[str]:
+    """Every task id (as text, as decisions store it) in the run's queue."""
+    return {str(t["id"]) for t in run.request["instance_data"]["tasks"]}
+
+
+def request_key(*, session: Session, key: str) -> RequestKey | None:
+    return session.scalar(select(RequestKey).where(RequestKey.key == key))

@@ -45,9 +45,23 @@ def upgrade() -> None:
     )
     with op.batch_alter_table('execution_reports', schema=None) as batch_op:
         batch_op.create_index(batch_op.f('ix_execution_reports_run_id'), ['run_id'], unique=False)
+    op.create_table('request_keys',
+    sa.Column('id', sa.Integer(), autoincrement=True, nullable=False),
+    sa.Column('key', sa.String(length=255), nullable=False),
+    sa.Column('request_digest', sa.String(length=64), nullable=False),
+    sa.Column('run_id', sa.String(length=32), nullable=False),
+    sa.Column('created_at', sa.DateTime(timezone=True), nullable=False),
+    sa.ForeignKeyConstraint(['run_id'], ['runs.id'], ondelete='CASCADE'),
+    sa.PrimaryKeyConstraint('id')
+    )
+    with op.batch_alter_table('request_keys', schema=None) as batch_op:
+        batch_op.create_index(batch_op.f('ix_request_keys_key'), ['key'], unique=True)
 
 
 def downgrade() -> None:
+    with op.batch_alter_table('request_keys', schema=None) as batch_op:
+        batch_op.drop_index(batch_op.f('ix_request_keys_key'))
+    op.drop_table('request_keys')
     with op.batch_alter_table('execution_reports', schema=None) as batch_op:
         batch_op.drop_index(batch_op.f('ix_execution_reports_run_id'))
     op.drop_table('execution_reports')

@@ -17,6 +17,7 @@ from app.api.run_schemas import (
     AttemptOut,
     DecisionOut,
     EventOut,
+    ExecutionStateOut,
     Progress,
     RunAssignment,
     RunCreated,
@@ -32,7 +33,7 @@ from app.domain.serialize import instance_to_dict
 from app.runs import audit, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
-from app.store.models import Attempt
+from app.store.models import Attempt, ExecutionReport
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -66,6 +67,7 @@ def create_run(
             problem.instance,
             mode=problem.mode.value,
             max_deviation=problem.cap.max_deviation,
+            cap_explicit="max_deviation" in body.model_fields_set,
             seed=body.seed,
             reasoner=reasoner,
             quality_threshold=body.quality_threshold,
@@ -165,6 +167,8 @@ def _run_out(view: service.RunView) -> RunOut:
                 robot=names[d.robot],
                 success=d.expected_success,
                 fallback=d.fallback,
+                pinned=d.task_index in view.pinned,
+                execution=_execution_out(view.execution.get(d.task_index)),
             )
             for d in view.decisions
         ],
@@ -173,9 +177,22 @@ def _run_out(view: service.RunView) -> RunOut:
         usage=UsageOut.from_domain(view.usage),
         resumes=run.resumes,
         error=run.error,
+        revision_of=run.revision_of,
+        revision=run.revision,
+        superseded_by=run.superseded_by,
         created_at=run.created_at,
         updated_at=run.updated_at,
         finished_at=run.finished_at,
+    )
+
+
+def _execution_out(report: ExecutionReport | None) -> ExecutionStateOut | None:
+    if report is None:
+        return None
+    return ExecutionStateOut(
+        state=report.state,  # type: ignore[arg-type]  # stored from the same Literal
+        started_at=report.started_at,
+        ended_at=report.ended_at,
     )
 
 

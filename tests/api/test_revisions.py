@@ -1,0 +1,77 @@
+"""Revisions of completed runs through the API (SPEC 10): the plan, the record, the link."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from fastapi.testclient import TestClient
+
+BASELINE = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
+HEAVY_DOWN = {
+    "changes": [{"type": "robot_unavailable", "robot": "heavy"}],
+    "pin": {"through_task_index": 17},
+    "reason": "heavy robot hydraulic fault",
+}
+
+
+def wait_status(client: TestClient, run_id: str, *statuses: str) -> dict[str, Any]:
+    deadline = time.monotonic() + 60
+    while True:
+        state = client.get(f"/runs/{run_id}").json()
+        if state["status"] in statuses:
+            return dict(state)
+        assert state["status"] not in ("failed", "cancelled"), state
+        assert time.monotonic() < deadline, f"run stayed {state['status']}"
+        time.sleep(0.02)
+
+
+def completed_run(client: TestClient, body: dict[str, Any] | None = None) -> str:
+    run_id = str(client.post("/runs", json=body or BASELINE).json()["id"])
+    wait_status(client, run_id, "completed")
+    return run_id
+
+
+def revise(client: TestClient, run_id: str, body: dict[str, Any], code: int = 202) -> Any:
+    response = client.post(f"/runs/{run_id}/revisions", json=body)
+    assert response.status_code == code, response.text
+    return response.json()
+
+
+def test_a_completed_parent_revised_stays_completed_and_still_verifies(
+    client: TestClient,
+) -> None:
+    parent = completed_run(client)
+    created = revise(client, parent, HEAVY_DOWN)
+    assert created["revision_of"] == parent and created["revision"] == 1
+    revision = wait_status(client, created["id"], "completed")
+    before = client.get(f"/runs/{parent}").json()
+    assert before["status"] == "completed" and before["superseded_by"] == created["id"]
+    assert revision["revision_of"] == parent
+    pinned = [a for a in revision["assignments"] if a["pinned"]]
+    assert [a["task_index"] for a in pinned] == list(range(18))
+    assert [(a["robot"], a["success"]) for a in pinned] == [
+        (a["robot"], a["success"]) for a in before["assignments"][:18]
+    ]
+    assert all(a["robot"] != "heavy" for a in revision["assignments"] if not a["pinned"])
+    for run_id in (parent, created["id"]):
+        report = client.get(f"/runs/{run_id}/trace/verify").json()
+        assert report["ok"] is True, report
+    link = client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]
+    assert link["run_id"] == parent and link["ok"] is True
+    assert client.get(f"/runs/{parent}/trace/verify").json()["annotations"] == 1
+    # The revision's trace: `revised` first, naming the parent's heads at that moment.
+    trace = client.get(f"/runs/{created['id']}/trace").json()
+    first = trace["events"][0]
+    assert first["kind"] == "revised" and first["detail"]["parent"] == parent
+    heads = client.get(f"/runs/{parent}/trace/verify").json()["heads"]
+    assert first["detail"]["parent_heads"] == heads
+    lineage = client.get(f"/runs/{created['id']}/revisions").json()
+    assert [r["id"] for r in lineage] == [parent, created["id"]]
+    diff = client.get(f"/runs/{created['id']}/diff").json()
+    assert diff["parent"] == parent
+    assert diff["fleet_changes"] == [{"robot": "heavy", "change": "unavailable"}]
+    assert all(c["from_robot"] == "heavy" for c in diff["robot_changes"])
+    # A second revision of the same run is a 409 naming the head.
+    again = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN)
+    assert again.status_code == 409 and created["id"] in again.text
