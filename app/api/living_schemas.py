@@ -140,8 +140,8 @@ class DiffOut(BaseModel):
     run_id: str
     parent: str
     robot_changes: list[RobotChange]
-    added_tasks: list[str]
-    removed_tasks: list[str]
+    added_tasks: list[int | str]
+    removed_tasks: list[int | str]
     fleet_changes: list[dict[str, object]]
     before: SideMetrics
     after: SideMetrics

@@ -24,8 +24,8 @@ class Diff:
     run_id: str
     parent: str
     robot_changes: list[dict[str, Any]]
-    added_tasks: list[str]
-    removed_tasks: list[str]
+    added_tasks: list[int | str]
+    removed_tasks: list[int | str]
     fleet_changes: list[dict[str, Any]]
     before: dict[str, Any]
     after: dict[str, Any]
@@ -85,14 +85,17 @@ def diff(*, sessions: sessionmaker[Session], run_id: str) -> Diff:
                     "success_after": d.expected_success,
                 }
             )
-    order = [str(t["id"]) for t in spec.instance_data["tasks"]]
-    parent_order = [str(t["id"]) for t in parent_spec.instance_data["tasks"]]
+    order = [t["id"] for t in spec.instance_data["tasks"]]
+    parent_order = [t["id"] for t in parent_spec.instance_data["tasks"]]
+    original = {str(t): t for t in order}
+    for c in changes:
+        c["task_id"] = original.get(str(c["task_id"]), c["task_id"])
     return Diff(
         run_id=run_id,
         parent=parent.id,
         robot_changes=changes,
-        added_tasks=[t for t in order if t not in old],
-        removed_tasks=[t for t in parent_order if t not in new],
+        added_tasks=[t for t in order if str(t) not in old],
+        removed_tasks=[t for t in parent_order if str(t) not in new],
         fleet_changes=list(detail.get("fleet_changes", [])),
         before=side(parent, parent_spec, before),
         after=side(run, spec, after),

@@ -71,7 +71,12 @@ def test_a_completed_parent_revised_stays_completed_and_still_verifies(
     diff = client.get(f"/runs/{created['id']}/diff").json()
     assert diff["parent"] == parent
     assert diff["fleet_changes"] == [{"robot": "heavy", "change": "unavailable"}]
-    assert all(c["from_robot"] == "heavy" for c in diff["robot_changes"])
+    moved = {c["task_id"] for c in diff["robot_changes"]}
+    was_heavy = {a["task_id"] for a in before["assignments"][18:] if a["robot"] == "heavy"}
+    assert was_heavy and was_heavy <= moved
+    assert all(c["to_robot"] != "heavy" for c in diff["robot_changes"])
+    assert abs(diff["before"]["expected_success"] - before["metrics"]["expected_success"]) < 1e-9
+    assert abs(diff["after"]["expected_success"] - revision["metrics"]["expected_success"]) < 1e-9
     # A second revision of the same run is a 409 naming the head.
     again = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN)
     assert again.status_code == 409 and created["id"] in again.text
