@@ -51,7 +51,8 @@ def execute(
     reasoners) however the execution ends. RunCancelled and reasoner errors propagate.
     """
     try:
-        run_graph(graph, context, thread_id, resume=resume)
+        if context.problem.free_tasks:  # every task pinned: nothing for the graph to decide
+            run_graph(graph, context, thread_id, resume=resume)
     finally:
         close_reasoner(context.reasoner)
     decisions = context.recorder.decisions()
