@@ -349,7 +349,9 @@ class RunWorker:
             if run is None or (only_if_running and run.status != RunStatus.RUNNING):
                 return
             if run.status == RunStatus.SUPERSEDED:
-                return  # a revision ended it (in another process, or between two checks)
+                # A revision ended it (made through another process, or between two checks).
+                log.info("run %s stopped: superseded by a revision", run_id)
+                return
             lifecycle.move(
                 session, run, status, event=EventKind(status.value), detail=detail, error=error
             )

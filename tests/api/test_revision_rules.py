@@ -37,7 +37,7 @@ def test_add_tasks_next_goes_right_after_the_pins(client: TestClient) -> None:
     state = wait_status(client, created["id"], "completed")
     ids = [a["task_id"] for a in state["assignments"]]
     parent_ids = [a["task_id"] for a in assignments(client, parent)]
-    assert ids == parent_ids[:18] + ["U0", "U1"] + parent_ids[18:] + ["L1"]
+    assert ids == [*parent_ids[:18], "U0", "U1", *parent_ids[18:], "L1"]
     diff = client.get(f"/runs/{created['id']}/diff").json()
     assert diff["added_tasks"] == ["U0", "U1", "L1"] and diff["removed_tasks"] == []
 
