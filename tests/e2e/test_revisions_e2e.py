@@ -173,3 +173,30 @@ def test_kill_right_after_the_202_leaves_exactly_one_revision(tmp_path: Path) ->
     assert again.status_code == 409 and created["id"] in again.text
     assert plan(revision) == plan(reference)
     assert verify["ok"] is True, verify
+
+
+def test_ltaa_revise_prints_the_diff(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from app.cli import cli
+
+    server = Server(tmp_path / "data").start()
+    try:
+        with server.client() as c:
+            parent = str(post(c, "/runs", GUIDED)["id"])
+        server.wait_for(parent, finished)
+        runner = CliRunner()
+        args = ["revise", parent, "--robot-unavailable", "heavy", "--pin", "through:17"]
+        result = runner.invoke(cli, [*args, "--url", server.url, "--reason", "hydraulics"])
+        again = runner.invoke(cli, [*args, "--url", server.url])
+        bad = runner.invoke(cli, ["revise", parent, "--pin", "through:x", "--url", server.url])
+        with server.client() as c:
+            lineage = c.get(f"/runs/{parent}/revisions").json()
+    finally:
+        server.stop()
+    assert result.exit_code == 0, result.output
+    assert "revision 1" in result.output and "heavy unavailable" in result.output
+    assert "moved to another robot" in result.output and "expected success" in result.output
+    assert len(lineage) == 2 and lineage[1]["status"] == "completed"
+    assert again.exit_code == 1 and "409" in again.output and lineage[1]["id"] in again.output
+    assert bad.exit_code == 1 and "--pin" in bad.output
