@@ -152,7 +152,12 @@ class Assignment(BaseModel):
     task_name: str
     robot: str
     success: float
-    pinned: bool = Field(False, description="Fixed by the request's `pinned`")
+    # Omitted unless true, so a request without pins gets exactly the response it always did.
+    pinned: bool = Field(
+        False,
+        description="Present (true) only for a task fixed by the request's `pinned`",
+        exclude_if=lambda pinned: not pinned,
+    )
 
 
 class CompletionOut(BaseModel):
