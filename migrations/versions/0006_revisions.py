@@ -1,19 +1,19 @@
 """living plans: revision columns on runs, pins on decisions, execution reports
 
 Revision ID: 0006_revisions
-Revises: 0007_reviews_annotations
+Revises: 0005, 0007_reviews_annotations
 Create Date: 2026-12-01 21:00:00.000000
 
-Chained after the reviews branch's annotation migration here, since this branch merged it
-(two heads would stop `alembic upgrade head`); re-chain at merge if main orders them
-differently.
+Also the merge point of the webhooks (0005) and reviews (0007_reviews_annotations)
+migrations, which both follow 0004 (two heads would stop `alembic upgrade head`); re-chain
+at merge if main orders them differently.
 """
 from alembic import op
 import sqlalchemy as sa
 
 
 revision = '0006_revisions'
-down_revision = '0007_reviews_annotations'
+down_revision = ('0005', '0007_reviews_annotations')
 branch_labels = None
 depends_on = None
 
