@@ -80,3 +80,23 @@ def test_a_completed_parent_revised_stays_completed_and_still_verifies(
     # A second revision of the same run is a 409 naming the head.
     again = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN)
     assert again.status_code == 409 and created["id"] in again.text
+
+
+def test_a_revised_completed_parent_still_replays(client: TestClient) -> None:
+    parent = completed_run(client)
+    revision = revise(client, parent, HEAVY_DOWN)["id"]
+    wait_status(client, revision, "completed")
+    assert (
+        client.post(
+            f"/runs/{parent}/execution", json={"updates": [{"task_id": 0, "state": "done"}]}
+        ).status_code
+        == 409
+    )
+    replay = client.post("/runs", json={"reasoner": "replay", "replay_of": parent})
+    assert replay.status_code == 202, replay.text
+    replayed = wait_status(client, replay.json()["id"], "completed")
+    original = client.get(f"/runs/{parent}").json()
+    assert [a["robot"] for a in replayed["assignments"]] == [
+        a["robot"] for a in original["assignments"]
+    ]
+    assert client.get(f"/runs/{parent}/trace/verify").json()["ok"] is True
