@@ -146,7 +146,7 @@ def run() -> Section:
             fmt_time(r.seconds),
             f"{r.es:.2f}%",
             f"{r.optimum:.2f}%",
-            f"{r.optimum - r.es:.2f}",
+            f"{max(0.0, r.optimum - r.es):.2f}",  # float noise at the optimum is not a gain
         ]
         for r in results
     ]
