@@ -9,7 +9,7 @@ request field it is about, so a bad revision is a 4xx before anything is written
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from app.domain.errors import DomainError, InfeasibleCapError
@@ -362,17 +362,15 @@ def plan_revision(
     except DomainError as exc:
         raise DomainError("changes", exc.message, code=exc.code) from None
 
-    spec = RunSpec(
+    # Everything not named here is inherited as it is (quality threshold, retries,
+    # temperature, guidance, seed, LLM scope, and whatever a run spec gains later).
+    spec = replace(
+        parent_spec,
         instance_data=instance_data,
         mode=mode.value,
         max_deviation=problem.cap.max_deviation,
-        seed=parent_spec.seed,
         reasoner=reasoner or parent_spec.reasoner,
-        quality_threshold=parent_spec.quality_threshold,
-        max_retries=parent_spec.max_retries,
         model=model if model is not None else (None if reasoner else parent_spec.model),
-        temperature=parent_spec.temperature,
-        guidance=parent_spec.guidance,
         token_budget=token_budget,
         replay_of=None,
         cap_explicit=keep,

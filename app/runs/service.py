@@ -119,6 +119,13 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
             )
         if run.status == RunStatus.CANCELLED:
             raise RunStateConflictError(run_id, run.status, "resume", "Create a new run instead.")
+        if run.status == RunStatus.SUPERSEDED:
+            raise RunStateConflictError(
+                run_id,
+                run.status,
+                "resume",
+                f"A revision replaced it: run '{run.superseded_by}' (GET /runs/{{id}}/revisions).",
+            )
         if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
         if run.status == RunStatus.FAILED:

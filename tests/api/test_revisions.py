@@ -7,6 +7,8 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
+from tests.api.conftest import ClientFactory
+
 BASELINE = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
 HEAVY_DOWN = {
     "changes": [{"type": "robot_unavailable", "robot": "heavy"}],
@@ -100,3 +102,31 @@ def test_a_revised_completed_parent_still_replays(client: TestClient) -> None:
         a["robot"] for a in original["assignments"]
     ]
     assert client.get(f"/runs/{parent}/trace/verify").json()["ok"] is True
+
+
+def test_idempotent_revision_and_a_superseded_run_cannot_resume(
+    make_client: ClientFactory,
+) -> None:
+    client = make_client(test_pause="18:reason:before")
+    parent = str(client.post("/runs", json=BASELINE).json()["id"])
+    deadline = time.monotonic() + 60
+    while client.get(f"/runs/{parent}").json()["progress"]["allocated"] < 18:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    key = {"Idempotency-Key": "revise-once"}
+    first = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN, headers=key)
+    again = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN, headers=key)
+    assert first.status_code == again.status_code == 202, again.text
+    assert again.json()["id"] == first.json()["id"]
+    assert again.headers["Idempotent-Replayed"] == "true"
+    other = client.post(
+        f"/runs/{parent}/revisions", json={**HEAVY_DOWN, "reason": "another"}, headers=key
+    )
+    assert other.status_code == 409
+    state = client.get(f"/runs/{parent}").json()
+    assert state["status"] == "superseded" and state["progress"]["allocated"] == 18
+    resume = client.post(f"/runs/{parent}/resume")
+    assert resume.status_code == 409 and first.json()["id"] in resume.text
+    cancel = client.post(f"/runs/{parent}/cancel")
+    assert cancel.status_code == 409
+    assert len(client.get(f"/runs/{parent}/revisions").json()) == 2
