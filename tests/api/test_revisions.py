@@ -102,6 +102,8 @@ def test_a_revised_completed_parent_still_replays(client: TestClient) -> None:
         a["robot"] for a in original["assignments"]
     ]
     assert client.get(f"/runs/{parent}/trace/verify").json()["ok"] is True
+    of_revision = client.post("/runs", json={"reasoner": "replay", "replay_of": revision})
+    assert of_revision.status_code == 422 and "revision" in of_revision.text
 
 
 def test_idempotent_revision_and_a_superseded_run_cannot_resume(
