@@ -4,14 +4,19 @@ and what `pin: "reported"` makes of them."""
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
-from tests.api.test_revisions import BASELINE, completed_run, revise, wait_status
+from tests.api.test_revisions import (
+    BASELINE,
+    completed_run,
+    revise,
+    wait_allocated,
+    wait_status,
+)
 
 
 def report(client: TestClient, run_id: str, *updates: tuple[Any, str], **kw: Any) -> Any:
@@ -24,10 +29,7 @@ def paused(make_client: ClientFactory) -> tuple[TestClient, str]:
     """A client whose runs hold before reasoning about task 18, and one such run."""
     client = make_client(test_pause="18:reason:before")
     run_id = str(client.post("/runs", json=BASELINE).json()["id"])
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{run_id}").json()["progress"]["allocated"] < 18:
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
+    wait_allocated(client, run_id, 18)
     return client, run_id
 
 

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
+from tests.polling import eventually
 
 BASELINE = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
 HEAVY_DOWN = {
@@ -18,14 +18,24 @@ HEAVY_DOWN = {
 
 
 def wait_status(client: TestClient, run_id: str, *statuses: str) -> dict[str, Any]:
-    deadline = time.monotonic() + 60
-    while True:
-        state = client.get(f"/runs/{run_id}").json()
-        if state["status"] in statuses:
-            return dict(state)
-        assert state["status"] not in ("failed", "cancelled"), state
-        assert time.monotonic() < deadline, f"run stayed {state['status']}"
-        time.sleep(0.02)
+    def reached(state: dict[str, Any]) -> bool:
+        assert state["status"] not in ("failed", "cancelled"), state  # never completes now
+        return state["status"] in statuses
+
+    state: dict[str, Any] = eventually(
+        lambda: client.get(f"/runs/{run_id}").json(),
+        until=reached,
+        what=f"run {run_id} reached {' or '.join(statuses)}",
+    )
+    return state
+
+
+def wait_allocated(client: TestClient, run_id: str, count: int) -> None:
+    eventually(
+        lambda: client.get(f"/runs/{run_id}").json()["progress"]["allocated"],
+        until=lambda allocated: allocated >= count,
+        what=f"run {run_id} decided {count} tasks",
+    )
 
 
 def completed_run(client: TestClient, body: dict[str, Any] | None = None) -> str:
@@ -111,10 +121,7 @@ def test_idempotent_revision_and_a_superseded_run_cannot_resume(
 ) -> None:
     client = make_client(test_pause="18:reason:before")
     parent = str(client.post("/runs", json=BASELINE).json()["id"])
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{parent}").json()["progress"]["allocated"] < 18:
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
+    wait_allocated(client, parent, 18)
     key = {"Idempotency-Key": "revise-once"}
     first = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN, headers=key)
     again = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN, headers=key)

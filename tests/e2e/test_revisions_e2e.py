@@ -5,7 +5,6 @@ nothing: one revision, the plan an uninterrupted revision makes, a record that v
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +13,7 @@ import pytest
 
 from app.graph.pause import PausePoint
 from tests.e2e.server import Server
+from tests.polling import eventually
 
 pytestmark = pytest.mark.e2e
 
@@ -27,14 +27,16 @@ PAUSE = PausePoint(18, "reason", after=False)
 
 
 def wait_for_log(server: Server, text: str, count: int = 1, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+    def seen() -> int:
         assert server.proc is not None and server.proc.poll() is None, server.log.read_text()
-        if server.log.read_text().count(text) >= count:
-            return
-        time.sleep(0.05)
-    raise AssertionError(
-        f"server never logged {text!r} x{count}:\n{server.log.read_text()[-3000:]}"
+        return server.log.read_text().count(text)
+
+    eventually(
+        seen,
+        until=lambda n: n >= count,
+        timeout=timeout,
+        what=f"the server logged {text!r} {count} time(s)",
+        context=lambda: server.log.read_text()[-3000:],
     )
 
 
