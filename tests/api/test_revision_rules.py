@@ -3,6 +3,7 @@ contradictions; and a 30-case bad-input battery for the two new endpoints."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import pytest
@@ -343,3 +344,26 @@ def test_bad_input_battery(client: TestClient) -> None:
     parent_state = client.get(f"/runs/{parent}").json()
     assert parent_state["superseded_by"] is None and parent_state["status"] == "completed"
     assert all(a.get("execution") is None for a in parent_state["assignments"])
+
+
+def test_the_cap_rule_is_inherited(client: TestClient) -> None:
+    explicit = completed_run(client, {**BASELINE, "max_deviation": 5})
+    kept = revise(client, explicit, {"changes": [HEAVY_DOWN], "pin": PIN_17, "reason": "x"})
+    assert client.get(f"/runs/{kept['id']}").json()["max_deviation"] == 5
+    default = completed_run(client)
+    recomputed = revise(client, default, {"changes": [HEAVY_DOWN], "pin": PIN_17, "reason": "x"})
+    state = wait_status(client, recomputed["id"], "completed")
+    parent = client.get(f"/runs/{default}").json()
+    on_heavy = sum(a["robot"] == "heavy" for a in parent["assignments"][:18])
+    w = (36 - on_heavy) / 2  # pins on heavy count for success, not for the balance
+    assert state["max_deviation"] == math.ceil(w / 3)  # balanced: ceil(W/3) for the new W
+    uncapped = revise(
+        client,
+        recomputed["id"],
+        {
+            "changes": [{"type": "set_mode", "mode": "balanced", "max_deviation": None}],
+            "pin": "decided",
+            "reason": "no cap",
+        },
+    )
+    assert client.get(f"/runs/{uncapped['id']}").json()["max_deviation"] is None
