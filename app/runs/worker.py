@@ -184,7 +184,9 @@ class RunWorker:
         if admission is None:
             return
         spec = admission.spec
-        fence = fences(status_fence(run_id, stop), self.ownership.fence(run_id, stop))
+        # The lease first: a process that lost the run to another is told so (LeaseLost)
+        # before the state check, which also fails once the new owner moved the run.
+        fence = fences(self.ownership.fence(run_id, stop), status_fence(run_id, stop))
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop, fence=fence)
         try:
             reasoner = self._reasoner(run_id, spec, fence)
