@@ -25,6 +25,7 @@ from app.api.routes import (
     health,
     metrics,
     reviews,
+    revisions,
     runs,
     signoffs,
     webhooks,
@@ -154,6 +155,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (health, catalog, allocate, runs, signoffs, reviews, events, metrics, webhooks):
+    for module in (
+        health,
+        catalog,
+        allocate,
+        runs,
+        revisions,
+        signoffs,
+        reviews,
+        events,
+        metrics,
+        webhooks,
+    ):
         app.include_router(module.router)
     return app

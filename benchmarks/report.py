@@ -17,6 +17,7 @@ SECTIONS = [
     "benchmarks.paper",
     "benchmarks.load",
     "benchmarks.llm_scope",
+    "benchmarks.adaptation",
 ]
 
 

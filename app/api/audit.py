@@ -9,7 +9,7 @@ from typing import Any
 from fastapi.responses import StreamingResponse
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.run_schemas import BrokenLinkOut, ChainHeadsOut, TraceVerifyOut
+from app.api.run_schemas import BrokenLinkOut, ChainHeadsOut, ParentLinkOut, TraceVerifyOut
 from app.runs import audit
 
 JSONL = "application/x-ndjson"
@@ -60,6 +60,13 @@ def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
         + report.annotations.unchained,
         heads=ChainHeadsOut(decisions=report.decisions.head, events=report.events.head),
         annotations_head=report.annotations.head,
+        parent=None
+        if report.parent_link is None
+        else ParentLinkOut(
+            run_id=report.parent_link.parent,
+            ok=report.parent_link.ok,
+            reason=report.parent_link.reason,
+        ),
         broken=None
         if broken is None
         else BrokenLinkOut(

@@ -71,13 +71,21 @@ def record_annotation(
     )
 
 
-def new_run(session: Session, *, run_id: str, created: Mapping[str, Any], **fields: Any) -> Run:
-    """A queued run and its `created` event."""
+def new_run(
+    session: Session,
+    *,
+    run_id: str,
+    created: Mapping[str, Any],
+    first_event: EventKind = EventKind.CREATED,
+    **fields: Any,
+) -> Run:
+    """A queued run and its first event: `created`, or `revised` for a revision (SPEC 10),
+    whose detail is the link its chains are anchored to."""
     with status_writes():
         run = Run(id=run_id, status=RunStatus.QUEUED.value, **fields)
     session.add(run)
     session.flush()
-    record_event(session, run_id=run_id, kind=EventKind.CREATED, detail=created)
+    record_event(session, run_id=run_id, kind=first_event, detail=created)
     return run
 
 

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import statistics
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from sqlalchemy.exc import IntegrityError
@@ -26,7 +27,7 @@ from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Attempt, Run, RunEvent
+from app.store.models import Attempt, ExecutionReport, Run, RunEvent
 
 
 def create_run(
@@ -127,6 +128,13 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
                 "It waits for a supervisor: resolve its review (GET /reviews, "
                 "POST /runs/{id}/reviews/{task_index}).",
             )
+        if run.status == RunStatus.SUPERSEDED:
+            raise RunStateConflictError(
+                run_id,
+                run.status,
+                "resume",
+                f"A revision replaced it: run '{run.superseded_by}' (GET /runs/{{id}}/revisions).",
+            )
         if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
         if run.status == RunStatus.FAILED:
@@ -175,6 +183,8 @@ class RunView:
     usage: Usage
     metrics: Metrics | None
     signoffs: list[SignOff] = field(default_factory=list)
+    execution: dict[int, ExecutionReport] = field(default_factory=dict)
+    pinned: frozenset[int] = frozenset()
 
     @property
     def progress(self) -> dict[str, Any]:
@@ -210,13 +220,33 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
         ]
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
         signed = signoffs(session=session, run_id=run_id)
+        execution = {
+            r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
+        }
     metrics = None
+    problem = spec.problem
     if run.status == RunStatus.COMPLETED and len(decisions) == run.n_tasks:
         metrics = compute_metrics(
-            spec.problem.instance, [d.robot for d in decisions], seed=spec.seed
+            problem.instance,
+            [d.robot for d in decisions],
+            seed=spec.seed,
+            scope=problem.balance_scope,
         )
+        if problem.pinned:
+            # A pin keeps the success it was decided with, whatever set_rates changed.
+            metrics = replace(
+                metrics,
+                expected_success=statistics.fmean(d.expected_success for d in decisions),
+            )
     return RunView(
-        run=run, spec=spec, decisions=decisions, usage=usage, metrics=metrics, signoffs=signed
+        run=run,
+        spec=spec,
+        decisions=decisions,
+        usage=usage,
+        metrics=metrics,
+        execution=execution,
+        pinned=frozenset(problem.pinned),
+        signoffs=signed,
     )
 
 

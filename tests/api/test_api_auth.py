@@ -31,6 +31,10 @@ CLIENT_ENDPOINTS = [
     ("POST", "/runs"),
     ("GET", "/runs"),
     ("GET", "/runs/{id}"),
+    ("POST", "/runs/{id}/execution"),
+    ("POST", "/runs/{id}/revisions"),
+    ("GET", "/runs/{id}/revisions"),
+    ("GET", "/runs/{id}/diff"),
 ]
 SUPERVISOR_ENDPOINTS = [
     ("GET", "/runs/{id}/trace"),
