@@ -19,6 +19,7 @@ from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.routes import allocate, catalog, events, health, metrics, runs
 from app.config import Settings, get_settings
+from app.console import install as install_console
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
 from app.runs.factory import make_worker
@@ -117,4 +118,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
     for module in (health, catalog, allocate, runs, events, metrics):
         app.include_router(module.router)
+    install_console(app, keyring=keyring, settings=settings)
     return app
