@@ -105,7 +105,9 @@ def start_run(server: Server, **body: object) -> str:
     return str(created.json()["id"])
 
 
-def wait_status(server: Server, run_id: str, status: str = "completed", timeout: float = 90) -> None:
+def wait_status(
+    server: Server, run_id: str, status: str = "completed", timeout: float = 90
+) -> None:
     deadline = time.monotonic() + timeout
     with server.client() as c:
         while time.monotonic() < deadline:

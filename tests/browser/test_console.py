@@ -44,9 +44,7 @@ def test_a_supervisor_key_signs_in_and_a_client_key_is_refused(page: Page, serve
     expect(page).to_have_url(re.compile(r"/console/login"))
 
 
-def test_the_progress_bar_reaches_100_percent_without_reloading(
-    page: Page, server: Server
-) -> None:
+def test_the_progress_bar_reaches_100_percent_without_reloading(page: Page, server: Server) -> None:
     sign_in(page, server)
     run_id = start_run(server, **tasks(600))
     page.goto(f"{server.url}/console/runs/{run_id}")
@@ -87,7 +85,8 @@ def test_a_form_posted_without_its_csrf_token_is_refused(
 ) -> None:
     sign_in(page, server)
     run_id = start_run(server, **tasks(3000))
-    for form in ({}, {"csrf_token": "forged-token"}):
+    forms: list[dict[str, str | float | bool]] = [{}, {"csrf_token": "forged-token"}]
+    for form in forms:
         refused = context.request.post(f"{server.url}/console/runs/{run_id}/cancel", form=form)
         assert refused.status == 403
         assert "Form refused" in refused.text()
