@@ -2,8 +2,8 @@
 sits on it.
 
 A 10,000-task run has thousands of possible caps, so the frontier is the exact optimum at a
-bounded number of them (MAX_CAPS spread from 0 to the deviation of the uncapped optimum,
-plus the run's own cap and no cap). It depends only on the run's stored request, so it is
+bounded number of them: at most MAX_CAPS points, spread from cap 0 to the deviation of the
+uncapped optimum, plus the run's own cap and no cap. It depends only on the run's stored request, so it is
 computed once per run and kept as a small JSON file in the data directory.
 """
 
@@ -32,8 +32,8 @@ class FrontierPoint:
 
 
 def caps_to_try(top: float, own: float | None) -> list[float]:
-    """At most MAX_CAPS caps spread over [0, top], and the run's own cap."""
-    steps = max(1, MAX_CAPS - 1)
+    """Caps spread over [0, top] and the run's own cap: with no cap, MAX_CAPS in all."""
+    steps = MAX_CAPS - 3  # MAX_CAPS - 2 spread points, the run's own cap, no cap
     caps = {round(top * i / steps, 2) for i in range(steps + 1)}
     if own is not None:
         caps.add(own)
