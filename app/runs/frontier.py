@@ -3,8 +3,8 @@ sits on it.
 
 A 10,000-task run has thousands of possible caps, so the frontier is the exact optimum at a
 bounded number of them: at most MAX_CAPS points, spread from cap 0 to the deviation of the
-uncapped optimum, plus the run's own cap and no cap. It depends only on the run's stored request, so it is
-computed once per run and kept as a small JSON file in the data directory.
+uncapped optimum, plus the run's own cap and no cap. It depends only on the run's stored
+request, so it is computed once per run and kept as a small JSON file in the data directory.
 """
 
 from __future__ import annotations
