@@ -20,6 +20,7 @@ def install(app: FastAPI, *, keyring: KeyRing, settings: Settings) -> None:
     app.state.stream_cookie_auth = context.stream_cookie_auth
     app.add_exception_handler(context.SignInRequired, context.on_sign_in_required)
     app.add_exception_handler(context.CsrfRefused, context.on_csrf_refused)
+    app.add_exception_handler(context.PageNotFound, context.on_page_not_found)
     app.mount(
         "/console/static",
         StaticFiles(directory=context.HERE / "static"),

@@ -4,6 +4,7 @@ HTML answers for the failures a person can meet (sign-in needed, refused form, n
 from __future__ import annotations
 
 import hmac
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -16,6 +17,7 @@ from fastapi.templating import Jinja2Templates
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import Caller, KeyRing, Role
+from app.api.run_schemas import RUN_ID_PATTERN
 from app.config import Settings
 from app.console import format as fmt
 from app.console import sessions
@@ -81,6 +83,31 @@ class SignInRequired(Exception):
 
     def __init__(self, path: str) -> None:
         self.path = path
+
+
+class PageNotFound(Exception):
+    """No such run (or attempt): answered with a page saying so, a 404."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.message = message
+
+
+def on_page_not_found(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, PageNotFound)
+    return console_of(request).render(
+        request, "refused.html", {"title": "Not found", "message": exc.message}, status_code=404
+    )
+
+
+def run_id_of(run_id: str) -> str:
+    """The path's run id, checked before any query (PostgreSQL refuses a NUL character)."""
+    if re.fullmatch(RUN_ID_PATTERN, run_id) is None:
+        raise PageNotFound(f"There is no run '{run_id[:64]}'.")
+    return run_id
+
+
+RunIdDep = Annotated[str, Depends(run_id_of)]
 
 
 class CsrfRefused(Exception):

@@ -3,7 +3,6 @@ the reviews queue; and the run actions a supervisor may take from a run page."""
 
 from __future__ import annotations
 
-import re
 from typing import Annotated
 
 from fastapi import APIRouter, Query, Request
@@ -11,9 +10,16 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import RedirectResponse, Response
 
 from app.api.audit import jsonl_trace
-from app.api.run_schemas import RUN_ID_PATTERN
 from app.console import views
-from app.console.context import ConsoleDep, CsrfDep, SignedInDep, finish, sessions_of
+from app.console.context import (
+    ConsoleDep,
+    CsrfDep,
+    PageNotFound,
+    RunIdDep,
+    SignedInDep,
+    finish,
+    sessions_of,
+)
 from app.domain.lifecycle import ACTIVE, RunStatus
 from app.runs import audit, browse, service
 from app.runs.errors import RunNotFoundError, RunStateConflictError
@@ -89,14 +95,12 @@ async def runs_table(
 @router.get("/runs/{run_id}")
 async def run_page(
     request: Request,
-    run_id: str,
+    run_id: RunIdDep,
     console: ConsoleDep,
     signed: SignedInDep,
     page: Annotated[int, Query(ge=1, le=1_000_000)] = 1,
     decision: Annotated[int | None, Query(ge=0, le=1_000_000)] = None,
 ) -> Response:
-    if not _valid_id(run_id):
-        return _not_found(request, console, signed, f"There is no run '{run_id[:64]}'.")
     try:
         view = await run_in_threadpool(
             views.run_page,
@@ -107,7 +111,7 @@ async def run_page(
             cache_dir=console.settings.data_dir / "console-cache",
         )
     except RunNotFoundError:
-        return _not_found(request, console, signed, f"There is no run '{run_id}'.")
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
     run = view.overview.run
     model = view.model or (console.settings.default_model if run.reasoner == "anthropic" else None)
     context = {
@@ -124,14 +128,10 @@ async def run_page(
     return finish(request, console.render(request, "run.html", context, signed=signed))
 
 
-def _valid_id(run_id: str) -> bool:
-    return re.fullmatch(RUN_ID_PATTERN, run_id) is not None
-
-
 @router.get("/runs/{run_id}/attempts/{task_index}/{attempt}")
 async def attempt_page(
     request: Request,
-    run_id: str,
+    run_id: RunIdDep,
     task_index: int,
     attempt: int,
     console: ConsoleDep,
@@ -149,7 +149,7 @@ async def attempt_page(
             attempt=attempt,
         )
     except (RunNotFoundError, browse.AttemptNotFoundError) as exc:
-        return _not_found(request, console, signed, str(exc))
+        raise PageNotFound(str(exc)) from None
     context = {"title": f"Task {task_index}, attempt {attempt}", "a": row, "run_id": run_id}
     name = "attempt_fragment.html" if fragment else "attempt.html"
     return finish(request, console.render(request, name, context, signed=signed))
@@ -157,14 +157,18 @@ async def attempt_page(
 
 @router.get("/runs/{run_id}/verify")
 async def verify_page(
-    request: Request, run_id: str, console: ConsoleDep, signed: SignedInDep, fragment: bool = False
+    request: Request,
+    run_id: RunIdDep,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    fragment: bool = False,
 ) -> Response:
     try:
         report = await run_in_threadpool(
             audit.verify_trace, sessions=sessions_of(request), run_id=run_id
         )
     except RunNotFoundError:
-        return _not_found(request, console, signed, f"There is no run '{run_id}'.")
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
     context = {"title": "Chain verification", "report": report, "run_id": run_id}
     name = "verify_fragment.html" if fragment else "verify.html"
     return finish(request, console.render(request, name, context, signed=signed))
@@ -172,14 +176,14 @@ async def verify_page(
 
 @router.get("/runs/{run_id}/export.jsonl")
 async def export(
-    request: Request, run_id: str, console: ConsoleDep, signed: SignedInDep
+    request: Request, run_id: RunIdDep, console: ConsoleDep, signed: SignedInDep
 ) -> Response:
     """The whole audit record as JSON lines (as GET /runs/{id}/trace?format=jsonl), as a
     download: the one record, read through the same pages."""
     try:
         response = jsonl_trace(sessions=sessions_of(request), run_id=run_id)
     except RunNotFoundError:
-        return _not_found(request, console, signed, f"There is no run '{run_id}'.")
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
     response.headers["Content-Disposition"] = f'attachment; filename="run-{run_id}.jsonl"'
     return finish(request, response)
 
@@ -192,7 +196,7 @@ async def _act(
     try:
         await run_in_threadpool(command, sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     except RunNotFoundError:
-        return _not_found(request, console, signed, f"There is no run '{run_id}'.")
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
     except RunStateConflictError as exc:
         return console.render(
             request,
@@ -209,10 +213,14 @@ async def _act(
 
 
 @router.post("/runs/{run_id}/cancel")
-async def cancel(request: Request, run_id: str, console: ConsoleDep, signed: CsrfDep) -> Response:
+async def cancel(
+    request: Request, run_id: RunIdDep, console: ConsoleDep, signed: CsrfDep
+) -> Response:
     return await _act(request, console, signed, run_id, "cancel")
 
 
 @router.post("/runs/{run_id}/resume")
-async def resume(request: Request, run_id: str, console: ConsoleDep, signed: CsrfDep) -> Response:
+async def resume(
+    request: Request, run_id: RunIdDep, console: ConsoleDep, signed: CsrfDep
+) -> Response:
     return await _act(request, console, signed, run_id, "resume")

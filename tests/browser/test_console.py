@@ -208,3 +208,15 @@ def test_the_four_pages_have_no_serious_or_critical_accessibility_violations(
     page.goto(f"{server.url}/console/reviews")
     found["reviews"] = _serious_violations(page)
     assert found == {"login": [], "runs": [], "run": [], "reviews": []}
+
+
+def test_the_runs_list_shows_status_changes_live(page: Page, server: Server) -> None:
+    sign_in(page, server)
+    run_id = start_run(server, **tasks(400))
+    page.goto(f"{server.url}/console?status=")
+    row = page.locator(f'tr[data-run="{run_id}"]')
+    expect(row).to_be_visible()
+    assert row.get_attribute("data-status") in ("queued", "running")
+    page.evaluate("window.__same_page = true")
+    expect(row.locator(".status")).to_have_text("completed", timeout=60_000)
+    assert page.evaluate("window.__same_page") is True
