@@ -212,3 +212,20 @@ def test_charts_are_well_formed_svg_with_a_title() -> None:
     )
     assert line is not None
     assert len(line.get("points", "").split()) <= charts.MAX_LINE_POINTS + 1
+
+
+def test_the_cookie_is_secure_over_https(make_client: ClientFactory) -> None:
+    client = make_client(api_keys=SecretStr(KEYS))
+    client.base_url = client.base_url.copy_with(scheme="https")
+    form = client.get("/console/login")
+    token = TOKEN.search(form.text)
+    assert token
+    answer = client.post(
+        "/console/login",
+        data={"api_key": SUPERVISOR, "csrf_token": token[1]},
+        follow_redirects=False,
+    )
+    assert answer.status_code == 303
+    cookie = answer.headers["set-cookie"]
+    assert "ltaa_console=" in cookie
+    assert "Secure" in cookie and "HttpOnly" in cookie and "SameSite=strict" in cookie
