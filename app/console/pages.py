@@ -155,6 +155,28 @@ async def attempt_page(
     return finish(request, console.render(request, name, context, signed=signed))
 
 
+@router.get("/runs/{run_id}/frontier")
+async def frontier_page(
+    request: Request,
+    run_id: RunIdDep,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    fragment: bool = False,
+) -> Response:
+    try:
+        part = await run_in_threadpool(
+            views.run_frontier,
+            sessions=sessions_of(request),
+            run_id=run_id,
+            cache_dir=console.settings.data_dir / "console-cache",
+        )
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    context = {"title": "Frontier", "f": part, "run_id": run_id}
+    name = "frontier_fragment.html" if fragment else "frontier.html"
+    return finish(request, console.render(request, name, context, signed=signed))
+
+
 @router.get("/runs/{run_id}/verify")
 async def verify_page(
     request: Request,

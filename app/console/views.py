@@ -12,10 +12,11 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.console import charts
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
 from app.runs import browse
-from app.runs.frontier import frontier
+from app.runs.frontier import FrontierPoint, cached_frontier, frontier
 from app.store.models import Attempt
 
 DECISIONS_PER_PAGE = 25
+INLINE_FRONTIER_TASKS = 1000  # up to here the frontier takes milliseconds: drawn in the page
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,36 @@ def final_attempt(attempts: list[Attempt]) -> Attempt | None:
 
 
 @dataclass(frozen=True)
+class FrontierView:
+    svg: Markup
+    points: list[charts.PlotPoint]
+    run_point: charts.PlotPoint | None
+
+
+def frontier_view(view: browse.RunOverview, points: list[FrontierPoint]) -> FrontierView:
+    plotted = [
+        charts.PlotPoint(
+            "no cap" if p.max_deviation is None else f"cap ±{p.max_deviation:g}",
+            p.balance_score,
+            100 * p.expected_success,
+        )
+        for p in points
+    ]
+    run_point = (
+        charts.PlotPoint("this run", view.balance_score, 100 * view.expected_success)
+        if view.balance_score is not None and view.expected_success is not None
+        else None
+    )
+    return FrontierView(charts.frontier_chart(plotted, run_point), plotted, run_point)
+
+
+def run_frontier(*, sessions: sessionmaker[Session], run_id: str, cache_dir: Path) -> FrontierView:
+    """The frontier part of the run page, computing (and caching) the frontier if need be."""
+    view = browse.overview(sessions=sessions, run_id=run_id)
+    return frontier_view(view, frontier(spec=view.spec, run_id=run_id, cache_dir=cache_dir))
+
+
+@dataclass(frozen=True)
 class RunPage:
     overview: browse.RunOverview
     page: browse.DecisionPage
@@ -55,9 +86,7 @@ class RunPage:
     open_decision: int | None
     workload_svg: Markup
     balance_svg: Markup
-    frontier_svg: Markup
-    frontier_points: list[charts.PlotPoint]
-    run_point: charts.PlotPoint | None
+    frontier: FrontierView | None  # None: not computed yet (the page loads it separately)
     cap_lower: int
     cap_upper: int | None
     model: str | None
@@ -86,19 +115,11 @@ def run_page(
     )
     cap = spec.problem.cap
     upper = None if cap.max_deviation is None else cap.upper
-    points = [
-        charts.PlotPoint(
-            "no cap" if p.max_deviation is None else f"cap ±{p.max_deviation:g}",
-            p.balance_score,
-            100 * p.expected_success,
-        )
-        for p in frontier(spec=spec, run_id=run_id, cache_dir=cache_dir)
-    ]
-    run_point = (
-        charts.PlotPoint("this run", view.balance_score, 100 * view.expected_success)
-        if view.balance_score is not None and view.expected_success is not None
-        else None
-    )
+    # A first visit to a large run would wait for the exact optimum at every cap: the page
+    # then comes without it and fetches it (which computes and caches it) once shown.
+    cached = cached_frontier(run_id=run_id, cache_dir=cache_dir)
+    if cached is None and run.n_tasks <= INLINE_FRONTIER_TASKS:
+        cached = frontier(spec=spec, run_id=run_id, cache_dir=cache_dir)
     last_seq = view.events[-1].seq if view.events else 0
     return RunPage(
         overview=view,
@@ -110,9 +131,7 @@ def run_page(
             view.robots, view.loads, spec.problem.instance.target_load, cap.lower, upper
         ),
         balance_svg=charts.balance_chart(view.balance, run.n_tasks),
-        frontier_svg=charts.frontier_chart(points, run_point),
-        frontier_points=points,
-        run_point=run_point,
+        frontier=frontier_view(view, cached) if cached is not None else None,
         cap_lower=cap.lower,
         cap_upper=upper,
         model=spec.model,

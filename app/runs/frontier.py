@@ -60,15 +60,27 @@ def compute_frontier(spec: RunSpec) -> list[FrontierPoint]:
     return [*points, uncapped]
 
 
-def frontier(*, spec: RunSpec, run_id: str, cache_dir: Path) -> list[FrontierPoint]:
-    """The cached frontier of a run, computed on first use."""
-    path = cache_dir / f"frontier-{run_id}.json"
+def _path(cache_dir: Path, run_id: str) -> Path:
+    return cache_dir / f"frontier-{run_id}.json"
+
+
+def cached_frontier(*, run_id: str, cache_dir: Path) -> list[FrontierPoint] | None:
+    """The run's frontier if it has been computed, else None (nothing is computed)."""
     try:
-        cached = json.loads(path.read_text())
+        cached = json.loads(_path(cache_dir, run_id).read_text())
         if cached.get("version") == CACHE_VERSION:
             return [FrontierPoint(**p) for p in cached["points"]]
     except (OSError, ValueError, TypeError, KeyError):
-        pass  # absent or unreadable: compute it again
+        pass  # absent or unreadable: computed again
+    return None
+
+
+def frontier(*, spec: RunSpec, run_id: str, cache_dir: Path) -> list[FrontierPoint]:
+    """The cached frontier of a run, computed on first use."""
+    cached = cached_frontier(run_id=run_id, cache_dir=cache_dir)
+    if cached is not None:
+        return cached
+    path = _path(cache_dir, run_id)
     points = compute_frontier(spec)
     cache_dir.mkdir(parents=True, exist_ok=True)
     # Written whole then renamed, so a concurrent reader never sees half a file.

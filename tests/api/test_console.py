@@ -153,7 +153,14 @@ def test_the_run_page_shows_the_run(make_client: ClientFactory) -> None:
     # Page 2 (tasks 25-35) with eight criterion rows per decision.
     assert html.count('<tr data-criterion="') == 11 * 8
     assert 'value="36"' in html
-    assert "this run" in html  # its point on the frontier
+    assert "this run" in html  # its point on the frontier, drawn in the page (small run)
+    assert 'id="frontier" aria-live' in html  # nothing left to fetch
+    cache = client.app.state.settings.data_dir / "console-cache" / f"frontier-{run_id}.json"  # type: ignore[attr-defined]
+    assert cache.is_file()
+    cache.unlink()
+    fragment = client.get(f"/console/runs/{run_id}/frontier?fragment=1")
+    assert fragment.status_code == 200 and "<svg" in fragment.text and "this run" in fragment.text
+    assert cache.is_file()
     assert client.get(f"/console/runs/{run_id}/export.jsonl").text.count('"type": "decision"') == 36
     assert client.get("/console/runs/no-such-run").status_code == 404
     assert client.get(f"/console/runs/{run_id}/attempts/0/99").status_code == 404

@@ -94,5 +94,7 @@ document.addEventListener("DOMContentLoaded", () => {
   if (runs) pollRuns(runs);
   const verify = document.getElementById("verify");
   if (verify) wireVerify(verify);
+  const frontier = document.getElementById("frontier");
+  if (frontier && frontier.dataset.src) loadInto(frontier, frontier.dataset.src);
   wirePrompts();
 });
