@@ -10,6 +10,7 @@ drive Debian's Chromium (/usr/bin/chromium) with Playwright.
 
 from __future__ import annotations
 
+import os
 import re
 import statistics
 import sys
@@ -115,14 +116,17 @@ def screenshots() -> list[Path]:
     return out
 
 
-def _usable_seconds(page: Page, url: str) -> tuple[float, float]:
-    """(seconds until the first page of decisions is on screen, until the load event)."""
+def _usable_seconds(page: Page, url: str) -> tuple[float, float, float]:
+    """Seconds until the first page of decisions is on screen, until the load event, and
+    until the frontier chart is drawn (fetched after the page on a first visit)."""
     start = time.perf_counter()
     page.goto(url, wait_until="commit")
     page.locator("details#decision-0").wait_for(state="visible", timeout=60_000)
     usable = time.perf_counter() - start
     page.wait_for_load_state("load")
-    return usable, time.perf_counter() - start
+    loaded = time.perf_counter() - start
+    page.locator("#chart-frontier").wait_for(state="visible", timeout=60_000)
+    return usable, loaded, time.perf_counter() - start
 
 
 def bench() -> str:
@@ -139,12 +143,14 @@ def bench() -> str:
         page = browser.new_page(viewport={"width": 1280, "height": 900})
         _sign_in(page, url)
         run_url = f"{url}/console/runs/{run_id}"
+        load = os.getloadavg()[0]
         cold = _usable_seconds(page, run_url)
         warm = [_usable_seconds(page, run_url) for _ in range(LOADS)]
         size = len(page.content().encode())
-    usable = statistics.median(u for u, _ in warm)
-    loaded = statistics.median(v for _, v in warm)
-    verdict = "within" if usable <= 2.0 else "**over**"
+    usable = statistics.median(u for u, _, _ in warm)
+    loaded = statistics.median(v for _, v, _ in warm)
+    charted = statistics.median(c for _, _, c in warm)
+    verdict = "within" if max(usable, cold[0]) <= 2.0 else "**not** within"
     return (
         f"{SECTION_TITLE}\n\n"
         f"Measured by `python -m benchmarks.console bench` on {machine()}: a completed "
@@ -152,15 +158,20 @@ def bench() -> str:
         f"{run_s:.0f} s), its page `/console/runs/{{id}}` opened in headless Chromium "
         "(Debian's package, Playwright) against the server started by `scripts/serve.sh`. "
         '"Usable" is the time from navigation to the first page of decisions on screen '
-        "(the header, progress, charts and the frontier are above it in the same HTML); "
-        '"loaded" is the load event. The first visit also computes the exact frontier '
-        "(the optimum at up to 12 caps) and caches it in the data directory.\n\n"
-        "| visit | usable | loaded |\n|---|---|---|\n"
-        f"| first (frontier computed) | {cold[0]:.2f} s | {cold[1]:.2f} s |\n"
-        f"| later (median of {LOADS}) | {usable:.2f} s | {loaded:.2f} s |\n\n"
-        f"Later visits are {verdict} the 2 s target; the page is {size / 1024:.0f} KiB of "
+        '(the header, progress and charts are above it in the same HTML); "loaded" is the '
+        'load event; "frontier" is when the chart of the run on the exact frontier is drawn. '
+        "On the first visit the page comes without the frontier and fetches it, which "
+        "computes the optimum at up to 12 caps and caches it in the data directory; later "
+        "visits draw it in the page.\n\n"
+        "| visit | usable | loaded | frontier |\n|---|---|---|---|\n"
+        f"| first (frontier computed) | {cold[0]:.2f} s | {cold[1]:.2f} s | {cold[2]:.2f} s |\n"
+        f"| later (median of {LOADS}) | {usable:.2f} s | {loaded:.2f} s | {charted:.2f} s |\n\n"
+        f"The first page of decisions is {verdict} the 2 s target on every visit; the page "
+        f"is {size / 1024:.0f} KiB of "
         "HTML with inline SVG (25 decisions per page; the balance line is thinned to 600 "
-        "points; prompts, replies and the chain check load on demand).\n"
+        "points; prompts, replies and the chain check load on demand). The 1-minute load "
+        f"average was {load:.1f} when the page visits began (other work on this shared "
+        "machine slows them).\n"
     )
 
 

@@ -155,7 +155,8 @@ def test_the_run_page_shows_the_run(make_client: ClientFactory) -> None:
     assert 'value="36"' in html
     assert "this run" in html  # its point on the frontier, drawn in the page (small run)
     assert 'id="frontier" aria-live' in html  # nothing left to fetch
-    cache = client.app.state.settings.data_dir / "console-cache" / f"frontier-{run_id}.json"  # type: ignore[attr-defined]
+    data_dir: Path = client.app.state.settings.data_dir  # type: ignore[attr-defined]
+    cache = data_dir / "console-cache" / f"frontier-{run_id}.json"
     assert cache.is_file()
     cache.unlink()
     fragment = client.get(f"/console/runs/{run_id}/frontier?fragment=1")
