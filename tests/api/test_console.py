@@ -4,7 +4,6 @@ tests in tests/browser drive the same pages in Chromium)."""
 from __future__ import annotations
 
 import re
-import time
 import xml.etree.ElementTree as ET
 from hashlib import sha256
 from itertools import pairwise
@@ -19,6 +18,7 @@ from app.domain.catalog import scenario
 from app.runs.frontier import MAX_CAPS, compute_frontier, frontier
 from app.runs.spec import RunSpec
 from tests.api.conftest import ClientFactory
+from tests.polling import eventually, wait_until
 
 SUPERVISOR = "api-console-supervisor-key-1"
 CLIENT = "api-console-client-key-00001"
@@ -43,12 +43,7 @@ def _run(client: TestClient) -> str:
         "/runs", json={"scenario": "baseline", "reasoner": "rules"}, headers={"X-API-Key": CLIENT}
     )
     run_id = str(created.json()["id"])
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{run_id}", headers={"X-API-Key": CLIENT}).json()["status"] != (
-        "completed"
-    ):
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
+    wait_until(client, run_id, ("completed",), headers={"X-API-Key": CLIENT})
     return run_id
 
 
@@ -102,8 +97,12 @@ def test_a_session_expires(make_client: ClientFactory) -> None:
     client = make_client(api_keys=SecretStr(KEYS), console_session_s=1.0)
     assert _sign_in(client) == 303
     assert client.get("/console", follow_redirects=False).status_code == 200
-    time.sleep(1.2)
-    assert client.get("/console", follow_redirects=False).status_code == 303
+    eventually(
+        lambda: client.get("/console", follow_redirects=False).status_code,
+        until=lambda status: status == 303,
+        timeout=10,
+        what="the session expired: the page redirects to sign-in",
+    )
 
 
 def test_the_cookie_opens_no_json_endpoint_but_the_event_stream(

@@ -7,7 +7,6 @@ which .ci/run installs when it is missing.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ import pytest
 from playwright.sync_api import Browser, BrowserContext, Page, Playwright, Request, sync_playwright
 
 from tests.e2e.server import Server
+from tests.polling import eventually
 
 CHROMIUM = Path("/usr/bin/chromium")
 SUPERVISOR_KEY = "browser-supervisor-key-7Gm2Qx9Lp4"
@@ -108,14 +108,13 @@ def start_run(server: Server, **body: object) -> str:
 def wait_status(
     server: Server, run_id: str, status: str = "completed", timeout: float = 90
 ) -> None:
-    deadline = time.monotonic() + timeout
     with server.client() as c:
-        while time.monotonic() < deadline:
-            state = c.get(f"/runs/{run_id}", headers={"X-API-Key": CLIENT_KEY}).json()
-            if state["status"] == status:
-                return
-            time.sleep(0.05)
-    raise AssertionError(f"run {run_id} did not become {status}; last: {state['status']}")
+        eventually(
+            lambda: c.get(f"/runs/{run_id}", headers={"X-API-Key": CLIENT_KEY}).json(),
+            until=lambda state: state["status"] == status,
+            timeout=timeout,
+            what=f"run {run_id} became {status}",
+        )
 
 
 def tasks(n: int) -> dict[str, object]:
