@@ -10,6 +10,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Annotated, Any, NoReturn
 
+import httpx
 import typer
 from pydantic import ValidationError
 from rich.console import Console
@@ -22,6 +23,7 @@ from app.config import Settings, get_settings
 from app.domain.errors import DomainError
 from app.domain.lifecycle import RunStatus
 from app.domain.modes import Mode
+from app.reasoners.scope import LLMScope
 
 cli = typer.Typer(
     name="ltaa",
@@ -256,7 +258,9 @@ def _print_report(r: AllocateResponse, *, show_tasks: bool) -> None:
 def run(
     scenario: Annotated[str, typer.Option(help="Built-in scenario")] = "baseline",
     mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
-    reasoner: Annotated[str, typer.Option(help="'rules' (offline) or 'anthropic'")] = "rules",
+    reasoner: Annotated[
+        str, typer.Option(help="'rules' (offline), 'anthropic' or 'openai'")
+    ] = "rules",
     max_deviation: Annotated[
         float | None,
         typer.Option(help="Workload cap, in tasks either side of the target (default: the mode's)"),
@@ -265,6 +269,10 @@ def run(
         str | None,
         typer.Option(help="'optimizer' to give the reasoner the optimal completion's choice"),
     ] = None,
+    llm_scope: Annotated[
+        LLMScope,
+        typer.Option(help="'contested': ask an LLM reasoner only for contested decisions"),
+    ] = LLMScope.ALL,
 ) -> None:
     """Run the LTAA graph durably in the local data directory, with a progress bar."""
     from app.cli_run import print_summary, run_locally
@@ -280,6 +288,7 @@ def run(
             max_deviation=max_deviation,
             guidance=guidance,
             console=console,
+            llm_scope=llm_scope.value,
         )
     except DomainError as exc:
         _fail(domain_error_body(exc), as_json=False)
@@ -302,6 +311,135 @@ def bench(
     from benchmarks.report import main as write_report
 
     write_report(section or None)
+
+
+@cli.command("bench-llm")
+def bench_llm(
+    reasoner: Annotated[
+        str, typer.Option(help="The LLM reasoner to measure: 'openai' or 'anthropic'")
+    ] = "openai",
+    model: Annotated[
+        str | None, typer.Option(help="Model (default: LTAA_OPENAI_MODEL / the default model)")
+    ] = None,
+    scenario: Annotated[
+        list[str] | None, typer.Option(help="Only these scenarios (default: all four)")
+    ] = None,
+    mode: Annotated[list[Mode] | None, typer.Option(help="Only these modes (default: all)")] = None,
+    tasks: Annotated[
+        int | None, typer.Option(min=1, help="Only the first N tasks of each scenario")
+    ] = None,
+    out: Annotated[Path, typer.Option(help="Where the report goes")] = Path(
+        "docs/llm-benchmark.md"
+    ),
+    label: Annotated[
+        str | None,
+        typer.Option(help="Who produced the figures, for the report (default: the endpoint)"),
+    ] = None,
+) -> None:
+    """Run the 4 scenarios x 3 modes (scope all and contested, guided and unguided) with
+    the configured LLM reasoner and write docs/llm-benchmark.md. Every call goes to the
+    server the LTAA_* settings name, and costs what that server charges."""
+    from benchmarks import llm_live
+
+    settings = get_settings()
+    try:
+        make = llm_live.reasoner_factory(reasoner, settings=settings, model=model)
+    except DomainError as exc:  # a missing setting (DomainError is a ValueError too)
+        typer.echo(f"{exc.field}: {exc.message}", err=True)
+        raise typer.Exit(1) from None
+    except ValueError as exc:
+        typer.echo(str(exc), err=True)
+        raise typer.Exit(2) from None
+    endpoint, used_model = llm_live.server_of(reasoner, settings, model)
+    typer.echo(f"bench-llm: {reasoner} model {used_model} at {endpoint}", err=True)
+
+    def progress(cell: llm_live.LiveCell) -> None:
+        typer.echo(
+            f"  {cell.scenario}/{cell.mode} {cell.scope}"
+            f"{' guided' if cell.guided else ''}: {cell.llm_tasks}/{cell.n_tasks} tasks "
+            f"asked the model, {cell.tokens:,} tokens, {cell.seconds:.1f} s",
+            err=True,
+        )
+
+    cells = llm_live.run_cells(
+        make,
+        scenario_names=scenario,
+        modes=mode or llm_live.MODES,
+        n_tasks=tasks,
+        progress=progress,
+    )
+    text = llm_live.render(
+        cells, reasoner=reasoner, endpoint=endpoint, model=used_model, label=label
+    )
+    typer.echo(f"wrote {llm_live.write(text, out)}", err=True)
+
+
+_URL = Annotated[
+    str,
+    typer.Option("--url", envvar="LTAA_URL", help="The server [default: http://127.0.0.1:8000]"),
+]
+_KEY = Annotated[
+    str | None,
+    typer.Option("--key", envvar="LTAA_API_KEY", help="A supervisor API key", show_default=False),
+]
+
+
+@cli.command()
+def reviews(url: _URL = "http://127.0.0.1:8000", key: _KEY = None) -> None:
+    """List the decisions waiting for a supervisor's review (GET /reviews)."""
+    from app.cli_reviews import ApiFailed, make_client, pending, print_reviews
+
+    try:
+        with make_client(url, key) as client:
+            found = pending(client)
+    except (ApiFailed, httpx.HTTPError) as exc:
+        Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    print_reviews(found, Console())
+
+
+@cli.command()
+def review(
+    run_id: Annotated[str, typer.Argument(help="The run (see `ltaa reviews`)")],
+    task_index: Annotated[int, typer.Argument(help="The task index waiting for review")],
+    approve: Annotated[bool, typer.Option("--approve", help="Approve the proposal")] = False,
+    override: Annotated[
+        str | None, typer.Option("--override", help="Use this robot instead", show_default=False)
+    ] = None,
+    reason: Annotated[
+        str | None, typer.Option("--reason", help="Why (required with --override)")
+    ] = None,
+    url: _URL = "http://127.0.0.1:8000",
+    key: _KEY = None,
+) -> None:
+    """Resolve a review: --approve, or --override ROBOT --reason TEXT."""
+    from app.cli_reviews import ApiFailed, make_client, resolve
+
+    if approve == (override is not None):
+        raise typer.BadParameter("give exactly one of --approve and --override ROBOT")
+    if override is not None and not (reason or "").strip():
+        raise typer.BadParameter("--override needs --reason", param_hint="--reason")
+    try:
+        with make_client(url, key) as client:
+            done = resolve(client, run_id, task_index, override=override, reason=reason)
+    except (ApiFailed, httpx.HTTPError) as exc:
+        Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    what = f"overridden to {done['robot']}" if done["action"] == "override" else "approved"
+    typer.echo(
+        f"task {task_index} of run {run_id} {what} by {done['reviewer']}; the run is "
+        f"{done['status']} again"
+    )
+
+
+@cli.command("key-name")
+def key_name(
+    key: Annotated[str, typer.Argument(help="An API key of LTAA_API_KEYS (without :ROLE)")],
+) -> None:
+    """Print a key's fingerprint: its default name, and how LTAA_API_KEY_NAMES names it."""
+    from app.api.auth import key_fingerprint
+
+    typer.echo(key_fingerprint(key))
 
 
 def main() -> None:

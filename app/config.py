@@ -61,6 +61,18 @@ class Settings(BaseSettings):
     )
     anthropic_timeout_s: float = Field(60.0, gt=0)
     anthropic_max_transport_retries: int = Field(3, ge=0)
+    # The `openai` reasoner: an OpenAI-compatible Chat Completions server (vLLM, Ollama,
+    # llama.cpp, OpenAI). Only these LTAA_ names are read, never the SDK's OPENAI_* ones:
+    # site data goes to the server the operator named here, or nowhere.
+    openai_base_url: str | None = Field(
+        None,
+        pattern=r"^https?://\S+$",
+        description="e.g. http://127.0.0.1:8001/v1 (vLLM), http://127.0.0.1:11434/v1 (Ollama)",
+    )
+    openai_api_key: SecretStr | None = Field(None, description="Optional for local servers")
+    openai_model: str | None = Field(None, min_length=1, description="e.g. Qwen/Qwen3-8B")
+    openai_timeout_s: float = Field(60.0, gt=0)
+    openai_max_transport_retries: int = Field(3, ge=0)
     # LLM tokens (input + output) a run may spend when its request names no token_budget;
     # then its remaining tasks go to the offline rules reasoner. None: no limit.
     run_token_budget: int | None = Field(None, ge=1)
@@ -75,6 +87,9 @@ class Settings(BaseSettings):
     # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.api.auth. A SecretStr so
     # repr(), model_dump() and validation errors never show a key.
     api_keys: SecretStr | None = None
+    # Non-secret names of the keys above, by fingerprint: "key-3f2a9c1b=alice,..." (see
+    # app.api.auth). Unnamed keys are called by their fingerprint.
+    api_key_names: str | None = None
     log_format: Literal["json", "text"] = "json"
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     # GET /runs/{id}/events polls the app tables at this interval (works across processes).

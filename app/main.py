@@ -18,7 +18,17 @@ from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
 from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
-from app.api.routes import allocate, catalog, events, health, metrics, runs, webhooks
+from app.api.routes import (
+    allocate,
+    catalog,
+    events,
+    health,
+    metrics,
+    reviews,
+    runs,
+    signoffs,
+    webhooks,
+)
 from app.api.routes.webhooks import WebhooksContext
 from app.config import Settings, get_settings
 from app.observability.logs import configure_logging
@@ -144,6 +154,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (health, catalog, allocate, runs, events, metrics, webhooks):
+    for module in (health, catalog, allocate, runs, signoffs, reviews, events, metrics, webhooks):
         app.include_router(module.router)
     return app

@@ -9,8 +9,10 @@ from pydantic import AfterValidator, BaseModel, Field
 
 from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
 from app.domain.lifecycle import RunStatus
+from app.domain.review import ReviewAction, ReviewOn
 from app.store.models import as_utc
 
+StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
 # database may refuse in a query (PostgreSQL rejects a NUL character with an error, a 500).
 RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
@@ -21,11 +23,49 @@ RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
 Timestamp = Annotated[datetime, AfterValidator(as_utc)]
 
 
+class ReviewPolicyIn(BaseModel):
+    """Which decisions wait for a supervisor (SPEC 11). A decision needs review when any
+    listed condition holds; the run pauses before the decision is stored."""
+
+    model_config = {"extra": "forbid"}
+
+    on: list[ReviewOn] = Field(
+        default_factory=list,
+        max_length=3,
+        description="'fallback' (the rules fallback decided), 'low_confidence' (the accepted "
+        "reply's Confidence Level is Low), 'every_decision'",
+    )
+    quality_below: float | None = Field(
+        None, ge=0, le=1, allow_inf_nan=False, description="Review when Q is below this"
+    )
+    regret_above: float | None = Field(
+        None,
+        ge=0,
+        allow_inf_nan=False,
+        description="Review when the proposal gives away more than this many success points "
+        "over the rest of the queue against the exact optimum (the unit of the guidance "
+        "costs, not divided by the number of tasks)",
+    )
+    task_ids: list[int | str] = Field(
+        default_factory=list, max_length=10_000, description="Review these tasks"
+    )
+    features: list[Name] = Field(
+        default_factory=list, max_length=100, description="Review tasks needing any of these"
+    )
+    robots: list[Name] = Field(
+        default_factory=list,
+        max_length=100,
+        description="Review decisions proposing any of these robots",
+    )
+
+
 class RunRequest(InstanceRequest):
     """An LTAA run on an instance, executed durably in the background."""
 
     reasoner: Name | None = Field(
-        None, description="'rules' (default, offline), 'anthropic', or 'replay' (with replay_of)"
+        None,
+        description="'rules' (default, offline), 'anthropic', 'openai' (the server's "
+        "OpenAI-compatible endpoint, LTAA_OPENAI_BASE_URL), or 'replay' (with replay_of)",
     )
     quality_threshold: float = Field(
         0.6,
@@ -42,7 +82,11 @@ class RunRequest(InstanceRequest):
         strict=True,
         description="Validation retries (tiers 1-3) before the fallback",
     )
-    model: Name | None = Field(None, description="Claude model (anthropic reasoner)")
+    model: Name | None = Field(
+        None,
+        description="Model name: Claude (anthropic) or the OpenAI-compatible server's "
+        "(openai; default LTAA_OPENAI_MODEL)",
+    )
     temperature: float | None = Field(
         None,
         ge=0,
@@ -64,6 +108,26 @@ class RunRequest(InstanceRequest):
         description="LLM tokens (input + output) the run may spend; once spent, the "
         "remaining tasks use the offline 'rules' reasoner (default: the server's setting)",
     )
+    llm_scope: Literal["all", "contested"] | None = Field(
+        None,
+        description="'all' (default, the paper): every decision asks the LLM. 'contested': "
+        "only decisions whose trade-off verdict is within llm_margin points of its threshold, "
+        "or where optimizer guidance disagrees with the rule, ask the LLM; the rules reasoner "
+        "answers the clear-cut ones (their attempts say reasoner 'rules', why 'clear-cut'). "
+        "No effect with the 'rules' reasoner",
+    )
+    llm_margin: float | None = Field(
+        None,
+        ge=0,
+        le=100,
+        strict=True,
+        allow_inf_nan=False,
+        description="Points either side of the threshold within which a decision is "
+        "contested (default 5)",
+    )
+    review: ReviewPolicyIn | None = Field(
+        None, description="Supervisor review of decisions (default: none); see GET /reviews"
+    )
     replay_of: str | None = Field(
         None,
         min_length=1,
@@ -71,10 +135,10 @@ class RunRequest(InstanceRequest):
         pattern=RUN_ID_PATTERN,
         description="Required by reasoner 'replay', refused with any other: id of a completed "
         "run whose recorded replies are replayed, with no API call. The replay copies that "
-        "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance and "
-        "seed: omit them, or send the original's values (any other value is a 422 naming "
-        "the field); model, temperature and token_budget do not apply. Unknown id: 422; "
-        "a run not completed: 409",
+        "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance, "
+        "seed, llm_scope and llm_margin: omit them, or send the original's values (any "
+        "other value is a 422 naming the field); model, temperature and token_budget do "
+        "not apply. Unknown id: 422; a run not completed: 409",
     )
 
 
@@ -90,6 +154,19 @@ class Progress(BaseModel):
     phase: Literal["early", "middle", "late"]
 
 
+class DecisionReviewOut(BaseModel):
+    """A supervisor's review of a decision (SPEC 11); covered by the decision's chain hash."""
+
+    action: ReviewAction
+    reviewer: str = Field(description="The resolving API key's name")
+    reason: str | None
+    at: Timestamp
+    triggers: list[str]
+    overridden_from: str | None = Field(
+        None, description="override: the robot the run had proposed"
+    )
+
+
 class RunAssignment(BaseModel):
     task_index: int
     task_id: int | str
@@ -97,6 +174,22 @@ class RunAssignment(BaseModel):
     robot: str
     success: float
     fallback: bool
+    review: DecisionReviewOut | None = None
+
+
+class SignedHeadsOut(BaseModel):
+    decisions: str | None = Field(description="Head of the decision chain when signed")
+    events: str | None = Field(description="Head of the event chain when signed")
+
+
+class SignOffOut(BaseModel):
+    signer: str = Field(description="The signing API key's name (never the key)")
+    at: Timestamp
+    heads: SignedHeadsOut = Field(
+        description="The chain heads signed; trace/verify's signoffs_ok says whether the "
+        "record still ends there"
+    )
+    statement: str
 
 
 class RunOut(BaseModel):
@@ -119,6 +212,9 @@ class RunOut(BaseModel):
     created_at: Timestamp
     updated_at: Timestamp
     finished_at: Timestamp | None
+    signoffs: list[SignOffOut] = Field(
+        default_factory=list, description="Sign-offs of the completed run, oldest first"
+    )
 
 
 class RunSummary(BaseModel):
@@ -153,6 +249,15 @@ class AttemptOut(BaseModel):
     latency_ms: float
     transport_retries: int
     model: str | None
+    reasoner: str = Field(
+        description="Who wrote the reply: 'anthropic', 'openai', 'rules' or 'replay'"
+    )
+    why: StandIn | None = Field(
+        None,
+        description="Set when the rules reasoner answered instead of the run's LLM: "
+        "'clear-cut' (llm_scope 'contested' and the decision was not contested) or "
+        "'budget_exhausted' (the run's token budget was spent)",
+    )
     replayed_from: str | None = Field(
         None,
         description="Replay runs: the run whose recorded reply this attempt reused "
@@ -187,6 +292,14 @@ class DecisionOut(BaseModel):
     fallback: bool
     failure_log: list[str]
     regret: float | None
+    reasoner: str = Field(
+        description="Whose answer the decision took: the accepted attempt's reasoner, or "
+        "'rules' when the fallback decided"
+    )
+    why: StandIn | None = Field(
+        None, description="'fallback' when every attempt failed; else the accepted attempt's"
+    )
+    review: DecisionReviewOut | None = None
     attempts: list[AttemptOut]
 
 
@@ -204,9 +317,11 @@ class TraceOut(BaseModel):
 class BrokenLinkOut(BaseModel):
     """Where a run's hash chain first fails to verify."""
 
-    table: Literal["decisions", "events"]
+    table: Literal["decisions", "events", "annotations"]
     task_index: int | None = Field(description="The decision (decisions table), else null")
-    seq: int | None = Field(description="The event (events table), else null")
+    seq: int | None = Field(
+        description="The event (events table) or annotation (annotations table), else null"
+    )
     expected: str | None = Field(
         description="The hash recomputed from the row's content and the previous link; null "
         "when the row is missing or has no stored hash"
@@ -221,11 +336,25 @@ class ChainHeadsOut(BaseModel):
 
 
 class TraceVerifyOut(BaseModel):
-    """The result of recomputing a run's two hash chains (decisions, events) from its rows."""
+    """The result of recomputing a run's three hash chains (decisions, events, and the
+    annotations recorded after it finished) from its rows."""
 
     ok: bool = Field(description="Every row present, chained and unaltered")
     decisions: int = Field(description="Decision rows checked")
     events: int = Field(description="Event rows checked")
+    annotations: int = Field(
+        default=0, description="Annotation rows checked (records made after the run finished)"
+    )
+    annotations_head: str | None = Field(
+        default=None,
+        description="Stored hash of the newest annotation (records made after the run "
+        "finished, such as sign-offs): outside `heads`, which is what a sign-off signs",
+    )
+    signoffs_ok: bool = Field(
+        default=True,
+        description="Every sign-off's heads are still the heads of the decision and event "
+        "chains, and both verify (true when there is no sign-off)",
+    )
     unchained: int = Field(
         description="Rows with no chain hash (written before tamper evidence existed); "
         "any makes ok false"

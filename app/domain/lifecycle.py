@@ -19,6 +19,8 @@ class RunStatus(StrEnum):
     COMPLETED = "completed"
     FAILED = "failed"
     CANCELLED = "cancelled"
+    # Paused before a decision that its review policy sends to a supervisor (SPEC 11).
+    AWAITING_REVIEW = "awaiting_review"
 
 
 class EventKind(StrEnum):
@@ -33,6 +35,9 @@ class EventKind(StrEnum):
     CANCELLED = "cancelled"
     INTEGRITY_FAILED = "integrity_failed"
     BUDGET_EXHAUSTED = "budget_exhausted"
+    REVIEW_REQUESTED = "review_requested"
+    REVIEW_RESOLVED = "review_resolved"
+    REVIEW_CLOSED = "review_closed"
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,8 @@ STATUS_RULES: dict[RunStatus, StatusRule] = {
     RunStatus.COMPLETED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.FAILED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.CANCELLED: StatusRule(finished=True, claimable=False, active=False),
+    # Nobody holds or claims it: it waits for a resolution, which queues it again.
+    RunStatus.AWAITING_REVIEW: StatusRule(finished=False, claimable=False, active=False),
 }
 
 FINISHED: frozenset[RunStatus] = frozenset(s for s, r in STATUS_RULES.items() if r.finished)
@@ -69,6 +76,9 @@ TRANSITIONS: dict[tuple[RunStatus, RunStatus], str] = {
     (RunStatus.INTERRUPTED, RunStatus.CANCELLED): "cancelled while interrupted",
     (RunStatus.INTERRUPTED, RunStatus.FAILED): "refused on resume (integrity check, settings)",
     (RunStatus.FAILED, RunStatus.INTERRUPTED): "a supervisor asked to resume it",
+    (RunStatus.RUNNING, RunStatus.AWAITING_REVIEW): "a decision needs a supervisor's review",
+    (RunStatus.AWAITING_REVIEW, RunStatus.QUEUED): "the review was resolved",
+    (RunStatus.AWAITING_REVIEW, RunStatus.CANCELLED): "cancelled while awaiting review",
 }
 
 

@@ -16,11 +16,13 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import EventKind, RunStatus
+from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
 from app.runs.errors import RunNotFoundError
 from app.store import chain
 from app.store import repository as repo
-from app.store.models import Attempt, Decision, Run, RunEvent, as_utc
+from app.store.models import Attempt, Decision, Run, RunAnnotation, RunEvent, as_utc
 
 DECISIONS_PER_PAGE = 100  # with their attempts' prompts: about 1-3 MB per page
 EVENTS_PER_PAGE = 1000
@@ -38,6 +40,21 @@ def _event_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[
     while True:
         with sessions() as session:
             page = repo.events_page(
+                session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
+            )
+        if not page:
+            return
+        yield page
+        after = page[-1].seq
+
+
+def _annotation_pages(
+    sessions: sessionmaker[Session], run_id: str
+) -> Iterator[list[RunAnnotation]]:
+    after = 0
+    while True:
+        with sessions() as session:
+            page = repo.annotations_page(
                 session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
             )
         if not page:
@@ -84,15 +101,20 @@ class ChainCheckResult:
 class ChainReport:
     decisions: ChainCheckResult
     events: ChainCheckResult
+    annotations: ChainCheckResult
+    # Every sign-off's heads are still the heads of the decision and event chains, and
+    # those chains verify: what was signed is what the record says now.
+    signoffs_ok: bool = True
 
     @property
     def ok(self) -> bool:
-        return self.decisions.first_break is None and self.events.first_break is None
+        return self.first_break is None
 
     @property
     def first_break(self) -> chain.Break | None:
-        """The decisions chain's break if it has one, else the events chain's."""
-        return self.decisions.first_break or self.events.first_break
+        """The decisions chain's break if it has one, else the events', else the
+        annotations'."""
+        return self.decisions.first_break or self.events.first_break or self.annotations.first_break
 
 
 def _result(check: chain.ChainCheck) -> ChainCheckResult:
@@ -141,7 +163,25 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
             "the run completed but its events do not end with the "
             "'completed' event: the last events were deleted"
         )
-    return ChainReport(decisions=_result(decisions), events=_result(events))
+    annotations = chain.ChainCheck("annotations", run_id, first_key=1)
+    signed: list[Any] = []
+    for annotation_page in _annotation_pages(sessions, run_id):
+        for a in annotation_page:
+            if a.kind == AnnotationKind.SIGNOFF:
+                signed.append((a.detail or {}).get("heads"))
+
+            def annotation_link(prev: str, a: RunAnnotation = a) -> str:
+                return chain.annotation_link(prev, _columns(a, chain.ANNOTATION_FIELDS))
+
+            annotations.feed(a.seq, a.chain_hash, annotation_link)
+    heads_now = {"decisions": decisions.head, "events": events.head}
+    chains_intact = decisions.first_break is None and events.first_break is None
+    return ChainReport(
+        decisions=_result(decisions),
+        events=_result(events),
+        annotations=_result(annotations),
+        signoffs_ok=all(chains_intact and heads == heads_now for heads in signed),
+    )
 
 
 # -- export --------------------------------------------------------------------------------
@@ -183,16 +223,31 @@ def _event_line(e: RunEvent) -> dict[str, Any]:
     }
 
 
-def _decision_line(d: Decision, attempts: list[Attempt]) -> dict[str, Any]:
-    # Columns under their stored names, so the export alone suffices to recompute the chain.
+def _attempt_line(a: Attempt, run_reasoner: str) -> tuple[dict[str, Any], Attribution]:
+    who = attempt_attribution(a.reply_extra, a.reply_model, run_reasoner)
+    line = {
+        **_columns(a, chain.ATTEMPT_FIELDS),
+        "at": _when(a.created_at),
+        "reasoner": who.reasoner,
+        "why": who.why,
+    }
+    return line, who
+
+
+def _decision_line(d: Decision, attempts: list[Attempt], run_reasoner: str) -> dict[str, Any]:
+    # Columns under their stored names, so the export alone suffices to recompute the chain;
+    # `reasoner` and `why` (derived, outside the chain) say who wrote each reply.
+    lines = [_attempt_line(a, run_reasoner) for a in attempts]
+    accepted = next((who for line, who in reversed(lines) if line["accepted"]), None)
+    decided = decision_attribution(bool(d.fallback), accepted)
     return {
         "type": "decision",
         **_columns(d, chain.DECISION_FIELDS),
         "at": _when(d.created_at),
         "chain_hash": d.chain_hash,
-        "attempt_records": [
-            {**_columns(a, chain.ATTEMPT_FIELDS), "at": _when(a.created_at)} for a in attempts
-        ],
+        "reasoner": decided.reasoner,
+        "why": decided.why,
+        "attempt_records": [line for line, _ in lines],
     }
 
 
@@ -222,5 +277,5 @@ def _record_pages(
     for decisions in _decision_pages(sessions, run_id):
         n_decisions += len(decisions)
         n_attempts += sum(len(a) for _, a in decisions)
-        yield [_decision_line(d, a) for d, a in decisions]
+        yield [_decision_line(d, a, header["reasoner"]) for d, a in decisions]
     yield [{"type": "end", "events": n_events, "decisions": n_decisions, "attempts": n_attempts}]

@@ -9,7 +9,9 @@ from typing import Any
 from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.problem import Problem
+from app.domain.review import ReviewPolicy
 from app.domain.serialize import instance_from_dict, instance_to_dict
+from app.reasoners.scope import DEFAULT_LLM_MARGIN, LLMScope
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
 DEFAULT_MAX_RETRIES = 3
@@ -32,6 +34,17 @@ class RunSpec:
     token_budget: int | None = None
     # reasoner 'replay': the finished run whose recorded replies are replayed.
     replay_of: str | None = None
+    # 'contested': an LLM reasoner is asked only for contested decisions, the rules
+    # reasoner answers the clear-cut ones (app.reasoners.scope). Specs stored before these
+    # existed read as the paper's 'all'.
+    llm_scope: str = LLMScope.ALL.value
+    llm_margin: float = DEFAULT_LLM_MARGIN
+    # app.domain.review.ReviewPolicy as JSON; None: no review.
+    review: dict[str, Any] | None = None
+
+    @property
+    def review_policy(self) -> ReviewPolicy | None:
+        return None if self.review is None else ReviewPolicy.from_json(self.review)
 
     @classmethod
     def for_instance(cls, instance: Instance, **params: Any) -> RunSpec:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import statistics
 import uuid
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 from langgraph.checkpoint.memory import InMemorySaver
@@ -16,14 +17,17 @@ from pydantic import Field
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
+from app.domain.review import Resolution, ReviewPolicy
 from app.graph.builder import build_graph
 from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import Recorder
+from app.graph.review import ReviewGate
 from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
+from app.reasoners.scope import DEFAULT_LLM_MARGIN
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
 
@@ -36,6 +40,10 @@ class LTAAOptions(SolverOptions):
     temperature: float | None = Field(None, ge=0.0, le=1.0)
     timeout: float | None = Field(None, gt=0.0)
     guidance: Literal["optimizer"] | None = None
+    # SPEC §14: 'contested' asks the LLM only where the trade-off verdict is close to its
+    # threshold (within llm_margin points) or guidance disagrees with the rule.
+    llm_scope: Literal["all", "contested"] = "all"
+    llm_margin: float = Field(DEFAULT_LLM_MARGIN, ge=0.0, le=100.0)
     # No api_key / base_url here: a request must not choose where the server sends its
     # key (SSRF) nor carry secrets into logs; both come from the server's settings.
 
@@ -48,9 +56,23 @@ def graph_context(
     quality_threshold: float,
     max_retries: int,
     guidance: str | None,
+    review: ReviewPolicy | None = None,
+    recorded_reviews: Mapping[int, Resolution] | None = None,
 ) -> GraphContext:
-    """The LTAA graph's run context, with exact regret always and guidance on request."""
+    """The LTAA graph's run context, with exact regret always, guidance on request, and the
+    review gate when the run has a review policy (or replays recorded resolutions)."""
     oracle = CompletionOracle(problem)
+
+    def cost(task_index: int, loads: Sequence[int], robot: int) -> float | None:
+        # Success points over the rest of the queue: the unit of the guidance costs.
+        loss = oracle.loss(task_index, loads, robot)
+        return None if loss is None else loss * 100
+
+    gate = (
+        ReviewGate(policy=review, cost=cost, recorded=recorded_reviews)
+        if review is not None or recorded_reviews is not None
+        else None
+    )
     return GraphContext(
         problem=problem,
         reasoner=reasoner,
@@ -59,6 +81,7 @@ def graph_context(
         max_retries=max_retries,
         guidance=oracle.guidance if guidance == "optimizer" else None,
         regret=oracle.regret,
+        review=gate,
     )
 
 
@@ -73,6 +96,9 @@ def execute_ltaa(
     max_retries: int,
     guidance: str | None,
     resume: bool = False,
+    review: ReviewPolicy | None = None,
+    recorded_reviews: Mapping[int, Resolution] | None = None,
+    resume_with: Any = None,
 ) -> Execution:
     """The one execution path of an LTAA problem (durable runs, `ltaa run` and the
     synchronous solver): its context with exact regret (and guidance on request), then
@@ -85,18 +111,21 @@ def execute_ltaa(
         quality_threshold=quality_threshold,
         max_retries=max_retries,
         guidance=guidance,
+        review=review,
+        recorded_reviews=recorded_reviews,
     )
-    return execute(graph, context, thread_id, resume=resume)
+    return execute(graph, context, thread_id, resume=resume, resume_with=resume_with)
 
 
 class LTAASolver(Solver):
     info = SolverInfo(
         name="ltaa",
         description="The LTAA graph (phase detection, reasoning, 8-criterion validation, tiered "
-        "retries, rules fallback), run synchronously; reasoner 'rules' (default) or "
-        "'anthropic'.",
+        "retries, rules fallback), run synchronously; reasoner 'rules' (default), "
+        "'anthropic' or 'openai' (an OpenAI-compatible server, e.g. vLLM or Ollama).",
         exact=False,
-        limits="any size within the request limits; 'anthropic' makes 1-4 API calls per task",
+        limits="any size within the request limits; 'anthropic' and 'openai' make 1-4 API calls "
+        "per task (per contested task with llm_scope 'contested')",
     )
     Options = LTAAOptions
 
@@ -109,6 +138,8 @@ class LTAASolver(Solver):
                 model=opts.model,
                 temperature=opts.temperature,
                 timeout=opts.timeout,
+                llm_scope=opts.llm_scope,
+                llm_margin=opts.llm_margin,
             )
         except DomainError as exc:
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
@@ -140,6 +171,7 @@ class LTAASolver(Solver):
                 "retries": sum(d.attempts - 1 for d in decisions),
                 "transport_retries": used.transport_retries,
                 "guidance": opts.guidance,
+                "llm_scope": opts.llm_scope,
                 "regret": sum(d.regret or 0.0 for d in decisions),
                 "decisions": [
                     {

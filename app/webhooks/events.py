@@ -25,7 +25,8 @@ class WebhookEventType(StrEnum):
 
 # Run event kind -> webhook type. Kinds absent here (started, resumed, ...) send nothing.
 # Features that add event kinds (revisions, reviews, sign-off) add their rows here.
-# The last five name the events SPEC 10-11 features will add to EventKind.
+# The string keys name events SPEC 10-11 features have yet to add to EventKind (a
+# sign-off is recorded in the annotation chain, not as a run event: not wired yet).
 TYPE_OF_KIND: dict[str, WebhookEventType] = {
     EventKind.CREATED: WebhookEventType.RUN_CREATED,
     EventKind.COMPLETED: WebhookEventType.RUN_COMPLETED,
@@ -36,8 +37,8 @@ TYPE_OF_KIND: dict[str, WebhookEventType] = {
     EventKind.BUDGET_EXHAUSTED: WebhookEventType.BUDGET_EXHAUSTED,
     "superseded": WebhookEventType.RUN_SUPERSEDED,
     "revised": WebhookEventType.RUN_REVISED,
-    "review_requested": WebhookEventType.REVIEW_REQUESTED,
-    "review_resolved": WebhookEventType.REVIEW_RESOLVED,
+    EventKind.REVIEW_REQUESTED: WebhookEventType.REVIEW_REQUESTED,
+    EventKind.REVIEW_RESOLVED: WebhookEventType.REVIEW_RESOLVED,
     "signed_off": WebhookEventType.RUN_SIGNED_OFF,
 }
 
@@ -49,6 +50,8 @@ STATUS_OF_KIND: dict[str, RunStatus] = {
     EventKind.INTEGRITY_FAILED: RunStatus.FAILED,
     EventKind.CANCELLED: RunStatus.CANCELLED,
     EventKind.INTERRUPTED: RunStatus.INTERRUPTED,
+    EventKind.REVIEW_REQUESTED: RunStatus.AWAITING_REVIEW,
+    EventKind.REVIEW_RESOLVED: RunStatus.QUEUED,
 }
 
 

@@ -19,6 +19,14 @@ from tests.polling import eventually
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
+LLM_ENVIRONMENT = (
+    "ANTHROPIC_API_KEY",
+    "LTAA_ANTHROPIC_API_KEY",
+    "LTAA_ANTHROPIC_BASE_URL",
+    "LTAA_OPENAI_BASE_URL",
+    "LTAA_OPENAI_API_KEY",
+    "LTAA_OPENAI_MODEL",
+)
 
 
 def free_port() -> int:
@@ -41,7 +49,8 @@ class Server:
         self.data_dir = data_dir
         self.port = port or free_port()
         self.env = {**os.environ, "LTAA_DATA_DIR": str(data_dir), **(env or {})}
-        for key in ("ANTHROPIC_API_KEY", "LTAA_ANTHROPIC_API_KEY"):
+        # The developer's own LLM configuration stays out of the server under test.
+        for key in (*LLM_ENVIRONMENT, *(k for k in os.environ if k.startswith("OPENAI_"))):
             if key not in (env or {}):
                 self.env.pop(key, None)
         self.proc: subprocess.Popen[bytes] | None = None

@@ -12,10 +12,12 @@ from app.api.audit import JSONL_RESPONSE, jsonl_trace, verify_out
 from app.api.deps import ClientDep, RunIdPath, RunsDep, SettingsDep, SupervisorDep
 from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey, idempotency_of
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
+from app.api.routes.signoffs import signoff_out
 from app.api.run_examples import RUN_EXAMPLES
 from app.api.run_schemas import (
     AttemptOut,
     DecisionOut,
+    DecisionReviewOut,
     EventOut,
     Progress,
     RunAssignment,
@@ -28,8 +30,11 @@ from app.api.run_schemas import (
     TraceVerifyOut,
 )
 from app.api.schemas import MetricsOut, UsageOut
+from app.domain.models import Instance
 from app.domain.serialize import instance_to_dict
-from app.runs import audit, service
+from app.graph.recorder import DecisionRecord
+from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
+from app.runs import audit, reviews, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
 from app.store.models import Attempt
@@ -76,6 +81,11 @@ def create_run(
             token_budget=body.token_budget
             if body.token_budget is not None
             else settings.run_token_budget,
+            **scope_of(body),
+            review=reviews.policy_for(
+                body.review.model_dump(mode="json") if body.review is not None else None,
+                problem.instance,
+            ),
         )
     run, replayed = service.create_or_replay_run(
         sessions=runs.sessions,
@@ -93,6 +103,16 @@ def create_run(
         status=RunStatus.QUEUED if replayed else RunStatus(run.status),
         location=f"/runs/{run.id}",
     )
+
+
+def scope_of(body: RunRequest) -> dict[str, Any]:
+    """The request's LLM scope as a run spec stores it (omitted: the defaults)."""
+    scope: dict[str, Any] = {}
+    if body.llm_scope is not None:
+        scope["llm_scope"] = body.llm_scope
+    if body.llm_margin is not None:
+        scope["llm_margin"] = float(body.llm_margin)
+    return scope
 
 
 def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
@@ -114,6 +134,8 @@ def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
         "model",
         "temperature",
         "token_budget",
+        "llm_scope",
+        "llm_margin",
     ):
         if name in sent:
             values[name] = getattr(body, name)
@@ -145,6 +167,10 @@ def list_runs(
     ]
 
 
+def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
+    return None if review is None else DecisionReviewOut.model_validate(review)
+
+
 def _run_out(view: service.RunView) -> RunOut:
     run, spec = view.run, view.spec
     instance = spec.problem.instance
@@ -165,6 +191,7 @@ def _run_out(view: service.RunView) -> RunOut:
                 robot=names[d.robot],
                 success=d.expected_success,
                 fallback=d.fallback,
+                review=_review_out(d.review),
             )
             for d in view.decisions
         ],
@@ -176,6 +203,7 @@ def _run_out(view: service.RunView) -> RunOut:
         created_at=run.created_at,
         updated_at=run.updated_at,
         finished_at=run.finished_at,
+        signoffs=[signoff_out(s) for s in view.signoffs],
     )
 
 
@@ -185,7 +213,8 @@ def get_run(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
 
 
-def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
+def _attempt_out(a: Attempt, prompts: bool, run_reasoner: str) -> AttemptOut:
+    who = attempt_attribution(a.reply_extra, a.reply_model, run_reasoner)
     return AttemptOut(
         attempt=a.attempt,
         tier=a.tier,
@@ -200,6 +229,8 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
         latency_ms=a.latency_ms,
         transport_retries=a.transport_retries,
         model=a.reply_model,
+        reasoner=who.reasoner,
+        why=who.why,  # type: ignore[arg-type]  # one of the StandIn values, as stored
         replayed_from=(a.reply_extra or {}).get("replayed_from"),
         original_model=(a.reply_extra or {}).get("original_model"),
         system_prompt=a.system_prompt if prompts else None,
@@ -245,29 +276,56 @@ def get_trace(
             EventOut(seq=e.seq, kind=e.kind, detail=e.detail, at=e.created_at) for e in trace.events
         ],
         decisions=[
-            DecisionOut(
-                task_index=d.task_index,
-                task_id=instance.tasks[d.task_index].id,
-                task_name=d.task_name,
-                robot=names[d.robot],
-                expected_success=d.expected_success,
-                phase=d.phase,
-                loads_before=d.loads_before,
-                loads_after=d.loads_after,
-                balance_before=d.balance_before,
-                balance_after=d.balance_after,
-                severity_after=d.severity_after,
-                reasoning=d.reasoning,
-                confidence=d.confidence,
-                tradeoff=d.tradeoff,
-                quality=d.quality,
-                fallback=d.fallback,
-                failure_log=d.failure_log,
-                regret=d.regret,
-                attempts=[_attempt_out(a, prompts) for a in trace.attempts.get(d.task_index, [])],
+            _decision_out(
+                d,
+                trace.attempts.get(d.task_index, []),
+                instance=instance,
+                names=names,
+                prompts=prompts,
+                run_reasoner=trace.run.reasoner,
             )
             for d in trace.decisions
         ],
+    )
+
+
+def _decision_out(
+    d: DecisionRecord,
+    attempts: list[Attempt],
+    *,
+    instance: Instance,
+    names: list[str],
+    prompts: bool,
+    run_reasoner: str,
+) -> DecisionOut:
+    outs = [_attempt_out(a, prompts, run_reasoner) for a in attempts]
+    accepted = next((a for a in reversed(outs) if a.accepted), None)
+    who = decision_attribution(
+        d.fallback, Attribution(accepted.reasoner, accepted.why) if accepted else None
+    )
+    return DecisionOut(
+        task_index=d.task_index,
+        task_id=instance.tasks[d.task_index].id,
+        task_name=d.task_name,
+        robot=names[d.robot],
+        expected_success=d.expected_success,
+        phase=d.phase,
+        loads_before=d.loads_before,
+        loads_after=d.loads_after,
+        balance_before=d.balance_before,
+        balance_after=d.balance_after,
+        severity_after=d.severity_after,
+        reasoning=d.reasoning,
+        confidence=d.confidence,
+        tradeoff=d.tradeoff,
+        quality=d.quality,
+        fallback=d.fallback,
+        failure_log=d.failure_log,
+        regret=d.regret,
+        reasoner=who.reasoner,
+        why=who.why,  # type: ignore[arg-type]  # one of the StandIn values
+        review=_review_out(d.review),
+        attempts=outs,
     )
 
 
