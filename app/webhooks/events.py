@@ -25,7 +25,8 @@ class WebhookEventType(StrEnum):
 
 # Run event kind -> webhook type. Kinds absent here (started, resumed, ...) send nothing.
 # Features that add event kinds (revisions, reviews, sign-off) add their rows here.
-# The last five name the events SPEC 10-11 features will add to EventKind.
+# The string keys name events SPEC 10-11 features have yet to add to EventKind (a
+# sign-off is recorded in the annotation chain, not as a run event: not wired yet).
 TYPE_OF_KIND: dict[str, WebhookEventType] = {
     EventKind.CREATED: WebhookEventType.RUN_CREATED,
     EventKind.COMPLETED: WebhookEventType.RUN_COMPLETED,

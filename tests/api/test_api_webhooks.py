@@ -399,3 +399,14 @@ def test_a_dripping_answer_is_cut_off_at_the_timeout(
     first = d["attempt_log"][0]
     assert first["outcome"] == "network_error" and "longer than the timeout" in first["error"]
     assert 450 < first["latency_ms"] < 1500
+
+
+def test_a_review_request_sends_review_requested(lan: TestClient, receiver: Receiver) -> None:
+    hook = subscribe(lan, receiver.url, ["review.requested"])
+    created = lan.post("/runs", json={**RUN, "review": {"on": ["every_decision"]}})
+    assert created.status_code == 202, created.text
+    run_id = created.json()["id"]
+    receiver.wait_for(lambda got: len(got) >= 1, what="a review request")
+    (first, *_) = receiver.verified(hook["secret"])
+    assert first["type"] == "review.requested" and first["data"]["run_id"] == run_id
+    assert first["data"]["event"] == "review_requested"
