@@ -100,6 +100,10 @@ def pause_for_review(session: Session, run: Run, payload: Mapping[str, Any]) -> 
             },
         )
     lifecycle.move(session, run, RunStatus.AWAITING_REVIEW)
+    # Nobody holds a run that waits for a person: its lease (PostgreSQL scale-out) ends in
+    # the same transaction, not a moment later when the worker's thread winds down.
+    run.lease_owner = None
+    run.lease_expires_at = None
 
 
 def resolution_to_apply(session: Session, run_id: str) -> dict[str, Any] | None:
