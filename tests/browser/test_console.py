@@ -205,7 +205,10 @@ def test_the_four_pages_have_no_serious_or_critical_accessibility_violations(
     page.goto(f"{server.url}/console/runs/{run_id}?decision=17")
     expect(page.locator("#verify-result")).to_be_visible()
     found["run"] = _serious_violations(page)
+    waiting = start_run(server, review={"task_ids": [5]})
+    wait_status(server, waiting, "awaiting_review")
     page.goto(f"{server.url}/console/reviews")
+    expect(page.locator("article.review").first).to_be_visible()  # with its forms
     found["reviews"] = _serious_violations(page)
     assert found == {"login": [], "runs": [], "run": [], "reviews": []}
 
