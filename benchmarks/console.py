@@ -94,11 +94,14 @@ def screenshots() -> list[Path]:
             headers={"X-API-Key": SUPERVISOR_KEY},
             timeout=60,
         )
+        # Waits for a supervisor at task 5: the badge on the list, the item on the reviews page.
+        _start(url, {"scenario": "baseline", "mode": "balanced", "review": {"task_ids": [5]}})
         long = synthetic_instance(3000, 4, seed=3)
         running = _start(url, {**instance_to_dict(long), "mode": "balanced"})
         page = browser.new_page(viewport={"width": 1280, "height": 800})
         _sign_in(page, url)
         page.goto(f"{url}/console")
+        page.locator(".badge").first.wait_for()
         out = [IMG / "console_runs.png", IMG / "console_run.png", IMG / "console_reviews.png"]
         page.screenshot(path=out[0], full_page=True)
         page.goto(f"{url}/console/runs/{done}?decision=17")
@@ -109,6 +112,7 @@ def screenshots() -> list[Path]:
         page.screenshot(path=out[1])
         page.set_viewport_size({"width": 1280, "height": 800})
         page.goto(f"{url}/console/reviews")
+        page.locator("article.review").first.wait_for()
         page.screenshot(path=out[2], full_page=True)
         httpx.post(
             f"{url}/runs/{running}/cancel", headers={"X-API-Key": SUPERVISOR_KEY}, timeout=60

@@ -121,13 +121,13 @@ class KeyRing:
         role = self.role_of(presented)
         return None if role is None else (role, _session_fingerprint(_digest(presented)))
 
-    def role_of_fingerprint(self, fingerprint: str) -> Role | None:
-        """The role of the configured key a session fingerprint was made from, or None once
-        that key is no longer configured (which ends the session)."""
-        found: Role | None = None
-        for digest, role, _name in self._entries:
+    def identify_fingerprint(self, fingerprint: str) -> tuple[Role, str] | None:
+        """The role and name of the configured key a session fingerprint was made from, or
+        None once that key is no longer configured (which ends the session)."""
+        found: tuple[Role, str] | None = None
+        for digest, role, name in self._entries:
             if hmac.compare_digest(_session_fingerprint(digest), fingerprint):
-                found = role
+                found = (role, name)
         return found
 
     def summary(self) -> str:

@@ -201,7 +201,7 @@ def stream_cookie_auth(request: Request) -> Caller | None:
     signed = signed_in_or_none(request)
     if signed is None:
         return None
-    return Caller(role=Role.SUPERVISOR, anonymous=signed.anonymous)
+    return Caller(role=Role.SUPERVISOR, anonymous=signed.anonymous, name=signed.name)
 
 
 def safe_next(target: str | None) -> str:

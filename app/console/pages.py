@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Form, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import RedirectResponse, Response
 
 from app.api.audit import jsonl_trace
+from app.api.review_schemas import MAX_STATEMENT_CHARS
 from app.console import views
 from app.console.context import (
     ConsoleDep,
@@ -21,7 +22,7 @@ from app.console.context import (
     sessions_of,
 )
 from app.domain.lifecycle import ACTIVE, RunStatus
-from app.runs import audit, browse, service
+from app.runs import audit, browse, service, signoff
 from app.runs.errors import RunNotFoundError, RunStateConflictError
 
 router = APIRouter(prefix="/console", include_in_schema=False)
@@ -232,6 +233,49 @@ async def _act(
             status_code=409,
         )
     return RedirectResponse(f"/console/runs/{run_id}", status_code=303)
+
+
+@router.post("/runs/{run_id}/signoff")
+async def sign_off(
+    request: Request,
+    run_id: RunIdDep,
+    console: ConsoleDep,
+    signed: CsrfDep,
+    statement: Annotated[str, Form(max_length=MAX_STATEMENT_CHARS)] = "",
+) -> Response:
+    """The console's sign-off form: the same service as POST /runs/{id}/signoff, signed with
+    the session key's name."""
+    if not statement.strip():
+        return console.render(
+            request,
+            "refused.html",
+            {
+                "title": "Not signed off",
+                "message": "A sign-off needs a statement.",
+                "retry": f"/console/runs/{run_id}",
+            },
+            signed=signed,
+            status_code=422,
+        )
+    try:
+        await run_in_threadpool(
+            signoff.sign_off,
+            sessions=sessions_of(request),
+            run_id=run_id,
+            signer=signed.name,
+            statement=statement.strip(),
+        )
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    except RunStateConflictError as exc:
+        return console.render(
+            request,
+            "refused.html",
+            {"title": "Not signed off", "message": exc.message, "retry": f"/console/runs/{run_id}"},
+            signed=signed,
+            status_code=409,
+        )
+    return RedirectResponse(f"/console/runs/{run_id}#signoffs", status_code=303)
 
 
 @router.post("/runs/{run_id}/cancel")

@@ -1,19 +1,104 @@
-"""GET /console/reviews: the queue of decisions waiting for a supervisor."""
+"""GET /console/reviews: the queue of decisions waiting for a supervisor, and the approve /
+override forms that resolve one (the same service as POST /runs/{id}/reviews/{task_index})."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Request
-from fastapi.responses import Response
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Annotated, Any
 
-from app.console.context import ConsoleDep, SignedInDep, finish
+from fastapi import APIRouter, Form, Path, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import RedirectResponse, Response
+
+from app.console.context import (
+    ConsoleDep,
+    CsrfDep,
+    PageNotFound,
+    RunIdDep,
+    SignedInDep,
+    finish,
+    sessions_of,
+)
+from app.domain.errors import DomainError
+from app.domain.review import ReviewAction
+from app.runs import reviews as review_service
+from app.runs.errors import RunNotFoundError
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 
 
+@dataclass(frozen=True)
+class ReviewItem:
+    run_id: str
+    task_index: int
+    task_id: Any
+    task_name: str
+    proposal: dict[str, Any]
+    triggers: list[str]
+    alternatives: list[dict[str, Any]]
+    requested_at: datetime
+
+
+def _pending(request: Request) -> list[ReviewItem]:
+    return [
+        ReviewItem(
+            run_id=r.run_id,
+            task_index=r.task_index,
+            task_id=r.payload["task_id"],
+            task_name=r.payload["task_name"],
+            proposal=dict(r.payload["proposal"]),
+            triggers=list(r.payload["triggers"]),
+            alternatives=[dict(a) for a in r.payload["alternatives"]],
+            requested_at=r.requested_at,
+        )
+        for r in review_service.pending_reviews(sessions=sessions_of(request))
+    ]
+
+
 @router.get("/reviews")
 async def reviews_page(request: Request, console: ConsoleDep, signed: SignedInDep) -> Response:
-    # Reviews (SPEC section 11, issue 12) are not in this build: no run can wait for one.
-    # templates/reviews.html already renders the queue and its approve / override forms
-    # from GET /reviews' item shape; this route passes them once the service exists.
-    context = {"title": "Reviews", "reviews": [], "available": False}
+    pending = await run_in_threadpool(_pending, request)
+    context = {"title": "Reviews", "reviews": pending, "available": True}
     return finish(request, console.render(request, "reviews.html", context, signed=signed))
+
+
+@router.post("/runs/{run_id}/reviews/{task_index}")
+async def resolve(
+    request: Request,
+    run_id: RunIdDep,
+    task_index: Annotated[int, Path(ge=0, le=1_000_000)],
+    console: ConsoleDep,
+    signed: CsrfDep,
+    action: Annotated[str, Form(max_length=16)] = "",
+    robot: Annotated[str | None, Form(max_length=200)] = None,
+    reason: Annotated[str | None, Form(max_length=2000)] = None,
+) -> Response:
+    runs = request.app.state.runs
+    try:
+        chosen = ReviewAction(action)
+        resolved = await run_in_threadpool(
+            review_service.resolve,
+            sessions=runs.sessions,
+            run_id=run_id,
+            task_index=task_index,
+            action=chosen,
+            robot=(robot or None) if chosen is ReviewAction.OVERRIDE else None,
+            reason=reason,
+            reviewer=signed.name,
+        )
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    except ValueError as exc:  # DomainError is a ValueError too: unknown action, robot...
+        status = getattr(exc, "status_code", 422) if isinstance(exc, DomainError) else 422
+        message = exc.message if isinstance(exc, DomainError) else f"unknown action '{action}'"
+        return console.render(
+            request,
+            "refused.html",
+            {"title": "Review not resolved", "message": message, "retry": "/console/reviews"},
+            signed=signed,
+            status_code=status,
+        )
+    request.app.state.metrics.review_resolved(resolved.waited_s)
+    runs.worker.submit(run_id)
+    return RedirectResponse(f"/console/runs/{run_id}", status_code=303)

@@ -15,7 +15,7 @@ from datetime import timedelta
 from sqlalchemy import delete
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.auth import KeyRing, Role
+from app.api.auth import ANONYMOUS, KeyRing, Role
 from app.store.db import transaction
 from app.store.models import ConsoleSession, as_utc, utcnow
 
@@ -38,10 +38,15 @@ class SignedIn:
     token: str
     csrf_token: str
     anonymous: bool
+    name: str = ANONYMOUS  # the key's non-secret name: what reviews and sign-offs record
 
 
 def open_session(
-    *, sessions: sessionmaker[Session], fingerprint: str | None, lifetime_s: float
+    *,
+    sessions: sessionmaker[Session],
+    fingerprint: str | None,
+    lifetime_s: float,
+    name: str = ANONYMOUS,
 ) -> SignedIn:
     token = new_token()
     csrf = secrets.token_urlsafe(32)
@@ -58,7 +63,7 @@ def open_session(
                 expires_at=now + timedelta(seconds=lifetime_s),
             )
         )
-    return SignedIn(token=token, csrf_token=csrf, anonymous=fingerprint is None)
+    return SignedIn(token=token, csrf_token=csrf, anonymous=fingerprint is None, name=name)
 
 
 def current(
@@ -74,10 +79,11 @@ def current(
             return None
         fingerprint, csrf = row.key_fingerprint, row.csrf_token
     if fingerprint is None:
-        valid = keyring.open
-    else:
-        valid = keyring.role_of_fingerprint(fingerprint) is Role.SUPERVISOR
-    return SignedIn(token=token, csrf_token=csrf, anonymous=fingerprint is None) if valid else None
+        return SignedIn(token=token, csrf_token=csrf, anonymous=True) if keyring.open else None
+    found = keyring.identify_fingerprint(fingerprint)
+    if found is None or found[0] is not Role.SUPERVISOR:
+        return None
+    return SignedIn(token=token, csrf_token=csrf, anonymous=False, name=found[1])
 
 
 def close_session(*, sessions: sessionmaker[Session], token: str) -> None:

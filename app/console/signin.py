@@ -123,11 +123,13 @@ async def login(
             },
             status_code=403,
         )
+    identified = console.keyring.identify_fingerprint(fingerprint)
     signed = await run_in_threadpool(
         sessions.open_session,
         sessions=sessions_of(request),
         fingerprint=fingerprint,
         lifetime_s=console.settings.console_session_s,
+        name=identified[1] if identified else fingerprint[:8],
     )
     response = RedirectResponse(target, status_code=303)
     set_session_cookie(request, response, signed, console.settings.console_session_s)

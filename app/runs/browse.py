@@ -18,6 +18,7 @@ from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.runs import records
 from app.runs.errors import RunNotFoundError
+from app.runs.signoff import SignOff, signoffs
 from app.runs.spec import RunSpec
 from app.store import repository as repo
 from app.store.models import Attempt, Run, RunEvent
@@ -32,6 +33,7 @@ class RunOverview:
     loads: list[int]  # per robot, from the decisions so far
     balance: list[float]  # balance after each decision, in task order
     events: list[RunEvent]
+    signoffs: list[SignOff]
     expected_success: float | None  # of the decisions so far (mean S), None before any
     balance_score: float | None  # of the final loads, once every task is decided
 
@@ -58,6 +60,7 @@ def overview(*, sessions: sessionmaker[Session], run_id: str) -> RunOverview:
         outline = repo.decision_outline(session=session, run_id=run_id)
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
         events = repo.events(session=session, run_id=run_id)
+        signed = signoffs(session=session, run_id=run_id)
     spec = RunSpec.from_json(run.request)
     instance = spec.problem.instance
     loads = [0] * instance.n_robots
@@ -72,6 +75,7 @@ def overview(*, sessions: sessionmaker[Session], run_id: str) -> RunOverview:
         loads=loads,
         balance=[row.balance_after for row in outline],
         events=events,
+        signoffs=signed,
         expected_success=expected_success(instance, assignment) if assignment else None,
         balance_score=balance_score(loads, instance.target_load)
         if len(outline) == run.n_tasks

@@ -183,8 +183,9 @@ def test_a_session_fingerprint_names_no_key_and_ends_with_it() -> None:
     assert role is Role.SUPERVISOR
     assert SUPERVISOR not in fingerprint
     assert fingerprint != sha256(SUPERVISOR.encode()).hexdigest()
-    assert ring.role_of_fingerprint(fingerprint) is Role.SUPERVISOR
-    assert KeyRing({CLIENT: Role.SUPERVISOR}).role_of_fingerprint(fingerprint) is None
+    identified = ring.identify_fingerprint(fingerprint)
+    assert identified is not None and identified[0] is Role.SUPERVISOR
+    assert KeyRing({CLIENT: Role.SUPERVISOR}).identify_fingerprint(fingerprint) is None
 
 
 def test_the_frontier_is_exact_bounded_and_cached(tmp_path: Path) -> None:

@@ -97,7 +97,7 @@ def test_a_form_posted_without_its_csrf_token_is_refused(
     expect(page.locator("#run-status")).not_to_have_text("cancelled")
     # The form as the page renders it (with its token) is accepted.
     page.get_by_role("button", name="Cancel this run").click()
-    expect(page.locator("#run-status")).to_have_text("cancelled", timeout=15_000)
+    expect(page.locator("#run-status")).to_have_text("cancelled", timeout=45_000)
     # The sign-in form has its own token too.
     login = context.request.post(
         f"{server.url}/console/login", form={"api_key": SUPERVISOR_KEY}, max_redirects=0
@@ -205,7 +205,10 @@ def test_the_four_pages_have_no_serious_or_critical_accessibility_violations(
     page.goto(f"{server.url}/console/runs/{run_id}?decision=17")
     expect(page.locator("#verify-result")).to_be_visible()
     found["run"] = _serious_violations(page)
+    waiting = start_run(server, review={"task_ids": [5]})
+    wait_status(server, waiting, "awaiting_review")
     page.goto(f"{server.url}/console/reviews")
+    expect(page.locator("article.review").first).to_be_visible()  # with its forms
     found["reviews"] = _serious_violations(page)
     assert found == {"login": [], "runs": [], "run": [], "reviews": []}
 

@@ -1,10 +1,6 @@
-"""Reviews and sign-off from the console (SPEC 11 through SPEC 13's pages).
-
-Written against SPEC section 11's API (POST /runs with `review`, GET /reviews,
-POST /runs/{id}/reviews/{task_index}, POST /runs/{id}/signoff), which is issue 12's and
-not in this build yet: both tests are expected to fail until it is (they fail at once, on
-the run request that names a review policy).
-"""
+"""Reviews and sign-off from the console (SPEC 11 through SPEC 13's pages): a run whose
+review policy names one task pauses there, is resolved from the reviews page and goes on;
+a completed run is signed off from its page, which then shows the verified heads."""
 
 from __future__ import annotations
 
@@ -17,14 +13,7 @@ from playwright.sync_api import Page, expect
 from tests.browser.conftest import CLIENT_KEY, SUPERVISOR_KEY, sign_in, wait_status
 from tests.e2e.server import Server
 
-pytestmark = [
-    pytest.mark.e2e,
-    pytest.mark.xfail(
-        reason="needs issue 12's review and sign-off API (POST /runs `review`, GET /reviews, "
-        "POST /runs/{id}/reviews/{task_index}, POST /runs/{id}/signoff), not on main yet",
-        strict=False,
-    ),
-]
+pytestmark = pytest.mark.e2e
 
 
 def _run_with_review(server: Server) -> str:
@@ -33,7 +22,7 @@ def _run_with_review(server: Server) -> str:
         json={
             "scenario": "baseline",
             "reasoner": "rules",
-            "review": {"on": ["every_decision"], "task_ids": [5]},
+            "review": {"task_ids": [5]},
         },
         headers={"X-API-Key": CLIENT_KEY},
         timeout=30,
