@@ -32,6 +32,7 @@ from app.api.routes import (
 )
 from app.api.routes.webhooks import WebhooksContext
 from app.config import Settings, get_settings
+from app.console import install as install_console
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
 from app.runs.factory import make_worker
@@ -168,4 +169,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         webhooks,
     ):
         app.include_router(module.router)
+    install_console(app, keyring=keyring, settings=settings)
     return app

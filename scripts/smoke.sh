@@ -136,4 +136,11 @@ if [ -n "${SMOKE_SUPERVISOR_KEY:-}" ]; then
   [ "$(call GET "/runs/$run_id/trace" '' "${CLIENT[@]}")" = 403 ] || fail "client key on a trace should be 403"
   echo "smoke: access control ok (401 without a key, 403 for a client on the trace)"
 fi
+# The supervisor console's sign-in page: HTML from the same server, no key needed to see it.
+code=$(curl -sS -o "$TMP/out" -D "$TMP/headers" -w '%{http_code}' "$BASE_URL/console/login")
+[ "$code" = 200 ] || fail "GET /console/login -> $code"
+grep -qi '^content-type: text/html' "$TMP/headers" || fail "/console/login is not HTML"
+grep -q 'name="api_key"' "$TMP/out" || grep -q 'Access control is off' "$TMP/out" \
+  || fail "/console/login has no api_key field"
+echo "smoke: console sign-in page ok"
 echo "smoke: all checks passed"

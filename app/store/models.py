@@ -290,3 +290,18 @@ def _guard_bulk_status(state: ORMExecuteState) -> None:
     values = getattr(statement, "_values", None) or {}
     if any(getattr(key, "key", key) == "status" for key in values):
         raise _refuse("by a bulk UPDATE")
+
+
+class ConsoleSession(Base):
+    """A supervisor's signed-in console session (app.console). The cookie holds a random
+    token; only its digest is stored, with a fingerprint of the API key it was opened with
+    (never the key), so removing that key from the configuration ends the session."""
+
+    __tablename__ = "console_sessions"
+
+    token_digest: Mapped[str] = mapped_column(String(64), primary_key=True)
+    # None: opened while access control was off (no keys configured).
+    key_fingerprint: Mapped[str | None] = mapped_column(String(64), nullable=True, index=True)
+    csrf_token: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    expires_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)

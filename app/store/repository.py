@@ -22,7 +22,7 @@ from sqlalchemy.dialects.postgresql import Insert as PostgresqlInsert
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import Insert as SqliteInsert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, defer
 
 from app.domain.lifecycle import RunStatus
 from app.store import chain
@@ -445,6 +445,25 @@ def decided_task_ids(session: Session, run_id: str) -> list[Any]:
     )
 
 
+def decision_count(*, session: Session, run_id: str) -> int:
+    return int(
+        session.scalar(select(func.count()).select_from(Decision).where(Decision.run_id == run_id))
+        or 0
+    )
+
+
+def decision_outline(*, session: Session, run_id: str) -> list[Any]:
+    """(task_index, robot, balance_after) of every decision, in task order: the columns a
+    chart of the whole run needs, without the text of 10,000 reasonings."""
+    return list(
+        session.execute(
+            select(Decision.task_index, Decision.robot, Decision.balance_after)
+            .where(Decision.run_id == run_id)
+            .order_by(Decision.task_index)
+        )
+    )
+
+
 def queue_task_ids(run: Run) -> set[str]:
     """Every task id (as text, as decisions store it) in the run's queue."""
     return {str(t["id"]) for t in run.request["instance_data"]["tasks"]}
@@ -452,3 +471,31 @@ def queue_task_ids(run: Run) -> set[str]:
 
 def request_key(*, session: Session, key: str) -> RequestKey | None:
     return session.scalar(select(RequestKey).where(RequestKey.key == key))
+
+
+def decisions_window(*, session: Session, run_id: str, offset: int, limit: int) -> list[Decision]:
+    return list(
+        session.scalars(
+            select(Decision)
+            .where(Decision.run_id == run_id, Decision.task_index >= offset)
+            .order_by(Decision.task_index)
+            .limit(limit)
+        )
+    )
+
+
+def attempt_summaries_of_tasks(
+    *, session: Session, run_id: str, first: int, last: int
+) -> dict[int, list[Attempt]]:
+    """As attempts_of_tasks, with the prompts and the reply left unloaded (read on demand)."""
+    by_task: dict[int, list[Attempt]] = {}
+    for row in session.scalars(
+        select(Attempt)
+        .options(
+            defer(Attempt.system_prompt), defer(Attempt.user_prompt), defer(Attempt.reply_text)
+        )
+        .where(Attempt.run_id == run_id, Attempt.task_index.between(first, last))
+        .order_by(Attempt.task_index, Attempt.attempt)
+    ):
+        by_task.setdefault(row.task_index, []).append(row)
+    return by_task
