@@ -23,7 +23,7 @@ from app.domain.annotations import AnnotationKind
 from app.domain.errors import DomainError
 from app.domain.lifecycle import FINISHED
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.runs import lifecycle, records
+from app.runs import lifecycle, records, reviews
 from app.runs.audit import revision_link
 from app.runs.errors import RunNotFoundError
 from app.runs.execution import head_of
@@ -38,7 +38,13 @@ from app.store.db import transaction
 from app.store.models import Run
 
 REVISABLE = frozenset(
-    {RunStatus.QUEUED, RunStatus.RUNNING, RunStatus.INTERRUPTED, RunStatus.COMPLETED}
+    {
+        RunStatus.QUEUED,
+        RunStatus.RUNNING,
+        RunStatus.INTERRUPTED,
+        RunStatus.AWAITING_REVIEW,
+        RunStatus.COMPLETED,
+    }
 )
 
 
@@ -140,8 +146,8 @@ def _create(
         status = RunStatus(parent.status)
         if status not in REVISABLE:
             raise RevisionConflictError(
-                f"run '{parent_id}' is {status.value}; only a queued, running, interrupted or "
-                "completed run can be revised (start a new run instead)"
+                f"run '{parent_id}' is {status.value}; only a queued, running, interrupted, "
+                "awaiting review or completed run can be revised (start a new run instead)"
             )
         parent_spec = RunSpec.from_json(parent.request)
         rows = repo.decisions(session=session, run_id=parent_id)
@@ -216,6 +222,10 @@ def _create(
         parent.superseded_by = run_id
         active = status not in FINISHED
         if active:
+            if status == RunStatus.AWAITING_REVIEW:
+                # Its pending decision was never stored, so it is not pinned; a later
+                # resolution of that review is a 409.
+                reviews.close_pending(session, parent_id, "the run was revised")
             # The other process holding it (PostgreSQL) stops at its next heartbeat.
             parent.cancel_requested = True
             lifecycle.move(

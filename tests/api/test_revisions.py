@@ -139,3 +139,27 @@ def test_idempotent_revision_and_a_superseded_run_cannot_resume(
     cancel = client.post(f"/runs/{parent}/cancel")
     assert cancel.status_code == 409
     assert len(client.get(f"/runs/{parent}/revisions").json()) == 2
+
+
+def test_a_run_awaiting_review_revised_is_superseded_and_its_review_closed(
+    client: TestClient,
+) -> None:
+    # Only task 202 (queue position 17) needs a review: the run pauses after 17 decisions.
+    body = {**BASELINE, "review": {"task_ids": [202]}}
+    parent = str(client.post("/runs", json=body).json()["id"])
+    state = wait_status(client, parent, "awaiting_review")
+    decided = state["progress"]["allocated"]
+    pending = [r for r in client.get("/reviews").json() if r["run_id"] == parent]
+    assert len(pending) == 1
+    created = revise(client, parent, {**HEAVY_DOWN, "pin": "decided"})
+    after = client.get(f"/runs/{parent}").json()
+    assert after["status"] == "superseded" and after["superseded_by"] == created["id"]
+    assert [r for r in client.get("/reviews").json() if r["run_id"] == parent] == []
+    kinds = [e["kind"] for e in client.get(f"/runs/{parent}/trace").json()["events"]]
+    assert kinds[-2:] == ["review_closed", "superseded"]
+    task_index = pending[0]["task_index"]
+    late = client.post(f"/runs/{parent}/reviews/{task_index}", json={"action": "approve"})
+    assert late.status_code == 409
+    revision = client.get(f"/runs/{created['id']}").json()
+    assert sum(a["pinned"] for a in revision["assignments"]) == decided
+    assert client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]["ok"] is True
