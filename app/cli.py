@@ -17,6 +17,7 @@ from rich.table import Table
 
 from app.api.allocation import allocate as run_allocation
 from app.api.errors import domain_error_body, validation_error_body
+from app.api.rounding import rounded
 from app.api.schemas import AllocateRequest, AllocateResponse
 from app.config import Settings, get_settings
 from app.domain.errors import DomainError
@@ -110,7 +111,8 @@ def allocate(
     except DomainError as exc:
         _fail(domain_error_body(exc), as_json)
     if as_json:
-        typer.echo(response.model_dump_json(indent=2))
+        # Rounded as the API rounds, so the two print the same document.
+        typer.echo(json.dumps(rounded(response.model_dump(mode="json")), indent=2))
     else:
         _print_report(response, show_tasks=show_tasks)
 

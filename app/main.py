@@ -17,6 +17,7 @@ from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
 from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
+from app.api.rounding import RoundedJSONResponse
 from app.api.routes import allocate, catalog, events, health, metrics, runs
 from app.config import Settings, get_settings
 from app.observability.logs import configure_logging
@@ -107,6 +108,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Phase-adaptive task allocation for heterogeneous construction robots",
         version=app_version(),
         lifespan=lifespan,
+        default_response_class=RoundedJSONResponse,
     )
     app.state.settings = settings
     app.state.keyring = keyring

@@ -90,6 +90,19 @@ class Progress(BaseModel):
     phase: Literal["early", "middle", "late"]
 
 
+DEFAULT_PAGE = 1_000
+MAX_PAGE = 10_000
+
+
+class Page(BaseModel):
+    """Which slice of a long list this answer carries; ask for the next with
+    `offset=offset+limit` while `offset + limit < total`."""
+
+    offset: int = Field(description="Index (in queue order) of the first item returned")
+    limit: int = Field(description="At most this many items returned")
+    total: int = Field(description="Items in the whole list")
+
+
 class RunAssignment(BaseModel):
     task_index: int
     task_id: int | str
@@ -107,7 +120,10 @@ class RunOut(BaseModel):
     max_deviation: float | None
     progress: Progress
     workload: dict[str, int]
-    assignments: list[RunAssignment] = Field(description="Decisions so far, in queue order")
+    assignments: list[RunAssignment] = Field(
+        description="Decisions so far, in queue order: one page of them (see assignments_page)"
+    )
+    assignments_page: Page
     metrics: MetricsOut | None = Field(description="Set once the run has completed")
     regret: float | None = Field(
         description="Sum of the per-decision regrets so far: expected success given away "
@@ -198,7 +214,10 @@ class TraceOut(BaseModel):
     max_deviation: float | None
     robots: list[str]
     events: list[EventOut]
-    decisions: list[DecisionOut]
+    decisions: list[DecisionOut] = Field(
+        description="Decisions in task order: one page of them (see decisions_page)"
+    )
+    decisions_page: Page
 
 
 class BrokenLinkOut(BaseModel):

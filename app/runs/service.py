@@ -150,51 +150,70 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
 
 @dataclass
 class RunView:
+    """A run with one page of its decisions; the totals (progress, workload, regret, metrics)
+    cover every decision, so a long run answers a poll without sending them all."""
+
     run: Run
     spec: RunSpec
     decisions: list[DecisionRecord]
+    offset: int
+    allocated: int
+    workload: dict[str, int]
+    regret: float | None
     usage: Usage
     metrics: Metrics | None
 
     @property
     def progress(self) -> dict[str, Any]:
-        allocated = len(self.decisions)
         return {
-            "allocated": allocated,
+            "allocated": self.allocated,
             "total": self.run.n_tasks,
-            "phase": detect_phase(min(allocated, self.run.n_tasks), self.run.n_tasks).value,
+            "phase": detect_phase(min(self.allocated, self.run.n_tasks), self.run.n_tasks).value,
         }
 
-    @property
-    def regret(self) -> float | None:
-        values = [d.regret for d in self.decisions]
-        if any(v is None for v in values):
-            return None
-        return float(sum(v for v in values if v is not None))
 
-    @property
-    def workload(self) -> dict[str, int]:
-        names = [r["name"] for r in self.spec.instance_data["robots"]]
-        loads = dict.fromkeys(names, 0)
-        for d in self.decisions:
-            loads[names[d.robot]] += 1
-        return loads
-
-
-def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
+def run_view(
+    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
+) -> RunView:
+    """The run with its decisions from the offset-th, at most limit of them (None: all)."""
     with sessions() as session:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
+        outcomes = repo.decision_outcomes(session=session, run_id=run_id)
         decisions = [
-            records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+            records.decision_record(d)
+            for d in repo.decisions_slice(
+                session=session, run_id=run_id, offset=offset, limit=limit
+            )
         ]
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
+    names = [r["name"] for r in spec.instance_data["robots"]]
+    workload = dict.fromkeys(names, 0)
+    for o in outcomes:
+        workload[names[o.robot]] += 1
+    regrets = [o.regret for o in outcomes]
+    regret = None if any(v is None for v in regrets) else float(sum(regrets))
     metrics = None
-    if run.status == RunStatus.COMPLETED and len(decisions) == run.n_tasks:
+    if run.status == RunStatus.COMPLETED and len(outcomes) == run.n_tasks:
         metrics = compute_metrics(
-            spec.problem.instance, [d.robot for d in decisions], seed=spec.seed
+            spec.problem.instance, [o.robot for o in outcomes], seed=spec.seed
         )
-    return RunView(run=run, spec=spec, decisions=decisions, usage=usage, metrics=metrics)
+    return RunView(
+        run=run,
+        spec=spec,
+        decisions=decisions,
+        offset=offset,
+        allocated=len(outcomes),
+        workload=workload,
+        regret=regret,
+        usage=usage,
+        metrics=metrics,
+    )
+
+
+def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:
+    with sessions() as session:
+        return _require(session, run_id)
 
 
 def list_run_rows(
@@ -206,23 +225,32 @@ def list_run_rows(
 
 @dataclass
 class Trace:
+    """A run's events with one page of its decisions (and their attempts)."""
+
     run: Run
     events: list[RunEvent]
     decisions: list[DecisionRecord]
     attempts: dict[int, list[Attempt]]
+    total: int
 
 
-def run_trace(*, sessions: sessionmaker[Session], run_id: str) -> Trace:
+def run_trace(
+    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
+) -> Trace:
     with sessions() as session:
         run = _require(session, run_id)
-        by_task: dict[int, list[Attempt]] = {}
-        for a in repo.attempts(session=session, run_id=run_id):
-            by_task.setdefault(a.task_index, []).append(a)
+        page = repo.decisions_slice(session=session, run_id=run_id, offset=offset, limit=limit)
+        attempts = (
+            repo.attempts_of_tasks(
+                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
+            )
+            if page
+            else {}
+        )
         return Trace(
             run=run,
             events=repo.events(session=session, run_id=run_id),
-            decisions=[
-                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
-            ],
-            attempts=by_task,
+            decisions=[records.decision_record(d) for d in page],
+            attempts=attempts,
+            total=repo.decision_count(session=session, run_id=run_id),
         )

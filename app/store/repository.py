@@ -102,6 +102,38 @@ def decisions(*, session: Session, run_id: str) -> list[Decision]:
     )
 
 
+def decisions_slice(
+    *, session: Session, run_id: str, offset: int, limit: int | None
+) -> list[Decision]:
+    """Decisions in task order from the offset-th, at most limit of them (None: all)."""
+    query = (
+        select(Decision)
+        .where(Decision.run_id == run_id)
+        .order_by(Decision.task_index)
+        .offset(offset)
+    )
+    return list(session.scalars(query if limit is None else query.limit(limit)))
+
+
+def decision_count(*, session: Session, run_id: str) -> int:
+    return int(
+        session.scalar(select(func.count()).select_from(Decision).where(Decision.run_id == run_id))
+        or 0
+    )
+
+
+def decision_outcomes(*, session: Session, run_id: str) -> list[Any]:
+    """(task_index, robot, regret) of every decision in task order: the few columns a run's
+    totals need, without loading each row's record."""
+    return list(
+        session.execute(
+            select(Decision.task_index, Decision.robot, Decision.regret)
+            .where(Decision.run_id == run_id)
+            .order_by(Decision.task_index)
+        )
+    )
+
+
 def attempts(*, session: Session, run_id: str) -> list[Attempt]:
     return list(
         session.scalars(
