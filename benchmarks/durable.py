@@ -5,8 +5,8 @@ through SQLAlchemy (WAL, synchronous=NORMAL) and the compact SQLite checkpointer
 from __future__ import annotations
 
 import sqlite3
-import threading
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path

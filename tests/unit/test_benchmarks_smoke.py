@@ -67,7 +67,7 @@ def test_durable_measure_on_a_tiny_run() -> None:
 def test_storage_measure_on_a_tiny_run() -> None:
     measure = durable.measure_storage(solvers.first_tasks(3), interval_s=0.01)
     assert measure.n_tasks == 3 and measure.samples >= 1
-    assert 0 < measure.peak_bytes and measure.final_bytes > 0
+    assert measure.peak_bytes > 0 and measure.final_bytes > 0
     big = dataclasses.replace(measure, n_tasks=10_000)
     assert "met" in storage.storage_part([measure, big])
 
