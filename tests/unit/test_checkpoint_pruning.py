@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 import pytest
+from langgraph.checkpoint.base import BaseCheckpointSaver
 from langgraph.graph import END, START, StateGraph
 
 from app.graph.checkpoint import WAL_SIZE_LIMIT, CompactSqliteSaver, open_sqlite_saver
@@ -25,7 +26,7 @@ class Crash(Exception):
     pass
 
 
-def _graph(saver: CompactSqliteSaver, crash_at: int | None) -> Any:
+def _graph(saver: BaseCheckpointSaver[Any], crash_at: int | None) -> Any:
     def step(state: Counter) -> dict[str, object]:
         if crash_at is not None and state["n"] == crash_at:
             raise Crash
