@@ -17,6 +17,7 @@ from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
 from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
+from app.api.openapi import install_openapi
 from app.api.rounding import RoundedJSONResponse
 from app.api.routes import allocate, catalog, events, health, metrics, runs
 from app.config import Settings, get_settings
@@ -119,4 +120,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
     for module in (health, catalog, allocate, runs, events, metrics):
         app.include_router(module.router)
+    install_openapi(app, open_access=keyring.open)
     return app

@@ -3,11 +3,22 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, cast
 
-from pydantic import AfterValidator, BaseModel, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic.config import JsonDict
 
-from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
+from app.api.schemas import (
+    CUSTOM_FORM,
+    MAX_SEED,
+    SCENARIO_FORM,
+    InstanceRequest,
+    MetricsOut,
+    Name,
+    UsageOut,
+    absent,
+    present,
+)
 from app.domain.lifecycle import RunStatus
 from app.store.models import as_utc
 
@@ -21,8 +32,35 @@ RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
 Timestamp = Annotated[datetime, AfterValidator(as_utc)]
 
 
+# A replay copies its source's instance: it may omit it (or repeat it, the forms above).
+REPLAY_FORM: dict[str, Any] = {
+    "title": "a replay of a completed run",
+    "allOf": [present("replay_of"), absent("scenario"), absent("tasks"), absent("robots")],
+}
+# replay_of goes with the replay reasoner and only with it (an omitted reasoner is the
+# server's default, never "replay").
+REPLAY_PAIRING: list[dict[str, Any]] = [
+    {
+        "if": present("replay_of"),
+        "then": {"required": ["reasoner"], "properties": {"reasoner": {"const": "replay"}}},
+    },
+    {
+        "if": {"required": ["reasoner"], "properties": {"reasoner": {"const": "replay"}}},
+        "then": present("replay_of"),
+    },
+]
+
+
 class RunRequest(InstanceRequest):
     """An LTAA run on an instance, executed durably in the background."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra=cast(
+            JsonDict,
+            {"anyOf": [SCENARIO_FORM, CUSTOM_FORM, REPLAY_FORM], "allOf": REPLAY_PAIRING},
+        ),
+    )
 
     reasoner: Name | None = Field(
         None, description="'rules' (default, offline), 'anthropic', or 'replay' (with replay_of)"

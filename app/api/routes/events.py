@@ -15,9 +15,10 @@ from fastapi.responses import StreamingResponse
 
 from app.api.deps import RunIdPath, RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
+from app.api.openapi import header_schema
 from app.api.responses import SUPERVISOR, errors
 from app.runs.errors import RunNotFoundError
-from app.runs.progress import Cursor, read_progress, run_status
+from app.runs.progress import CURSOR_PATTERN, Cursor, read_progress, run_status
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -32,9 +33,19 @@ def existing_run(run_id: RunIdPath, runs: RunsDep) -> str:
 
 
 def start_cursor(
-    last_event_id: Annotated[str | None, Header(alias="Last-Event-ID")] = None,
+    last_event_id: Annotated[
+        str | None,
+        Header(
+            alias="Last-Event-ID",
+            # Documented here, checked below (a 422 with this stream's own wording). Empty
+            # or blank is "from the start", as a reconnecting EventSource may send.
+            json_schema_extra=header_schema(pattern=rf"^[ \t]*$|{CURSOR_PATTERN}"),
+            description="The `id` of the last event received, e.g. `3-17`: the stream "
+            "continues after it",
+        ),
+    ] = None,
 ) -> Cursor:
-    if not last_event_id:
+    if not last_event_id or not last_event_id.strip(" \t"):
         return Cursor()
     try:
         return Cursor.parse(last_event_id)
