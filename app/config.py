@@ -67,6 +67,11 @@ class Settings(BaseSettings):
     # can SIGKILL or SIGTERM the server at a known point. Warned about at start-up.
     test_pause: str | None = Field(None, pattern=r"^[0-9]+:[a-z_]+:(before|after)$")
 
+    # Test-only seam: the graph version this process claims (app.graph.version derives it
+    # from the code), so a test can interrupt a run under one version and restart the
+    # server under another. Warned about at start-up.
+    test_graph_version: str | None = Field(None, min_length=1, max_length=64)
+
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
 
     # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.api.auth. A SecretStr so

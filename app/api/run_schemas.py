@@ -169,6 +169,10 @@ class RunOut(BaseModel):
     )
     usage: UsageOut
     resumes: int
+    graph_version: str | None = Field(
+        description="The graph version the run started under (null: not started yet, or "
+        "before versions were recorded)"
+    )
     error: str | None
     created_at: Timestamp
     updated_at: Timestamp

@@ -215,6 +215,10 @@ class AllocateResponse(BaseModel):
 class HealthOut(BaseModel):
     status: Literal["ok"] = "ok"
     version: str
+    graph_version: str = Field(
+        description="The graph version runs start under here (app.graph.version); a run "
+        "interrupted under another resumes only under that one"
+    )
     solvers: list[str]
     default_reasoner: str
 

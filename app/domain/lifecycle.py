@@ -19,6 +19,9 @@ class RunStatus(StrEnum):
     COMPLETED = "completed"
     FAILED = "failed"
     CANCELLED = "cancelled"
+    # Its checkpoint belongs to another graph version: no worker takes it up until a
+    # supervisor resumes it under a release of that version (or revises it).
+    BLOCKED = "blocked"
 
 
 class EventKind(StrEnum):
@@ -33,6 +36,7 @@ class EventKind(StrEnum):
     CANCELLED = "cancelled"
     INTEGRITY_FAILED = "integrity_failed"
     BUDGET_EXHAUSTED = "budget_exhausted"
+    UPGRADE_BLOCKED = "upgrade_blocked"
 
 
 @dataclass(frozen=True)
@@ -49,6 +53,7 @@ STATUS_RULES: dict[RunStatus, StatusRule] = {
     RunStatus.COMPLETED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.FAILED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.CANCELLED: StatusRule(finished=True, claimable=False, active=False),
+    RunStatus.BLOCKED: StatusRule(finished=False, claimable=False, active=False),
 }
 
 FINISHED: frozenset[RunStatus] = frozenset(s for s, r in STATUS_RULES.items() if r.finished)
@@ -69,6 +74,10 @@ TRANSITIONS: dict[tuple[RunStatus, RunStatus], str] = {
     (RunStatus.INTERRUPTED, RunStatus.CANCELLED): "cancelled while interrupted",
     (RunStatus.INTERRUPTED, RunStatus.FAILED): "refused on resume (integrity check, settings)",
     (RunStatus.FAILED, RunStatus.INTERRUPTED): "a supervisor asked to resume it",
+    (RunStatus.INTERRUPTED, RunStatus.BLOCKED): "its checkpoint is of another graph version",
+    (RunStatus.QUEUED, RunStatus.BLOCKED): "its checkpoint is of another graph version",
+    (RunStatus.BLOCKED, RunStatus.INTERRUPTED): "a supervisor asked to resume it",
+    (RunStatus.BLOCKED, RunStatus.CANCELLED): "cancelled while blocked",
 }
 
 

@@ -120,8 +120,9 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
             raise RunStateConflictError(run_id, run.status, "resume", "Create a new run instead.")
         if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
-        if run.status == RunStatus.FAILED:
-            # Its error stays readable until a worker takes it up again.
+        if run.status in (RunStatus.FAILED, RunStatus.BLOCKED):
+            # Its error stays readable until a worker takes it up again (a blocked run is
+            # blocked again, with the same error, if this server's graph version differs).
             lifecycle.move(session, run, RunStatus.INTERRUPTED, error=run.error)
     worker.submit(run_id)
     with sessions() as session:

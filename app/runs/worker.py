@@ -28,6 +28,7 @@ from app.graph.builder import build_graph
 from app.graph.execution import GraphEndedEarly
 from app.graph.pause import NodeHook
 from app.graph.recorder import RunCancelled
+from app.graph.version import compatible, current_version, upgrade_blocked_message
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records
@@ -230,7 +231,9 @@ class RunWorker:
             spec = RunSpec.from_json(run.request)
             instance = spec.problem.instance
             resume = checkpoint is not None or run.status == RunStatus.INTERRUPTED
+            version = current_version(self._settings.test_graph_version)
             if not resume:
+                run.graph_version = version
                 lifecycle.move(
                     session,
                     run,
@@ -240,10 +243,25 @@ class RunWorker:
                         "reasoner": spec.reasoner,
                         "mode": spec.mode,
                         "tasks": instance.n_tasks,
+                        "graph_version": version,
                         **detail,
                     },
                 )
                 return Admission(spec=spec, resume=False)
+            if not compatible(run.graph_version, version):
+                # Refused before anything runs, and not claimable: no process loops on it.
+                started_under = run.graph_version or ""
+                lifecycle.move(
+                    session,
+                    run,
+                    RunStatus.BLOCKED,
+                    event=EventKind.UPGRADE_BLOCKED,
+                    detail={"started_under": started_under, "current": version, **detail},
+                    error=upgrade_blocked_message(started_under, version),
+                )
+                return None
+            # A run from before versions were recorded goes on under this one, from now on.
+            run.graph_version = version
             stored = [
                 records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ]

@@ -76,6 +76,9 @@ class Run(Base):
         String(255), nullable=True, unique=True, index=True
     )
     request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # The graph version (app.graph.version) the run started under; null for runs from
+    # before it was recorded. A resume under another version is refused (status blocked).
+    graph_version: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class RunEvent(Base):

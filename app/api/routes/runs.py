@@ -194,6 +194,7 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
         regret=view.regret,
         usage=UsageOut.from_domain(view.usage),
         resumes=run.resumes,
+        graph_version=run.graph_version,
         error=run.error,
         created_at=run.created_at,
         updated_at=run.updated_at,
