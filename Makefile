@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 export LTAA_DATA_DIR ?= ./data
 
-.PHONY: run test lint bench migrate install clean
+.PHONY: run test lint bench bench-llm migrate install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,11 @@ test: lint
 
 bench: install
 	$(BIN)/ltaa bench
+
+# Calls the configured LLM (LTAA_OPENAI_* or the Anthropic key): ~1,700 decisions, and
+# what the server charges for them. Options: make bench-llm ARGS="--reasoner anthropic".
+bench-llm: install
+	$(BIN)/ltaa bench-llm $(ARGS)
 
 clean:
 	rm -rf $(VENV) data .pytest_cache .ruff_cache .mypy_cache

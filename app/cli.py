@@ -23,6 +23,7 @@ from app.config import Settings, get_settings
 from app.domain.errors import DomainError
 from app.domain.lifecycle import RunStatus
 from app.domain.modes import Mode
+from app.reasoners.scope import LLMScope
 
 cli = typer.Typer(
     name="ltaa",
@@ -54,6 +55,30 @@ def serve(
     uvicorn.run(
         "app.main:create_app", factory=True, host=host or settings.host, port=port or settings.port
     )
+
+
+@cli.command("reencrypt-webhook-secrets")
+def reencrypt_webhook_secrets() -> None:
+    """Re-encrypt every webhook secret under the first key of LTAA_SECRET_KEY (after a
+    server key rotation: new key first, old key after it; then drop the old key)."""
+    from app.store.db import make_engine, make_session_factory
+    from app.webhooks.errors import SecretKeyError
+    from app.webhooks.secret_box import SecretBox
+    from app.webhooks.service import reencrypt_secrets
+
+    settings = get_settings()
+    apply_migrations(settings)
+    raw = settings.secret_key.get_secret_value() if settings.secret_key else None
+    engine = make_engine(settings.db_url)
+    try:
+        box = SecretBox.from_setting(raw, settings.data_dir)
+        count = reencrypt_secrets(sessions=make_session_factory(engine), box=box)
+    except SecretKeyError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=1) from None
+    finally:
+        engine.dispose()
+    typer.echo(f"re-encrypted {count} webhook secret(s) under the first key")
 
 
 def apply_migrations(settings: Settings) -> None:
@@ -234,7 +259,9 @@ def _print_report(r: AllocateResponse, *, show_tasks: bool) -> None:
 def run(
     scenario: Annotated[str, typer.Option(help="Built-in scenario")] = "baseline",
     mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
-    reasoner: Annotated[str, typer.Option(help="'rules' (offline) or 'anthropic'")] = "rules",
+    reasoner: Annotated[
+        str, typer.Option(help="'rules' (offline), 'anthropic' or 'openai'")
+    ] = "rules",
     max_deviation: Annotated[
         float | None,
         typer.Option(help="Workload cap, in tasks either side of the target (default: the mode's)"),
@@ -243,6 +270,10 @@ def run(
         str | None,
         typer.Option(help="'optimizer' to give the reasoner the optimal completion's choice"),
     ] = None,
+    llm_scope: Annotated[
+        LLMScope,
+        typer.Option(help="'contested': ask an LLM reasoner only for contested decisions"),
+    ] = LLMScope.ALL,
 ) -> None:
     """Run the LTAA graph durably in the local data directory, with a progress bar."""
     from app.cli_run import print_summary, run_locally
@@ -258,6 +289,7 @@ def run(
             max_deviation=max_deviation,
             guidance=guidance,
             console=console,
+            llm_scope=llm_scope.value,
         )
     except DomainError as exc:
         _fail(domain_error_body(exc), as_json=False)
@@ -280,6 +312,67 @@ def bench(
     from benchmarks.report import main as write_report
 
     write_report(section or None)
+
+
+@cli.command("bench-llm")
+def bench_llm(
+    reasoner: Annotated[
+        str, typer.Option(help="The LLM reasoner to measure: 'openai' or 'anthropic'")
+    ] = "openai",
+    model: Annotated[
+        str | None, typer.Option(help="Model (default: LTAA_OPENAI_MODEL / the default model)")
+    ] = None,
+    scenario: Annotated[
+        list[str] | None, typer.Option(help="Only these scenarios (default: all four)")
+    ] = None,
+    mode: Annotated[list[Mode] | None, typer.Option(help="Only these modes (default: all)")] = None,
+    tasks: Annotated[
+        int | None, typer.Option(min=1, help="Only the first N tasks of each scenario")
+    ] = None,
+    out: Annotated[Path, typer.Option(help="Where the report goes")] = Path(
+        "docs/llm-benchmark.md"
+    ),
+    label: Annotated[
+        str | None,
+        typer.Option(help="Who produced the figures, for the report (default: the endpoint)"),
+    ] = None,
+) -> None:
+    """Run the 4 scenarios x 3 modes (scope all and contested, guided and unguided) with
+    the configured LLM reasoner and write docs/llm-benchmark.md. Every call goes to the
+    server the LTAA_* settings name, and costs what that server charges."""
+    from benchmarks import llm_live
+
+    settings = get_settings()
+    try:
+        make = llm_live.reasoner_factory(reasoner, settings=settings, model=model)
+    except DomainError as exc:  # a missing setting (DomainError is a ValueError too)
+        typer.echo(f"{exc.field}: {exc.message}", err=True)
+        raise typer.Exit(1) from None
+    except ValueError as exc:
+        typer.echo(str(exc), err=True)
+        raise typer.Exit(2) from None
+    endpoint, used_model = llm_live.server_of(reasoner, settings, model)
+    typer.echo(f"bench-llm: {reasoner} model {used_model} at {endpoint}", err=True)
+
+    def progress(cell: llm_live.LiveCell) -> None:
+        typer.echo(
+            f"  {cell.scenario}/{cell.mode} {cell.scope}"
+            f"{' guided' if cell.guided else ''}: {cell.llm_tasks}/{cell.n_tasks} tasks "
+            f"asked the model, {cell.tokens:,} tokens, {cell.seconds:.1f} s",
+            err=True,
+        )
+
+    cells = llm_live.run_cells(
+        make,
+        scenario_names=scenario,
+        modes=mode or llm_live.MODES,
+        n_tasks=tasks,
+        progress=progress,
+    )
+    text = llm_live.render(
+        cells, reasoner=reasoner, endpoint=endpoint, model=used_model, label=label
+    )
+    typer.echo(f"wrote {llm_live.write(text, out)}", err=True)
 
 
 def main() -> None:

@@ -33,6 +33,7 @@ def run_locally(
     max_deviation: float | None,
     guidance: str | None,
     console: Console,
+    llm_scope: str = "all",
 ) -> service.RunView:
     problem = Problem.build(builtin_scenario(scenario).instance, mode, max_deviation)
     settings.data_dir.mkdir(parents=True, exist_ok=True)
@@ -48,6 +49,7 @@ def run_locally(
             reasoner=reasoner,
             guidance=guidance,
             token_budget=settings.run_token_budget,
+            llm_scope=llm_scope,
         )
         run = service.create_run(sessions=sessions, worker=worker, settings=settings, spec=spec)
         columns = (

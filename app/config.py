@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 DEFAULT_MAX_BODY_BYTES = 10 * 1024 * 1024  # 10,000 tasks with TEACh metadata fit comfortably
+# Seconds between a webhook's failed attempts (8 attempts over ~27.6 h, as Svix does): a
+# receiver down for a day still gets every event. Jitter of +-20% is added to each.
+DEFAULT_WEBHOOK_RETRY_DELAYS_S = (5.0, 300.0, 1800.0, 7200.0, 18000.0, 36000.0, 36000.0)
 
 
 class Settings(BaseSettings):
@@ -58,6 +61,18 @@ class Settings(BaseSettings):
     )
     anthropic_timeout_s: float = Field(60.0, gt=0)
     anthropic_max_transport_retries: int = Field(3, ge=0)
+    # The `openai` reasoner: an OpenAI-compatible Chat Completions server (vLLM, Ollama,
+    # llama.cpp, OpenAI). Only these LTAA_ names are read, never the SDK's OPENAI_* ones:
+    # site data goes to the server the operator named here, or nowhere.
+    openai_base_url: str | None = Field(
+        None,
+        pattern=r"^https?://\S+$",
+        description="e.g. http://127.0.0.1:8001/v1 (vLLM), http://127.0.0.1:11434/v1 (Ollama)",
+    )
+    openai_api_key: SecretStr | None = Field(None, description="Optional for local servers")
+    openai_model: str | None = Field(None, min_length=1, description="e.g. Qwen/Qwen3-8B")
+    openai_timeout_s: float = Field(60.0, gt=0)
+    openai_max_transport_retries: int = Field(3, ge=0)
     # LLM tokens (input + output) a run may spend when its request names no token_budget;
     # then its remaining tasks go to the offline rules reasoner. None: no limit.
     run_token_budget: int | None = Field(None, ge=1)
@@ -84,6 +99,46 @@ class Settings(BaseSettings):
     # A stream ends after this long even if the run has not; EventSource reconnects with
     # Last-Event-ID and misses nothing. (A shutdown ends every stream at once.)
     events_max_stream_s: float = Field(300.0, gt=0)
+
+    # -- webhooks (docs/webhooks.md) -----------------------------------------------------
+    # Fernet keys (comma-separated; the first encrypts, all decrypt) protecting webhook
+    # secrets at rest. Unset: a key file generated in data_dir on first use (one process);
+    # processes sharing a PostgreSQL database must share this setting.
+    secret_key: SecretStr | None = None
+    # Deliver to private, loopback, link-local... addresses (tests; site LANs).
+    webhook_allow_private: bool = False
+    webhook_retry_delays_s: Annotated[list[float], NoDecode] = Field(
+        default_factory=lambda: list(DEFAULT_WEBHOOK_RETRY_DELAYS_S),
+        description="Comma-separated seconds between attempts; then the delivery fails",
+    )
+    webhook_timeout_s: float = Field(10.0, gt=0, le=60)
+    webhook_max_response_bytes: int = Field(64 * 1024, ge=0)
+    webhook_poll_s: float = Field(0.5, gt=0, le=60)
+    # How long a process holds a claimed delivery; past it, another process may retry it
+    # (its owner died). Longer than the timeout, so a live process always finishes first.
+    webhook_claim_s: float = Field(60.0, gt=0)
+    webhook_concurrency: int = Field(4, ge=1, le=64)
+    webhook_secret_grace_s: float = Field(
+        86400.0, ge=0, description="How long a rotated-out secret keeps signing"
+    )
+    # Ops/test: off, deliveries wait in the outbox (a restart with it on sends them).
+    webhook_dispatch: bool = True
+    # Test-only resolver seam: "host=ip,host=ip" answers DNS for these names.
+    test_webhook_resolve: str | None = None
+
+    @field_validator("webhook_retry_delays_s", mode="before")
+    @classmethod
+    def _delays(cls, value: object) -> object:
+        if isinstance(value, str):
+            return [part.strip() for part in value.split(",") if part.strip()]
+        return value
+
+    @field_validator("webhook_retry_delays_s")
+    @classmethod
+    def _non_negative(cls, value: list[float]) -> list[float]:
+        if any(delay < 0 for delay in value):
+            raise ValueError("retry delays must be >= 0 seconds")
+        return value
 
     @field_validator("log_level", mode="before")
     @classmethod

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.concurrency import run_in_threadpool
+from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
@@ -19,7 +20,8 @@ from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.openapi import install_openapi
 from app.api.rounding import RoundedJSONResponse
-from app.api.routes import allocate, catalog, events, health, metrics, runs
+from app.api.routes import allocate, catalog, events, health, metrics, runs, webhooks
+from app.api.routes.webhooks import WebhooksContext
 from app.config import Settings, get_settings
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
@@ -27,6 +29,9 @@ from app.runs.factory import make_worker
 from app.runs.worker import RunWorker
 from app.store.db import make_engine, make_session_factory
 from app.store.migrate import upgrade_head
+from app.webhooks.dispatcher import Dispatcher
+from app.webhooks.metrics import WebhookTablesCollector
+from app.webhooks.secret_box import SecretBox
 
 log = logging.getLogger("ltaa")
 
@@ -60,6 +65,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         collector = RunTablesCollector(sessions)
         app.state.metrics.registry.register(collector)
         resources.callback(app.state.metrics.registry.unregister, collector)
+        app.state.webhooks = _start_webhooks(settings, sessions, app.state.metrics, resources)
         worker = await run_in_threadpool(make_worker, settings=settings, sessions=sessions)
         # Drain on shutdown: runs stop at a node boundary and are marked interrupted.
         resources.push_async_callback(run_in_threadpool, worker.close)
@@ -70,6 +76,29 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         if resumed:
             log.info("resuming %d interrupted run(s): %s", len(resumed), ", ".join(resumed))
         yield
+
+
+def _start_webhooks(
+    settings: Settings,
+    sessions: sessionmaker[Session],
+    metrics: Metrics,
+    resources: AsyncExitStack,
+) -> WebhooksContext:
+    secret_key = settings.secret_key.get_secret_value() if settings.secret_key else None
+    box = SecretBox.from_setting(secret_key, settings.data_dir)
+    collector = WebhookTablesCollector(sessions)
+    metrics.registry.register(collector)
+    resources.callback(metrics.registry.unregister, collector)
+    dispatcher = None
+    if settings.webhook_dispatch:
+        # Off the request path: its own thread and pool. Closed before the engine (the
+        # stack unwinds in reverse), after letting attempts in flight finish.
+        dispatcher = Dispatcher(settings=settings, sessions=sessions, box=box)
+        dispatcher.start()
+        resources.callback(dispatcher.close)
+    else:
+        log.warning("webhook dispatch is off (LTAA_WEBHOOK_DISPATCH=false): deliveries wait")
+    return WebhooksContext(sessions=sessions, box=box, dispatcher=dispatcher)
 
 
 def _begin_drain(worker: RunWorker) -> None:
@@ -118,7 +147,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (health, catalog, allocate, runs, events, metrics):
+    for module in (health, catalog, allocate, runs, events, metrics, webhooks):
         app.include_router(module.router)
     install_openapi(app, open_access=keyring.open)
     return app

@@ -7,6 +7,7 @@ from typing import Any
 from alembic import context
 from sqlalchemy import text
 
+from app.store import webhook_models  # noqa: F401  (registers the webhook tables)
 from app.store.db import make_engine
 from app.store.models import Base
 
@@ -33,8 +34,13 @@ def _include_name(name: str | None, type_: str, _parents: Any) -> bool:
 
 
 def run_migrations_offline() -> None:
-    context.configure(url=_url(), target_metadata=Base.metadata, literal_binds=True,
-                      render_as_batch=True, include_name=_include_name)
+    context.configure(
+        url=_url(),
+        target_metadata=Base.metadata,
+        literal_binds=True,
+        render_as_batch=True,
+        include_name=_include_name,
+    )
     with context.begin_transaction():
         context.run_migrations()
 
@@ -42,13 +48,18 @@ def run_migrations_offline() -> None:
 def run_migrations_online() -> None:
     engine = make_engine(_url())
     with engine.connect() as connection:
-        context.configure(connection=connection, target_metadata=Base.metadata,
-                          render_as_batch=True, include_name=_include_name)
+        context.configure(
+            connection=connection,
+            target_metadata=Base.metadata,
+            render_as_batch=True,
+            include_name=_include_name,
+        )
         with context.begin_transaction():
             if connection.dialect.name == "postgresql":
                 # Held until this transaction commits (PostgreSQL DDL is transactional).
-                connection.execute(text("SELECT pg_advisory_xact_lock(:key)"),
-                                   {"key": MIGRATION_LOCK_KEY})
+                connection.execute(
+                    text("SELECT pg_advisory_xact_lock(:key)"), {"key": MIGRATION_LOCK_KEY}
+                )
             context.run_migrations()
     engine.dispose()
 

@@ -71,6 +71,24 @@ check '[e["kind"] for e in d["events"]][-1] == "completed"' "completed event"
 [ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace/verify"; check 'd["ok"] is True and d["decisions"] == 36 and d["broken"] is None' "trace hash chains verify"
 [ "$(call GET "/runs/$run_id/trace?format=jsonl" '' "${SUPERVISOR[@]}")" = 200 ] && python3 -c "import json; t=[json.loads(l)['type'] for l in open('$TMP/out')]; assert t[0] == 'run' and t[-1] == 'end' and t.count('decision') == 36" || fail "jsonl trace: $(head -c 300 "$TMP/out")"
 [ "$(call POST "/runs/$run_id/resume" '' "${SUPERVISOR[@]}")" = 409 ] || fail "resume completed run should be 409"
+# Webhooks: create (secret shown once), list, refuse a private target, delete. The event
+# subscribed to is never emitted by a smoke run, so nothing is sent anywhere.
+hook_url="https://hooks.example.com/ltaa-smoke-$$"
+code=$(call POST /webhooks "{\"url\":\"$hook_url\",\"events\":[\"run.signed_off\"],\"description\":\"smoke\"}" "${SUPERVISOR[@]}")
+[ "$code" = 201 ] || fail "POST /webhooks -> $code $(head -c 300 "$TMP/out")"
+check 'd["id"].startswith("wh_") and d["secret"].startswith("whsec_")' "webhook created with a secret"
+hook_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
+[ "$(call GET /webhooks '' "${SUPERVISOR[@]}")" = 200 ] || fail "GET /webhooks"
+check "any(w['id'] == '$hook_id' and 'secret' not in w for w in d)" "webhook listed without its secret"
+[ "$(call GET "/webhooks/$hook_id/deliveries" '' "${SUPERVISOR[@]}")" = 200 ] || fail "deliveries"
+check 'd == []' "no deliveries for an event never emitted"
+code=$(call POST /webhooks '{"url":"http://169.254.169.254/latest/meta-data/","events":["*"]}' "${SUPERVISOR[@]}")
+[ "$code" = 422 ] || fail "a link-local webhook target should be 422, got $code"
+check 'd["detail"][0]["loc"] == ["body", "url"]' "422 names the url"
+[ "$(call DELETE "/webhooks/$hook_id" '' "${SUPERVISOR[@]}")" = 204 ] || fail "DELETE /webhooks/$hook_id"
+[ "$(call GET "/webhooks/$hook_id" '' "${SUPERVISOR[@]}")" = 404 ] || fail "deleted webhook should be 404"
+echo "smoke: webhooks ok (create, list, deliveries, private target refused, delete)"
+
 if [ -n "${SMOKE_SUPERVISOR_KEY:-}" ]; then
   [ "$(call GET "/runs/$run_id" '')" = 401 ] || fail "no key should be 401"
   [ "$(call GET "/runs/$run_id/trace" '' "${CLIENT[@]}")" = 403 ] || fail "client key on a trace should be 403"

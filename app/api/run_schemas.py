@@ -22,6 +22,7 @@ from app.api.schemas import (
 from app.domain.lifecycle import RunStatus
 from app.store.models import as_utc
 
+StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
 # database may refuse in a query (PostgreSQL rejects a NUL character with an error, a 500).
 RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
@@ -63,7 +64,9 @@ class RunRequest(InstanceRequest):
     )
 
     reasoner: Name | None = Field(
-        None, description="'rules' (default, offline), 'anthropic', or 'replay' (with replay_of)"
+        None,
+        description="'rules' (default, offline), 'anthropic', 'openai' (the server's "
+        "OpenAI-compatible endpoint, LTAA_OPENAI_BASE_URL), or 'replay' (with replay_of)",
     )
     quality_threshold: float = Field(
         0.6,
@@ -80,7 +83,11 @@ class RunRequest(InstanceRequest):
         strict=True,
         description="Validation retries (tiers 1-3) before the fallback",
     )
-    model: Name | None = Field(None, description="Claude model (anthropic reasoner)")
+    model: Name | None = Field(
+        None,
+        description="Model name: Claude (anthropic) or the OpenAI-compatible server's "
+        "(openai; default LTAA_OPENAI_MODEL)",
+    )
     temperature: float | None = Field(
         None,
         ge=0,
@@ -102,6 +109,23 @@ class RunRequest(InstanceRequest):
         description="LLM tokens (input + output) the run may spend; once spent, the "
         "remaining tasks use the offline 'rules' reasoner (default: the server's setting)",
     )
+    llm_scope: Literal["all", "contested"] | None = Field(
+        None,
+        description="'all' (default, the paper): every decision asks the LLM. 'contested': "
+        "only decisions whose trade-off verdict is within llm_margin points of its threshold, "
+        "or where optimizer guidance disagrees with the rule, ask the LLM; the rules reasoner "
+        "answers the clear-cut ones (their attempts say reasoner 'rules', why 'clear-cut'). "
+        "No effect with the 'rules' reasoner",
+    )
+    llm_margin: float | None = Field(
+        None,
+        ge=0,
+        le=100,
+        strict=True,
+        allow_inf_nan=False,
+        description="Points either side of the threshold within which a decision is "
+        "contested (default 5)",
+    )
     replay_of: str | None = Field(
         None,
         min_length=1,
@@ -109,10 +133,10 @@ class RunRequest(InstanceRequest):
         pattern=RUN_ID_PATTERN,
         description="Required by reasoner 'replay', refused with any other: id of a completed "
         "run whose recorded replies are replayed, with no API call. The replay copies that "
-        "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance and "
-        "seed: omit them, or send the original's values (any other value is a 422 naming "
-        "the field); model, temperature and token_budget do not apply. Unknown id: 422; "
-        "a run not completed: 409",
+        "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance, "
+        "seed, llm_scope and llm_margin: omit them, or send the original's values (any "
+        "other value is a 422 naming the field); model, temperature and token_budget do "
+        "not apply. Unknown id: 422; a run not completed: 409",
     )
 
 
@@ -211,6 +235,15 @@ class AttemptOut(BaseModel):
     latency_ms: float
     transport_retries: int
     model: str | None
+    reasoner: str = Field(
+        description="Who wrote the reply: 'anthropic', 'openai', 'rules' or 'replay'"
+    )
+    why: StandIn | None = Field(
+        None,
+        description="Set when the rules reasoner answered instead of the run's LLM: "
+        "'clear-cut' (llm_scope 'contested' and the decision was not contested) or "
+        "'budget_exhausted' (the run's token budget was spent)",
+    )
     replayed_from: str | None = Field(
         None,
         description="Replay runs: the run whose recorded reply this attempt reused "
@@ -245,6 +278,13 @@ class DecisionOut(BaseModel):
     fallback: bool
     failure_log: list[str]
     regret: float | None
+    reasoner: str = Field(
+        description="Whose answer the decision took: the accepted attempt's reasoner, or "
+        "'rules' when the fallback decided"
+    )
+    why: StandIn | None = Field(
+        None, description="'fallback' when every attempt failed; else the accepted attempt's"
+    )
     attempts: list[AttemptOut]
 
 

@@ -1,11 +1,9 @@
 """Claude through the official `anthropic` SDK.
 
-The SDK is the transport layer: it retries connection errors, timeouts, 408, 409, 429 and
-5xx itself (SDK 2.10, `_should_retry`), waiting what `retry-after` (or `retry-after-ms`)
-says, else an exponential backoff from 0.5 s. Only what it finally gives up on reaches the
-graph, as ReasonerError, which the graph counts as a failed attempt (validation retries
-are a separate budget). So does a 200 whose body is no Message (empty, cut off, an HTML
-page from a proxy): the SDK would hand those back unparsed or raise a bare ValueError.
+Transport retries, transport failures, unreadable bodies and refused calls are handled
+as for every SDK-backed reasoner (app.reasoners.transport): only what the SDK finally
+gives up on reaches the graph, as ReasonerError (a failed attempt); a refused call (bad
+key, unknown model) is a ReasonerRejectedError that ends the run.
 
 Temperature: the pinned SDK (2.x) sends `anthropic-version: 2026-10-21` and no longer has a
 `temperature` argument; that API version rejects sampling parameters with HTTP 400. The
@@ -25,7 +23,16 @@ from anthropic.types import Message
 
 from app.domain.decision import DecisionContext
 from app.domain.errors import DomainError
-from app.reasoners.base import ReasonerError, ReasonerReply
+from app.reasoners.base import ReasonerReply
+from app.reasoners.transport import (
+    ReasonerRejectedError,
+    gave_up,
+    rejected,
+    transient,
+    unreadable,
+)
+
+__all__ = ["AnthropicReasoner", "ReasonerRejectedError"]
 
 # claude-sonnet-4-5 reaches end-of-life on 2026-11-30 (the SDK warns); 4.6 still takes
 # a temperature on API version 2023-06-01.
@@ -35,20 +42,6 @@ DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a l
 DEFAULT_TIMEOUT_S = 60.0
 DEFAULT_TRANSPORT_RETRIES = 3
 SAMPLING_API_VERSION = "2023-06-01"  # the last API version accepting `temperature`
-# Statuses worth another try later (after the SDK's own retries): the rest are our fault.
-_TRANSIENT_STATUSES = {408, 409, 429}
-
-
-def _transient(exc: anthropic.APIStatusError) -> bool:
-    return exc.status_code in _TRANSIENT_STATUSES or exc.status_code >= 500
-
-
-def _retries_taken(exc: anthropic.APIError) -> int:
-    """The SDK numbers each try in a request header; the last try's number is the retries."""
-    try:
-        return int(exc.request.headers.get("x-stainless-retry-count", 0))
-    except ValueError:
-        return 0
 
 
 def _message(raw: anthropic.APIResponse[Any]) -> Message:
@@ -59,12 +52,12 @@ def _message(raw: anthropic.APIResponse[Any]) -> Message:
     try:
         return Message.model_validate_json(body)
     except pydantic.ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(part) for part in first["loc"]) or "body"
-        raise ReasonerError(
-            f"unreadable reply (HTTP {raw.status_code}, {len(body)} bytes, "
-            f"{raw.headers.get('content-type', 'no content-type')}): {where}: {first['msg']}",
-            transport_retries=raw.retries_taken,
+        raise unreadable(
+            exc,
+            status=raw.status_code,
+            body=body,
+            content_type=raw.headers.get("content-type"),
+            retries=raw.retries_taken,
         ) from exc
 
 
@@ -107,19 +100,11 @@ class AnthropicReasoner:
                 **sampling,
             )
         except anthropic.APIConnectionError as exc:  # includes APITimeoutError
-            retries = _retries_taken(exc)
-            raise ReasonerError(
-                f"{type(exc).__name__} after {retries} transport retries: {exc}",
-                transport_retries=retries,
-            ) from exc
+            raise gave_up(exc, type(exc).__name__) from exc
         except anthropic.APIStatusError as exc:
-            if not _transient(exc):
+            if not transient(exc.status_code):
                 raise _rejected(exc, self.model) from exc
-            retries = _retries_taken(exc)
-            raise ReasonerError(
-                f"HTTP {exc.status_code} after {retries} transport retries: {exc}",
-                transport_retries=retries,
-            ) from exc
+            raise gave_up(exc, f"HTTP {exc.status_code}") from exc
         message = _message(raw)
         latency_ms = (time.perf_counter() - started) * 1000.0
         text = "".join(getattr(block, "text", "") for block in message.content)
@@ -142,25 +127,11 @@ class AnthropicReasoner:
         self._client.close()
 
 
-class ReasonerRejectedError(DomainError):
-    """The Messages API refused the call itself (bad key, unknown model): retrying cannot
-    help, so the run or request fails with this message instead of escalating tiers."""
-
-
 def _rejected(exc: anthropic.APIStatusError, model: str) -> DomainError:
-    if exc.status_code == 404:
-        err = ReasonerRejectedError(
-            "model",
-            f"the Messages API does not know model '{model}' (HTTP 404); choose another model",
-            code="unknown_model",
-        )
-        return err
-    err = ReasonerRejectedError(
-        "reasoner",
-        f"the Messages API rejected the call (HTTP {exc.status_code}: "
-        f"{exc.message}); check the server's ANTHROPIC_API_KEY and model access",
-        code="upstream_rejected",
+    return rejected(
+        api="the Messages API",
+        status=exc.status_code,
+        message=exc.message,
+        model=model,
+        check="the server's ANTHROPIC_API_KEY and model access",
     )
-    # The server's own configuration, not the request, is at fault.
-    err.status_code = 502 if exc.status_code in (401, 403) else 422
-    return err

@@ -11,11 +11,12 @@ again after a restart).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from typing import Any
 
 from app.domain.decision import DecisionContext
 from app.domain.lifecycle import EventKind
+from app.reasoners.attribution import Why, stood_in
 from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.factory import close_reasoner
 from app.reasoners.rules import RulesReasoner
@@ -65,11 +66,8 @@ class TokenBudgetReasoner:
         if not self._told:
             self._on_exhausted(BudgetExhausted(context.task_index, self.spent, self.budget))
             self._told = True
-        # The rules reply names no model, so the trace shows which reasoner answered.
-        reply = self._rules.reason(system, user, context)
-        return replace(
-            reply, extra={**reply.extra, "reasoner": self._rules.name, "reason": BUDGET_EXHAUSTED}
-        )
+        # The rules reply names no model (it is not an LLM call) and says why it answered.
+        return stood_in(self._rules.reason(system, user, context), Why.BUDGET_EXHAUSTED)
 
     def close(self) -> None:
         close_reasoner(self._inner)

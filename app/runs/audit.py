@@ -17,6 +17,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.lifecycle import EventKind, RunStatus
+from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
 from app.runs.errors import RunNotFoundError
 from app.store import chain
 from app.store import repository as repo
@@ -183,16 +184,31 @@ def _event_line(e: RunEvent) -> dict[str, Any]:
     }
 
 
-def _decision_line(d: Decision, attempts: list[Attempt]) -> dict[str, Any]:
-    # Columns under their stored names, so the export alone suffices to recompute the chain.
+def _attempt_line(a: Attempt, run_reasoner: str) -> tuple[dict[str, Any], Attribution]:
+    who = attempt_attribution(a.reply_extra, a.reply_model, run_reasoner)
+    line = {
+        **_columns(a, chain.ATTEMPT_FIELDS),
+        "at": _when(a.created_at),
+        "reasoner": who.reasoner,
+        "why": who.why,
+    }
+    return line, who
+
+
+def _decision_line(d: Decision, attempts: list[Attempt], run_reasoner: str) -> dict[str, Any]:
+    # Columns under their stored names, so the export alone suffices to recompute the chain;
+    # `reasoner` and `why` (derived, outside the chain) say who wrote each reply.
+    lines = [_attempt_line(a, run_reasoner) for a in attempts]
+    accepted = next((who for line, who in reversed(lines) if line["accepted"]), None)
+    decided = decision_attribution(bool(d.fallback), accepted)
     return {
         "type": "decision",
         **_columns(d, chain.DECISION_FIELDS),
         "at": _when(d.created_at),
         "chain_hash": d.chain_hash,
-        "attempt_records": [
-            {**_columns(a, chain.ATTEMPT_FIELDS), "at": _when(a.created_at)} for a in attempts
-        ],
+        "reasoner": decided.reasoner,
+        "why": decided.why,
+        "attempt_records": [line for line, _ in lines],
     }
 
 
@@ -222,5 +238,5 @@ def _record_pages(
     for decisions in _decision_pages(sessions, run_id):
         n_decisions += len(decisions)
         n_attempts += sum(len(a) for _, a in decisions)
-        yield [_decision_line(d, a) for d, a in decisions]
+        yield [_decision_line(d, a, header["reasoner"]) for d, a in decisions]
     yield [{"type": "end", "events": n_events, "decisions": n_decisions, "attempts": n_attempts}]

@@ -22,6 +22,7 @@ from app.domain.lifecycle import (
 )
 from app.store import repository as repo
 from app.store.models import Run, RunEvent, status_writes, utcnow
+from app.webhooks.outbox import enqueue_for_event
 
 __all__ = [
     "EventKind",
@@ -36,10 +37,13 @@ __all__ = [
 def record_event(
     session: Session, *, run_id: str, kind: EventKind, detail: Mapping[str, Any] | None = None
 ) -> RunEvent:
-    """Append one event to the run's record (and its hash chain), in this transaction."""
-    return repo.add_event(
+    """Append one event to the run's record (and its hash chain), in this transaction,
+    with its webhook deliveries (the outbox: they commit with the event or not at all)."""
+    event = repo.add_event(
         session=session, run_id=run_id, kind=EventKind(kind).value, detail=dict(detail or {})
     )
+    enqueue_for_event(session, run_id=run_id, kind=event.kind, detail=event.detail, seq=event.seq)
+    return event
 
 
 def new_run(session: Session, *, run_id: str, created: Mapping[str, Any], **fields: Any) -> Run:

@@ -31,6 +31,8 @@ COPIED = (
     "max_retries",
     "guidance",
     "seed",
+    "llm_scope",
+    "llm_margin",
 )
 # Request fields that have no meaning for a replay.
 NOT_FOR_REPLAY = ("model", "temperature", "token_budget")

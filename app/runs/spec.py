@@ -10,6 +10,7 @@ from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.domain.serialize import instance_from_dict, instance_to_dict
+from app.reasoners.scope import DEFAULT_LLM_MARGIN, LLMScope
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
 DEFAULT_MAX_RETRIES = 3
@@ -32,6 +33,11 @@ class RunSpec:
     token_budget: int | None = None
     # reasoner 'replay': the finished run whose recorded replies are replayed.
     replay_of: str | None = None
+    # 'contested': an LLM reasoner is asked only for contested decisions, the rules
+    # reasoner answers the clear-cut ones (app.reasoners.scope). Specs stored before these
+    # existed read as the paper's 'all'.
+    llm_scope: str = LLMScope.ALL.value
+    llm_margin: float = DEFAULT_LLM_MARGIN
 
     @classmethod
     def for_instance(cls, instance: Instance, **params: Any) -> RunSpec:

@@ -320,6 +320,8 @@ class RunWorker:
             temperature=spec.temperature,
             replay_of=spec.replay_of,
             replies=replies,
+            llm_scope=spec.llm_scope,
+            llm_margin=spec.llm_margin,
         )
         return with_token_budget(
             reasoner, run_id=run_id, budget=spec.token_budget, sessions=self._sessions, fence=fence

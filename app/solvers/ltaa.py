@@ -24,6 +24,7 @@ from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
+from app.reasoners.scope import DEFAULT_LLM_MARGIN
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
 
@@ -36,6 +37,10 @@ class LTAAOptions(SolverOptions):
     temperature: float | None = Field(None, ge=0.0, le=1.0)
     timeout: float | None = Field(None, gt=0.0)
     guidance: Literal["optimizer"] | None = None
+    # SPEC §14: 'contested' asks the LLM only where the trade-off verdict is close to its
+    # threshold (within llm_margin points) or guidance disagrees with the rule.
+    llm_scope: Literal["all", "contested"] = "all"
+    llm_margin: float = Field(DEFAULT_LLM_MARGIN, ge=0.0, le=100.0)
     # No api_key / base_url here: a request must not choose where the server sends its
     # key (SSRF) nor carry secrets into logs; both come from the server's settings.
 
@@ -93,10 +98,11 @@ class LTAASolver(Solver):
     info = SolverInfo(
         name="ltaa",
         description="The LTAA graph (phase detection, reasoning, 8-criterion validation, tiered "
-        "retries, rules fallback), run synchronously; reasoner 'rules' (default) or "
-        "'anthropic'.",
+        "retries, rules fallback), run synchronously; reasoner 'rules' (default), "
+        "'anthropic' or 'openai' (an OpenAI-compatible server, e.g. vLLM or Ollama).",
         exact=False,
-        limits="any size within the request limits; 'anthropic' makes 1-4 API calls per task",
+        limits="any size within the request limits; 'anthropic' and 'openai' make 1-4 API calls "
+        "per task (per contested task with llm_scope 'contested')",
     )
     Options = LTAAOptions
 
@@ -109,6 +115,8 @@ class LTAASolver(Solver):
                 model=opts.model,
                 temperature=opts.temperature,
                 timeout=opts.timeout,
+                llm_scope=opts.llm_scope,
+                llm_margin=opts.llm_margin,
             )
         except DomainError as exc:
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
@@ -140,6 +148,7 @@ class LTAASolver(Solver):
                 "retries": sum(d.attempts - 1 for d in decisions),
                 "transport_retries": used.transport_retries,
                 "guidance": opts.guidance,
+                "llm_scope": opts.llm_scope,
                 "regret": sum(d.regret or 0.0 for d in decisions),
                 "decisions": [
                     {

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import threading
-import time
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
+from pydantic import SecretStr
+
+from tests.api.conftest import ClientFactory
+from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, good_responder
+from tests.polling import eventually
 
 ROBOTS: list[dict[str, Any]] = [
     {"name": "arm", "label": "Precision Arm", "success": {"dexterous": 0.9, "heavy": 0.3}},
@@ -179,25 +183,41 @@ def test_fractional_cap_and_any_feature_names(client: TestClient) -> None:
     assert out["metrics"]["workload"] == {"r0": 2, "r1": 2, "r2": 3}
 
 
-def test_a_long_solve_leaves_the_event_loop_free(client: TestClient) -> None:
-    """The solve runs in the threadpool: /health answers while a long /allocate is solving."""
+def test_a_long_solve_leaves_the_event_loop_free(make_client: ClientFactory) -> None:
+    """The solve runs in the threadpool: /health answers while a long /allocate is solving.
+
+    The solve is kept long by its reasoner: the fake Messages API holds its answers until
+    /health has been asked, so "under way" is observed (the API got the solve's first
+    call), not guessed from a sleep, and the solve cannot end too soon."""
+    health_asked = threading.Event()
+
+    def answer_after_health(request: dict[str, Any]) -> Reply:
+        health_asked.wait(timeout=10)  # a blocked event loop shows as a failure, not a hang
+        return good_responder(request)
+
     robots = [{"name": f"r{i}", "success": {"f": 0.2 * (i + 1)}} for i in range(4)]
-    big = {
+    body = {
         "solver": "ltaa",
-        "tasks": [{"id": i, "features": ["f"]} for i in range(400)],
+        "tasks": [{"id": i, "features": ["f"]} for i in range(3)],
         "robots": robots,
+        "options": {"reasoner": "anthropic", "model": "claude-test"},
     }
     answered: list[int] = []
-    solving = threading.Thread(
-        target=lambda: answered.append(client.post("/allocate", json=big).status_code)
-    )
-    solving.start()
-    try:
-        time.sleep(0.5)  # the request is in, its solve (several seconds) under way
-        assert client.get("/health").status_code == 200
-        assert answered == []  # /health did not wait for the solve
-    finally:
-        solving.join()
+    with FakeMessagesAPI(default=answer_after_health) as api:
+        client = make_client(
+            anthropic_api_key=SecretStr("test-key"), anthropic_base_url=api.base_url
+        )
+        solving = threading.Thread(
+            target=lambda: answered.append(client.post("/allocate", json=body).status_code)
+        )
+        solving.start()
+        try:
+            eventually(lambda: api.requests, what="the solve's first call to the Messages API")
+            assert client.get("/health").status_code == 200
+            assert answered == []  # /health did not wait for the solve
+        finally:
+            health_asked.set()
+            solving.join()
     assert answered == [200]
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from typing import Any
 
 import pytest
@@ -15,6 +14,7 @@ from app.api.auth import ApiKeysError, InsecureBindError, Role, parse_api_keys
 from app.config import Settings, get_settings
 from app.main import create_app
 from tests.api.conftest import ClientFactory
+from tests.polling import wait_until
 
 CLIENT_KEY = "client-key-7Hq2vN9xLp4Rt8Zw"
 SUPERVISOR_KEY = "supervisor-key-Jm3Kd8Qw2Vx6Bn5Y"
@@ -39,6 +39,13 @@ SUPERVISOR_ENDPOINTS = [
     ("POST", "/runs/{id}/resume"),
     ("POST", "/runs/{id}/cancel"),
     ("GET", "/metrics"),
+    ("POST", "/webhooks"),
+    ("GET", "/webhooks"),
+    ("GET", "/webhooks/{webhook_id}"),
+    ("DELETE", "/webhooks/{webhook_id}"),
+    ("POST", "/webhooks/{webhook_id}/rotate-secret"),
+    ("GET", "/webhooks/{webhook_id}/deliveries"),
+    ("POST", "/webhooks/{webhook_id}/deliveries/{delivery_id}/retry"),
 ]
 
 
@@ -48,10 +55,7 @@ def secured(make_client: ClientFactory) -> TestClient:
 
 
 def _wait_completed(client: TestClient, run_id: str) -> None:
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{run_id}", headers=AS_CLIENT).json()["status"] != "completed":
-        assert time.monotonic() < deadline, "run did not complete"
-        time.sleep(0.02)
+    wait_until(client, run_id, ("completed",), timeout=60, headers=AS_CLIENT)
 
 
 def _call(

@@ -199,3 +199,18 @@ def test_run_applies_the_token_budget_setting(runner: CliRunner) -> None:
     # The first call spends the budget; every later task goes to the rules reasoner.
     assert answered == 1
     assert "LLM calls / tokens in / out" in result.output
+
+
+def test_run_with_a_contested_scope_asks_the_model_for_contested_decisions_only(
+    runner: CliRunner,
+) -> None:
+    from tests.fakes.llm_providers import PROVIDERS
+
+    openai = PROVIDERS["openai"]
+    with openai.fake() as api:
+        result = runner.invoke(
+            cli, ["run", "--reasoner", "openai", "--llm-scope", "contested"], env=openai.env(api)
+        )
+        answered = api.answered()
+    assert result.exit_code == 0, result.output
+    assert 0 < answered <= 0.4 * 36  # baseline / balanced: about a fifth

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import json
-import time
 
 import pytest
 from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
+from tests.polling import wait_until
 
 
 def _six_task_run(client: TestClient) -> str:
@@ -18,10 +18,7 @@ def _six_task_run(client: TestClient) -> str:
             "/runs", json={"tasks": baseline["tasks"][:6], "robots": baseline["robots"]}
         ).json()["id"]
     )
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{run_id}").json()["status"] != "completed":
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
+    wait_until(client, run_id, ("completed",), timeout=60)
     return run_id
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from fastapi.testclient import TestClient
@@ -12,6 +11,7 @@ from pydantic import SecretStr
 from tests.api.conftest import ClientFactory
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply
 from tests.fakes.scripted_reasoner import GARBAGE
+from tests.polling import wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
 
@@ -28,11 +28,7 @@ def scrape(client: TestClient) -> dict[tuple[str, tuple[tuple[str, str], ...]], 
 
 
 def wait_done(client: TestClient, run_id: str) -> dict[str, Any]:
-    deadline = time.monotonic() + 60
-    while (state := client.get(f"/runs/{run_id}").json())["status"] in ("queued", "running"):
-        assert time.monotonic() < deadline, state
-        time.sleep(0.02)
-    return dict(state)
+    return wait_until(client, run_id, timeout=60)  # anything but queued or running
 
 
 def test_before_any_run_every_series_is_zero(client: TestClient) -> None:

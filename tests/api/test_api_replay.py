@@ -1,8 +1,9 @@
 """Exact replay over HTTP: `reasoner: "replay"` re-runs a finished run from its record.
 
-The original anthropic run goes through the real SDK to the fake Messages API; the fake
-is stopped before the replay, so any API call the replay made would fail (and change the
-verdicts), and the fake must have received nothing more.
+The original run (anthropic, then openai) goes through the real SDK to the provider's fake
+(Messages API, Chat Completions); the fake is stopped before the replay, so any API call
+the replay made would fail (and change the verdicts), and the fake must have received
+nothing more.
 """
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_prompt, prompt_of
+from tests.fakes.llm_providers import Provider
 from tests.fakes.scripted_reasoner import GARBAGE, poor_answer
-from tests.run_polling import wait_until
+from tests.polling import wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
 ZERO_USAGE = {"llm_calls": 0, "input_tokens": 0, "output_tokens": 0}
@@ -72,22 +74,18 @@ def verdicts(trace: dict[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
-def test_replay_of_an_anthropic_run_with_the_api_stopped_reproduces_it_exactly(
-    make_client: ClientFactory,
+def test_replay_of_an_llm_run_with_the_api_stopped_reproduces_it_exactly(
+    make_client: ClientFactory, provider: Provider
 ) -> None:
-    api = FakeMessagesAPI().start()
+    api = provider.fake().start()
     # Task 0: a poor answer, fixed at tier 1. Task 1: garbage at every tier, so the
     # fallback decides. Task 2: a 500 the transport gives up on (a failed attempt with no
     # reply), then a good answer. Every later call: a good answer.
     api.script(poor, Reply.from_prompt(), *[Reply.answer(GARBAGE)] * 4, Reply.error(500))
-    client = make_client(
-        anthropic_api_key="test-key",
-        anthropic_base_url=api.base_url,
-        anthropic_max_transport_retries=0,
-    )
+    client = make_client(**provider.settings(api, retries=0))
     try:
         original, first = run_to_end(
-            client, {**BASELINE, "reasoner": "anthropic", "model": "claude-test"}
+            client, {**BASELINE, "reasoner": provider.reasoner, "model": provider.model}
         )
     finally:
         api.stop()
@@ -111,13 +109,13 @@ def test_replay_of_an_anthropic_run_with_the_api_stopped_reproduces_it_exactly(
     answered = again["decisions"][0]["attempts"][0]
     assert answered["model"] is None and answered["input_tokens"] == 0
     assert answered["replayed_from"] == original["id"]
-    assert answered["original_model"] == "claude-test"
+    assert answered["original_model"] == provider.model
     assert again["events"][0]["detail"]["replay_of"] == original["id"]
 
     # A replay of the replay is the same record again, and still names the first model.
     twice, thrice = run_to_end(client, {"reasoner": "replay", "replay_of": replay["id"]})
     assert twice["usage"] == ZERO_USAGE and verdicts(thrice) == verdicts(first)
-    assert thrice["decisions"][0]["attempts"][0]["original_model"] == "claude-test"
+    assert thrice["decisions"][0]["attempts"][0]["original_model"] == provider.model
     assert len(api.requests) == calls
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import sqlite3
-import time
 from typing import Any
 
 import pytest
@@ -13,9 +12,18 @@ from sqlalchemy.engine import make_url
 from app.config import Settings
 from app.main import create_app
 from tests.api.conftest import ClientFactory
-from tests.run_polling import wait_until
+from tests.polling import eventually, wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
+
+
+def _wait_allocated(client: TestClient, run_id: str, tasks: int) -> None:
+    eventually(
+        lambda: client.get(f"/runs/{run_id}").json()["progress"]["allocated"],
+        until=lambda allocated: allocated >= tasks,
+        timeout=30,
+        what=f"run {run_id} allocated {tasks} tasks",
+    )
 
 
 def test_a_rules_run_completes_with_metrics_and_a_full_trace(client: TestClient) -> None:
@@ -93,10 +101,7 @@ def test_resuming_a_completed_run_is_a_conflict(client: TestClient) -> None:
 def test_cancel_stops_a_running_run(make_client: ClientFactory) -> None:
     client = make_client(test_pause="5:reason:before")
     run_id = client.post("/runs", json=BASELINE).json()["id"]
-    deadline = time.monotonic() + 30
-    while client.get(f"/runs/{run_id}").json()["progress"]["allocated"] < 5:
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
+    _wait_allocated(client, run_id, 5)
     assert client.post(f"/runs/{run_id}/cancel").status_code == 200
     state = wait_until(client, run_id, ("cancelled",))
     assert state["progress"]["allocated"] == 5
@@ -158,10 +163,7 @@ def test_a_run_whose_record_fails_the_integrity_check_is_not_resumed(settings: S
     paused = settings.model_copy(update={"test_pause": f"{5}:reason:before"})
     with TestClient(create_app(paused)) as first:
         run_id = first.post("/runs", json=BASELINE).json()["id"]
-        deadline = time.monotonic() + 30
-        while first.get(f"/runs/{run_id}").json()["progress"]["allocated"] < 5:
-            assert time.monotonic() < deadline
-            time.sleep(0.02)
+        _wait_allocated(first, run_id, 5)
     # Shut down mid-run (interrupted at task 5), then lose a stored decision.
     database = sqlite3.connect(make_url(settings.db_url).database or "")
     with database:
@@ -194,10 +196,7 @@ def test_checkpoints_go_when_a_run_can_no_longer_resume(settings: Settings) -> N
     with TestClient(create_app(paused)) as client:
         held = client.post("/runs", json=BASELINE).json()["id"]
         wait_until(client, held, ("running",))
-        deadline = time.monotonic() + 30
-        while client.get(f"/runs/{held}").json()["progress"]["allocated"] < 3:
-            assert time.monotonic() < deadline
-            time.sleep(0.02)
+        _wait_allocated(client, held, 3)
     # Shut down while the run waited at task 3: interrupted, its checkpoints kept.
     assert _checkpoints_of(settings, held) > 0
     with TestClient(create_app(settings)) as client:

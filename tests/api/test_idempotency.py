@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ from app.store.db import make_engine, make_session_factory
 from app.store.models import Run
 from tests.api.conftest import ClientFactory
 from tests.e2e.server import Server
+from tests.polling import wait_until
 
 BODY: dict[str, Any] = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
 KEY = "retry-3f1c9a7e-5b2d-4e8f-9a01-6c7d8e9f0a1b"
@@ -46,13 +46,6 @@ def stored_runs(data_dir: Path) -> list[Run]:
         engine.dispose()
 
 
-def wait_for(client: TestClient, run_id: str, status: str) -> None:
-    deadline = time.monotonic() + 60
-    while client.get(f"/runs/{run_id}").json()["status"] != status:
-        assert time.monotonic() < deadline, f"run {run_id} never became {status}"
-        time.sleep(0.02)
-
-
 def test_same_key_and_body_returns_the_first_run(client: TestClient) -> None:
     first = post(client, BODY)
     assert first.status_code == 202, first.text
@@ -72,7 +65,7 @@ def test_same_key_and_body_returns_the_first_run(client: TestClient) -> None:
 
 def test_a_replay_after_the_run_completed_answers_as_the_first_time(client: TestClient) -> None:
     first = post(client, BODY).json()
-    wait_for(client, first["id"], "completed")
+    wait_until(client, first["id"], ("completed",), timeout=60)
     again = post(client, BODY)
     assert again.status_code == 202
     assert again.json() == first and first["status"] == "queued"

@@ -12,7 +12,6 @@ so the whole module stays well under a minute and a half.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,7 @@ from starlette.types import Receive, Scope, Send
 
 from app.config import Settings
 from app.main import create_app
+from tests.polling import wait_until
 
 CONFIG = schemathesis.Config.from_path(Path(__file__).with_name("schemathesis.toml"))
 
@@ -122,11 +122,8 @@ def stored_run(app_settings: Settings) -> str:
     with TestClient(create_app(app_settings)) as client:
         body = {"scenario": "baseline", "reasoner": "rules"}
         run_id = str(client.post("/runs", json=body, headers=AUTH).json()["id"])
-        for _ in range(600):
-            if client.get(f"/runs/{run_id}", headers=AUTH).json()["status"] == "completed":
-                return run_id
-            time.sleep(0.05)
-    raise AssertionError("the stored run did not complete")
+        wait_until(client, run_id, ("completed",), timeout=30, headers=AUTH)
+    return run_id
 
 
 @schema.exclude(path_regex=RUN_PATHS).parametrize()

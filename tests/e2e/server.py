@@ -8,20 +8,38 @@ import signal
 import socket
 import subprocess
 import sys
-import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import httpx
 
+from app.graph.pause import PausePoint
+from tests.polling import eventually
+
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
+LLM_ENVIRONMENT = (
+    "ANTHROPIC_API_KEY",
+    "LTAA_ANTHROPIC_API_KEY",
+    "LTAA_ANTHROPIC_BASE_URL",
+    "LTAA_OPENAI_BASE_URL",
+    "LTAA_OPENAI_API_KEY",
+    "LTAA_OPENAI_MODEL",
+)
 
 
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def pause_setting(point: PausePoint) -> str:
+    """`LTAA_TEST_PAUSE` for `point`: a server started with it logs `point.message()`."""
+    setting = f"{point.task_index}:{point.node}:{'after' if point.after else 'before'}"
+    assert PausePoint.from_setting(setting) == point  # the server reads back this point
+    return setting
 
 
 class Server:
@@ -31,18 +49,26 @@ class Server:
         self.data_dir = data_dir
         self.port = port or free_port()
         self.env = {**os.environ, "LTAA_DATA_DIR": str(data_dir), **(env or {})}
-        for key in ("ANTHROPIC_API_KEY", "LTAA_ANTHROPIC_API_KEY"):
+        # The developer's own LLM configuration stays out of the server under test.
+        for key in (*LLM_ENVIRONMENT, *(k for k in os.environ if k.startswith("OPENAI_"))):
             if key not in (env or {}):
                 self.env.pop(key, None)
         self.proc: subprocess.Popen[bytes] | None = None
         self.log = data_dir / f"server-{self.port}.log"
+        self._log_start = 0  # where the latest start's output begins in `log`
 
     @property
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
-    def start(self, timeout: float = 60.0, **env: str) -> Server:
+    def start(
+        self, timeout: float = 60.0, *, pause: PausePoint | None = None, **env: str
+    ) -> Server:
+        """Start the server and wait until /health answers; `pause` holds its runs there
+        (LTAA_TEST_PAUSE): wait for `wait_for_log(pause.message())` before acting on it."""
         self.data_dir.mkdir(parents=True, exist_ok=True)
+        if pause is not None:
+            env["LTAA_TEST_PAUSE"] = pause_setting(pause)
         full_env = {
             **self.env,
             **env,
@@ -50,6 +76,7 @@ class Server:
             "HOST": "127.0.0.1",
             "PORT": str(self.port),
         }
+        self._log_start = self.log.stat().st_size if self.log.exists() else 0
         with self.log.open("ab") as log:
             # The script `make run` and the Docker image use; it execs uvicorn, so this
             # process is the server and SIGKILL reaches it directly.
@@ -60,17 +87,30 @@ class Server:
                 stdout=log,
                 stderr=subprocess.STDOUT,
             )
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"server exited early:\n{self.log.read_text()[-3000:]}")
-            try:
-                if httpx.get(f"{self.url}/health", timeout=1).status_code == 200:
-                    return self
-            except httpx.HTTPError:
-                pass
-            time.sleep(0.1)
-        raise RuntimeError(f"server did not become healthy:\n{self.log.read_text()[-3000:]}")
+        eventually(
+            self._healthy,
+            timeout=timeout,
+            interval=0.1,
+            what=f"the server on port {self.port} answering GET /health",
+            context=self._log_tail,
+        )
+        return self
+
+    def _healthy(self) -> bool:
+        assert self.proc is not None
+        if self.proc.poll() is not None:
+            raise RuntimeError(f"server exited early:\n{self._log_tail()}")
+        try:
+            return httpx.get(f"{self.url}/health", timeout=1).status_code == 200
+        except httpx.HTTPError:
+            return False
+
+    def _log_tail(self) -> str:
+        return self.log.read_text()[-3000:]
+
+    def logged(self) -> str:
+        """What the server has logged since it was last started."""
+        return self.log.read_bytes()[self._log_start :].decode(errors="replace")
 
     def kill(self) -> None:
         """SIGKILL: no shutdown hooks, no flushing — a crash."""
@@ -89,13 +129,38 @@ class Server:
     def client(self) -> httpx.Client:
         return httpx.Client(base_url=self.url, timeout=30)
 
-    def wait_for(self, run_id: str, predicate: Any, timeout: float = 120.0) -> dict[str, Any]:
-        deadline = time.monotonic() + timeout
-        last: dict[str, Any] = {}
+    def wait_for(
+        self,
+        run_id: str,
+        predicate: Callable[[dict[str, Any]], object],
+        timeout: float = 120.0,
+        *,
+        headers: dict[str, str] | None = None,
+    ) -> dict[str, Any]:
+        """The run's state (GET /runs/{id}) once `predicate` holds for it."""
         with self.client() as c:
-            while time.monotonic() < deadline:
-                last = c.get(f"/runs/{run_id}").json()
-                if predicate(last):
-                    return last
-                time.sleep(0.05)
-        raise AssertionError(f"timed out; last state: {last}")
+            state: dict[str, Any] = eventually(
+                lambda: c.get(f"/runs/{run_id}", headers=headers).json(),
+                until=predicate,
+                timeout=timeout,
+                interval=0.05,
+                what=f"run {run_id} satisfied {getattr(predicate, '__name__', predicate)}",
+            )
+        return state
+
+    def wait_for_log(self, text: str, *, count: int = 1, timeout: float = 60.0) -> None:
+        """Until the server, since its latest start, has logged `text` `count` times (e.g. a
+        pause point's message once per run held there); fails at once if it has exited."""
+
+        def seen() -> int:
+            assert self.proc is not None and self.proc.poll() is None, self._log_tail()
+            return self.logged().count(text)
+
+        eventually(
+            seen,
+            until=lambda n: n >= count,
+            timeout=timeout,
+            interval=0.05,
+            what=f"the server logged {text!r} {count} time(s)",
+            context=self._log_tail,
+        )

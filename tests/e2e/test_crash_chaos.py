@@ -1,11 +1,11 @@
 """Ten SIGKILLs in one durable run, one at each kind of node (and both sides of `reason`),
-against the real server, the real SDK and a fake Messages API: the run still ends with an
-uninterrupted run's allocation, one decision per task, and no LLM call paid twice."""
+against the real server, the real SDK and its provider's fake (anthropic: the Messages API,
+openai: Chat Completions): the run still ends with an uninterrupted run's allocation, one
+decision per task, and no LLM call paid twice."""
 
 from __future__ import annotations
 
 import random
-import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -17,6 +17,7 @@ from app.graph.pause import PausePoint
 from app.reasoners.rules import compose_answer
 from tests.e2e.server import Server
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_prompt, prompt_of
+from tests.fakes.llm_providers import Provider
 from tests.fakes.scripted_reasoner import GARBAGE
 
 pytestmark = pytest.mark.e2e
@@ -62,17 +63,9 @@ def calls_per_attempt(api: FakeMessagesAPI, first: int = 0) -> Counter[tuple[int
     return Counter(keys)
 
 
-def wait_for_log(server: Server, text: str, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        assert server.proc is not None and server.proc.poll() is None, server.log.read_text()
-        if text in server.log.read_text():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"server never logged {text!r}:\n{server.log.read_text()[-3000:]}")
-
-
-def test_ten_sigkills_at_every_kind_of_node_change_nothing(tmp_path: Path) -> None:
+def test_ten_sigkills_at_every_kind_of_node_change_nothing(
+    tmp_path: Path, provider: Provider
+) -> None:
     points = kill_points(seed=6)
     assert {p.node for p in points} == set(NODES)
     assert {p.after for p in points if p.node == "reason"} == {True, False}
@@ -81,25 +74,22 @@ def test_ten_sigkills_at_every_kind_of_node_change_nothing(tmp_path: Path) -> No
     body = {
         "scenario": "baseline",
         "mode": "balanced",
-        "reasoner": "anthropic",
-        "model": "claude-test",
+        "reasoner": provider.reasoner,
+        "model": provider.model,
     }
     data = tmp_path / "data"
 
-    with FakeMessagesAPI(default=rejecting_first_tries(retry_tasks)) as api:
-        env = {"LTAA_ANTHROPIC_API_KEY": "test-key", "LTAA_ANTHROPIC_BASE_URL": api.base_url}
+    with provider.fake(default=rejecting_first_tries(retry_tasks)) as api:
+        env = provider.env(api)
         server = Server(data, env=env)
         for n, point in enumerate(points):
-            server.start(
-                LTAA_TEST_PAUSE=f"{point.task_index}:{point.node}:"
-                f"{'after' if point.after else 'before'}",
-            )
+            server.start(pause=point)
             if n == 0:
                 with server.client() as c:
                     created = c.post("/runs", json=body)
                 assert created.status_code == 202, created.text
                 run_id = created.json()["id"]
-            wait_for_log(server, point.message())
+            server.wait_for_log(point.message())
             server.kill()
             server = Server(data, env=env)
 

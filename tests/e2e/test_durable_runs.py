@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import random
-import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from app.graph.pause import PausePoint
 from tests.e2e.server import Server
 
 pytestmark = pytest.mark.e2e
@@ -26,6 +27,13 @@ def _assignments(state: dict[str, Any]) -> list[tuple[Any, str]]:
     return [(a["task_id"], a["robot"]) for a in state["assignments"]]
 
 
+def _allocated(at_least: int) -> Callable[[dict[str, Any]], bool]:
+    def allocated(state: dict[str, Any]) -> bool:
+        return bool(state["progress"]["allocated"] >= at_least)
+
+    return allocated
+
+
 def _completed(state: dict[str, Any]) -> bool:
     assert state["status"] not in ("failed", "cancelled"), state
     return state["status"] == "completed"
@@ -33,11 +41,12 @@ def _completed(state: dict[str, Any]) -> bool:
 
 def test_run_killed_at_task_18_resumes_at_task_18(tmp_path: Path) -> None:
     body = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
-    first = Server(tmp_path / "data").start(LTAA_TEST_PAUSE="18:reason:before")
+    held_at = PausePoint(18, "reason", after=False)
+    first = Server(tmp_path / "data").start(pause=held_at)
     try:
         run_id = _create(first, body)
         state = first.wait_for(run_id, lambda s: s["progress"]["allocated"] >= 18)
-        time.sleep(0.3)  # the run is now held inside task 18's reasoning node
+        first.wait_for_log(held_at.message())  # held inside task 18's reasoning node
         assert first.client().get(f"/runs/{run_id}").json()["progress"]["allocated"] == 18
     finally:
         first.kill()
@@ -89,7 +98,7 @@ def test_three_sigkills_during_a_500_task_run(tmp_path: Path) -> None:
     server = Server(data).start()
     run_id = _create(server, body)
     for point in kill_points:
-        server.wait_for(run_id, lambda s, p=point: s["progress"]["allocated"] >= p)
+        server.wait_for(run_id, _allocated(point))
         server.kill()
         server = Server(data).start()
     try:

@@ -8,7 +8,6 @@ lease owner id, checkpointer pool and threads, and they share only the database.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -35,6 +34,7 @@ from app.store.migrate import alembic_config, upgrade_head
 from app.store.models import Run, status_writes
 from tests.e2e.postgres import fresh_database, query
 from tests.factories import run_row
+from tests.polling import eventually
 
 pytestmark = pytest.mark.e2e
 
@@ -89,13 +89,6 @@ def _create(sessions: sessionmaker[Session], worker: RunWorker) -> str:
     return service.create_run(
         sessions=sessions, worker=worker, settings=worker._settings, spec=spec
     ).id
-
-
-def _until(predicate: Callable[[], bool], timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.05)
 
 
 def _run(sessions: sessionmaker[Session], run_id: str) -> Run:
@@ -169,7 +162,11 @@ def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
 ) -> None:
     worker = make_leased(test_pause="3:reason:before")
     run_id = _create(sessions, worker)
-    _until(lambda: _decisions(sessions, run_id) == 3 and worker.is_active(run_id))
+    eventually(
+        lambda: _decisions(sessions, run_id) == 3 and worker.is_active(run_id),
+        interval=0.05,
+        what="3 decisions stored (it holds before task 3) and the run active",
+    )
     # Another process took the run (as if this one had stalled past its lease).
     query(
         postgres_url,
@@ -224,7 +221,7 @@ def test_cancel_reaches_the_process_running_the_run(
     runner = make_leased(test_pause="3:reason:before")
     other = make_leased()
     run_id = _create(sessions, runner)
-    _until(lambda: _decisions(sessions, run_id) == 3)
+    eventually(lambda: _decisions(sessions, run_id) == 3, interval=0.05, what="3 decisions stored")
     assert other.is_active(run_id) and _run(sessions, run_id).status == "running"
     service.cancel_run(sessions=sessions, worker=other, run_id=run_id)
     runner.wait(run_id, timeout=10)
@@ -239,7 +236,7 @@ def test_a_draining_process_hands_its_runs_to_another(
 ) -> None:
     first = make_leased(test_pause="3:reason:before")
     run_id = _create(sessions, first)
-    _until(lambda: _decisions(sessions, run_id) == 3)
+    eventually(lambda: _decisions(sessions, run_id) == 3, interval=0.05, what="3 decisions stored")
     first.close()  # SIGTERM: interrupted at a node boundary, lease released at once
     run = _run(sessions, run_id)
     assert (run.status, run.lease_owner) == ("interrupted", None)

@@ -17,13 +17,16 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.config import Settings
+from app.graph.pause import PausePoint
 from app.main import create_app
 from tests.e2e.postgres import fresh_database, query
 from tests.e2e.server import Server
+from tests.polling import eventually
 
 pytestmark = pytest.mark.e2e
 
 PAUSE_AT = 12  # the first process holds its runs inside task 12's reasoning node
+HELD = PausePoint(PAUSE_AT, "reason", after=False)
 A_SLOTS = 5
 LEASE_S = 3.0
 
@@ -51,6 +54,22 @@ def _assignments(state: dict[str, Any]) -> list[tuple[Any, str]]:
     return [(a["task_id"], a["robot"]) for a in state["assignments"]]
 
 
+def _wait_completed(client: TestClient, run_id: str) -> dict[str, Any]:
+    def completed(state: dict[str, Any]) -> bool:
+        if state["status"] != "completed":
+            assert state["status"] in ("queued", "running"), state
+        return state["status"] == "completed"
+
+    state: dict[str, Any] = eventually(
+        lambda: client.get(f"/runs/{run_id}").json(),
+        until=completed,
+        timeout=120,
+        interval=0.05,
+        what=f"reference run {run_id} completed",
+    )
+    return state
+
+
 def _sqlite_reference(data_dir: Path) -> list[list[tuple[Any, str]]]:
     """The same requests through the embedded default (SQLite tables and checkpointer)."""
     settings = Settings(data_dir=data_dir, anthropic_api_key=None, anthropic_base_url=None)
@@ -61,11 +80,7 @@ def _sqlite_reference(data_dir: Path) -> list[list[tuple[Any, str]]]:
             for body in REQUESTS
         ]
         for run_id in ids:
-            deadline = time.monotonic() + 120
-            while (state := client.get(f"/runs/{run_id}").json())["status"] != "completed":
-                assert state["status"] in ("queued", "running"), state
-                assert time.monotonic() < deadline, state
-                time.sleep(0.05)
+            state = _wait_completed(client, run_id)
             results.append(_assignments(state))
     return results
 
@@ -98,14 +113,13 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
             **env,
             "LTAA_WORKER_NAME": "api-a",
             "LTAA_MAX_CONCURRENT_RUNS": str(A_SLOTS),
-            "LTAA_TEST_PAUSE": f"{PAUSE_AT}:reason:before",
         },
     )
     b = Server(
         tmp_path / "b", env={**env, "LTAA_WORKER_NAME": "api-b", "LTAA_MAX_CONCURRENT_RUNS": "4"}
     )
     try:
-        a.start()
+        a.start(pause=HELD)
         with a.client() as c:
             created = [c.post("/runs", json={**body, "reasoner": "rules"}) for body in REQUESTS]
         assert all(r.status_code == 202 for r in created), [r.text for r in created]
@@ -122,7 +136,7 @@ def test_two_processes_one_killed_mid_run(tmp_path: Path, postgres_url: str) -> 
         for run_id in held_by_a:  # held at the pause: the kill lands mid-run
             state = a.wait_for(run_id, lambda s: s["progress"]["allocated"] >= PAUSE_AT)
             assert state["status"] == "running"
-        time.sleep(0.3)
+        a.wait_for_log(HELD.message(), count=A_SLOTS)  # each of A's runs held there
         with a.client() as c:
             assert all(
                 c.get(f"/runs/{r}").json()["progress"]["allocated"] == PAUSE_AT for r in held_by_a

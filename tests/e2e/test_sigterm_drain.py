@@ -9,7 +9,6 @@ import signal
 import sqlite3
 import subprocess
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ import httpx
 import pytest
 
 from tests.e2e.server import Server
+from tests.polling import eventually
 from tests.sse import parse_events
 
 pytestmark = pytest.mark.e2e
@@ -77,9 +77,9 @@ def test_sigterm_interrupts_runs_at_a_node_boundary_and_the_next_start_resumes_t
     seen: list[str] = []
     watcher = threading.Thread(target=watch, args=(f"{server.url}/runs/{running}/events", seen))
     watcher.start()
-    deadline = time.monotonic() + 10
-    while "decision" not in seen and time.monotonic() < deadline:
-        time.sleep(0.05)
+    eventually(
+        lambda: "decision" in seen, timeout=10, interval=0.05, what="a decision event streamed"
+    )
     assert "decision" in seen  # the stream is live when the signal comes
 
     assert server.proc is not None

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import subprocess
-import time
 from pathlib import Path
 from typing import Any
 
@@ -47,15 +46,12 @@ def _watch(server: Server, run_id: str, stop_after_decisions: int | None = None)
 
 
 def _wait_finished(server: Server, run_id: str) -> dict[str, Any]:
-    deadline = time.monotonic() + 60
-    with server.client() as c:
-        while (state := c.get(f"/runs/{run_id}", headers=AS_SUPERVISOR).json())["status"] in (
-            "queued",
-            "running",
-        ):
-            assert time.monotonic() < deadline, state
-            time.sleep(0.05)
-    return dict(state)
+    return server.wait_for(
+        run_id,
+        lambda state: state["status"] not in ("queued", "running"),
+        timeout=60,
+        headers=AS_SUPERVISOR,
+    )
 
 
 def test_sse_delivers_all_36_decisions_in_order(tmp_path: Path) -> None:

@@ -4,12 +4,12 @@ records the switch once."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from app.graph.pause import PausePoint
 from tests.e2e.server import Server
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 
@@ -17,6 +17,7 @@ pytestmark = pytest.mark.e2e
 
 N_TASKS = 6
 PAUSE_AT = 3  # the killed server holds every run inside task 3's reasoning node
+HELD = PausePoint(PAUSE_AT, "reason", after=False)
 
 
 def _run(server: Server, body: dict[str, Any]) -> str:
@@ -82,7 +83,7 @@ def test_a_budgeted_run_killed_before_and_after_its_switch_switches_at_the_same_
         finally:
             server.stop()
 
-        killed = Server(data, env=env).start(LTAA_TEST_PAUSE=f"{PAUSE_AT}:reason:before")
+        killed = Server(data, env=env).start(pause=HELD)
         try:
             ids = {
                 name: _run(killed, {**body, "token_budget": budget})
@@ -90,7 +91,7 @@ def test_a_budgeted_run_killed_before_and_after_its_switch_switches_at_the_same_
             }
             for run_id in ids.values():
                 killed.wait_for(run_id, lambda s: s["progress"]["allocated"] >= PAUSE_AT)
-            time.sleep(0.3)  # both runs are now held inside task 3's reasoning node
+            killed.wait_for_log(HELD.message(), count=len(ids))  # both runs held there
             with killed.client() as c:
                 events = {
                     name: [e["kind"] for e in c.get(f"/runs/{i}/trace").json()["events"]]

@@ -11,7 +11,6 @@ import pytest
 
 from app.graph.pause import PausePoint
 from tests.e2e.server import Server
-from tests.e2e.test_crash_chaos import wait_for_log
 
 pytestmark = pytest.mark.e2e
 
@@ -41,13 +40,11 @@ def test_a_run_killed_mid_write_resumes_with_a_valid_chain(tmp_path: Path) -> No
     before_kill: list[dict[int, str]] = []
     server = Server(data)
     for n, point in enumerate(points):
-        server.start(
-            LTAA_TEST_PAUSE=f"{point.task_index}:{point.node}:after",
-        )
+        server.start(pause=point)
         if n == 0:
             with server.client() as c:
                 run_id = c.post("/runs", json=BODY).json()["id"]
-        wait_for_log(server, point.message())
+        server.wait_for_log(point.message())
         before_kill.append(_stored_links(data))
         if n == 0:
             first_write = _written_at(data, 18)

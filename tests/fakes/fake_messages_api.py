@@ -29,7 +29,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any
+from typing import Any, Self
 
 from app.domain.decision import DecisionContext
 from app.domain.modes import Mode, strategic_weights
@@ -194,6 +194,12 @@ def good_responder(request: dict[str, Any]) -> Reply:
 
 
 class FakeMessagesAPI:
+    """The Messages API; subclasses speak another provider's dialect (see _error_body,
+    _message_body, _usage_of) over the same scripting, faults and accounting."""
+
+    PATH = "/v1/messages"
+    NAME = "fake Messages API"
+
     def __init__(self, *, default: Responder | None = good_responder, port: int = 0) -> None:
         self._queue: deque[Reply | Responder] = deque()
         self._default = default
@@ -230,9 +236,9 @@ class FakeMessagesAPI:
         assert isinstance(host, str)  # an AF_INET server's host is text (AF_UNIX's is bytes)
         return f"http://{host}:{port}"
 
-    def start(self) -> FakeMessagesAPI:
+    def start(self) -> Self:
         self._thread = threading.Thread(
-            target=self._server.serve_forever, daemon=True, name="fake-messages-api"
+            target=self._server.serve_forever, daemon=True, name=self.NAME.replace(" ", "-")
         )
         self._thread.start()
         return self
@@ -243,7 +249,7 @@ class FakeMessagesAPI:
         if self._thread is not None:
             self._thread.join(timeout=5)
 
-    def __enter__(self) -> FakeMessagesAPI:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -258,7 +264,7 @@ class FakeMessagesAPI:
                 return Reply(
                     status=500,
                     headers={"x-should-retry": "false"},
-                    text="fake Messages API: script exhausted",
+                    text=f"{self.NAME}: script exhausted",
                 )
             return self._default(request)
         return item(request) if callable(item) else item
@@ -266,24 +272,37 @@ class FakeMessagesAPI:
     def _respond(self, request: dict[str, Any]) -> tuple[Reply, int, dict[str, Any]]:
         reply = self._next(request)
         if reply.status != 200:
-            kind = _ERROR_TYPES.get(reply.status, "api_error")
-            body: dict[str, Any] = {
-                "type": "error",
-                "error": {"type": kind, "message": reply.text or f"fake {reply.status}"},
-                "request_id": f"req_fake_{next(self._ids):05d}",
-            }
-            return reply, reply.status, body
+            return reply, reply.status, self._error_body(reply.status, reply.text)
         if reply.body is not None:
             return reply, reply.status, {}  # sent verbatim: no message to compose
         text = reply.text if reply.text is not None else answer_from_prompt(prompt_of(request))
-        prompt = (request.get("system") or "") + prompt_of(request)
+        prompt = self._system_of(request) + prompt_of(request)
         in_tokens = (
             reply.input_tokens if reply.input_tokens is not None else estimate_tokens(prompt)
         )
         out_tokens = (
             reply.output_tokens if reply.output_tokens is not None else estimate_tokens(text)
         )
-        body = {
+        return reply, 200, self._message_body(request, text, in_tokens, out_tokens)
+
+    # -- the dialect
+    def _error_body(self, status: int, message: str | None) -> dict[str, Any]:
+        return {
+            "type": "error",
+            "error": {
+                "type": _ERROR_TYPES.get(status, "api_error"),
+                "message": message or f"fake {status}",
+            },
+            "request_id": f"req_fake_{next(self._ids):05d}",
+        }
+
+    def _system_of(self, request: dict[str, Any]) -> str:
+        return str(request.get("system") or "")
+
+    def _message_body(
+        self, request: dict[str, Any], text: str, in_tokens: int, out_tokens: int
+    ) -> dict[str, Any]:
+        return {
             "id": f"msg_fake_{next(self._ids):05d}",
             "type": "message",
             "role": "assistant",
@@ -293,7 +312,10 @@ class FakeMessagesAPI:
             "stop_sequence": None,
             "usage": {"input_tokens": in_tokens, "output_tokens": out_tokens},
         }
-        return reply, 200, body
+
+    def _usage_of(self, body: dict[str, Any]) -> tuple[int, int]:
+        usage = body.get("usage", {})
+        return usage.get("input_tokens", 0), usage.get("output_tokens", 0)
 
     def _handler_class(self) -> type[BaseHTTPRequestHandler]:
         api = self
@@ -307,15 +329,8 @@ class FakeMessagesAPI:
             def do_POST(self) -> None:
                 length = int(self.headers.get("content-length") or 0)
                 raw = self.rfile.read(length)
-                if self.path.split("?")[0] != "/v1/messages":
-                    self._send(
-                        404,
-                        {
-                            "type": "error",
-                            "error": {"type": "not_found_error", "message": self.path},
-                        },
-                        Reply(status=404),
-                    )
+                if self.path.split("?")[0] != api.PATH:
+                    self._send(404, api._error_body(404, self.path), Reply(status=404))
                     return
                 request = json.loads(raw or b"{}")
                 request["_headers"] = {k.lower(): v for k, v in self.headers.items()}
@@ -327,16 +342,10 @@ class FakeMessagesAPI:
                     time.sleep(reply.delay_s)
                 delivered = not self._peer_closed() and self._send(status, body, reply)
                 # A broken body reports no usage the client could read.
-                usage = body.get("usage", {}) if reply.wellformed else {}
+                in_tokens, out_tokens = api._usage_of(body) if reply.wellformed else (0, 0)
                 with api._lock:
                     api.served.append(
-                        Served(
-                            status,
-                            usage.get("input_tokens", 0),
-                            usage.get("output_tokens", 0),
-                            delivered,
-                            reply.wellformed,
-                        )
+                        Served(status, in_tokens, out_tokens, delivered, reply.wellformed)
                     )
 
             def _peer_closed(self) -> bool:

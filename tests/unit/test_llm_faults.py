@@ -1,5 +1,6 @@
-"""LLM faults through durable runs: the real anthropic SDK against the fake Messages API,
-the real worker, SQLite and trace endpoint.
+"""LLM faults through durable runs, for every LLM provider: the real SDK (anthropic, openai)
+against its loopback fake (Messages API, Chat Completions), the real worker, SQLite and
+trace endpoint.
 
 Every fault must end in one of three ways, each visible in GET /runs/{id}/trace:
 a transport retry (the SDK tried again: the attempt's `transport_retries`), a validation
@@ -16,12 +17,12 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
-from pydantic import SecretStr
 
 from app.config import Settings
 from app.main import create_app
 from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, answer_from_prompt, prompt_of
-from tests.run_polling import wait_until
+from tests.fakes.llm_providers import Provider
+from tests.polling import wait_until
 
 TRANSPORT_RETRIES = 2  # the SDK's max_retries in these tests
 TIMEOUT_S = 2.0  # the client's timeout; a "slow" reply takes longer
@@ -34,35 +35,30 @@ def unknown_robot(request: dict[str, Any]) -> Reply:
 
 
 @pytest.fixture
-def api() -> Iterator[FakeMessagesAPI]:
-    with FakeMessagesAPI() as server:
+def api(provider: Provider) -> Iterator[FakeMessagesAPI]:
+    with provider.fake() as server:
         yield server
 
 
 @pytest.fixture
-def client(settings: Settings, api: FakeMessagesAPI) -> Iterator[TestClient]:
-    app = create_app(
-        settings.model_copy(
-            update={
-                "anthropic_api_key": SecretStr("test-key"),
-                "anthropic_base_url": api.base_url,
-                "anthropic_max_transport_retries": TRANSPORT_RETRIES,
-                "anthropic_timeout_s": TIMEOUT_S,
-            }
-        )
-    )
+def client(settings: Settings, api: FakeMessagesAPI, provider: Provider) -> Iterator[TestClient]:
+    update = provider.settings(api, retries=TRANSPORT_RETRIES, timeout_s=TIMEOUT_S)
+    app = create_app(settings.model_copy(update=update))
     with TestClient(app) as c:
+        c.provider = provider  # type: ignore[attr-defined]
         yield c
 
 
 def llm_run(client: TestClient, n_tasks: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
-    """A run of the baseline's first tasks on Claude; its final state and its trace."""
+    """A run of the baseline's first tasks on the provider's model; its final state and its
+    trace."""
+    provider: Provider = client.provider  # type: ignore[attr-defined]
     baseline = next(s for s in client.get("/scenarios").json() if s["name"] == "baseline")
     body = {
         "tasks": baseline["tasks"][:n_tasks],
         "robots": baseline["robots"],
-        "reasoner": "anthropic",
-        "model": "claude-test",
+        "reasoner": provider.reasoner,
+        "model": provider.model,
     }
     created = client.post("/runs", json=body)
     assert created.status_code == 202, created.text
@@ -102,7 +98,7 @@ TRANSPORT_FAULTS = {
 
 @pytest.mark.parametrize("fault", TRANSPORT_FAULTS.values(), ids=TRANSPORT_FAULTS.keys())
 def test_a_transport_fault_is_retried_by_the_sdk(
-    client: TestClient, api: FakeMessagesAPI, fault: TransportFault
+    client: TestClient, api: FakeMessagesAPI, provider: Provider, fault: TransportFault
 ) -> None:
     api.script(fault.reply)
     state, trace = llm_run(client)
@@ -110,7 +106,7 @@ def test_a_transport_fault_is_retried_by_the_sdk(
 
     [attempt] = trace["decisions"][0]["attempts"]
     assert attempt["transport_retries"] == 1 and attempt["accepted"] is True
-    assert attempt["model"] == "claude-test" and attempt["hard_invalid"] is None
+    assert attempt["model"] == provider.model and attempt["hard_invalid"] is None
     assert not trace["decisions"][0]["fallback"] and trace["decisions"][0]["failure_log"] == []
     first, second = api.requests[:2]
     assert (
@@ -124,15 +120,28 @@ def test_a_transport_fault_is_retried_by_the_sdk(
     assert (state["usage"]["input_tokens"], state["usage"]["output_tokens"]) == api.tokens()
 
 
-def test_overloaded_is_served_in_the_api_error_shape(api: FakeMessagesAPI) -> None:
+def test_overloaded_is_served_in_the_messages_api_error_shape() -> None:
     import httpx
 
-    api.script(Reply.overloaded(retry_after=3))
-    response = httpx.post(f"{api.base_url}/v1/messages", json={"messages": []})
+    with FakeMessagesAPI() as api:
+        api.script(Reply.overloaded(retry_after=3))
+        response = httpx.post(f"{api.base_url}/v1/messages", json={"messages": []})
     assert response.status_code == 529 and response.headers["retry-after"] == "3"
     body = response.json()
     assert body["type"] == "error" and body["request_id"].startswith("req_")
     assert body["error"] == {"type": "overloaded_error", "message": "Overloaded"}
+
+
+def test_a_rate_limit_is_served_in_the_chat_completions_error_shape() -> None:
+    import httpx
+
+    from tests.fakes.fake_chat_completions_api import FakeChatCompletionsAPI
+
+    with FakeChatCompletionsAPI() as api:
+        api.script(Reply.error(429, retry_after=3))
+        response = httpx.post(f"{api.base_url}/chat/completions", json={"messages": []})
+    assert response.status_code == 429 and response.headers["retry-after"] == "3"
+    assert response.json()["error"]["type"] == "rate_limit_exceeded"
 
 
 # ------------------------------------------------------------- validation retries
@@ -148,7 +157,7 @@ VALIDATION_FAULTS: dict[str, tuple[Reply | Callable[[dict[str, Any]], Reply], st
 
 @pytest.mark.parametrize(("fault", "why"), VALIDATION_FAULTS.values(), ids=VALIDATION_FAULTS.keys())
 def test_a_bad_reply_is_a_failed_attempt_retried_at_the_next_tier(
-    client: TestClient, api: FakeMessagesAPI, fault: Reply, why: str
+    client: TestClient, api: FakeMessagesAPI, provider: Provider, fault: Reply, why: str
 ) -> None:
     api.script(fault)
     state, trace = llm_run(client)
@@ -160,7 +169,7 @@ def test_a_bad_reply_is_a_failed_attempt_retried_at_the_next_tier(
     assert why in failed["hard_invalid"]
     assert failed["feedback"].startswith("Hard invalid (Q=0)") and why in failed["feedback"]
     assert failed["transport_retries"] == 0  # the SDK had nothing to retry: a 200 came back
-    assert fixed["tier"] == 1 and fixed["accepted"] is True and fixed["model"] == "claude-test"
+    assert fixed["tier"] == 1 and fixed["accepted"] is True and fixed["model"] == provider.model
     assert not decision["fallback"]
     assert len(decision["failure_log"]) == 1 and why in decision["failure_log"][0]
     # The retry prompt carried the feedback to the model.
@@ -194,7 +203,9 @@ def test_a_transport_that_gives_up_at_every_tier_ends_in_the_fallback(
     assert not trace["decisions"][1]["fallback"]  # the API recovered for the next task
 
 
-def test_a_run_whose_every_call_fails_completes_on_fallbacks(settings: Settings) -> None:
+def test_a_run_whose_every_call_fails_completes_on_fallbacks(
+    settings: Settings, provider: Provider
+) -> None:
     faults: Iterator[Callable[[], Reply]] = itertools.cycle(
         [
             Reply.empty,
@@ -206,17 +217,10 @@ def test_a_run_whose_every_call_fails_completes_on_fallbacks(settings: Settings)
             Reply.dropped,
         ]
     )
-    with FakeMessagesAPI(default=lambda request: next(faults)()) as api:
-        app = create_app(
-            settings.model_copy(
-                update={
-                    "anthropic_api_key": SecretStr("test-key"),
-                    "anthropic_base_url": api.base_url,
-                    "anthropic_max_transport_retries": 1,
-                }
-            )
-        )
+    with provider.fake(default=lambda request: next(faults)()) as api:
+        app = create_app(settings.model_copy(update=provider.settings(api, retries=1)))
         with TestClient(app) as client:
+            client.provider = provider  # type: ignore[attr-defined]
             state, trace = llm_run(client, n_tasks=4)
         statuses = {s.status for s in api.served}
 
@@ -232,14 +236,12 @@ def test_a_run_whose_every_call_fails_completes_on_fallbacks(settings: Settings)
         assert decision["quality"] >= 0.9 and "Rule-based choice" in decision["reasoning"]
 
 
-def test_a_resume_without_the_api_key_fails_saying_which_key_to_set(settings: Settings) -> None:
-    with FakeMessagesAPI() as api:
+def test_a_resume_without_the_configuration_fails_saying_what_to_set(
+    settings: Settings, provider: Provider
+) -> None:
+    with provider.fake() as api:
         keyed = settings.model_copy(
-            update={
-                "anthropic_api_key": SecretStr("test-key"),
-                "anthropic_base_url": api.base_url,
-                "test_pause": f"{1}:reason:before",
-            }
+            update={**provider.settings(api), "test_pause": f"{1}:reason:before"}
         )
         with TestClient(create_app(keyed)) as first:
             baseline = next(s for s in first.get("/scenarios").json() if s["name"] == "baseline")
@@ -248,13 +250,15 @@ def test_a_resume_without_the_api_key_fails_saying_which_key_to_set(settings: Se
                 json={
                     "tasks": baseline["tasks"][:2],
                     "robots": baseline["robots"],
-                    "reasoner": "anthropic",
-                    "model": "claude-test",
+                    "reasoner": provider.reasoner,
+                    "model": provider.model,
                 },
             ).json()["id"]
             wait_until(first, run_id, ("running",))
-    # The key is gone when the server starts again and resumes the interrupted run.
+    # The key (the server's URL) is gone when the server starts again and resumes the
+    # interrupted run.
     with TestClient(create_app(settings)) as second:
         state = wait_until(second, run_id, ("failed", "completed"))
     assert state["status"] == "failed"
-    assert "ANTHROPIC_API_KEY" in state["error"] and "internal error" not in state["error"]
+    assert provider.missing_setting in state["error"]
+    assert "internal error" not in state["error"]

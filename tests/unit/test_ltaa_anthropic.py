@@ -182,6 +182,11 @@ class FakeSettings:
     anthropic_timeout_s = 12.0
     anthropic_max_transport_retries = 5
     default_model = "claude-settings"
+    openai_base_url: str | None = None
+    openai_api_key: SecretStr | None = None
+    openai_model: str | None = None
+    openai_timeout_s = 60.0
+    openai_max_transport_retries = 3
 
 
 def test_factory(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -3,8 +3,8 @@ through the recorder's stop check (a cancel or the server draining)."""
 
 from __future__ import annotations
 
+import logging
 import threading
-import time
 
 import pytest
 from langgraph.checkpoint.memory import InMemorySaver
@@ -18,7 +18,20 @@ from app.graph.recorder import RunCancelled
 from app.graph.runner import run_graph
 from app.graph.state import GraphContext
 from app.reasoners.rules import RulesReasoner
+from tests.polling import eventually, wait_logged
 from tests.unit.ltaa_support import problem
+
+
+class StopCheckCounter(MemoryRecorder):
+    """Counts the stop checks: a held run keeps making them while it stores nothing."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stop_checks = 0
+
+    def check_cancelled(self) -> None:
+        self.stop_checks += 1
+        super().check_cancelled()
 
 
 def test_parse() -> None:
@@ -37,10 +50,14 @@ def test_setting_is_checked() -> None:
 
 
 @pytest.mark.parametrize("after", [False, True])
-def test_a_held_run_stops_at_the_point_and_leaves_on_cancel(after: bool) -> None:
-    rec = MemoryRecorder()
+def test_a_held_run_stops_at_the_point_and_leaves_on_cancel(
+    after: bool, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="ltaa.runs")
+    rec = StopCheckCounter()
     ctx = GraphContext(problem=problem(), reasoner=RulesReasoner(), recorder=rec)
-    hook = pause_hook(PausePoint(4, "store_and_route", after=after), frozenset(NODES))
+    point = PausePoint(4, "store_and_route", after=after)
+    hook = pause_hook(point, frozenset(NODES))
     graph = build_graph(InMemorySaver(), node_hook=hook)
     outcome: list[BaseException] = []
 
@@ -54,10 +71,17 @@ def test_a_held_run_stops_at_the_point_and_leaves_on_cancel(after: bool) -> None
     thread.start()
     # `after`: task 4's decision is stored by the held node; `before`: not yet.
     stored = 5 if after else 4
-    deadline = time.monotonic() + 10
-    while len(rec.decisions()) < stored and time.monotonic() < deadline:
-        time.sleep(0.01)
-    time.sleep(0.3)
+    wait_logged(caplog, point.message(), timeout=10)
+    # Held, not passing through: a graph going on makes one stop check per node and stores
+    # a decision at least every seven nodes, so eight more checks with the decisions as
+    # they were mean the run is waiting in the hold.
+    checks = rec.stop_checks
+    eventually(
+        lambda: rec.stop_checks,
+        until=lambda n: n >= checks + 8,
+        timeout=10,
+        what="the held run polling its stop check eight more times",
+    )
     assert thread.is_alive()  # held, not finished
     assert [d.task_index for d in rec.decisions()] == list(range(stored))
     rec.cancel()

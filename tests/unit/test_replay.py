@@ -86,6 +86,7 @@ def test_replay_through_the_graph_reproduces_every_verdict_and_costs_nothing() -
     reply = reply_of(attempt_of(again, 0, 1))
     assert reply.model is None and reply.input_tokens == 0
     assert reply.extra == {
+        "reasoner": "replay",
         "replayed_from": "orig",
         "original_model": "scripted",
         "original_input_tokens": 100,
@@ -103,6 +104,7 @@ def test_a_replay_of_a_replay_still_names_the_first_model_and_its_tokens() -> No
     assert [verdicts(a) for a in twice.attempts()] == [verdicts(a) for a in original.attempts()]
     extra = reply_of(attempt_of(twice, 0, 2)).extra
     assert extra == {
+        "reasoner": "replay",
         "replayed_from": "b",
         "original_model": "scripted",
         "original_input_tokens": 100,

@@ -30,7 +30,7 @@ from app.store.migrate import upgrade_head
 from tests.factories import run_row
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
-from tests.run_polling import wait_until
+from tests.polling import wait_until
 from tests.unit.ltaa_support import problem, reply_of, run
 
 N_TASKS = 6
@@ -49,7 +49,8 @@ def test_the_switch_comes_once_the_budget_is_reached_and_is_told_once() -> None:
     assert [reply_of(a).model for a in rec.attempts()] == ["scripted", "scripted", None, None]
     assert told == [BudgetExhausted(task_index=2, tokens_spent=300, budget=300)]
     assert all(a.accepted for a in rec.attempts())
-    assert reply_of(rec.attempts()[2]).extra == {"reasoner": "rules", "reason": "budget_exhausted"}
+    assert reply_of(rec.attempts()[2]).extra == {"reasoner": "rules", "why": "budget_exhausted"}
+    assert reply_of(rec.attempts()[0]).extra["reasoner"] == "scripted"
 
 
 def test_a_retry_after_the_budget_is_spent_goes_to_the_rules_reasoner() -> None:

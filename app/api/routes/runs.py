@@ -38,7 +38,10 @@ from app.api.run_schemas import (
     TraceVerifyOut,
 )
 from app.api.schemas import MetricsOut, UsageOut
+from app.domain.models import Instance
 from app.domain.serialize import instance_to_dict
+from app.graph.recorder import DecisionRecord
+from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
 from app.runs import audit, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
@@ -90,6 +93,7 @@ def create_run(
             token_budget=body.token_budget
             if body.token_budget is not None
             else settings.run_token_budget,
+            **scope_of(body),
         )
     run, replayed = service.create_or_replay_run(
         sessions=runs.sessions,
@@ -107,6 +111,16 @@ def create_run(
         status=RunStatus.QUEUED if replayed else RunStatus(run.status),
         location=f"/runs/{run.id}",
     )
+
+
+def scope_of(body: RunRequest) -> dict[str, Any]:
+    """The request's LLM scope as a run spec stores it (omitted: the defaults)."""
+    scope: dict[str, Any] = {}
+    if body.llm_scope is not None:
+        scope["llm_scope"] = body.llm_scope
+    if body.llm_margin is not None:
+        scope["llm_margin"] = float(body.llm_margin)
+    return scope
 
 
 def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
@@ -128,6 +142,8 @@ def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
         "model",
         "temperature",
         "token_budget",
+        "llm_scope",
+        "llm_margin",
     ):
         if name in sent:
             values[name] = getattr(body, name)
@@ -219,7 +235,8 @@ def _page_out(runs: RunsContext, run_id: str, offset: int, limit: int) -> RunOut
     return _run_out(view, limit)
 
 
-def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
+def _attempt_out(a: Attempt, prompts: bool, run_reasoner: str) -> AttemptOut:
+    who = attempt_attribution(a.reply_extra, a.reply_model, run_reasoner)
     return AttemptOut(
         attempt=a.attempt,
         tier=a.tier,
@@ -234,6 +251,8 @@ def _attempt_out(a: Attempt, prompts: bool) -> AttemptOut:
         latency_ms=a.latency_ms,
         transport_retries=a.transport_retries,
         model=a.reply_model,
+        reasoner=who.reasoner,
+        why=who.why,  # type: ignore[arg-type]  # one of the StandIn values, as stored
         replayed_from=(a.reply_extra or {}).get("replayed_from"),
         original_model=(a.reply_extra or {}).get("original_model"),
         system_prompt=a.system_prompt if prompts else None,
@@ -281,30 +300,56 @@ def get_trace(
             EventOut(seq=e.seq, kind=e.kind, detail=e.detail, at=e.created_at) for e in trace.events
         ],
         decisions=[
-            DecisionOut(
-                task_index=d.task_index,
-                task_id=instance.tasks[d.task_index].id,
-                task_name=d.task_name,
-                robot=names[d.robot],
-                expected_success=d.expected_success,
-                phase=d.phase,
-                loads_before=d.loads_before,
-                loads_after=d.loads_after,
-                balance_before=d.balance_before,
-                balance_after=d.balance_after,
-                severity_after=d.severity_after,
-                reasoning=d.reasoning,
-                confidence=d.confidence,
-                tradeoff=d.tradeoff,
-                quality=d.quality,
-                fallback=d.fallback,
-                failure_log=d.failure_log,
-                regret=d.regret,
-                attempts=[_attempt_out(a, prompts) for a in trace.attempts.get(d.task_index, [])],
+            _decision_out(
+                d,
+                trace.attempts.get(d.task_index, []),
+                instance=instance,
+                names=names,
+                prompts=prompts,
+                run_reasoner=trace.run.reasoner,
             )
             for d in trace.decisions
         ],
         decisions_page=Page(offset=offset, limit=limit, total=trace.total),
+    )
+
+
+def _decision_out(
+    d: DecisionRecord,
+    attempts: list[Attempt],
+    *,
+    instance: Instance,
+    names: list[str],
+    prompts: bool,
+    run_reasoner: str,
+) -> DecisionOut:
+    outs = [_attempt_out(a, prompts, run_reasoner) for a in attempts]
+    accepted = next((a for a in reversed(outs) if a.accepted), None)
+    who = decision_attribution(
+        d.fallback, Attribution(accepted.reasoner, accepted.why) if accepted else None
+    )
+    return DecisionOut(
+        task_index=d.task_index,
+        task_id=instance.tasks[d.task_index].id,
+        task_name=d.task_name,
+        robot=names[d.robot],
+        expected_success=d.expected_success,
+        phase=d.phase,
+        loads_before=d.loads_before,
+        loads_after=d.loads_after,
+        balance_before=d.balance_before,
+        balance_after=d.balance_after,
+        severity_after=d.severity_after,
+        reasoning=d.reasoning,
+        confidence=d.confidence,
+        tradeoff=d.tradeoff,
+        quality=d.quality,
+        fallback=d.fallback,
+        failure_log=d.failure_log,
+        regret=d.regret,
+        reasoner=who.reasoner,
+        why=who.why,  # type: ignore[arg-type]  # one of the StandIn values
+        attempts=outs,
     )
 
 

@@ -13,6 +13,7 @@ from langgraph.runtime import Runtime
 from app.graph.context import decision_context
 from app.graph.nodes.common import cancellable, require_attempt
 from app.graph.state import GraphContext, LTAAState
+from app.reasoners.attribution import attributed
 from app.reasoners.base import ReasonerError, ReasonerReply
 
 
@@ -27,7 +28,10 @@ def reason(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     rec.before_reason(t, a)
     dctx = decision_context(ctx.problem, state, tier=state["tier"])
     try:
-        reply = ctx.reasoner.reason(record.system_prompt, record.user_prompt, dctx)
+        reply = attributed(
+            ctx.reasoner.reason(record.system_prompt, record.user_prompt, dctx),
+            ctx.reasoner.name,
+        )
     except ReasonerError as exc:
         # Transport gave up (after its own retries): a failed attempt, not a failed run.
         # No model answered, so the reply names none and is not counted as an LLM call.

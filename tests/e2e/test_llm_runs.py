@@ -1,5 +1,5 @@
-"""A durable run with the anthropic reasoner: the real SDK, the real server, a fake
-Messages API on loopback that fails the way real networks do."""
+"""A durable run with each LLM reasoner (anthropic, openai): the real SDK, the real server,
+the provider's fake on loopback failing the way real networks do."""
 
 from __future__ import annotations
 
@@ -9,24 +9,22 @@ from typing import Any
 import pytest
 
 from tests.e2e.server import Server
-from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply
+from tests.fakes.fake_chat_completions_api import FakeChatCompletionsAPI
+from tests.fakes.fake_messages_api import Reply
+from tests.fakes.llm_providers import Provider
 from tests.fakes.scripted_reasoner import GARBAGE
 
 pytestmark = pytest.mark.e2e
 
 
-def test_anthropic_run_through_transport_faults_and_a_poor_answer(tmp_path: Path) -> None:
-    with FakeMessagesAPI() as api:
+def test_a_run_through_transport_faults_and_a_poor_answer(
+    tmp_path: Path, provider: Provider
+) -> None:
+    with provider.fake() as api:
         # Task 0: 429, then 500 (both retried by the SDK), then an unusable answer
         # (rejected by validation, fixed at tier 1). Every later call is a good answer.
         api.script(Reply.error(429), Reply.error(500), Reply.answer(GARBAGE))
-        server = Server(
-            tmp_path / "data",
-            env={
-                "LTAA_ANTHROPIC_API_KEY": "test-key",
-                "LTAA_ANTHROPIC_BASE_URL": api.base_url,
-            },
-        ).start()
+        server = Server(tmp_path / "data", env=provider.env(api)).start()
         try:
             with server.client() as c:
                 created = c.post(
@@ -34,8 +32,8 @@ def test_anthropic_run_through_transport_faults_and_a_poor_answer(tmp_path: Path
                     json={
                         "scenario": "baseline",
                         "mode": "balanced",
-                        "reasoner": "anthropic",
-                        "model": "claude-test",
+                        "reasoner": provider.reasoner,
+                        "model": provider.model,
                     },
                 )
                 assert created.status_code == 202, created.text
@@ -56,19 +54,27 @@ def test_anthropic_run_through_transport_faults_and_a_poor_answer(tmp_path: Path
         rejected, fixed = first["attempts"]
         assert rejected["accepted"] is False and rejected["transport_retries"] == 2
         assert rejected["feedback"] and rejected["reply"] == GARBAGE
-        assert fixed["accepted"] is True and fixed["model"] == "claude-test"
+        assert fixed["accepted"] is True and fixed["model"] == provider.model
         assert all(not d["fallback"] for d in trace["decisions"])
-        assert {r["model"] for r in api.requests} == {"claude-test"}
+        assert {r["model"] for r in api.requests} == {provider.model}
 
 
-def test_anthropic_without_a_key_is_a_422(tmp_path: Path) -> None:
-    server = Server(tmp_path / "data").start()
-    try:
-        with server.client() as c:
-            response = c.post("/runs", json={"scenario": "baseline", "reasoner": "anthropic"})
-            assert response.status_code == 422
-            assert response.json()["detail"][0]["loc"] == ["body", "reasoner"]
-            assert "ANTHROPIC_API_KEY" in response.json()["detail"][0]["msg"]
-            assert c.get("/runs").json() == []
-    finally:
-        server.stop()
+def test_an_unconfigured_provider_is_a_422_naming_the_setting(
+    tmp_path: Path, provider: Provider
+) -> None:
+    # The SDKs' own variables point at a live server: the openai one must never be used.
+    with FakeChatCompletionsAPI() as decoy:
+        env = {"OPENAI_BASE_URL": decoy.base_url, "OPENAI_API_KEY": "sk-from-the-environment"}
+        server = Server(tmp_path / "data", env=env).start()
+        try:
+            with server.client() as c:
+                response = c.post(
+                    "/runs", json={"scenario": "baseline", "reasoner": provider.reasoner}
+                )
+                assert response.status_code == 422
+                assert response.json()["detail"][0]["loc"] == ["body", "reasoner"]
+                assert provider.missing_setting in response.json()["detail"][0]["msg"]
+                assert c.get("/runs").json() == []
+        finally:
+            server.stop()
+        assert decoy.requests == []

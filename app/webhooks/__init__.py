@@ -1,0 +1,6 @@
+"""Webhooks: signed, durable notifications of run events (SPEC section 12, docs/webhooks.md).
+
+Layering: `app.runs` writes run events and calls `outbox.enqueue_for_event` in the same
+transaction; the dispatcher delivers; `app.api.routes.webhooks` manages subscriptions.
+Nothing here imports `app.runs`.
+"""

@@ -1,0 +1,74 @@
+"""Webhook errors, shaped like domain errors so the API answers them in the one 4xx shape."""
+
+from __future__ import annotations
+
+from app.domain.errors import DomainError
+
+IDEMPOTENCY_HEADER = "Idempotency-Key"
+
+
+class WebhookNotFoundError(DomainError):
+    status_code = 404
+    location = "path"
+
+    def __init__(self, webhook_id: str) -> None:
+        super().__init__(
+            "webhook_id",
+            f"no webhook subscription with id '{webhook_id}'; list them with GET /webhooks",
+            code="not_found",
+        )
+
+
+class DeliveryNotFoundError(DomainError):
+    status_code = 404
+    location = "path"
+
+    def __init__(self, webhook_id: str, delivery_id: str) -> None:
+        super().__init__(
+            "delivery_id",
+            f"webhook '{webhook_id}' has no delivery '{delivery_id}'; "
+            f"see GET /webhooks/{webhook_id}/deliveries",
+            code="not_found",
+        )
+
+
+class DuplicateSubscriptionError(DomainError):
+    status_code = 409
+
+    def __init__(self, existing_id: str) -> None:
+        super().__init__(
+            "url",
+            f"webhook '{existing_id}' already sends these events to this URL; delete it "
+            "first or subscribe to other events",
+            code="duplicate_subscription",
+        )
+
+
+class DeliveryStateConflictError(DomainError):
+    status_code = 409
+    location = "path"
+
+    def __init__(self, delivery_id: str, status: str) -> None:
+        super().__init__(
+            "delivery_id",
+            f"delivery '{delivery_id}' is {status}; only a delivered, failed or waiting "
+            "delivery can be retried",
+            code="conflict",
+        )
+
+
+class IdempotencyKeyReusedError(DomainError):
+    status_code = 409
+    location = "header"
+
+    def __init__(self, what: str) -> None:
+        super().__init__(
+            IDEMPOTENCY_HEADER,
+            f"this {IDEMPOTENCY_HEADER} was already used with a different request ({what}); "
+            "send a new key for a new request, or resend the original request",
+            code="idempotency_key_reused",
+        )
+
+
+class SecretKeyError(ValueError):
+    """LTAA_SECRET_KEY cannot be used. Messages never quote the setting."""

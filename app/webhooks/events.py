@@ -1,0 +1,56 @@
+"""The webhook event types (SPEC 12) and which run event kinds produce them."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+from app.domain.lifecycle import EventKind, RunStatus
+
+ALL = "*"
+
+
+class WebhookEventType(StrEnum):
+    RUN_CREATED = "run.created"
+    RUN_COMPLETED = "run.completed"
+    RUN_FAILED = "run.failed"
+    RUN_CANCELLED = "run.cancelled"
+    RUN_INTERRUPTED = "run.interrupted"
+    RUN_SUPERSEDED = "run.superseded"
+    RUN_REVISED = "run.revised"
+    REVIEW_REQUESTED = "review.requested"
+    REVIEW_RESOLVED = "review.resolved"
+    RUN_SIGNED_OFF = "run.signed_off"
+    BUDGET_EXHAUSTED = "budget.exhausted"
+
+
+# Run event kind -> webhook type. Kinds absent here (started, resumed, ...) send nothing.
+# Features that add event kinds (revisions, reviews, sign-off) add their rows here.
+# The last five name the events SPEC 10-11 features will add to EventKind.
+TYPE_OF_KIND: dict[str, WebhookEventType] = {
+    EventKind.CREATED: WebhookEventType.RUN_CREATED,
+    EventKind.COMPLETED: WebhookEventType.RUN_COMPLETED,
+    EventKind.FAILED: WebhookEventType.RUN_FAILED,
+    EventKind.INTEGRITY_FAILED: WebhookEventType.RUN_FAILED,
+    EventKind.CANCELLED: WebhookEventType.RUN_CANCELLED,
+    EventKind.INTERRUPTED: WebhookEventType.RUN_INTERRUPTED,
+    EventKind.BUDGET_EXHAUSTED: WebhookEventType.BUDGET_EXHAUSTED,
+    "superseded": WebhookEventType.RUN_SUPERSEDED,
+    "revised": WebhookEventType.RUN_REVISED,
+    "review_requested": WebhookEventType.REVIEW_REQUESTED,
+    "review_resolved": WebhookEventType.REVIEW_RESOLVED,
+    "signed_off": WebhookEventType.RUN_SIGNED_OFF,
+}
+
+# The run status a kind leaves the run in, for the payload's `data.status`.
+STATUS_OF_KIND: dict[str, RunStatus] = {
+    EventKind.CREATED: RunStatus.QUEUED,
+    EventKind.COMPLETED: RunStatus.COMPLETED,
+    EventKind.FAILED: RunStatus.FAILED,
+    EventKind.INTEGRITY_FAILED: RunStatus.FAILED,
+    EventKind.CANCELLED: RunStatus.CANCELLED,
+    EventKind.INTERRUPTED: RunStatus.INTERRUPTED,
+}
+
+
+def subscribed(events: list[str], event_type: WebhookEventType) -> bool:
+    return ALL in events or event_type.value in events
