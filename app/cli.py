@@ -301,6 +301,48 @@ def run(
         raise typer.Exit(1)
 
 
+@cli.command("backup")
+def backup_command(
+    dest: Annotated[Path, typer.Argument(help="A new or empty directory for the copy")],
+    url: Annotated[
+        str | None,
+        typer.Option(help="The server holding the store [default: http://LTAA_HOST:LTAA_PORT]"),
+    ] = None,
+    api_key: Annotated[
+        str | None, typer.Option(help="A supervisor key [default: LTAA_API_KEY]")
+    ] = None,
+) -> None:
+    """Back up the data directory's two SQLite files, consistent with each other, while the
+    server runs (it holds its runs at a node boundary meanwhile)."""
+    from app.cli_store import StoreCommandError, run_backup
+    from app.runs.backup import BackupError
+
+    try:
+        manifest, how = run_backup(get_settings(), dest, url=url, api_key=api_key)
+    except (StoreCommandError, BackupError) as exc:
+        Console(stderr=True, soft_wrap=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    typer.echo(json.dumps({"taken_by": how, **manifest}, indent=2))
+
+
+@cli.command("restore")
+def restore_command(
+    source: Annotated[Path, typer.Argument(help="A directory written by `ltaa backup`")],
+) -> None:
+    """Fill an empty data directory (LTAA_DATA_DIR) from a backup; then start the server
+    there: runs that were running resume from the backup's point."""
+    from app.cli_store import StoreCommandError, run_restore
+    from app.runs.backup import BackupError
+
+    try:
+        written = run_restore(get_settings(), source)
+    except (StoreCommandError, BackupError) as exc:
+        Console(stderr=True, soft_wrap=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    for path in written:
+        typer.echo(f"restored {path}")
+
+
 @cli.command()
 def bench(
     section: Annotated[

@@ -15,10 +15,9 @@ def without_security(document: dict[str, Any]) -> dict[str, Any]:
     for operations in document.get("paths", {}).values():
         for operation in operations.values():
             if isinstance(operation, dict):
+                # 401/403 stay documented: their descriptions say they apply only
+                # when LTAA_API_KEYS is set, and a client may meet a server that sets it.
                 operation.pop("security", None)
-                # 401 and 403 are answered only when keys are configured.
-                for status in ("401", "403"):
-                    operation.get("responses", {}).pop(status, None)
     document.get("components", {}).pop("securitySchemes", None)
     return document
 

@@ -35,6 +35,7 @@ _WHEN: dict[int, str] = {
     413: "The body is larger than LTAA_MAX_BODY_BYTES",
     422: "The request is invalid; `loc` names the field and `msg` says how to fix it",
     502: "The Messages API refused the server's own credentials (ANTHROPIC_API_KEY)",
+    503: "Runs did not reach a node boundary in time for a backup; retry",
 }
 
 

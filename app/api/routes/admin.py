@@ -1,0 +1,56 @@
+"""Supervisor operations on the store itself: backup while the server runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import APIRouter
+from pydantic import BaseModel, Field
+
+from app.api.deps import SettingsDep, SupervisorDep
+from app.api.errors import ApiError
+from app.api.responses import BODY, SUPERVISOR, errors
+from app.graph.gate import GateTimeoutError
+from app.runs import backup
+
+router = APIRouter(prefix="/admin", tags=["admin"])
+
+
+class BackupRequest(BaseModel):
+    dest: str = Field(
+        min_length=1,
+        max_length=4096,
+        pattern=r"^/[^\x00]*$",
+        description="Absolute path, on the server's machine, of a new or empty directory",
+    )
+
+
+class BackupOut(BaseModel):
+    dest: str
+    created_at: str
+    graph_version: str
+    held_ms: float = Field(description="How long runs were held at their node boundary")
+    waited_for_nodes: int = Field(description="Node bodies the hold let finish first")
+    files: dict[str, int] = Field(description="File name -> bytes")
+    runs: dict[str, int] = Field(
+        description="Runs not finished in the backup -> their decisions stored: where each "
+        "resumes once the backup is restored"
+    )
+
+
+@router.post("/backup", response_model=BackupOut, responses=errors(*SUPERVISOR, *BODY, 409, 503))
+def backup_store(caller: SupervisorDep, body: BackupRequest, settings: SettingsDep) -> BackupOut:
+    """For supervisors (`ltaa backup DEST` calls this while a server holds the store): copy
+    both SQLite files consistently, runs held at a node boundary meanwhile."""
+    try:
+        report = backup.backup(settings=settings, dest=Path(body.dest))
+    except backup.BackupError as exc:
+        raise ApiError(409, ["body", "dest"], str(exc), "backup_refused") from None
+    except GateTimeoutError as exc:
+        raise ApiError(
+            503,
+            ["body", "dest"],
+            f"runs did not reach a node boundary: {exc}; retry",
+            "backup_busy",
+        ) from None
+    return BackupOut(**report.__dict__)
