@@ -343,6 +343,24 @@ def restore_command(
         typer.echo(f"restored {path}")
 
 
+@cli.command("keygen")
+def keygen_command(
+    path: Annotated[Path, typer.Argument(help="Where to write the private key (PEM, 0600)")],
+) -> None:
+    """Write a new Ed25519 signing key for signed chain heads; point LTAA_SIGNING_KEY_FILE
+    at it. Keep the previous key's public half in LTAA_RETIRED_PUBLIC_KEYS_DIR."""
+    from app.runs.signing import generate_key_file
+
+    try:
+        kid = generate_key_file(path)
+    except FileExistsError:
+        Console(stderr=True, soft_wrap=True).print(
+            f"[bold red]error[/]: {path} exists; a key is never overwritten", highlight=False
+        )
+        raise typer.Exit(code=1) from None
+    typer.echo(f"wrote {path} (key id {kid})")
+
+
 @cli.command()
 def bench(
     section: Annotated[

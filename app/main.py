@@ -20,7 +20,17 @@ from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.openapi import install_openapi
 from app.api.rounding import RoundedJSONResponse
-from app.api.routes import admin, allocate, catalog, events, health, metrics, runs, webhooks
+from app.api.routes import (
+    admin,
+    allocate,
+    audit_keys,
+    catalog,
+    events,
+    health,
+    metrics,
+    runs,
+    webhooks,
+)
 from app.api.routes.webhooks import WebhooksContext
 from app.config import Settings, get_settings
 from app.observability.logs import configure_logging
@@ -147,7 +157,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (health, catalog, allocate, runs, events, metrics, webhooks, admin):
+    for module in (health, catalog, allocate, runs, events, metrics, webhooks, admin, audit_keys):
         app.include_router(module.router)
     install_openapi(app, open_access=keyring.open)
     return app

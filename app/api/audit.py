@@ -9,7 +9,7 @@ from typing import Any
 from fastapi.responses import StreamingResponse
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.run_schemas import BrokenLinkOut, ChainHeadsOut, TraceVerifyOut
+from app.api.run_schemas import BrokenLinkOut, ChainHeadsOut, SignatureOut, TraceVerifyOut
 from app.runs import audit
 
 JSONL = "application/x-ndjson"
@@ -55,6 +55,15 @@ def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
         events=report.events.rows,
         unchained=report.decisions.unchained + report.events.unchained,
         heads=ChainHeadsOut(decisions=report.decisions.head, events=report.events.head),
+        chain_scheme=report.chain_scheme,
+        signature=None
+        if report.signature is None
+        else SignatureOut(
+            key_id=report.signature.key_id,
+            reason=report.signature.reason,
+            valid=report.signature.valid,
+            problem=report.signature.problem,
+        ),
         broken=None
         if broken is None
         else BrokenLinkOut(

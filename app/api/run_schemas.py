@@ -321,6 +321,13 @@ class ChainHeadsOut(BaseModel):
     events: str | None = Field(description="Stored hash of the newest event")
 
 
+class SignatureOut(BaseModel):
+    key_id: str = Field(description="The signing key (GET /audit/public-key lists them)")
+    reason: str = Field(description="When it was signed: completed (later: sign-off)")
+    valid: bool = Field(description="Signed by that key, over the heads recomputed now")
+    problem: str | None = Field(description="Why not, in plain language; null when valid")
+
+
 class TraceVerifyOut(BaseModel):
     """The result of recomputing a run's two hash chains (decisions, events) from its rows."""
 
@@ -336,4 +343,14 @@ class TraceVerifyOut(BaseModel):
     )
     broken: BrokenLinkOut | None = Field(
         description="The first broken link (the decisions chain first), or null when ok"
+    )
+    chain_scheme: str = Field(
+        "ltaa-trace-chain/v1",
+        description="How the run's chains are built: v1, or v2 whose genesis also covers "
+        "the run's immutable fields (request, mode, cap)",
+    )
+    signature: SignatureOut | None = Field(
+        None,
+        description="The check of the run's newest signature over its heads (null: not "
+        "signed, e.g. no server signing key); an invalid one makes ok false",
     )

@@ -19,6 +19,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.domain.lifecycle import EventKind, RunStatus
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
 from app.runs.errors import RunNotFoundError
+from app.runs.signing import SignatureCheck, SigningKeys, check_signature
 from app.store import chain
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, Run, RunEvent, as_utc
@@ -85,10 +86,15 @@ class ChainCheckResult:
 class ChainReport:
     decisions: ChainCheckResult
     events: ChainCheckResult
+    chain_scheme: str = chain.SCHEME
+    signature: SignatureCheck | None = None  # the newest signature's check, if any
 
     @property
     def ok(self) -> bool:
-        return self.decisions.first_break is None and self.events.first_break is None
+        signed_ok = self.signature is None or self.signature.valid
+        return (
+            self.decisions.first_break is None and self.events.first_break is None and (signed_ok)
+        )
 
     @property
     def first_break(self) -> chain.Break | None:
@@ -102,13 +108,35 @@ def _result(check: chain.ChainCheck) -> ChainCheckResult:
     )
 
 
-def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport:
-    """Recompute both chains of a run from its rows and report the first broken link."""
+def _geneses(run: Run) -> dict[str, str]:
+    return {
+        table: chain.run_genesis(
+            table,
+            run.id,
+            scheme=run.chain_scheme,
+            request=run.request,
+            mode=run.mode,
+            max_deviation=run.max_deviation,
+        )
+        for table in ("decisions", "events")
+    }
+
+
+def verify_trace(
+    *, sessions: sessionmaker[Session], run_id: str, keys: SigningKeys | None = None
+) -> ChainReport:
+    """Recompute both chains of a run from its rows (by the run's own chain scheme), check
+    its newest signature with the public keys, and report the first broken link."""
     with sessions() as session:
         run = _run(session, run_id)
         status, n_tasks = run.status, run.n_tasks
+        geneses = _geneses(run)
+        scheme = run.chain_scheme or chain.SCHEME
+        signed = repo.latest_signature(session=session, run_id=run_id)
 
-    decisions = chain.ChainCheck("decisions", run_id, first_key=0)
+    decisions = chain.ChainCheck(
+        "decisions", run_id, first_key=0, genesis_link=geneses["decisions"]
+    )
     for page in _decision_pages(sessions, run_id):
         for d, attempts in page:
 
@@ -118,7 +146,7 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
 
             decisions.feed(d.task_index, d.chain_hash, link)
 
-    events = chain.ChainCheck("events", run_id, first_key=1)
+    events = chain.ChainCheck("events", run_id, first_key=1, genesis_link=geneses["events"])
     last_kind = None
     for event_page in _event_pages(sessions, run_id):
         for e in event_page:
@@ -142,7 +170,22 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
             "the run completed but its events do not end with the "
             "'completed' event: the last events were deleted"
         )
-    return ChainReport(decisions=_result(decisions), events=_result(events))
+    signature = None
+    if signed is not None:
+        signature = check_signature(
+            keys or SigningKeys(),
+            signed.key_id,
+            signed.payload,
+            signed.signature,
+            {"decisions": decisions.head, "events": events.head},
+            geneses,
+        )
+    return ChainReport(
+        decisions=_result(decisions),
+        events=_result(events),
+        chain_scheme=scheme,
+        signature=signature,
+    )
 
 
 # -- export --------------------------------------------------------------------------------
@@ -155,7 +198,8 @@ def _when(value: datetime | None) -> str | None:
 def _run_line(run: Run) -> dict[str, Any]:
     return {
         "type": "run",
-        "format": chain.SCHEME,
+        "format": run.chain_scheme or chain.SCHEME,
+        "chain_scheme": run.chain_scheme or chain.SCHEME,
         "id": run.id,
         "status": run.status,
         "reasoner": run.reasoner,
@@ -168,10 +212,7 @@ def _run_line(run: Run) -> dict[str, Any]:
         "created_at": _when(run.created_at),
         "finished_at": _when(run.finished_at),
         "request": run.request,
-        "genesis": {
-            "decisions": chain.genesis("decisions", run.id),
-            "events": chain.genesis("events", run.id),
-        },
+        "genesis": _geneses(run),
     }
 
 
@@ -224,6 +265,16 @@ def trace_record(
     Raises RunNotFoundError here, before the first page is asked for."""
     with sessions() as session:
         header = _run_line(_run(session, run_id))
+        header["signatures"] = [
+            {
+                "reason": s.reason,
+                "key_id": s.key_id,
+                "payload": s.payload,
+                "signature": s.signature,
+                "at": _when(s.created_at),
+            }
+            for s in repo.signatures(session=session, run_id=run_id)
+        ]
     return _record_pages(sessions, run_id, header)
 
 

@@ -23,6 +23,7 @@ from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import validate_replay
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
+from app.store import chain
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import Attempt, Run, RunEvent
@@ -61,6 +62,7 @@ def create_run(
             resumes=0,
             cancel_requested=False,
             idempotency_key=idempotency.key if idempotency else None,
+            chain_scheme=chain.SCHEME_V2,
             request_digest=idempotency.digest if idempotency else None,
             created={
                 "reasoner": spec.reasoner,

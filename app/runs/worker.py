@@ -37,6 +37,7 @@ from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
 from app.runs.recorder import Fence, RunStop, SqlRecorder
 from app.runs.replay import recorded_replies
+from app.runs.signing import SigningKeys, sign_run
 from app.runs.spec import RunSpec
 from app.runs.token_budget import with_token_budget
 from app.solvers.ltaa import execute_ltaa
@@ -71,6 +72,7 @@ class RunWorker:
         self._sessions = sessions
         self.ownership = ownership
         self.checkpointer, self._close_checkpointer = checkpointer
+        self.signing_keys = SigningKeys.from_settings(settings)
         self.graph = build_graph(self.checkpointer, node_hook=node_hook)
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
@@ -353,6 +355,11 @@ class RunWorker:
                 return
             lifecycle.move(
                 session, run, status, event=EventKind(status.value), detail=detail, error=error
+            )
+        if status == RunStatus.COMPLETED:
+            # After the completed event commits: the heads signed are the final ones.
+            sign_run(
+                sessions=self._sessions, keys=self.signing_keys, run_id=run_id, reason="completed"
             )
         if status in (RunStatus.COMPLETED, RunStatus.CANCELLED):
             self._prune_checkpoints(run_id)

@@ -15,7 +15,7 @@ from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
 from app.store import chain
-from app.store.models import Attempt, Base, Decision, Run, RunEvent, utcnow
+from app.store.models import Attempt, Base, Decision, Run, RunEvent, RunSignature, utcnow
 
 
 def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run | None:
@@ -35,6 +35,39 @@ def runs_with_status(*, session: Session, statuses: Sequence[str]) -> list[Run]:
     return list(session.scalars(select(Run).where(Run.status.in_(statuses)).order_by(Run.id)))
 
 
+def chain_genesis(*, session: Session, table: chain.Table, run_id: str) -> str:
+    """The genesis of a run's chain, by the run's scheme (one primary-key read; only the
+    first row of a chain needs it)."""
+    run = session.get(Run, run_id)
+    if run is None:
+        return chain.genesis(table, run_id)
+    return chain.run_genesis(
+        table,
+        run_id,
+        scheme=run.chain_scheme,
+        request=run.request,
+        mode=run.mode,
+        max_deviation=run.max_deviation,
+    )
+
+
+def signatures(*, session: Session, run_id: str) -> list[RunSignature]:
+    return list(
+        session.scalars(
+            select(RunSignature).where(RunSignature.run_id == run_id).order_by(RunSignature.id)
+        )
+    )
+
+
+def latest_signature(*, session: Session, run_id: str) -> RunSignature | None:
+    return session.scalars(
+        select(RunSignature)
+        .where(RunSignature.run_id == run_id)
+        .order_by(RunSignature.id.desc())
+        .limit(1)
+    ).first()
+
+
 def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:
     # One indexed lookup gives both the next seq and the link the new row hangs off.
     last = session.execute(
@@ -44,7 +77,11 @@ def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any
         .limit(1)
     ).first()
     seq = last.seq + 1 if last is not None else 1
-    prev = chain.next_prev(last.chain_hash) if last is not None else chain.genesis("events", run_id)
+    prev = (
+        chain.next_prev(last.chain_hash)
+        if last is not None
+        else chain_genesis(session=session, table="events", run_id=run_id)
+    )
     link = chain.event_link(prev, {"seq": seq, "kind": kind, "detail": detail})
     event = RunEvent(run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link)
     session.add(event)
@@ -234,7 +271,11 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
     rows = session.execute(
         _decision_link_statement(), {"run_id": run_id, "task_index": values["task_index"]}
     ).all()
-    prev_link = rows[0].prev if rows[0].prev is not None else chain.genesis("decisions", run_id)
+    prev_link = (
+        rows[0].prev
+        if rows[0].prev is not None
+        else chain_genesis(session=session, table="decisions", run_id=run_id)
+    )
     attempts = [row._mapping for row in rows if row.attempt is not None]
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
 

@@ -27,9 +27,12 @@ def _completed_store(client: TestClient) -> str:
 
 
 def test_the_endpoint_backs_up_and_refuses_a_used_destination(
-    client: TestClient, tmp_path: Path
+    client: TestClient, settings: Settings, tmp_path: Path
 ) -> None:
     run_id = _completed_store(client)
+    outside = client.post("/admin/backup", json={"dest": str(tmp_path / "b1")})
+    assert outside.status_code == 422 and "LTAA_BACKUP_DIR" in outside.json()["detail"][0]["msg"]
+    tmp_path = settings.data_dir / "backups"  # the default LTAA_BACKUP_DIR
     answer = client.post("/admin/backup", json={"dest": str(tmp_path / "b1")})
     assert answer.status_code == 200, answer.text
     body = answer.json()

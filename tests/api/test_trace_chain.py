@@ -79,6 +79,8 @@ def test_a_completed_run_verifies_ok_and_reports_its_chain_heads(client: TestCli
         "unchained": 0,
         "broken": None,
         "heads": {"decisions": decisions[-1]["chain_hash"], "events": events[-1]["chain_hash"]},
+        "chain_scheme": "ltaa-trace-chain/v2",
+        "signature": None,  # no server signing key here
     }
     # Every row carries its own link: no two hashes alike, all of them SHA-256 hex.
     hashes = [line["chain_hash"] for line in decisions + events]

@@ -56,7 +56,7 @@ def _assignments(server: Server, run_id: str) -> list[tuple[Any, str]]:
 
 def test_backup_mid_run_restores_and_resumes_to_the_same_allocation(tmp_path: Path) -> None:
     body = _big_instance(N_TASKS, seed=3)
-    source = Server(tmp_path / "data").start()
+    source = Server(tmp_path / "data").start(LTAA_BACKUP_DIR=str(tmp_path))
     try:
         with source.client() as c:
             run_id = str(c.post("/runs", json=body).json()["id"])

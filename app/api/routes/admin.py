@@ -21,7 +21,8 @@ class BackupRequest(BaseModel):
         min_length=1,
         max_length=4096,
         pattern=r"^/[^\x00]*$",
-        description="Absolute path, on the server's machine, of a new or empty directory",
+        description="Absolute path, on the server's machine, of a new or empty directory "
+        "inside LTAA_BACKUP_DIR (default: the data directory's backups/)",
     )
 
 
@@ -42,10 +43,23 @@ class BackupOut(BaseModel):
 def backup_store(caller: SupervisorDep, body: BackupRequest, settings: SettingsDep) -> BackupOut:
     """For supervisors (`ltaa backup DEST` calls this while a server holds the store): copy
     both SQLite files consistently, runs held at a node boundary meanwhile."""
+    root = settings.backup_root.resolve()
+    dest = Path(body.dest).resolve()
+    if dest == root or root not in dest.parents:
+        raise ApiError(
+            422,
+            ["body", "dest"],
+            f"dest must be a directory inside {root} (LTAA_BACKUP_DIR)",
+            "outside_backup_dir",
+        )
     try:
-        report = backup.backup(settings=settings, dest=Path(body.dest))
+        report = backup.backup(settings=settings, dest=dest)
     except backup.BackupError as exc:
         raise ApiError(409, ["body", "dest"], str(exc), "backup_refused") from None
+    except OSError as exc:
+        raise ApiError(
+            422, ["body", "dest"], f"cannot write there: {exc.strerror}", "os_error"
+        ) from None
     except GateTimeoutError as exc:
         raise ApiError(
             503,

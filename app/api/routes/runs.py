@@ -358,7 +358,9 @@ def _decision_out(
 )
 def verify_trace(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> TraceVerifyOut:
     """For supervisors: recompute the run's hash chains; ok, or the first broken link."""
-    return verify_out(audit.verify_trace(sessions=runs.sessions, run_id=run_id))
+    return verify_out(
+        audit.verify_trace(sessions=runs.sessions, run_id=run_id, keys=runs.worker.signing_keys)
+    )
 
 
 @router.post(
