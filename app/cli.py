@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 from collections import defaultdict
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any, NoReturn
 
@@ -341,6 +343,45 @@ def restore_command(
         raise typer.Exit(code=1) from None
     for path in written:
         typer.echo(f"restored {path}")
+
+
+@cli.command("archive")
+def archive_command(
+    before: Annotated[
+        datetime,
+        typer.Option(
+            help="Archive lineages whose head completed or was cancelled before this date",
+            formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S"],
+        ),
+    ],
+    url: Annotated[str | None, typer.Option(help="The server holding the store")] = None,
+    api_key: Annotated[
+        str | None, typer.Option(help="A supervisor key [default: LTAA_API_KEY]")
+    ] = None,
+) -> None:
+    """Archive old runs: verified JSON-lines files in LTAA_ARCHIVE_DIR, their rows deleted,
+    tombstones left (lookups answer 410 naming the file), then VACUUM."""
+    from app.cli_store import StoreCommandError, run_archive
+    from app.runs.backup import BackupError
+
+    when = before if before.tzinfo is not None else before.replace(tzinfo=UTC)
+    # Test seam: die (SIGKILL) after this many archive files are in place.
+    kill_after = int(os.environ.get("LTAA_TEST_ARCHIVE_KILL_AFTER", "0"))
+    written: list[str] = []
+
+    def after_file(run_id: str) -> None:
+        written.append(run_id)
+        if kill_after and len(written) >= kill_after:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    try:
+        result, how = run_archive(
+            get_settings(), when, url=url, api_key=api_key, after_file=after_file
+        )
+    except (StoreCommandError, BackupError) as exc:
+        Console(stderr=True, soft_wrap=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    typer.echo(json.dumps({"done_by": how, **result}, indent=2))
 
 
 @cli.command("keygen")

@@ -8,6 +8,8 @@ this process takes the lock, so none can start meanwhile, and copies the files d
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -67,3 +69,55 @@ def run_restore(settings: Settings, source: Path) -> list[str]:
         return backup.restore(settings=settings, source=source)
     finally:
         lock.release()
+
+
+def run_archive(
+    settings: Settings,
+    before: datetime,
+    *,
+    url: str | None = None,
+    api_key: str | None = None,
+    after_file: Callable[[str], None] | None = None,
+) -> tuple[dict[str, Any], str]:
+    """Archive through the server holding the store, or directly under the store lock."""
+    from app.runs import archive
+    from app.store.db import make_engine, make_session_factory
+    from app.store.migrate import upgrade_head
+
+    lock = StoreLock(backup.database_file(settings))
+    try:
+        lock.acquire()
+    except StoreInUseError:
+        base = url or f"http://{settings.host}:{settings.port}"
+        key = api_key or os.environ.get("LTAA_API_KEY")
+        headers = {"Authorization": f"Bearer {key}"} if key else {}
+        answer = httpx.post(
+            f"{base}/admin/archive",
+            json={"before": before.isoformat()},
+            headers=headers,
+            timeout=3600,
+        )
+        if answer.status_code != 200:
+            raise StoreCommandError(
+                f"the server refused the archive ({answer.status_code}): {answer.text}"
+            ) from None
+        return answer.json(), "server"
+    try:
+        upgrade_head(settings.db_url)
+        engine = make_engine(settings.db_url)
+        try:
+            sessions = make_session_factory(engine)
+            dest = settings.archive_root
+            done = archive.archive(
+                sessions=sessions, before=before, dest=dest, after_file=after_file
+            )
+        finally:
+            engine.dispose()
+        if done:
+            archive.vacuum(backup.database_file(settings))
+    finally:
+        lock.release()
+    return {
+        "archive_dir": str(dest),
+        "lineages": [{"head": x.head, "runs": x.runs, "files": x.files} for x in done],
+    }, "direct"

@@ -94,6 +94,8 @@ class Settings(BaseSettings):
     # Where POST /admin/backup may write (a supervisor key must not write anywhere the
     # server can); default {data_dir}/backups.
     backup_dir: Path | None = None
+    # Where archived runs' JSON-lines files go; default {data_dir}/archive.
+    archive_dir: Path | None = None
     retired_public_keys_dir: Path | None = None
 
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
@@ -170,6 +172,10 @@ class Settings(BaseSettings):
     def db_url(self) -> str:
         """`database_url`, typed as a plain str (derived from data_dir when unset)."""
         return self.database_url or f"sqlite:///{self.data_dir.as_posix()}/ltaa.db"
+
+    @property
+    def archive_root(self) -> Path:
+        return self.archive_dir or self.data_dir / "archive"
 
     @property
     def backup_root(self) -> Path:

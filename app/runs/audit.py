@@ -18,8 +18,8 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.lifecycle import EventKind, RunStatus
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
-from app.runs.errors import RunNotFoundError
 from app.runs.signing import SignatureCheck, SigningKeys, check_signature
+from app.runs.tombstones import missing_run
 from app.store import chain
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, Run, RunEvent, as_utc
@@ -31,7 +31,7 @@ EVENTS_PER_PAGE = 1000
 def _run(session: Session, run_id: str) -> Run:
     run = repo.get_run(session=session, run_id=run_id)
     if run is None:
-        raise RunNotFoundError(run_id)
+        raise missing_run(session, run_id)
     return run
 
 

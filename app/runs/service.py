@@ -17,11 +17,12 @@ from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
 from app.runs import lifecycle, records
-from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.errors import RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import validate_replay
 from app.runs.spec import RunSpec
+from app.runs.tombstones import missing_run
 from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import repository as repo
@@ -107,7 +108,7 @@ def create_or_replay_run(
 def _require(session: Session, run_id: str, *, lock: bool = False) -> Run:
     run = repo.get_run(session=session, run_id=run_id, for_update=lock)
     if run is None:
-        raise RunNotFoundError(run_id)
+        raise missing_run(session, run_id)
     return run
 
 

@@ -98,6 +98,20 @@ class RunSignature(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+class ArchivedRun(Base):
+    """The tombstone of an archived run: what a lookup answers 410 Gone with."""
+
+    __tablename__ = "archived_runs"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    lineage_head: Mapped[str] = mapped_column(String(32))
+    archive_file: Mapped[str] = mapped_column(String(255))
+    heads: Mapped[dict[str, Any]] = mapped_column(JSON)
+    verified: Mapped[bool] = mapped_column(Boolean)
+    status: Mapped[str] = mapped_column(String(16))
+    archived_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
 class RunEvent(Base):
     __tablename__ = "run_events"
     __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_run_events_run_seq"),)

@@ -1,4 +1,5 @@
-"""runs.graph_version (safe upgrades), runs.chain_scheme and run_signatures (signed heads)
+"""runs.graph_version (safe upgrades), runs.chain_scheme and run_signatures (signed heads),
+archived_runs (tombstones of archived runs)
 
 Revision ID: 0008
 Revises: 0005
@@ -33,9 +34,21 @@ def upgrade() -> None:
         sa.PrimaryKeyConstraint('id'),
     )
     op.create_index('ix_run_signatures_run_id', 'run_signatures', ['run_id'])
+    op.create_table(
+        'archived_runs',
+        sa.Column('id', sa.String(length=32), nullable=False),
+        sa.Column('lineage_head', sa.String(length=32), nullable=False),
+        sa.Column('archive_file', sa.String(length=255), nullable=False),
+        sa.Column('heads', sa.JSON(), nullable=False),
+        sa.Column('verified', sa.Boolean(), nullable=False),
+        sa.Column('status', sa.String(length=16), nullable=False),
+        sa.Column('archived_at', sa.DateTime(timezone=True), nullable=False),
+        sa.PrimaryKeyConstraint('id'),
+    )
 
 
 def downgrade() -> None:
+    op.drop_table('archived_runs')
     op.drop_index('ix_run_signatures_run_id', table_name='run_signatures')
     op.drop_table('run_signatures')
     with op.batch_alter_table('runs', schema=None) as batch_op:

@@ -1,4 +1,4 @@
-"""Supervisor operations on the store itself: backup while the server runs."""
+"""Supervisor operations on the store itself, while the server runs: backup, archive."""
 
 from __future__ import annotations
 
@@ -7,11 +7,13 @@ from pathlib import Path
 from fastapi import APIRouter
 from pydantic import BaseModel, Field
 
-from app.api.deps import SettingsDep, SupervisorDep
+from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
 from app.api.responses import BODY, SUPERVISOR, errors
+from app.api.run_schemas import Timestamp
 from app.graph.gate import GateTimeoutError
-from app.runs import backup
+from app.runs import archive, backup
+from app.runs.factory import uses_leases
 
 router = APIRouter(prefix="/admin", tags=["admin"])
 
@@ -68,3 +70,38 @@ def backup_store(caller: SupervisorDep, body: BackupRequest, settings: SettingsD
             "backup_busy",
         ) from None
     return BackupOut(**report.__dict__)
+
+
+class ArchiveRequest(BaseModel):
+    before: Timestamp = Field(
+        description="Archive lineages whose head is completed or cancelled and finished "
+        "before this time (RFC 3339, with an offset)"
+    )
+
+
+class ArchivedLineageOut(BaseModel):
+    head: str
+    runs: list[str]
+    files: list[str]
+
+
+class ArchiveOut(BaseModel):
+    archive_dir: str
+    lineages: list[ArchivedLineageOut]
+
+
+@router.post("/archive", response_model=ArchiveOut, responses=errors(*SUPERVISOR, *BODY))
+def archive_runs(
+    caller: SupervisorDep, body: ArchiveRequest, settings: SettingsDep, runs: RunsDep
+) -> ArchiveOut:
+    """For supervisors (`ltaa archive` calls this while a server holds the store): write
+    each selected run's verified export to the archive directory, delete its rows, leave a
+    tombstone (lookups then answer 410 naming the file), then vacuum."""
+    dest = settings.archive_root
+    done = archive.archive(sessions=runs.sessions, before=body.before, dest=dest)
+    if done and not uses_leases(settings.db_url):
+        archive.vacuum(backup.database_file(settings))
+    return ArchiveOut(
+        archive_dir=str(dest),
+        lineages=[ArchivedLineageOut(head=x.head, runs=x.runs, files=x.files) for x in done],
+    )

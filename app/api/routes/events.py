@@ -17,8 +17,8 @@ from app.api.deps import RunIdPath, RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
 from app.api.openapi import header_schema
 from app.api.responses import SUPERVISOR, errors
-from app.runs.errors import RunNotFoundError
 from app.runs.progress import CURSOR_PATTERN, Cursor, read_progress, run_status
+from app.runs.tombstones import missing_run
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -28,7 +28,8 @@ RECONNECT_MS = 1000
 def existing_run(run_id: RunIdPath, runs: RunsDep) -> str:
     # A dependency, so an unknown id is a 404 before the stream (and its 200) begins.
     if run_status(sessions=runs.sessions, run_id=run_id) is None:
-        raise RunNotFoundError(run_id)
+        with runs.sessions() as session:
+            raise missing_run(session, run_id)
     return run_id
 
 
@@ -84,7 +85,7 @@ def sse(
 @router.get(
     "/{run_id}/events",
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404)},
+    responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404, 410)},
 )
 async def run_events(
     caller: SupervisorDep,  # first: who may ask is settled before whether the run exists

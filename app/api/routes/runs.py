@@ -58,7 +58,7 @@ LOCATION_HEADER: dict[str, Any] = {
     "",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=RunCreated,
-    responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409)},
+    responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409, 410)},
 )
 def create_run(
     caller: ClientDep,
@@ -218,7 +218,7 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
     )
 
 
-@router.get("/{run_id}", response_model=RunOut, responses=errors(*CLIENT, 404))
+@router.get("/{run_id}", response_model=RunOut, responses=errors(*CLIENT, 404, 410))
 def get_run(
     caller: ClientDep,
     run_id: RunIdPath,
@@ -264,7 +264,7 @@ def _attempt_out(a: Attempt, prompts: bool, run_reasoner: str) -> AttemptOut:
 @router.get(
     "/{run_id}/trace",
     response_model=TraceOut,
-    responses={**errors(*SUPERVISOR, 404), 200: JSONL_RESPONSE},
+    responses={**errors(*SUPERVISOR, 404, 410), 200: JSONL_RESPONSE},
 )
 def get_trace(
     caller: SupervisorDep,
@@ -354,7 +354,7 @@ def _decision_out(
 
 
 @router.get(
-    "/{run_id}/trace/verify", response_model=TraceVerifyOut, responses=errors(*SUPERVISOR, 404)
+    "/{run_id}/trace/verify", response_model=TraceVerifyOut, responses=errors(*SUPERVISOR, 404, 410)
 )
 def verify_trace(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> TraceVerifyOut:
     """For supervisors: recompute the run's hash chains; ok, or the first broken link."""
@@ -367,7 +367,7 @@ def verify_trace(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> Tra
     "/{run_id}/resume",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=RunSummary,
-    responses={202: {"headers": LOCATION_HEADER}, **errors(*SUPERVISOR, 404, 409)},
+    responses={202: {"headers": LOCATION_HEADER}, **errors(*SUPERVISOR, 404, 409, 410)},
 )
 def resume_run(
     caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep, response: Response
@@ -379,7 +379,9 @@ def resume_run(
     return _summary(run)
 
 
-@router.post("/{run_id}/cancel", response_model=RunOut, responses=errors(*SUPERVISOR, 404, 409))
+@router.post(
+    "/{run_id}/cancel", response_model=RunOut, responses=errors(*SUPERVISOR, 404, 409, 410)
+)
 def cancel_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     """For supervisors: cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
