@@ -28,7 +28,9 @@ from app.api.routes import (
     events,
     health,
     metrics,
+    reviews,
     runs,
+    signoffs,
     webhooks,
 )
 from app.api.routes.webhooks import WebhooksContext
@@ -157,7 +159,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (health, catalog, allocate, runs, events, metrics, webhooks, admin, audit_keys):
+    for module in (
+        health,
+        catalog,
+        allocate,
+        runs,
+        signoffs,
+        reviews,
+        events,
+        metrics,
+        webhooks,
+        admin,
+        audit_keys,
+    ):
         app.include_router(module.router)
     install_openapi(app, open_access=keyring.open)
     return app

@@ -89,6 +89,21 @@ check 'd["detail"][0]["loc"] == ["body", "url"]' "422 names the url"
 [ "$(call GET "/webhooks/$hook_id" '' "${SUPERVISOR[@]}")" = 404 ] || fail "deleted webhook should be 404"
 echo "smoke: webhooks ok (create, list, deliveries, private target refused, delete)"
 
+# Supervisor reviews and sign-off: the queue is readable, the completed run is signed off
+# (the heads signed are verify's), a second run still running cannot be.
+[ "$(call GET /reviews '' "${SUPERVISOR[@]}")" = 200 ] || fail "GET /reviews"
+check 'isinstance(d, list)' "review queue is a list"
+[ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace/verify"
+heads=$(python3 -c "import json; print(json.dumps(json.load(open('$TMP/out'))['heads'], sort_keys=True))")
+code=$(call POST "/runs/$run_id/signoff" '{"statement":"smoke: plan read and accepted"}' "${SUPERVISOR[@]}")
+[ "$code" = 201 ] || fail "POST /runs/$run_id/signoff -> $code $(head -c 300 "$TMP/out")"
+check "json.dumps(d['heads'], sort_keys=True) == '$heads' and d['signer']" "sign-off signs verify's heads"
+[ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace/verify"
+check 'd["ok"] is True and d["signoffs_ok"] is True and d["annotations"] == 1' "signed run verifies"
+[ "$(call GET "/runs/$run_id" '' "${CLIENT[@]}")" = 200 ] || fail "GET /runs/$run_id"
+check 'len(d["signoffs"]) == 1' "sign-off listed on the run"
+echo "smoke: reviews and sign-off ok"
+
 if [ -n "${SMOKE_SUPERVISOR_KEY:-}" ]; then
   [ "$(call GET "/runs/$run_id" '')" = 401 ] || fail "no key should be 401"
   [ "$(call GET "/runs/$run_id/trace" '' "${CLIENT[@]}")" = 403 ] || fail "client key on a trace should be 403"

@@ -20,6 +20,7 @@ from app.domain import catalog
 from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics
 from app.domain.models import Instance, Robot, Task
+from app.domain.pins import resolve_pins
 from app.domain.problem import Problem
 from app.reasoners.factory import ReasonerSettings
 from app.solvers.base import Solution, Solver
@@ -66,10 +67,23 @@ def resolve_instance(request: InstanceRequest) -> Instance:
 
 
 def build_problem(request: InstanceRequest) -> Problem:
+    """The problem a request describes, with its pins and unavailable robots if it has
+    any (POST /allocate; runs have none)."""
     # An explicit `"max_deviation": null` means no cap; leaving it out means the mode's.
     uncapped = "max_deviation" in request.model_fields_set and request.max_deviation is None
+    instance = resolve_instance(request)
+    pins = None
+    if isinstance(request, AllocateRequest) and (request.pinned or request.unavailable):
+        pins = resolve_pins(
+            instance, [(p.task_id, p.robot) for p in request.pinned], request.unavailable
+        )
     return Problem.build(
-        resolve_instance(request), request.mode, request.max_deviation, uncapped=uncapped
+        instance,
+        request.mode,
+        request.max_deviation,
+        uncapped=uncapped,
+        pinned=pins.pinned if pins else None,
+        unavailable=pins.unavailable if pins else (),
     )
 
 
@@ -101,10 +115,13 @@ def build_response(
                 task_name=task.name,
                 robot=instance.robots[r].name,
                 success=float(s[t, r]),
+                pinned=t in problem.pinned,
             )
             for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
         ],
-        metrics=MetricsOut.from_domain(compute_metrics(instance, solution.assignment, seed=seed)),
+        metrics=MetricsOut.from_domain(
+            compute_metrics(instance, solution.assignment, seed=seed, scope=problem.balance_scope)
+        ),
         usage=UsageOut.from_domain(solution.usage),
         elapsed_ms=elapsed_ms,
     )
@@ -131,6 +148,11 @@ def _check_solution(problem: Problem, solution: Solution, solver: str) -> None:
     a = solution.assignment
     if len(a) != n or any(not 0 <= robot < r for robot in a):
         raise RuntimeError(f"solver '{solver}' returned {len(a)} robot indices for {n} tasks")
+    moved = [t for t, robot in problem.pinned.items() if a[t] != robot]
+    if moved:
+        raise RuntimeError(f"solver '{solver}' moved pinned task(s) {moved}")
+    if problem.unavailable and any(a[t] in problem.unavailable for t in problem.free_tasks):
+        raise RuntimeError(f"solver '{solver}' gave an unpinned task to an unavailable robot")
     loads = [a.count(i) for i in range(r)]
     if not problem.cap.respected_by(loads):
         raise RuntimeError(f"solver '{solver}' returned an invalid allocation (loads {loads})")

@@ -53,7 +53,11 @@ def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
         ok=report.ok,
         decisions=report.decisions.rows,
         events=report.events.rows,
-        unchained=report.decisions.unchained + report.events.unchained,
+        annotations=report.annotations.rows,
+        signoffs_ok=report.signoffs_ok,
+        unchained=report.decisions.unchained
+        + report.events.unchained
+        + report.annotations.unchained,
         heads=ChainHeadsOut(decisions=report.decisions.head, events=report.events.head),
         chain_scheme=report.chain_scheme,
         signature=None
@@ -64,12 +68,13 @@ def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
             valid=report.signature.valid,
             problem=report.signature.problem,
         ),
+        annotations_head=report.annotations.head,
         broken=None
         if broken is None
         else BrokenLinkOut(
             table=broken.table,
             task_index=broken.key if broken.table == "decisions" else None,
-            seq=broken.key if broken.table == "events" else None,
+            seq=broken.key if broken.table != "decisions" else None,
             expected=broken.expected,
             stored=broken.stored,
             reason=broken.reason,

@@ -100,8 +100,8 @@ async def authenticate(
             "missing_api_key",
             "Bearer",
         )
-    role = keyring.role_of(presented)
-    if role is None:
+    found = keyring.identify(presented)
+    if found is None:
         # Where and from whom, never what: the rejected value may be a real key mistyped.
         log.warning(
             "rejected an unknown API key on %s %s from %s",
@@ -112,7 +112,8 @@ async def authenticate(
         raise _unauthenticated(
             loc, "the API key is not valid", "invalid_api_key", 'Bearer error="invalid_token"'
         )
-    return Caller(role=role, anonymous=False)
+    role, name = found
+    return Caller(role=role, anonymous=False, name=name)
 
 
 def _check_role(caller: Caller, required: Role) -> Caller:

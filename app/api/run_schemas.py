@@ -20,6 +20,7 @@ from app.api.schemas import (
     present,
 )
 from app.domain.lifecycle import RunStatus
+from app.domain.review import ReviewAction, ReviewOn
 from app.store.models import as_utc
 
 StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
@@ -50,6 +51,40 @@ REPLAY_PAIRING: list[dict[str, Any]] = [
         "then": present("replay_of"),
     },
 ]
+class ReviewPolicyIn(BaseModel):
+    """Which decisions wait for a supervisor (SPEC 11). A decision needs review when any
+    listed condition holds; the run pauses before the decision is stored."""
+
+    model_config = {"extra": "forbid"}
+
+    on: list[ReviewOn] = Field(
+        default_factory=list,
+        max_length=3,
+        description="'fallback' (the rules fallback decided), 'low_confidence' (the accepted "
+        "reply's Confidence Level is Low), 'every_decision'",
+    )
+    quality_below: float | None = Field(
+        None, ge=0, le=1, allow_inf_nan=False, description="Review when Q is below this"
+    )
+    regret_above: float | None = Field(
+        None,
+        ge=0,
+        allow_inf_nan=False,
+        description="Review when the proposal gives away more than this many success points "
+        "over the rest of the queue against the exact optimum (the unit of the guidance "
+        "costs, not divided by the number of tasks)",
+    )
+    task_ids: list[int | str] = Field(
+        default_factory=list, max_length=10_000, description="Review these tasks"
+    )
+    features: list[Name] = Field(
+        default_factory=list, max_length=100, description="Review tasks needing any of these"
+    )
+    robots: list[Name] = Field(
+        default_factory=list,
+        max_length=100,
+        description="Review decisions proposing any of these robots",
+    )
 
 
 class RunRequest(InstanceRequest):
@@ -126,6 +161,9 @@ class RunRequest(InstanceRequest):
         description="Points either side of the threshold within which a decision is "
         "contested (default 5)",
     )
+    review: ReviewPolicyIn | None = Field(
+        None, description="Supervisor review of decisions (default: none); see GET /reviews"
+    )
     replay_of: str | None = Field(
         None,
         min_length=1,
@@ -163,6 +201,17 @@ class Page(BaseModel):
     offset: int = Field(description="Index (in queue order) of the first item returned")
     limit: int = Field(description="At most this many items returned")
     total: int = Field(description="Items in the whole list")
+class DecisionReviewOut(BaseModel):
+    """A supervisor's review of a decision (SPEC 11); covered by the decision's chain hash."""
+
+    action: ReviewAction
+    reviewer: str = Field(description="The resolving API key's name")
+    reason: str | None
+    at: Timestamp
+    triggers: list[str]
+    overridden_from: str | None = Field(
+        None, description="override: the robot the run had proposed"
+    )
 
 
 class RunAssignment(BaseModel):
@@ -172,6 +221,22 @@ class RunAssignment(BaseModel):
     robot: str
     success: float
     fallback: bool
+    review: DecisionReviewOut | None = None
+
+
+class SignedHeadsOut(BaseModel):
+    decisions: str | None = Field(description="Head of the decision chain when signed")
+    events: str | None = Field(description="Head of the event chain when signed")
+
+
+class SignOffOut(BaseModel):
+    signer: str = Field(description="The signing API key's name (never the key)")
+    at: Timestamp
+    heads: SignedHeadsOut = Field(
+        description="The chain heads signed; trace/verify's signoffs_ok says whether the "
+        "record still ends there"
+    )
+    statement: str
 
 
 class RunOut(BaseModel):
@@ -201,6 +266,9 @@ class RunOut(BaseModel):
     created_at: Timestamp
     updated_at: Timestamp
     finished_at: Timestamp | None
+    signoffs: list[SignOffOut] = Field(
+        default_factory=list, description="Sign-offs of the completed run, oldest first"
+    )
 
 
 class RunSummary(BaseModel):
@@ -285,6 +353,7 @@ class DecisionOut(BaseModel):
     why: StandIn | None = Field(
         None, description="'fallback' when every attempt failed; else the accepted attempt's"
     )
+    review: DecisionReviewOut | None = None
     attempts: list[AttemptOut]
 
 
@@ -305,9 +374,11 @@ class TraceOut(BaseModel):
 class BrokenLinkOut(BaseModel):
     """Where a run's hash chain first fails to verify."""
 
-    table: Literal["decisions", "events"]
+    table: Literal["decisions", "events", "annotations"]
     task_index: int | None = Field(description="The decision (decisions table), else null")
-    seq: int | None = Field(description="The event (events table), else null")
+    seq: int | None = Field(
+        description="The event (events table) or annotation (annotations table), else null"
+    )
     expected: str | None = Field(
         description="The hash recomputed from the row's content and the previous link; null "
         "when the row is missing or has no stored hash"
@@ -329,11 +400,25 @@ class SignatureOut(BaseModel):
 
 
 class TraceVerifyOut(BaseModel):
-    """The result of recomputing a run's two hash chains (decisions, events) from its rows."""
+    """The result of recomputing a run's three hash chains (decisions, events, and the
+    annotations recorded after it finished) from its rows."""
 
     ok: bool = Field(description="Every row present, chained and unaltered")
     decisions: int = Field(description="Decision rows checked")
     events: int = Field(description="Event rows checked")
+    annotations: int = Field(
+        default=0, description="Annotation rows checked (records made after the run finished)"
+    )
+    annotations_head: str | None = Field(
+        default=None,
+        description="Stored hash of the newest annotation (records made after the run "
+        "finished, such as sign-offs): outside `heads`, which is what a sign-off signs",
+    )
+    signoffs_ok: bool = Field(
+        default=True,
+        description="Every sign-off's heads are still the heads of the decision and event "
+        "chains, and both verify (true when there is no sign-off)",
+    )
     unchained: int = Field(
         description="Rows with no chain hash (written before tamper evidence existed); "
         "any makes ok false"

@@ -143,10 +143,30 @@ class InstanceRequest(BaseModel):
     )
 
 
+class PinIn(BaseModel):
+    """A task fixed on a robot (SPEC 10): every solver keeps it there."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    task_id: TaskId
+    robot: Name = Field(description="Robot name (or label)")
+
+
 class AllocateRequest(InstanceRequest):
     solver: Name = Field(description="See GET /solvers")
     seed: int = Field(0, ge=0, le=MAX_SEED, strict=True)
     options: dict[str, Any] = Field(default_factory=dict, description="Solver-specific options")
+    pinned: list[PinIn] = Field(
+        default_factory=list,
+        max_length=MAX_TASKS,
+        description="Tasks fixed on robots; solvers decide only the other tasks",
+    )
+    unavailable: list[Name] = Field(
+        default_factory=list,
+        max_length=MAX_ROBOTS,
+        description="Robots that keep their pins but take no new task and are outside the "
+        "balance: W = (unpinned tasks + tasks pinned on available robots) / available robots",
+    )
 
 
 class Assignment(BaseModel):
@@ -154,6 +174,12 @@ class Assignment(BaseModel):
     task_name: str
     robot: str
     success: float
+    # Omitted unless true, so a request without pins gets exactly the response it always did.
+    pinned: bool = Field(
+        False,
+        description="Present (true) only for a task fixed by the request's `pinned`",
+        exclude_if=lambda pinned: not pinned,
+    )
 
 
 class CompletionOut(BaseModel):

@@ -1,4 +1,10 @@
-"""The workload cap: every robot's final load must lie in [ceil(W - cap), floor(W + cap)]."""
+"""The workload cap: every robot's final load must lie in [ceil(W - cap), floor(W + cap)].
+
+With pins (SPEC 10) some robots may be unavailable: they keep the tasks pinned on them
+but take no new task and stand outside the balance. `n_tasks` and `n_robots` are then the
+tasks and robots *in the balance* (W = n_tasks / n_robots), while load vectors still have
+one entry per robot of the fleet; the unavailable robots' entries are ignored.
+"""
 
 from __future__ import annotations
 
@@ -18,9 +24,22 @@ def _exact(value: float) -> Fraction:
 
 @dataclass(frozen=True)
 class WorkloadCap:
-    n_tasks: int
-    n_robots: int
+    n_tasks: int  # tasks in the balance: W's numerator
+    n_robots: int  # robots in the balance: W's denominator
     max_deviation: float | None
+    # Robot indexes (into fleet-length load vectors) outside the balance: take no task.
+    unavailable: frozenset[int] = frozenset()
+
+    @property
+    def fleet_size(self) -> int:
+        """Length of a load vector: the balance's robots plus the unavailable ones."""
+        return self.n_robots + len(self.unavailable)
+
+    def balanced(self, loads: Sequence[int]) -> list[int]:
+        """The entries of a fleet-length load vector that count for the balance."""
+        if not self.unavailable:
+            return list(loads)
+        return [x for i, x in enumerate(loads) if i not in self.unavailable]
 
     @property
     def target(self) -> float:
@@ -72,6 +91,8 @@ class WorkloadCap:
     def can_complete(self, loads: Sequence[int], remaining: int) -> bool:
         """Can `remaining` more tasks be spread so every final load fits the cap?"""
         lo, hi = self.lower, self.upper
+        if self.unavailable:
+            loads = self.balanced(loads)
         if any(load > hi for load in loads):
             return False
         shortfall = sum(max(0, lo - load) for load in loads)
@@ -80,6 +101,8 @@ class WorkloadCap:
 
     def allows(self, loads: Sequence[int], robot: int, remaining_after: int) -> bool:
         """Does giving the current task to `robot` keep a cap-respecting completion possible?"""
+        if robot in self.unavailable:
+            return False
         after = list(loads)
         after[robot] += 1
         return self.can_complete(after, remaining_after)
@@ -88,7 +111,7 @@ class WorkloadCap:
         return [r for r in range(len(loads)) if self.allows(loads, r, remaining_after)]
 
     def respected_by(self, loads: Sequence[int]) -> bool:
-        return all(self.lower <= load <= self.upper for load in loads)
+        return all(self.lower <= load <= self.upper for load in self.balanced(loads))
 
 
 class CapTracker:
@@ -102,13 +125,16 @@ class CapTracker:
         self, cap: WorkloadCap, loads: Sequence[int] | None = None, remaining: int | None = None
     ) -> None:
         self.cap = cap
-        self.loads = list(loads) if loads is not None else [0] * cap.n_robots
-        self.remaining = cap.n_tasks - sum(self.loads) if remaining is None else remaining
-        self.shortfall = sum(max(0, cap.lower - x) for x in self.loads)
+        self.loads = list(loads) if loads is not None else [0] * cap.fleet_size
+        balanced = cap.balanced(self.loads)
+        self.remaining = cap.n_tasks - sum(balanced) if remaining is None else remaining
+        self.shortfall = sum(max(0, cap.lower - x) for x in balanced)
+        # Per-robot ceiling; an unavailable robot's is below any load, so it never qualifies.
+        self._ceiling = [-1 if i in cap.unavailable else cap.upper for i in range(len(self.loads))]
 
     def allows(self, robot: int) -> bool:
         load = self.loads[robot]
-        if load + 1 > self.cap.upper:
+        if load + 1 > self._ceiling[robot]:
             return False
         shortfall = self.shortfall - (1 if load < self.cap.lower else 0)
         return shortfall <= self.remaining - 1

@@ -17,10 +17,21 @@ class DomainError(ValueError):
 
 
 class InfeasibleCapError(DomainError):
-    """No allocation can keep every robot's load inside the workload cap."""
+    """No allocation can keep every robot's load inside the workload cap.
 
-    def __init__(self, message: str) -> None:
-        super().__init__("max_deviation", message, code="infeasible_cap")
+    `suggested_max_deviation`, when known, is the smallest cap that admits a completion
+    (given the pins); `field` is `pinned` when the pins, not the counts, break the cap.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        field: str = "max_deviation",
+        suggested_max_deviation: float | None = None,
+    ) -> None:
+        super().__init__(field, message, code="infeasible_cap")
+        self.suggested_max_deviation = suggested_max_deviation
 
 
 class TooLargeError(DomainError):

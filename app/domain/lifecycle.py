@@ -22,6 +22,8 @@ class RunStatus(StrEnum):
     # Its checkpoint belongs to another graph version: no worker takes it up until a
     # supervisor resumes it under a release of that version (or revises it).
     BLOCKED = "blocked"
+    # Paused before a decision that its review policy sends to a supervisor (SPEC 11).
+    AWAITING_REVIEW = "awaiting_review"
 
 
 class EventKind(StrEnum):
@@ -37,6 +39,9 @@ class EventKind(StrEnum):
     INTEGRITY_FAILED = "integrity_failed"
     BUDGET_EXHAUSTED = "budget_exhausted"
     UPGRADE_BLOCKED = "upgrade_blocked"
+    REVIEW_REQUESTED = "review_requested"
+    REVIEW_RESOLVED = "review_resolved"
+    REVIEW_CLOSED = "review_closed"
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,8 @@ STATUS_RULES: dict[RunStatus, StatusRule] = {
     RunStatus.FAILED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.CANCELLED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.BLOCKED: StatusRule(finished=False, claimable=False, active=False),
+    # Nobody holds or claims it: it waits for a resolution, which queues it again.
+    RunStatus.AWAITING_REVIEW: StatusRule(finished=False, claimable=False, active=False),
 }
 
 FINISHED: frozenset[RunStatus] = frozenset(s for s, r in STATUS_RULES.items() if r.finished)
@@ -78,6 +85,9 @@ TRANSITIONS: dict[tuple[RunStatus, RunStatus], str] = {
     (RunStatus.QUEUED, RunStatus.BLOCKED): "its checkpoint is of another graph version",
     (RunStatus.BLOCKED, RunStatus.INTERRUPTED): "a supervisor asked to resume it",
     (RunStatus.BLOCKED, RunStatus.CANCELLED): "cancelled while blocked",
+    (RunStatus.RUNNING, RunStatus.AWAITING_REVIEW): "a decision needs a supervisor's review",
+    (RunStatus.AWAITING_REVIEW, RunStatus.QUEUED): "the review was resolved",
+    (RunStatus.AWAITING_REVIEW, RunStatus.CANCELLED): "cancelled while awaiting review",
 }
 
 

@@ -93,6 +93,18 @@ def simulate_completion(
 
 
 @dataclass(frozen=True)
+class BalanceScope:
+    """What balance is measured over when some robots are outside it (SPEC 10 pins):
+    the target W of the available fleet and the robots in the balance."""
+
+    target: float
+    robots: tuple[int, ...]
+
+    def loads(self, loads: Sequence[int]) -> list[int]:
+        return [loads[r] for r in self.robots]
+
+
+@dataclass(frozen=True)
 class Metrics:
     expected_success: float
     balance_score: float
@@ -110,16 +122,21 @@ def compute_metrics(
     *,
     seed: int = 0,
     trials: int = DEFAULT_TRIALS,
+    scope: BalanceScope | None = None,
 ) -> Metrics:
+    """Success over every task; balance, deviation, severity and Jain over `scope` (the
+    available robots and their W, see Problem.balance_scope), or the whole fleet. The
+    workload lists every robot, including unavailable ones with their pins."""
     loads = workload(assignment, instance.n_robots)
-    w = instance.target_load
+    counted = loads if scope is None else scope.loads(loads)
+    w = instance.target_load if scope is None else scope.target
     return Metrics(
         expected_success=expected_success(instance, assignment),
-        balance_score=balance_score(loads, w),
-        max_deviation=max_abs_deviation(loads, w),
-        imbalance_severity=severity(loads, w),
+        balance_score=balance_score(counted, w),
+        max_deviation=max_abs_deviation(counted, w),
+        imbalance_severity=severity(counted, w),
         workload={robot.name: load for robot, load in zip(instance.robots, loads, strict=True)},
         feature_success=feature_success(instance, assignment),
-        jain_index=jain_index(loads),
+        jain_index=jain_index(counted),
         simulated_completion=simulate_completion(instance, assignment, seed=seed, trials=trials),
     )

@@ -1,13 +1,29 @@
-"""An allocation problem: an instance, an operational mode and the workload cap it implies."""
+"""An allocation problem: an instance, an operational mode and the workload cap it implies.
+
+Optionally with pins (SPEC 10 "Pins in /allocate"): tasks fixed on robots, and robots that
+are unavailable (they keep their pins, take no new task and stand outside the balance).
+Then W = (free tasks + tasks pinned on available robots) / available robots, loads start
+from the pins on available robots, and the cap's bounds apply to available robots only.
+Tasks pinned on an unavailable robot count for expected success, not for loads.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import bisect
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
+from functools import cached_property
+from types import MappingProxyType
 
 from app.domain.cap import WorkloadCap
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, InfeasibleCapError
+from app.domain.metrics import BalanceScope
 from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
+
+_NO_PINS: Mapping[int, int] = MappingProxyType({})
 
 
 @dataclass(frozen=True)
@@ -15,6 +31,9 @@ class Problem:
     instance: Instance
     mode: Mode
     cap: WorkloadCap
+    # task index -> robot index, in task order; hash=False: a mapping is not hashable.
+    pinned: Mapping[int, int] = field(default_factory=lambda: _NO_PINS, hash=False)
+    unavailable: frozenset[int] = frozenset()
 
     @classmethod
     def build(
@@ -24,15 +43,196 @@ class Problem:
         max_deviation: float | None = None,
         *,
         uncapped: bool = False,
+        pinned: Mapping[int, int] | None = None,
+        unavailable: Iterable[int] = (),
     ) -> Problem:
-        """Apply the mode's default cap unless `max_deviation` overrides it (or `uncapped`
-        asks for no cap at all); reject infeasible caps."""
+        """Apply the mode's default cap (for the W of the available fleet) unless
+        `max_deviation` overrides it (or `uncapped` asks for no cap at all); reject
+        infeasible caps, including caps the pins already break."""
+        pins = _checked_pins(instance, pinned or {})
+        off = _checked_unavailable(instance, unavailable)
+        n_available = instance.n_robots - len(off)
+        balance_tasks = sum(1 for r in pins.values() if r not in off)
+        balance_tasks += instance.n_tasks - len(pins)
         if uncapped:
             max_deviation = None
         elif max_deviation is None:
-            max_deviation = default_max_deviation(mode, instance.n_tasks, instance.n_robots)
+            max_deviation = default_max_deviation(mode, balance_tasks, n_available)
         elif max_deviation < 0:
             raise DomainError("max_deviation", f"must be >= 0 tasks, got {max_deviation:g}")
-        cap = WorkloadCap(instance.n_tasks, instance.n_robots, max_deviation)
-        cap.ensure_feasible()
-        return cls(instance=instance, mode=mode, cap=cap)
+        cap = WorkloadCap(balance_tasks, n_available, max_deviation, off)
+        problem = cls(
+            instance=instance, mode=mode, cap=cap, pinned=MappingProxyType(pins), unavailable=off
+        )
+        if pins or off:
+            problem._ensure_completable()
+        else:
+            cap.ensure_feasible()
+        return problem
+
+    # -- the pinned view -------------------------------------------------------------------
+
+    @cached_property
+    def available(self) -> tuple[int, ...]:
+        """Robot indexes that may take new tasks, in fleet order."""
+        return tuple(r for r in range(self.instance.n_robots) if r not in self.unavailable)
+
+    @cached_property
+    def free_tasks(self) -> tuple[int, ...]:
+        """Unpinned task indexes, in queue order: what a solver decides."""
+        if not self.pinned:
+            return tuple(range(self.instance.n_tasks))
+        return tuple(t for t in range(self.instance.n_tasks) if t not in self.pinned)
+
+    @cached_property
+    def initial_loads(self) -> tuple[int, ...]:
+        """Per robot of the fleet: the pins on it if available, 0 if unavailable."""
+        loads = [0] * self.instance.n_robots
+        for robot in self.pinned.values():
+            if robot not in self.unavailable:
+                loads[robot] += 1
+        return tuple(loads)
+
+    def remaining_after(self, task_index: int) -> int:
+        """Free tasks after `task_index` in the queue."""
+        return len(self.free_tasks) - bisect.bisect_right(self.free_tasks, task_index)
+
+    def allocated_before(self, task_index: int) -> int:
+        """Pins plus free tasks before `task_index`: the phase rule's count (SPEC 10)."""
+        return len(self.pinned) + bisect.bisect_left(self.free_tasks, task_index)
+
+    @property
+    def target(self) -> float:
+        """W of the available fleet (n_tasks / n_robots without pins)."""
+        return self.cap.target
+
+    @cached_property
+    def balance_scope(self) -> BalanceScope | None:
+        """What the metrics measure balance over; None means the whole fleet (no pins)."""
+        if not self.pinned and not self.unavailable:
+            return None
+        return BalanceScope(target=self.cap.target, robots=self.available)
+
+    def complete(self, choices: Sequence[int]) -> list[int]:
+        """A full assignment from one robot per free task (in `free_tasks` order)."""
+        if len(choices) != len(self.free_tasks):
+            raise ValueError(
+                f"{len(choices)} robots for {len(self.free_tasks)} free tasks; one each"
+            )
+        if not self.pinned:
+            return list(choices)
+        assignment = [0] * self.instance.n_tasks
+        for task, robot in self.pinned.items():
+            assignment[task] = robot
+        for task, robot in zip(self.free_tasks, choices, strict=True):
+            assignment[task] = robot
+        return assignment
+
+    # -- validation ------------------------------------------------------------------------
+
+    def _ensure_completable(self) -> None:
+        cap, free = self.cap, len(self.free_tasks)
+        if cap.can_complete(self.initial_loads, free):
+            return
+        suggestion = smallest_completing_cap(cap, self.initial_loads, free)
+        reason = cap.infeasibility()
+        where = "max_deviation"
+        if reason is None:
+            where = "pinned"
+            reason = self._pin_conflict()
+        raise InfeasibleCapError(
+            f"{reason}; the smallest max_deviation that admits a completion given the pins "
+            f"and unavailable robots is {suggestion:g}",
+            field=where,
+            suggested_max_deviation=suggestion,
+        )
+
+    def _pin_conflict(self) -> str:
+        cap, loads, names = self.cap, self.initial_loads, self.instance.robots
+        lo, hi, w = cap.lower, cap.upper, f"{cap.target:g}"
+        bounds = f"[{lo}, {hi}] tasks around the target load {w} of the available robots"
+        over = [r for r in self.available if loads[r] > hi]
+        if over:
+            r = over[0]
+            return (
+                f"the pins already put {loads[r]} tasks on robot '{names[r].name}', above the "
+                f"cap's {bounds}"
+            )
+        free = len(self.free_tasks)
+        short = sum(max(0, lo - loads[r]) for r in self.available)
+        if short > free:
+            return (
+                f"the pins leave {free} free tasks, but the available robots need {short} "
+                f"more to reach the cap's {bounds}"
+            )
+        room = sum(hi - loads[r] for r in self.available)
+        return (
+            f"the pins leave {free} free tasks, but the available robots have room for only "
+            f"{room} more within the cap's {bounds}"
+        )
+
+
+def smallest_completing_cap(cap: WorkloadCap, loads: Sequence[int], remaining: int) -> float:
+    """The smallest max_deviation whose bounds let `remaining` tasks complete `loads`.
+
+    The bounds [ceil(W - c), floor(W + c)] only change where W +- c crosses an integer,
+    i.e. at c = |k - W| = |k*R - n| / R: multiples of 1/R. Feasibility only grows with c,
+    so a binary search over those points finds the least; it is rounded up to three
+    decimals (still below the next point, since 1/R >= 1/100), so it reads as typed.
+    """
+    n, r = cap.n_tasks, cap.n_robots
+    points = sorted({Fraction(abs(k * r - n), r) for k in range(n + 1)} | {Fraction(0)})
+    balanced = cap.balanced(loads)
+
+    def fits(c: Fraction) -> bool:
+        w = Fraction(n, r)
+        lo, hi = max(0, math.ceil(w - c)), min(n, math.floor(w + c))
+        if any(x > hi for x in balanced):
+            return False
+        return sum(max(0, lo - x) for x in balanced) <= remaining <= sum(hi - x for x in balanced)
+
+    left, right = 0, len(points) - 1  # the largest point allows every load up to n: fits
+    while left < right:
+        mid = (left + right) // 2
+        if fits(points[mid]):
+            right = mid
+        else:
+            left = mid + 1
+    best = points[left]
+    if best.denominator == 1:
+        return int(best)
+    return math.ceil(best * 1000) / 1000
+
+
+def _checked_pins(instance: Instance, pinned: Mapping[int, int]) -> dict[int, int]:
+    pins: dict[int, int] = {}
+    for task, robot in sorted(pinned.items()):
+        if not 0 <= task < instance.n_tasks:
+            raise DomainError(
+                "pinned", f"task index {task} is outside the queue of {instance.n_tasks} tasks"
+            )
+        if not 0 <= robot < instance.n_robots:
+            raise DomainError(
+                "pinned",
+                f"robot index {robot} (pin of task {instance.tasks[task].id!r}) is outside "
+                f"the fleet of {instance.n_robots} robots",
+            )
+        pins[task] = robot
+    return pins
+
+
+def _checked_unavailable(instance: Instance, unavailable: Iterable[int]) -> frozenset[int]:
+    off = frozenset(unavailable)
+    for robot in sorted(off):
+        if not 0 <= robot < instance.n_robots:
+            raise DomainError(
+                "unavailable",
+                f"robot index {robot} is outside the fleet of {instance.n_robots} robots",
+            )
+    if len(off) == instance.n_robots:
+        raise DomainError(
+            "unavailable",
+            "every robot is unavailable; no robot is left to take the unpinned tasks",
+            code="no_robot_left",
+        )
+    return off

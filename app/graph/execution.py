@@ -14,7 +14,7 @@ from langgraph.graph.state import CompiledStateGraph
 
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
-from app.graph.runner import run_graph
+from app.graph.runner import INTERRUPT_KEY, run_graph
 from app.graph.state import GraphContext
 from app.reasoners.factory import close_reasoner
 
@@ -26,6 +26,9 @@ class Execution:
 
     decisions: list[DecisionRecord]
     usage: Usage
+    # Set when the graph paused at a review (`interrupt()`): the interrupt's payload. The
+    # thread waits for `Command(resume=...)`; the decisions are those stored so far.
+    paused: dict[str, Any] | None = None
 
 
 class GraphEndedEarly(RuntimeError):
@@ -44,17 +47,24 @@ def execute(
     thread_id: str,
     *,
     resume: bool,
+    resume_with: Any = None,
 ) -> Execution:
-    """Run (or resume) the thread to its end; its decisions and usage.
+    """Run (or resume) the thread to its end, or until it pauses for a review; its
+    decisions and usage. `resume_with`: a review's resolution, for a paused thread.
 
     Takes ownership of `context.reasoner`: it is closed (its HTTP pool, for the LLM
     reasoners) however the execution ends. RunCancelled and reasoner errors propagate.
     """
     try:
-        run_graph(graph, context, thread_id, resume=resume)
+        result = run_graph(graph, context, thread_id, resume=resume, resume_with=resume_with)
     finally:
         close_reasoner(context.reasoner)
     decisions = context.recorder.decisions()
+    interrupts = result.get(INTERRUPT_KEY)
+    if interrupts:
+        return Execution(
+            decisions=decisions, usage=context.recorder.usage(), paused=dict(interrupts[0].value)
+        )
     n_tasks = context.problem.instance.n_tasks
     if [d.task_index for d in decisions] != list(range(n_tasks)):
         raise GraphEndedEarly(len(decisions), n_tasks)

@@ -69,6 +69,8 @@ class DecisionRecord:
     balance_after: float
     severity_after: str
     regret: float | None = None
+    # The supervisor's review, when the run's policy sent this decision to one (SPEC 11).
+    review: dict[str, Any] | None = None
 
 
 class Recorder(Protocol):

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from langgraph.graph.state import CompiledStateGraph
-from langgraph.types import RunnableConfig
+from langgraph.types import Command, Interrupt, RunnableConfig
 
 from app.graph.state import GraphContext, initial_state
 
@@ -37,18 +37,33 @@ def has_checkpoint(graph: CompiledStateGraph[Any, Any, Any, Any], thread_id: str
     return saver.get_tuple({"configurable": {"thread_id": thread_id}}) is not None
 
 
+def pending_interrupt(graph: CompiledStateGraph[Any, Any, Any, Any], thread_id: str) -> Any:
+    """The payload of the interrupt the thread is paused at, or None."""
+    if not has_checkpoint(graph, thread_id):
+        return None
+    interrupts = graph.get_state({"configurable": {"thread_id": thread_id}}).interrupts
+    return interrupts[0].value if interrupts else None
+
+
+INTERRUPT_KEY = "__interrupt__"
+
+
 def run_graph(
     graph: CompiledStateGraph[Any, Any, Any, Any],
     context: GraphContext,
     thread_id: str,
     *,
     resume: bool,
+    resume_with: Any = None,
 ) -> dict[str, Any]:
-    """Run (or resume) the thread to the end and return the final graph state.
+    """Run (or resume) the thread to the end, or to an `interrupt()`, and return the final
+    graph state (with `__interrupt__` when it paused).
 
     Resuming must pass None as input: passing the initial state again restarts from START
     and duplicates work. A resume of a thread that never reached its first checkpoint
     starts it fresh; starting a thread that already has checkpoints is refused.
+    A thread paused at an interrupt is resumed with `Command(resume=resume_with)`; without
+    a value it is left paused, not re-run (invoke(None) would re-run the paused node).
     """
     n = context.problem.instance.n_tasks
     config = thread_config(thread_id, n, context.max_retries)
@@ -57,6 +72,12 @@ def run_graph(
         raise ValueError(
             f"thread {thread_id!r} already has checkpoints; resume it instead of starting it again"
         )
-    payload = None if resume and exists else initial_state(context.problem)
+    payload: Any = None if resume and exists else initial_state(context.problem)
+    if resume and exists:
+        pending = pending_interrupt(graph, thread_id)
+        if pending is not None and resume_with is None:
+            return {INTERRUPT_KEY: [Interrupt(value=pending)]}
+        if pending is not None:
+            payload = Command(resume=resume_with)
     result = graph.invoke(payload, config, context=context, durability="sync")
     return dict(result)

@@ -21,6 +21,7 @@ from app.domain.modes import strategic_weights
 from app.domain.phases import balance_urgency, detect_phase
 from app.domain.problem import Problem
 from app.graph.recorder import Recorder
+from app.graph.review import ReviewGate
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.graph.verdicts import VerdictCache
 from app.reasoners.base import Reasoner
@@ -72,6 +73,8 @@ class GraphContext:
     max_retries: int = DEFAULT_MAX_RETRIES
     guidance: Guidance | None = None
     regret: Regret | None = None
+    # The run's review policy (SPEC 11), or a replay's recorded resolutions; None: no review.
+    review: ReviewGate | None = None
     verdicts: VerdictCache = field(default_factory=VerdictCache)
 
     @property

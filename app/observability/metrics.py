@@ -24,7 +24,8 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.domain.lifecycle import RunStatus
-from app.store.models import Attempt, Decision, Run
+from app.domain.review import ReviewState
+from app.store.models import Attempt, Decision, Review, Run
 
 RUN_STATUSES = tuple(s.value for s in RunStatus)
 RETRY_TIERS = ("1", "2", "3")
@@ -42,6 +43,16 @@ class Metrics:
             ("method", "route", "status"),
             registry=self.registry,
         )
+        # Observed by the process that stores a resolution (each is stored exactly once).
+        self.review_resolution_seconds = Histogram(
+            "ltaa_review_resolution_seconds",
+            "Time from a decision's review request to its resolution",
+            buckets=(1, 5, 15, 60, 300, 900, 3600, 4 * 3600, 24 * 3600, float("inf")),
+            registry=self.registry,
+        )
+
+    def review_resolved(self, waited_s: float) -> None:
+        self.review_resolution_seconds.observe(max(0.0, waited_s))
 
 
 @dataclass
@@ -56,6 +67,7 @@ class RunCounts:
     hard_invalid: int = 0
     below_threshold: int = 0
     retries_by_tier: dict[str, int] = field(default_factory=dict)
+    reviews_pending: int = 0
 
 
 def _count_if(condition: Any) -> Any:
@@ -94,6 +106,14 @@ def read_counts(session: Session) -> RunCounts:
             select(Attempt.tier, func.count()).where(Attempt.tier > 0).group_by(Attempt.tier)
         )
     }
+    counts.reviews_pending = (
+        session.scalar(
+            select(func.count())
+            .select_from(Review)
+            .where(Review.state == ReviewState.PENDING.value)
+        )
+        or 0
+    )
     return counts
 
 
@@ -135,6 +155,9 @@ def families(c: RunCounts) -> Iterator[Metric]:
     for tier in sorted({*RETRY_TIERS, *c.retries_by_tier}, key=int):
         retries.add_metric([tier], c.retries_by_tier.get(tier, 0))
     yield retries
+    yield GaugeMetricFamily(
+        "ltaa_reviews_pending", "Decisions waiting for a supervisor's review", c.reviews_pending
+    )
 
 
 class RunTablesCollector(Collector):

@@ -16,13 +16,14 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import EventKind, RunStatus
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
 from app.runs.signing import SignatureCheck, SigningKeys, check_signature
 from app.runs.tombstones import missing_run
 from app.store import chain
 from app.store import repository as repo
-from app.store.models import Attempt, Decision, Run, RunEvent, as_utc
+from app.store.models import Attempt, Decision, Run, RunAnnotation, RunEvent, as_utc
 
 DECISIONS_PER_PAGE = 100  # with their attempts' prompts: about 1-3 MB per page
 EVENTS_PER_PAGE = 1000
@@ -40,6 +41,21 @@ def _event_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[
     while True:
         with sessions() as session:
             page = repo.events_page(
+                session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
+            )
+        if not page:
+            return
+        yield page
+        after = page[-1].seq
+
+
+def _annotation_pages(
+    sessions: sessionmaker[Session], run_id: str
+) -> Iterator[list[RunAnnotation]]:
+    after = 0
+    while True:
+        with sessions() as session:
+            page = repo.annotations_page(
                 session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
             )
         if not page:
@@ -86,20 +102,23 @@ class ChainCheckResult:
 class ChainReport:
     decisions: ChainCheckResult
     events: ChainCheckResult
+    annotations: ChainCheckResult
+    # Every sign-off's heads are still the heads of the decision and event chains, and
+    # those chains verify: what was signed is what the record says now.
+    signoffs_ok: bool = True
     chain_scheme: str = chain.SCHEME
     signature: SignatureCheck | None = None  # the newest signature's check, if any
 
     @property
     def ok(self) -> bool:
         signed_ok = self.signature is None or self.signature.valid
-        return (
-            self.decisions.first_break is None and self.events.first_break is None and (signed_ok)
-        )
+        return self.first_break is None and signed_ok
 
     @property
     def first_break(self) -> chain.Break | None:
-        """The decisions chain's break if it has one, else the events chain's."""
-        return self.decisions.first_break or self.events.first_break
+        """The decisions chain's break if it has one, else the events', else the
+        annotations'."""
+        return self.decisions.first_break or self.events.first_break or self.annotations.first_break
 
 
 def _result(check: chain.ChainCheck) -> ChainCheckResult:
@@ -132,7 +151,7 @@ def verify_trace(
         status, n_tasks = run.status, run.n_tasks
         geneses = _geneses(run)
         scheme = run.chain_scheme or chain.SCHEME
-        signed = repo.latest_signature(session=session, run_id=run_id)
+        signature_row = repo.latest_signature(session=session, run_id=run_id)
 
     decisions = chain.ChainCheck(
         "decisions", run_id, first_key=0, genesis_link=geneses["decisions"]
@@ -170,19 +189,34 @@ def verify_trace(
             "the run completed but its events do not end with the "
             "'completed' event: the last events were deleted"
         )
+    annotations = chain.ChainCheck("annotations", run_id, first_key=1)
+    signed: list[Any] = []
+    for annotation_page in _annotation_pages(sessions, run_id):
+        for a in annotation_page:
+            if a.kind == AnnotationKind.SIGNOFF:
+                signed.append((a.detail or {}).get("heads"))
+
+            def annotation_link(prev: str, a: RunAnnotation = a) -> str:
+                return chain.annotation_link(prev, _columns(a, chain.ANNOTATION_FIELDS))
+
+            annotations.feed(a.seq, a.chain_hash, annotation_link)
+    heads_now = {"decisions": decisions.head, "events": events.head}
+    chains_intact = decisions.first_break is None and events.first_break is None
     signature = None
-    if signed is not None:
+    if signature_row is not None:
         signature = check_signature(
             keys or SigningKeys(),
-            signed.key_id,
-            signed.payload,
-            signed.signature,
-            {"decisions": decisions.head, "events": events.head},
+            signature_row.key_id,
+            signature_row.payload,
+            signature_row.signature,
+            heads_now,
             geneses,
         )
     return ChainReport(
         decisions=_result(decisions),
         events=_result(events),
+        annotations=_result(annotations),
+        signoffs_ok=all(chains_intact and heads == heads_now for heads in signed),
         chain_scheme=scheme,
         signature=signature,
     )

@@ -14,6 +14,7 @@ from typing import Any
 from sqlalchemy import ColumnElement, update
 from sqlalchemy.orm import Session
 
+from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import (
     FINISHED,
     EventKind,
@@ -21,15 +22,17 @@ from app.domain.lifecycle import (
     check_transition,
 )
 from app.store import repository as repo
-from app.store.models import Run, RunEvent, status_writes, utcnow
+from app.store.models import Run, RunAnnotation, RunEvent, status_writes, utcnow
 from app.webhooks.outbox import enqueue_for_event
 
 __all__ = [
+    "AnnotationKind",
     "EventKind",
     "RunStatus",
     "move",
     "move_where",
     "new_run",
+    "record_annotation",
     "record_event",
 ]
 
@@ -44,6 +47,28 @@ def record_event(
     )
     enqueue_for_event(session, run_id=run_id, kind=event.kind, detail=event.detail, seq=event.seq)
     return event
+
+
+def record_annotation(
+    session: Session,
+    *,
+    run_id: str,
+    kind: AnnotationKind,
+    detail: Mapping[str, Any] | None = None,
+    idempotency_key: str | None = None,
+    request_digest: str | None = None,
+) -> RunAnnotation:
+    """Append one record about a run to its annotation chain (app.domain.annotations), in
+    this transaction: what is said about a run after it finished, never a change to its
+    decisions or events."""
+    return repo.add_annotation(
+        session=session,
+        run_id=run_id,
+        kind=AnnotationKind(kind).value,
+        detail=dict(detail or {}),
+        idempotency_key=idempotency_key,
+        request_digest=request_digest,
+    )
 
 
 def new_run(session: Session, *, run_id: str, created: Mapping[str, Any], **fields: Any) -> Run:

@@ -24,6 +24,8 @@ _OPENING = (EventKind.CREATED, EventKind.STARTED, EventKind.RESUMED)
 # ASCII digits only (\d would take any script's), as the OpenAPI pattern says.
 CURSOR_PATTERN = r"^[ \t]*([0-9]{1,9})-([0-9]{1,9})[ \t]*$"
 _CURSOR = re.compile(CURSOR_PATTERN)
+# Sent as their own SSE event type, so a supervisor's console can listen for them alone.
+_REVIEW = (EventKind.REVIEW_REQUESTED, EventKind.REVIEW_RESOLVED, EventKind.REVIEW_CLOSED)
 R = TypeVar("R", RunEvent, Decision)
 
 
@@ -48,7 +50,7 @@ class Cursor:
 
 @dataclass(frozen=True)
 class ProgressItem:
-    kind: Literal["decision", "run"]
+    kind: Literal["decision", "run", "review"]
     data: dict[str, Any]
     at: datetime
     cursor: Cursor  # the position after this item: its SSE id
@@ -74,6 +76,7 @@ def _decision_data(d: Decision) -> dict[str, Any]:
         "attempts": d.attempts,
         "regret": d.regret,
         "balance_after": d.balance_after,
+        "review": d.review,
     }
 
 
@@ -132,7 +135,8 @@ def read_progress(
         for at, _, row in rows:
             if isinstance(row, RunEvent):
                 cursor = Cursor(row.seq, cursor.decisions)
-                items.append(ProgressItem("run", _event_data(row), at, cursor))
+                kind: Literal["run", "review"] = "review" if row.kind in _REVIEW else "run"
+                items.append(ProgressItem(kind, _event_data(row), at, cursor))
             else:
                 cursor = Cursor(cursor.events, row.task_index + 1)
                 items.append(ProgressItem("decision", _decision_data(row), at, cursor))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from sqlalchemy.exc import IntegrityError
@@ -16,11 +16,12 @@ from app.domain.phases import detect_phase
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.runs import lifecycle, records
+from app.runs import lifecycle, records, reviews
 from app.runs.errors import RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import validate_replay
+from app.runs.signoff import SignOff, signoffs
 from app.runs.spec import RunSpec
 from app.runs.tombstones import missing_run
 from app.runs.worker import RunWorker
@@ -121,6 +122,14 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
             )
         if run.status == RunStatus.CANCELLED:
             raise RunStateConflictError(run_id, run.status, "resume", "Create a new run instead.")
+        if run.status == RunStatus.AWAITING_REVIEW:
+            raise RunStateConflictError(
+                run_id,
+                run.status,
+                "resume",
+                "It waits for a supervisor: resolve its review (GET /reviews, "
+                "POST /runs/{id}/reviews/{task_index}).",
+            )
         if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
         if run.status in (RunStatus.FAILED, RunStatus.BLOCKED):
@@ -139,7 +148,17 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
         if run.status in FINISHED:
             raise RunStateConflictError(run_id, run.status, "cancel", "It has already ended.")
         run.cancel_requested = True
-        if not worker.is_active(run_id):
+        if run.status == RunStatus.AWAITING_REVIEW:
+            # Nobody holds it: close its review, then cancel (the last event is `cancelled`).
+            reviews.close_pending(session, run_id, "the run was cancelled")
+            lifecycle.move(
+                session,
+                run,
+                RunStatus.CANCELLED,
+                event=EventKind.CANCELLED,
+                detail={"reason": "cancel requested while awaiting review"},
+            )
+        elif not worker.is_active(run_id):
             lifecycle.move(
                 session,
                 run,
@@ -166,6 +185,7 @@ class RunView:
     regret: float | None
     usage: Usage
     metrics: Metrics | None
+    signoffs: list[SignOff] = field(default_factory=list)
 
     @property
     def progress(self) -> dict[str, Any]:
@@ -191,6 +211,7 @@ def run_view(
             )
         ]
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
+        signed = signoffs(session=session, run_id=run_id)
     names = [r["name"] for r in spec.instance_data["robots"]]
     workload = dict.fromkeys(names, 0)
     for o in outcomes:
@@ -212,6 +233,7 @@ def run_view(
         regret=regret,
         usage=usage,
         metrics=metrics,
+        signoffs=signed,
     )
 
 

@@ -9,6 +9,7 @@ from typing import Any
 from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.problem import Problem
+from app.domain.review import ReviewPolicy
 from app.domain.serialize import instance_from_dict, instance_to_dict
 from app.reasoners.scope import DEFAULT_LLM_MARGIN, LLMScope
 
@@ -38,6 +39,12 @@ class RunSpec:
     # existed read as the paper's 'all'.
     llm_scope: str = LLMScope.ALL.value
     llm_margin: float = DEFAULT_LLM_MARGIN
+    # app.domain.review.ReviewPolicy as JSON; None: no review.
+    review: dict[str, Any] | None = None
+
+    @property
+    def review_policy(self) -> ReviewPolicy | None:
+        return None if self.review is None else ReviewPolicy.from_json(self.review)
 
     @classmethod
     def for_instance(cls, instance: Instance, **params: Any) -> RunSpec:

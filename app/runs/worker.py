@@ -31,7 +31,7 @@ from app.graph.recorder import RunCancelled
 from app.graph.version import compatible, current_version, upgrade_blocked_message
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
-from app.runs import lifecycle, records
+from app.runs import lifecycle, records, reviews
 from app.runs.integrity import check_integrity
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
@@ -56,6 +56,8 @@ class Admission:
 
     spec: RunSpec
     resume: bool
+    # A review's resolution to resume the paused graph with (`Command(resume=...)`).
+    resume_with: dict[str, Any] | None = None
 
 
 class RunWorker:
@@ -155,8 +157,9 @@ class RunWorker:
     # -- execution ---------------------------------------------------------------------
 
     def _execute(self, run_id: str, stop: RunStop) -> None:
+        paused = False
         try:
-            self._run(run_id, stop)
+            paused = self._run(run_id, stop)
         except Exception:  # a bug must not kill the worker thread silently
             log.exception("run %s crashed", run_id)
             self._end(
@@ -171,14 +174,23 @@ class RunWorker:
                 self._futures.pop(run_id, None)
                 self._stops.pop(run_id, None)
             self.ownership.finished(run_id, stop)
+        if paused:
+            # A resolution that came while this thread was still winding down found the
+            # run held here (submit refused it): pick it up now that the slot is free.
+            with self._sessions() as session:
+                run = repo.get_run(session=session, run_id=run_id)
+                queued = run is not None and run.status == RunStatus.QUEUED
+            if queued:
+                self.submit(run_id)
 
-    def _run(self, run_id: str, stop: RunStop) -> None:
+    def _run(self, run_id: str, stop: RunStop) -> bool:
+        """Execute the run; True if it paused for a review."""
         if stop.shutting_down.is_set():
-            return  # draining before it began: it stays queued (or interrupted) for the next start
+            return False  # draining before it began: it stays queued (or interrupted)
         checkpoint = self.checkpointer.get_tuple({"configurable": {"thread_id": run_id}})
         admission = self._admit(run_id, stop, checkpoint)
         if admission is None:
-            return
+            return False
         spec = admission.spec
         fence = self.ownership.fence(run_id, stop)
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop, fence=fence)
@@ -193,7 +205,12 @@ class RunWorker:
                 {"error": exc.message, "field": exc.field},
                 error=f"cannot resume: {exc.message}",
             )
-            return
+            return False
+        recorded = None
+        if spec.replay_of is not None:
+            # A replay re-applies the original's resolutions and never waits for a review.
+            with self._sessions() as session:
+                recorded = reviews.recorded_resolutions(session=session, run_id=spec.replay_of)
         try:
             execution = execute_ltaa(
                 spec.problem,
@@ -205,6 +222,9 @@ class RunWorker:
                 max_retries=spec.max_retries,
                 guidance=spec.guidance,
                 resume=checkpoint is not None,
+                review=spec.review_policy if recorded is None else None,
+                recorded_reviews=recorded,
+                resume_with=admission.resume_with,
             )
         except RunCancelled:
             self._end_stopped(run_id, stop)
@@ -216,7 +236,41 @@ class RunWorker:
             message = f"{type(exc).__name__}: {exc}"
             self._end(run_id, RunStatus.FAILED, {"error": message}, error=message)
         else:
+            if execution.paused is not None:
+                self._pause(run_id, stop, execution.paused)
+                return True
             self._end(run_id, RunStatus.COMPLETED, {"decisions": len(execution.decisions)})
+        return False
+
+    def _pause(self, run_id: str, stop: RunStop, payload: dict[str, Any]) -> None:
+        """The graph paused for a review: record it and let go of the run (no slot is held
+        while it waits; a resolution queues it again)."""
+        with transaction(self._sessions) as session:
+            run = self.ownership.owned_run(session, run_id)
+            if run is None or run.status != RunStatus.RUNNING:
+                return
+            if stop.cancelled.is_set() or run.cancel_requested:
+                lifecycle.move(
+                    session,
+                    run,
+                    RunStatus.CANCELLED,
+                    event=EventKind.CANCELLED,
+                    detail={"reason": "cancel requested"},
+                )
+                cancelled = True
+            else:
+                reviews.pause_for_review(session, run, payload)
+                cancelled = False
+        if cancelled:
+            self._prune_checkpoints(run_id)
+        else:
+            log.info(
+                "run %s awaits review of task %s (%s)",
+                run_id,
+                payload.get("task_index"),
+                ", ".join(payload.get("triggers", [])),
+                extra={"run_id": run_id},
+            )
 
     def _admit(
         self, run_id: str, stop: RunStop, checkpoint: CheckpointTuple | None
@@ -234,6 +288,12 @@ class RunWorker:
             instance = spec.problem.instance
             resume = checkpoint is not None or run.status == RunStatus.INTERRUPTED
             version = current_version(self._settings.test_graph_version)
+            resolution = reviews.resolution_to_apply(session, run_id) if resume else None
+            if resolution is not None and run.status == RunStatus.QUEUED:
+                # Queued by a review's resolution: the paused graph goes on with it. Not a
+                # crash resume, so neither `resumes` nor a `resumed` event.
+                lifecycle.move(session, run, RunStatus.RUNNING)
+                return Admission(spec=spec, resume=True, resume_with=resolution)
             if not resume:
                 run.graph_version = version
                 lifecycle.move(
@@ -306,7 +366,7 @@ class RunWorker:
                     **detail,
                 },
             )
-            return Admission(spec=spec, resume=True)
+            return Admission(spec=spec, resume=True, resume_with=resolution)
 
     def _reasoner(self, run_id: str, spec: RunSpec, fence: Fence | None = None) -> Reasoner:
         """The reasoner a run's graph calls, built afresh at every (re)start."""

@@ -21,6 +21,7 @@ The last two let the network see what the rest of the queue offers each robot.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -35,7 +36,14 @@ BLOCKS = 7  # per-robot blocks before the progress entry
 class AllocationEnv(gym.Env[np.ndarray, np.int64]):
     metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 - gymnasium's own shape
 
-    def __init__(self, success: np.ndarray, cap: WorkloadCap) -> None:
+    def __init__(
+        self,
+        success: np.ndarray,
+        cap: WorkloadCap,
+        initial_loads: Sequence[int] | None = None,
+    ) -> None:
+        """`success` and `cap` over the tasks and robots to decide (a FreePart's); every
+        episode starts from `initial_loads` (the pins' loads), zeros by default."""
         super().__init__()
         self.success = np.asarray(success, dtype=float)
         self.cap = cap
@@ -47,8 +55,11 @@ class AllocationEnv(gym.Env[np.ndarray, np.int64]):
         regret = self.success - self.success.max(axis=1, keepdims=True)
         self._regret = regret
         self._later_best, self._later_regret = _later_summaries(regret)
+        self._start = list(initial_loads) if initial_loads is not None else [0] * self.n_robots
+        if len(self._start) != self.n_robots:
+            raise ValueError(f"{len(self._start)} initial loads for {self.n_robots} robots")
         self._t = 0
-        self._loads = [0] * self.n_robots
+        self._loads = list(self._start)
         self._masks: dict[tuple[int, ...], np.ndarray] = {}
 
     @property
@@ -72,7 +83,7 @@ class AllocationEnv(gym.Env[np.ndarray, np.int64]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         self._t = 0
-        self._loads = [0] * self.n_robots
+        self._loads = list(self._start)
         return self._observation(), {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:

@@ -6,9 +6,10 @@ from typing import Any
 
 import numpy as np
 
-from app.domain.errors import TooLargeError
+from app.domain.errors import InfeasibleCapError, TooLargeError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
+from app.solvers.free_part import FreePart
 from app.solvers.tiebreak import integer_weights, weight_scale
 
 MAX_ASSIGNMENTS = 3**12
@@ -23,14 +24,20 @@ class BruteForceSolver(Solver):
     )
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
-        s, cap = problem.instance.success, problem.cap
+        # Only the free tasks on the available robots are enumerated; pins are fixed.
+        part = FreePart.of(problem)
+        s, cap = part.success, part.cap
         n, r = s.shape
         count = r**n
         if count > MAX_ASSIGNMENTS:
+            space = (
+                "free tasks on available robots" if problem.pinned or problem.unavailable else ""
+            )
             raise TooLargeError(
                 "tasks",
-                f"brute_force would enumerate {r}^{n} = {count:,} assignments, above its limit "
-                f"of 3^12 = {MAX_ASSIGNMENTS:,}; use 'dp' or 'optimal' for this size",
+                f"brute_force would enumerate {r}^{n} = {count:,} assignments"
+                f"{f' ({space})' if space else ''}, above its limit of 3^12 = "
+                f"{MAX_ASSIGNMENTS:,}; use 'dp' or 'optimal' for this size",
                 code="too_large",
             )
         # Row k is assignment number k in lexicographic order (task 0 most significant),
@@ -38,13 +45,19 @@ class BruteForceSolver(Solver):
         codes = np.arange(count, dtype=np.int64)
         powers = r ** np.arange(n - 1, -1, -1, dtype=np.int64)
         choices = (codes[:, None] // powers[None, :]) % r
-        w = integer_weights(s, weight_scale(n, r))
+        w = integer_weights(s, weight_scale(cap.n_tasks, r, n))
         values = w[np.arange(n)[None, :], choices].sum(axis=1)
-        loads = np.stack([(choices == i).sum(axis=1) for i in range(r)], axis=1)
+        start = np.asarray(part.initial_loads, dtype=np.int64)
+        loads = start[None, :] + np.stack([(choices == i).sum(axis=1) for i in range(r)], axis=1)
         ok = ((loads >= cap.lower) & (loads <= cap.upper)).all(axis=1)
-        dev = np.abs(r * loads - n).sum(axis=1)
+        if not ok.any():  # Problem.build refuses such caps; a direct caller may not
+            cap.ensure_feasible()
+            raise InfeasibleCapError("no completion of the free tasks fits the cap from the pins")
+        dev = np.abs(r * loads - cap.n_tasks).sum(axis=1)
         top = values[ok].max()
         tied = ok & (values == top)
         best_dev = dev[tied].min()
         winner = int(np.flatnonzero(tied & (dev == best_dev))[0])
-        return Solution([int(c) for c in choices[winner]], details={"enumerated": count})
+        return Solution(
+            part.assignment([int(c) for c in choices[winner]]), details={"enumerated": count}
+        )

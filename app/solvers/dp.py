@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from app.domain.errors import TooLargeError
+from app.domain.errors import InfeasibleCapError, TooLargeError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
+from app.solvers.free_part import FreePart
 from app.solvers.tiebreak import better, deviation_units, integer_weights, weight_scale
 
 MAX_STATES = 400_000
@@ -34,18 +35,22 @@ class DynamicProgrammingSolver(Solver):
     )
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
-        s, cap = problem.instance.success, problem.cap
+        # The free tasks on the available robots, loads starting from the pins.
+        part = FreePart.of(problem)
+        s, cap = part.success, part.cap
         n, r = s.shape
         bound = state_bound(n, r)
         if bound > MAX_STATES:
             raise TooLargeError(
                 "tasks",
-                f"dp would visit up to {bound:,} states for {n} tasks and {r} robots, above its "
-                f"limit of {MAX_STATES:,}; use 'optimal' for this size",
+                f"dp would visit up to {bound:,} states for {n} {_free(problem)}tasks and {r} "
+                f"{_available(problem)}robots, above its limit of {MAX_STATES:,}; use "
+                "'optimal' for this size",
                 code="too_large",
             )
+        start: Loads = part.initial_loads
         # Forward: the load vectors from which a cap-respecting completion exists.
-        layers: list[set[Loads]] = [{(0,) * r}]
+        layers: list[set[Loads]] = [{start} if cap.can_complete(start, n) else set()]
         for t in range(n):
             nxt: set[Loads] = set()
             for loads in layers[t]:
@@ -53,9 +58,10 @@ class DynamicProgrammingSolver(Solver):
                     nxt.add(_plus_one(loads, i))
             layers.append(nxt)
         # Backward: best (sum of integer weights, deviation) from each state, and the move.
-        w = integer_weights(s, weight_scale(n, r)).tolist()
+        # Weights and deviation units are the ones every exact solver uses (tiebreak).
+        w = integer_weights(s, weight_scale(cap.n_tasks, r, n)).tolist()
         value: dict[Loads, tuple[int, int]] = {
-            loads: (0, deviation_units(loads, n)) for loads in layers[n]
+            loads: (0, deviation_units(loads, cap.n_tasks)) for loads in layers[n]
         }
         moves: list[dict[Loads, int]] = [{} for _ in range(n)]
         for t in range(n - 1, -1, -1):
@@ -73,10 +79,21 @@ class DynamicProgrammingSolver(Solver):
                 if best is not None:
                     current[loads] = best
             value = current
-        assignment: list[int] = []
-        loads = (0,) * r
+        if start not in value:  # Problem.build refuses such caps; a direct caller may not
+            cap.ensure_feasible()
+            raise InfeasibleCapError("no completion of the free tasks fits the cap from the pins")
+        choices: list[int] = []
+        loads = start
         for t in range(n):
             i = moves[t][loads]
-            assignment.append(i)
+            choices.append(i)
             loads = _plus_one(loads, i)
-        return Solution(assignment, details={"states": sum(len(x) for x in layers)})
+        return Solution(part.assignment(choices), details={"states": sum(len(x) for x in layers)})
+
+
+def _free(problem: Problem) -> str:
+    return "free " if problem.pinned else ""
+
+
+def _available(problem: Problem) -> str:
+    return "available " if problem.unavailable else ""

@@ -30,6 +30,7 @@ from pydantic import Field, model_validator
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
+from app.solvers.free_part import FreePart
 
 INSTALL_HINT = "install the rl extra: pip install torch==2.13.0 && pip install -e '.[rl]'"
 
@@ -118,9 +119,17 @@ class DQNSolver(Solver):
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         opts: DQNOptions = options
         torch, allocation_env, masked_dqn = _import_rl()
-        success = problem.instance.success
+        # Trained on the pinned problem: the free tasks, the available robots, the pins' loads.
+        part = FreePart.of(problem)
+        if part.n_tasks == 0:  # everything is pinned: nothing to learn or decide
+            return Solution(part.assignment([]), details={"timesteps": 0})
+        success = part.success
+
+        def environment() -> Any:
+            return allocation_env.AllocationEnv(success, part.cap, part.initial_loads)
+
         with _borrowed_global_state(torch):
-            env = allocation_env.AllocationEnv(success, problem.cap)
+            env = environment()
             model = masked_dqn.MaskedDQN(
                 masked_dqn.MaskedDQNPolicy,
                 env,
@@ -140,10 +149,8 @@ class DQNSolver(Solver):
             )
             model.set_logger(masked_dqn.silent_logger())
             model.learn(total_timesteps=opts.timesteps)
-            assignment = _act(
-                model, allocation_env.AllocationEnv(success, problem.cap), masked_dqn.q_values
-            )
-        return Solution(assignment, details={"timesteps": opts.timesteps})
+            choices = _act(model, environment(), masked_dqn.q_values)
+        return Solution(part.assignment(choices), details={"timesteps": opts.timesteps})
 
 
 def _act(model: Any, env: Any, q_values: Any) -> list[int]:

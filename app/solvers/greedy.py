@@ -9,6 +9,7 @@ import numpy as np
 from app.domain.cap import CapTracker
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
+from app.solvers.free_part import FreePart
 
 
 class GreedySolver(Solver):
@@ -21,13 +22,14 @@ class GreedySolver(Solver):
     )
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
-        s = problem.instance.success
-        tracker = CapTracker(problem.cap)
+        part = FreePart.of(problem)  # pinned tasks stay put; unavailable robots are not columns
+        s = part.success
+        tracker = CapTracker(part.cap, part.initial_loads)
         # Robots by descending S per task (stable sort keeps robot order among ties).
         ranked = np.argsort(-s, axis=1, kind="stable").tolist()
-        assignment: list[int] = []
+        choices: list[int] = []
         for t in range(s.shape[0]):
             choice = next(i for i in ranked[t] if tracker.allows(i))
             tracker.assign(choice)
-            assignment.append(choice)
-        return Solution(assignment)
+            choices.append(choice)
+        return Solution(part.assignment(choices))

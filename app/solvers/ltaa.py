@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import statistics
 import uuid
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 from langgraph.checkpoint.memory import InMemorySaver
@@ -16,10 +17,12 @@ from pydantic import Field
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
+from app.domain.review import Resolution, ReviewPolicy
 from app.graph.builder import build_graph
 from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import Recorder
+from app.graph.review import ReviewGate
 from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
@@ -53,9 +56,23 @@ def graph_context(
     quality_threshold: float,
     max_retries: int,
     guidance: str | None,
+    review: ReviewPolicy | None = None,
+    recorded_reviews: Mapping[int, Resolution] | None = None,
 ) -> GraphContext:
-    """The LTAA graph's run context, with exact regret always and guidance on request."""
+    """The LTAA graph's run context, with exact regret always, guidance on request, and the
+    review gate when the run has a review policy (or replays recorded resolutions)."""
     oracle = CompletionOracle(problem)
+
+    def cost(task_index: int, loads: Sequence[int], robot: int) -> float | None:
+        # Success points over the rest of the queue: the unit of the guidance costs.
+        loss = oracle.loss(task_index, loads, robot)
+        return None if loss is None else loss * 100
+
+    gate = (
+        ReviewGate(policy=review, cost=cost, recorded=recorded_reviews)
+        if review is not None or recorded_reviews is not None
+        else None
+    )
     return GraphContext(
         problem=problem,
         reasoner=reasoner,
@@ -64,6 +81,7 @@ def graph_context(
         max_retries=max_retries,
         guidance=oracle.guidance if guidance == "optimizer" else None,
         regret=oracle.regret,
+        review=gate,
     )
 
 
@@ -78,6 +96,9 @@ def execute_ltaa(
     max_retries: int,
     guidance: str | None,
     resume: bool = False,
+    review: ReviewPolicy | None = None,
+    recorded_reviews: Mapping[int, Resolution] | None = None,
+    resume_with: Any = None,
 ) -> Execution:
     """The one execution path of an LTAA problem (durable runs, `ltaa run` and the
     synchronous solver): its context with exact regret (and guidance on request), then
@@ -90,8 +111,10 @@ def execute_ltaa(
         quality_threshold=quality_threshold,
         max_retries=max_retries,
         guidance=guidance,
+        review=review,
+        recorded_reviews=recorded_reviews,
     )
-    return execute(graph, context, thread_id, resume=resume)
+    return execute(graph, context, thread_id, resume=resume, resume_with=resume_with)
 
 
 class LTAASolver(Solver):

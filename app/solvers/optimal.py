@@ -21,6 +21,7 @@ from app.domain.cap import WorkloadCap
 from app.domain.errors import InfeasibleCapError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
+from app.solvers.free_part import FreePart
 from app.solvers.tiebreak import deviation_factor, integer_weights, weight_scale
 
 
@@ -59,8 +60,17 @@ class TaskClasses:
 def class_allocation(
     rows: np.ndarray, counts: np.ndarray, cap: WorkloadCap, initial_loads: Sequence[int]
 ) -> np.ndarray:
-    """x[c, r]: how many tasks of class c robot r takes in an optimal completion."""
+    """x[c, r]: how many tasks of class c robot r takes in an optimal completion.
+
+    The columns of `rows` are the robots in the cap's balance (a FreePart's), so `cap` has
+    no unavailable robots and its W is n_tasks / (the number of columns).
+    """
     n_classes, r = rows.shape
+    if cap.unavailable or r != cap.n_robots:
+        raise ValueError(
+            f"class_allocation takes the {cap.n_robots} robots in the balance as columns, "
+            f"got {r} (unavailable: {sorted(cap.unavailable)}); reduce with FreePart first"
+        )
     m, n = int(counts.sum()), cap.n_tasks
     init = list(initial_loads)
     lo, hi = cap.lower, cap.upper
@@ -144,5 +154,6 @@ class OptimalSolver(Solver):
     )
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
-        assignment, _ = best_completion(problem.instance.success, problem.cap)
-        return Solution(assignment)
+        part = FreePart.of(problem)  # the free tasks on the available robots, from the pins
+        choices, _ = best_completion(part.success, part.cap, part.initial_loads)
+        return Solution(part.assignment(choices))

@@ -28,10 +28,11 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from app.domain.errors import TooLargeError
+from app.domain.errors import InfeasibleCapError, TooLargeError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.dp import state_bound
+from app.solvers.free_part import FreePart
 
 MAX_STATES = 200_000
 
@@ -63,13 +64,16 @@ class StateSpace:
         return int(self.task.size)
 
 
-def enumerate_states(problem: Problem) -> StateSpace:
-    cap, n, r = problem.cap, problem.instance.n_tasks, problem.instance.n_robots
-    ids: dict[Loads, int] = {(0,) * r: 0}
-    order: list[Loads] = [(0,) * r]
+def enumerate_states(part: FreePart) -> StateSpace:
+    """States over the free tasks and available robots; loads start from the pins."""
+    cap, n, r = part.cap, part.n_tasks, part.n_robots
+    start: Loads = part.initial_loads
+    placed = sum(start)
+    ids: dict[Loads, int] = {start: 0}
+    order: list[Loads] = [start]
     moves: list[list[tuple[int, int]]] = []
     for loads in order:  # grows while iterating: breadth-first, so ids follow task order
-        t = sum(loads)
+        t = sum(loads) - placed
         robots = cap.feasible_robots(loads, n - t - 1) if t < n else []
         row = []
         for robot in robots:
@@ -85,7 +89,7 @@ def enumerate_states(problem: Problem) -> StateSpace:
         for robot, child_id in row:
             allowed[state, robot] = True
             successor[state, robot] = child_id
-    task = np.fromiter((sum(loads) for loads in order), dtype=np.int64, count=len(order))
+    task = np.fromiter((sum(loads) - placed for loads in order), dtype=np.int64, count=len(order))
     return StateSpace(task=task, allowed=allowed, successor=successor)
 
 
@@ -176,18 +180,26 @@ class QLearningSolver(Solver):
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         opts: QLearningOptions = options
-        s = problem.instance.success
+        # Trained on the pinned problem: the free tasks, the available robots, the pins' loads.
+        part = FreePart.of(problem)
+        s = part.success
         n, r = s.shape
         bound = state_bound(n, r)
         if bound > MAX_STATES:
+            free = "free " if problem.pinned else ""
+            available = "available " if problem.unavailable else ""
             raise TooLargeError(
                 "tasks",
                 f"q_learning would need a table of up to {bound:,} (task, load-vector) states "
-                f"for {n} tasks and {r} robots, above its limit of {MAX_STATES:,}; use "
-                "'optimal' for this size",
+                f"for {n} {free}tasks and {r} {available}robots, above its limit of "
+                f"{MAX_STATES:,}; use 'optimal' for this size",
                 code="too_large",
             )
-        space = enumerate_states(problem)
+        space = enumerate_states(part)
+        if n and not space.allowed[0].any():  # Problem.build refuses this; a direct caller may not
+            raise InfeasibleCapError("no completion of the free tasks fits the cap from the pins")
         q = _train(space, s, opts, np.random.default_rng(seed))
-        assignment = greedy_policy(space, q.sum(axis=0), s)
-        return Solution(assignment, details={"states": space.size, "episodes": opts.episodes})
+        choices = greedy_policy(space, q.sum(axis=0), s)
+        return Solution(
+            part.assignment(choices), details={"states": space.size, "episodes": opts.episodes}
+        )

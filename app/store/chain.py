@@ -3,6 +3,9 @@ hash over its audited content and the hash of the previous row of its run (a has
 
 Two chains per run, one per table. Decisions are linked in `task_index` order and events in
 `seq` order, each starting from a genesis value derived from the table and the run id.
+A third, `annotations`, links what is recorded about a run after it finished (sign-offs),
+in `seq` order: a completed run's decision and event chains never change, so a sign-off
+can name their heads, and the annotations that follow stay checkable too.
 Why not one chain over both tables: events are written by the run service and worker and
 decisions by the graph's store node, at unrelated moments (and, on PostgreSQL, possibly from
 different processes); one interleaved chain would need a global order across both tables and
@@ -44,7 +47,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
-Table = Literal["decisions", "events"]
+Table = Literal["decisions", "events", "annotations"]
 # The previous row exists but was written before chaining: later links hang off this marker.
 UNCHAINED = "0" * 64
 SCHEME = "ltaa-trace-chain/v1"
@@ -110,7 +113,10 @@ DECISION_FIELDS: dict[str, Normaliser] = {
     "balance_after": _float,
     "severity_after": _str,
     "regret": _float,
+    "review": _json,
 }
+# Hashed only when set, so decisions stored before the column existed keep their links.
+OPTIONAL_DECISION_FIELDS = frozenset({"review"})
 ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "attempt": _int,
     "tier": _int,
@@ -131,6 +137,8 @@ ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "feedback": _opt_str,
 }
 EVENT_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
+# Records made after a run finished (app.domain.annotations), chained like the events.
+ANNOTATION_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
 
 
 def canonical_json(value: Any) -> str:
@@ -191,13 +199,23 @@ def attempts_digest(attempts: Iterable[Mapping[Any, Any]]) -> str:
 
 def decision_link(prev: str, decision: Mapping[str, Any], attempts: str) -> str:
     """`decision`: the DECISION_FIELDS columns; `attempts`: attempts_digest of its task."""
-    content = _content(DECISION_FIELDS, decision)
+    content = {
+        name: normalise(decision.get(name))
+        for name, normalise in DECISION_FIELDS.items()
+        if name not in OPTIONAL_DECISION_FIELDS or decision.get(name) is not None
+    }
     return _sha256(canonical_json({"prev": prev, "decision": content, "attempts": attempts}))
 
 
 def event_link(prev: str, event: Mapping[str, Any]) -> str:
     """`event`: the EVENT_FIELDS columns."""
     return _sha256(canonical_json({"prev": prev, "event": _content(EVENT_FIELDS, event)}))
+
+
+def annotation_link(prev: str, annotation: Mapping[str, Any]) -> str:
+    """`annotation`: the ANNOTATION_FIELDS columns."""
+    content = _content(ANNOTATION_FIELDS, annotation)
+    return _sha256(canonical_json({"prev": prev, "annotation": content}))
 
 
 def next_prev(stored: str | None) -> str:

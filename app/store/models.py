@@ -126,6 +126,28 @@ class RunEvent(Base):
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
+class RunAnnotation(Base):
+    """A record made about a run after it finished (app.domain.annotations): append-only,
+    hash-chained per run in `seq` order like the events."""
+
+    __tablename__ = "run_annotations"
+    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_run_annotations_run_seq"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    seq: Mapped[int] = mapped_column(Integer)
+    kind: Mapped[str] = mapped_column(String(32))
+    detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # The Idempotency-Key of the POST that made it (keys are global, as for runs), and a
+    # digest of that request, so a retry returns this row and a reused key is refused.
+    idempotency_key: Mapped[str | None] = mapped_column(
+        String(255), nullable=True, unique=True, index=True
+    )
+    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
+
+
 class Decision(Base):
     __tablename__ = "decisions"
     __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_decisions_run_task"),)
@@ -152,9 +174,34 @@ class Decision(Base):
     balance_after: Mapped[float] = mapped_column(Float)
     severity_after: Mapped[str] = mapped_column(String(16))
     regret: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # A supervisor's review of this decision, when its run's policy asked for one: action,
+    # reviewer (the key's name), reason, at, triggers, and overridden_from on an override.
+    review: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     # Tamper evidence: a hash over this row's content and the previous link of its run.
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+
+
+class Review(Base):
+    """One decision a run paused for: its proposal and, once a supervisor answered, the
+    resolution the worker resumes the graph with. One per run and task."""
+
+    __tablename__ = "reviews"
+    __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_reviews_run_task"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    task_index: Mapped[int] = mapped_column(Integer)
+    state: Mapped[str] = mapped_column(String(16), index=True)  # app.domain.review.ReviewState
+    # The interrupt's payload: task, proposal, triggers and every robot as an alternative.
+    proposal: Mapped[dict[str, Any]] = mapped_column(JSON)
+    requested_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    resolution: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    resolved_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    # The Idempotency-Key of the resolving POST and a digest of its body: a retry gets the
+    # same answer instead of a 409, a reused key with another body is refused.
+    idempotency_key: Mapped[str | None] = mapped_column(String(255), nullable=True)
+    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class Attempt(Base):

@@ -15,7 +15,16 @@ from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
 from app.store import chain
-from app.store.models import Attempt, Base, Decision, Run, RunEvent, RunSignature, utcnow
+from app.store.models import (
+    Attempt,
+    Base,
+    Decision,
+    Run,
+    RunAnnotation,
+    RunEvent,
+    RunSignature,
+    utcnow,
+)
 
 
 def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run | None:
@@ -86,6 +95,61 @@ def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any
     event = RunEvent(run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link)
     session.add(event)
     return event
+
+
+def add_annotation(
+    *,
+    session: Session,
+    run_id: str,
+    kind: str,
+    detail: dict[str, Any],
+    idempotency_key: str | None = None,
+    request_digest: str | None = None,
+) -> RunAnnotation:
+    """Append to the run's annotation chain. Two writers at once collide on (run_id, seq)
+    and one rolls back: lock the run row first where that matters."""
+    last = session.execute(
+        select(RunAnnotation.seq, RunAnnotation.chain_hash)
+        .where(RunAnnotation.run_id == run_id)
+        .order_by(RunAnnotation.seq.desc())
+        .limit(1)
+    ).first()
+    seq = last.seq + 1 if last is not None else 1
+    prev = (
+        chain.next_prev(last.chain_hash)
+        if last is not None
+        else chain.genesis("annotations", run_id)
+    )
+    link = chain.annotation_link(prev, {"seq": seq, "kind": kind, "detail": detail})
+    row = RunAnnotation(
+        run_id=run_id,
+        seq=seq,
+        kind=kind,
+        detail=detail,
+        chain_hash=link,
+        idempotency_key=idempotency_key,
+        request_digest=request_digest,
+    )
+    session.add(row)
+    session.flush()
+    return row
+
+
+def annotations_page(
+    *, session: Session, run_id: str, kind: str | None = None, after_seq: int = 0, limit: int = 1000
+) -> list[RunAnnotation]:
+    query = select(RunAnnotation).where(
+        RunAnnotation.run_id == run_id, RunAnnotation.seq > after_seq
+    )
+    if kind is not None:
+        query = query.where(RunAnnotation.kind == kind)
+    return list(session.scalars(query.order_by(RunAnnotation.seq).limit(limit)))
+
+
+def annotation_for_key(*, session: Session, idempotency_key: str) -> RunAnnotation | None:
+    return session.scalar(
+        select(RunAnnotation).where(RunAnnotation.idempotency_key == idempotency_key)
+    )
 
 
 def events_page(*, session: Session, run_id: str, after_seq: int, limit: int) -> list[RunEvent]:

@@ -36,8 +36,8 @@ TYPE_OF_KIND: dict[str, WebhookEventType] = {
     EventKind.BUDGET_EXHAUSTED: WebhookEventType.BUDGET_EXHAUSTED,
     "superseded": WebhookEventType.RUN_SUPERSEDED,
     "revised": WebhookEventType.RUN_REVISED,
-    "review_requested": WebhookEventType.REVIEW_REQUESTED,
-    "review_resolved": WebhookEventType.REVIEW_RESOLVED,
+    EventKind.REVIEW_REQUESTED: WebhookEventType.REVIEW_REQUESTED,
+    EventKind.REVIEW_RESOLVED: WebhookEventType.REVIEW_RESOLVED,
     "signed_off": WebhookEventType.RUN_SIGNED_OFF,
 }
 
@@ -49,6 +49,8 @@ STATUS_OF_KIND: dict[str, RunStatus] = {
     EventKind.INTEGRITY_FAILED: RunStatus.FAILED,
     EventKind.CANCELLED: RunStatus.CANCELLED,
     EventKind.INTERRUPTED: RunStatus.INTERRUPTED,
+    EventKind.REVIEW_REQUESTED: RunStatus.AWAITING_REVIEW,
+    EventKind.REVIEW_RESOLVED: RunStatus.QUEUED,
 }
 
 

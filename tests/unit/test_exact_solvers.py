@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from app.domain.catalog import scenario
@@ -138,3 +138,81 @@ def test_near_ties_are_judged_alike_by_every_exact_solver() -> None:
     problem = Problem.build(instance, Mode.SUCCESS_FOCUSED)
     loads = {name: workload(get_solver(name).solve(problem).assignment, 2) for name in EXACT}
     assert loads["brute_force"] == loads["dp"] == loads["optimal"]
+
+
+@st.composite
+def pinned_instances(
+    draw: st.DrawFn,
+) -> tuple[Instance, float | None, dict[int, int], frozenset[int]]:
+    instance, cap = draw(instances())
+    n, r = instance.n_tasks, instance.n_robots
+    # Per task: not pinned, or pinned on a robot; piling pins on one robot is how pins
+    # come to break a cap, so that is drawn often too.
+    one_robot = draw(st.one_of(st.none(), st.integers(0, r - 1)))
+    robot = st.integers(0, r - 1) if one_robot is None else st.just(one_robot)
+    choices = draw(st.lists(st.one_of(st.none(), robot), min_size=n, max_size=n))
+    pins = {t: c for t, c in enumerate(choices) if c is not None}
+    off = draw(st.frozensets(st.integers(0, r - 1), max_size=r - 1))
+    # Tight caps too, which pins break most often.
+    cap = draw(st.one_of(st.just(cap), st.sampled_from([0, 0.5, 1])))
+    return instance, cap, pins, off
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(pinned_instances())
+def test_exact_solvers_agree_given_pins(
+    case: tuple[Instance, float | None, dict[int, int], frozenset[int]],
+) -> None:
+    instance, cap, pins, off = case
+    mode = Mode.SUCCESS_FOCUSED if cap is None else Mode.BALANCED
+    try:
+        problem = Problem.build(instance, mode, cap, pinned=pins, unavailable=off)
+    except InfeasibleCapError as exc:
+        if not pins and not off:  # today's problem, today's message
+            assert exc.suggested_max_deviation is None and "raise max_deviation" in exc.message
+            return
+        event(f"infeasible ({exc.field})")
+        # The suggested cap is the least that admits a completion given the pins...
+        suggested = exc.suggested_max_deviation
+        assert suggested is not None and f"{suggested:g}" in exc.message
+        assert exc.field in ("pinned", "max_deviation")
+        if suggested >= 0.001:
+            with pytest.raises(InfeasibleCapError):
+                Problem.build(instance, mode, suggested - 0.001, pinned=pins, unavailable=off)
+        # ... and the exact solvers must agree at that tightest cap too.
+        problem = Problem.build(instance, mode, suggested, pinned=pins, unavailable=off)
+    event("pinned" if pins else "unpinned")
+    event("some unavailable" if off else "all available")
+    results = {}
+    for name in EXACT:
+        assignment = get_solver(name).solve(problem).assignment
+        assert {t: assignment[t] for t in pins} == pins, name
+        assert all(assignment[t] not in off for t in problem.free_tasks), name
+        loads = workload(assignment, instance.n_robots)
+        assert problem.cap.respected_by(loads), name
+        results[name] = (
+            expected_success(instance, assignment),
+            deviation_units(problem.cap.balanced(loads), problem.cap.n_tasks),
+        )
+    reference = results["brute_force"]
+    for name, (es, dev) in results.items():
+        assert es == pytest.approx(reference[0], abs=1e-7), name
+        assert dev == reference[1], f"{name} breaks the deviation tie-break"
+
+
+@pytest.mark.parametrize("mode", list(Mode))
+@pytest.mark.parametrize("prefix", [0, 1, 12, 18, 35, 36])
+def test_pinning_an_optimal_prefix_keeps_the_optimum(mode: Mode, prefix: int) -> None:
+    # Re-planning with the first decisions of the optimum pinned finds the same optimum.
+    instance = scenario("baseline").instance
+    problem = Problem.build(instance, mode)
+    optimal = get_solver("optimal").solve(problem).assignment
+    best = expected_success(instance, optimal)
+    pins = {t: optimal[t] for t in range(prefix)}
+    # The cap stays the same one: with nobody unavailable W does not change with pins.
+    again = Problem.build(instance, mode, problem.cap.max_deviation, pinned=pins)
+    assert again.cap == problem.cap
+    for name in ("optimal", "dp"):
+        assignment = get_solver(name).solve(again).assignment
+        assert assignment[:prefix] == optimal[:prefix]
+        assert expected_success(instance, assignment) == pytest.approx(best, abs=1e-12), name

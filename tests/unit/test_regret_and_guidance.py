@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from app.domain.catalog import scenarios
@@ -70,3 +72,54 @@ def test_guided_prompt_carries_the_choice_and_the_costs() -> None:
     state["view"] = task_view(problem, 0, [0, 0, 0], choice.robot, choice.costs)
     text = user_prompt(decision_context(problem, state))
     assert "Optimizer guidance:" in text and "Success points each choice gives away" in text
+
+
+def _pinned_problem(mode: Mode) -> Problem:
+    # Heavy breaks down after task 17, having taken every third task; light also took task 20.
+    pins = {t: t % 3 for t in range(18)} | {20: 0}
+    return Problem.build(scenarios()["baseline"].instance, mode, pinned=pins, unavailable=[2])
+
+
+def _walk(problem: Problem, oracle: CompletionOracle, pick: Any) -> tuple[list[int], float]:
+    """Decide the queue in order as the graph does: pins take their robot and are already
+    in the loads (initial_loads); free tasks add to the loads."""
+    loads, assignment, regret = list(problem.initial_loads), [], 0.0
+    for t in range(problem.instance.n_tasks):
+        robot = pick(t, loads)
+        regret += oracle.regret(t, loads, robot)
+        if t not in problem.pinned:
+            loads[robot] += 1
+        assignment.append(robot)
+    return assignment, regret
+
+
+@pytest.mark.parametrize("mode", list(Mode))
+def test_the_oracle_answers_on_the_pinned_problem(mode: Mode) -> None:
+    problem = _pinned_problem(mode)
+    oracle = CompletionOracle(problem)
+    best = _optimum(problem)
+
+    def guided(t: int, loads: list[int]) -> int:
+        choice = oracle.guidance(t, loads)
+        assert choice is not None
+        if t in problem.pinned:  # a pin is the only choice, also on the unavailable robot
+            assert choice.robot == problem.pinned[t] and choice.costs[choice.robot] == 0.0
+            assert sum(c is not None for c in choice.costs) == 1
+        else:
+            assert choice.costs[2] is None  # the unavailable robot takes no new task
+        return choice.robot
+
+    assignment, regret = _walk(problem, oracle, guided)
+    assert regret == pytest.approx(0.0, abs=1e-12)
+    assert expected_success(problem.instance, assignment) == pytest.approx(best, abs=1e-12)
+    assert oracle.value(0, problem.initial_loads) == pytest.approx(
+        best * 36 - sum(problem.instance.success[t, r] for t, r in problem.pinned.items())
+    )
+    # Regrets of any allocation that honours the pins telescope to its gap to the optimum.
+    greedy = get_solver("greedy").solve(problem).assignment
+    _, greedy_regret = _walk(problem, oracle, lambda t, _loads: greedy[t])
+    gap = best - expected_success(problem.instance, greedy)
+    assert greedy_regret == pytest.approx(gap, abs=1e-12)
+    # Moving a pinned task or using the unavailable robot is no choice at all.
+    assert oracle.loss(0, problem.initial_loads, 1) is None
+    assert oracle.loss(18, problem.initial_loads, 2) is None

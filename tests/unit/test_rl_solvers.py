@@ -248,3 +248,49 @@ def test_environment_rejects_a_cap_breaking_robot() -> None:
     env.step(0)
     with pytest.raises(ValueError, match="workload cap"):
         env.step(0)
+
+
+def _heavy_down(n_tasks: int, pinned: int) -> Problem:
+    # The first `pinned` tasks done round-robin, then the heavy robot (index 2) breaks down.
+    pins = {t: t % 3 for t in range(pinned)}
+    return Problem.build(small_instance(n_tasks), Mode.BALANCED, pinned=pins, unavailable=[2])
+
+
+@pytest.mark.parametrize("name", ["q_learning", "dqn"])
+@pytest.mark.parametrize(("n_tasks", "pinned"), [(9, 3), (12, 6), (9, 9), (10, 0)])
+def test_learners_honour_pins_and_unavailable_robots(name: str, n_tasks: int, pinned: int) -> None:
+    problem = _heavy_down(n_tasks, pinned)
+    options = {"q_learning": {"episodes": 5}, "dqn": {"timesteps": 100}}[name]
+    assignment = get_solver(name).solve(problem, seed=3, options=options).assignment
+    assert {t: assignment[t] for t in problem.pinned} == dict(problem.pinned)
+    assert all(assignment[t] != 2 for t in problem.free_tasks)
+    assert problem.cap.respected_by(workload(assignment, 3))
+
+
+@pytest.mark.parametrize("name", ["q_learning", "dqn"])
+def test_learners_train_on_the_pinned_problem(name: str) -> None:
+    # 6 free tasks on 2 robots: small enough that a modest training finds the optimum.
+    problem = _heavy_down(12, 6)
+    options = {"q_learning": {"episodes": 4_000}, "dqn": {"timesteps": 4_000}}[name]
+    assignment = get_solver(name).solve(problem, seed=0, options=options).assignment
+    assert expected_success(problem.instance, assignment) == pytest.approx(
+        baseline_optimum(problem), abs=1e-9
+    )
+
+
+def test_environment_starts_from_the_pins() -> None:
+    from app.solvers.allocation_env import AllocationEnv
+    from app.solvers.free_part import FreePart
+
+    part = FreePart.of(_heavy_down(12, 6))
+    assert part.initial_loads == (2, 2) and part.success.shape == (6, 2)
+    env = AllocationEnv(part.success, part.cap, part.initial_loads)
+    env.reset()
+    assert env.loads == [2, 2]
+    for t in range(6):
+        allowed = env.action_masks()
+        assert list(np.flatnonzero(allowed)) == part.cap.feasible_robots(env.loads, 6 - t - 1)
+        env.step(int(np.flatnonzero(allowed)[0]))
+    assert part.cap.respected_by(env.loads) and sum(env.loads) == 10
+    env.reset()
+    assert env.loads == [2, 2]

@@ -95,7 +95,8 @@ async def run_events(
     settings: SettingsDep,
 ) -> StreamingResponse:
     """For supervisors: one `run` event per run event and one `decision` event per
-    finalised decision, in order; the stream ends when the run does. Reconnect with
+    finalised decision, in order; review requests, resolutions and closings are `review`
+    events (same data as `run`); the stream ends when the run does. Reconnect with
     Last-Event-ID to continue where a stream stopped."""
     headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
     return StreamingResponse(

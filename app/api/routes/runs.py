@@ -19,12 +19,14 @@ from app.api.deps import (
 )
 from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey, idempotency_of
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
+from app.api.routes.signoffs import signoff_out
 from app.api.run_examples import RUN_EXAMPLES
 from app.api.run_schemas import (
     DEFAULT_PAGE,
     MAX_PAGE,
     AttemptOut,
     DecisionOut,
+    DecisionReviewOut,
     EventOut,
     Page,
     Progress,
@@ -42,7 +44,7 @@ from app.domain.models import Instance
 from app.domain.serialize import instance_to_dict
 from app.graph.recorder import DecisionRecord
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
-from app.runs import audit, service
+from app.runs import audit, reviews, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
 from app.store.models import Attempt, Run
@@ -94,6 +96,10 @@ def create_run(
             if body.token_budget is not None
             else settings.run_token_budget,
             **scope_of(body),
+            review=reviews.policy_for(
+                body.review.model_dump(mode="json") if body.review is not None else None,
+                problem.instance,
+            ),
         )
     run, replayed = service.create_or_replay_run(
         sessions=runs.sessions,
@@ -182,6 +188,10 @@ def _summary(r: Run) -> RunSummary:
     )
 
 
+def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
+    return None if review is None else DecisionReviewOut.model_validate(review)
+
+
 def _run_out(view: service.RunView, limit: int) -> RunOut:
     run, spec = view.run, view.spec
     instance = spec.problem.instance
@@ -202,6 +212,7 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
                 robot=names[d.robot],
                 success=d.expected_success,
                 fallback=d.fallback,
+                review=_review_out(d.review),
             )
             for d in view.decisions
         ],
@@ -215,6 +226,7 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
         created_at=run.created_at,
         updated_at=run.updated_at,
         finished_at=run.finished_at,
+        signoffs=[signoff_out(s) for s in view.signoffs],
     )
 
 
@@ -349,6 +361,7 @@ def _decision_out(
         regret=d.regret,
         reasoner=who.reasoner,
         why=who.why,  # type: ignore[arg-type]  # one of the StandIn values
+        review=_review_out(d.review),
         attempts=outs,
     )
 

@@ -9,6 +9,7 @@ from langgraph.runtime import Runtime
 from app.graph.context import decision_context
 from app.graph.nodes.common import cancellable
 from app.graph.recorder import AttemptRecord
+from app.graph.review import gate
 from app.graph.state import GraphContext, LTAAState
 from app.graph.validation import validate_text
 from app.reasoners.rules import choose, compose_answer
@@ -62,4 +63,26 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
         "loads_before": list(state["loads"]),
         "balance_before": state["view"]["balance"],
     }
+    if ctx.review is not None:
+        # Last, and after nothing but reads: a resumed graph re-runs this node from its top.
+        def texts() -> tuple[str, str]:
+            if "text_attempt" in text:
+                parsed = accepted.parsed or {}
+                return str(parsed.get("reasoning") or ""), str(parsed.get("tradeoff") or "")
+            return str(text["reasoning"] or ""), str(text["tradeoff"] or "")
+
+        task = ctx.problem.instance.tasks[t]
+        reviewed = gate(
+            ctx.review,
+            dctx,
+            task_id=str(task.id),
+            robot=robot,
+            decision=decision,
+            text=texts,
+        )
+        if reviewed is not None:
+            # Loads, balance, regret and every later decision follow the reviewed robot.
+            robot = reviewed.robot
+            decision["expected_success"] = dctx.success[robot]
+            decision["review"] = reviewed.review
     return {"robot": robot, "fallback": fallback, "decision": decision}

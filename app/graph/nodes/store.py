@@ -46,6 +46,7 @@ def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
             balance_after=state["view"]["balance"],
             severity_after=state["view"]["severity"],
             regret=ctx.regret(t, d["loads_before"], robot) if ctx.regret is not None else None,
+            review=d.get("review"),
         )
     )
     # build_prompt resets the per-task flags; clearing the text scratch keeps the next

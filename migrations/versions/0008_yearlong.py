@@ -1,16 +1,16 @@
 """runs.graph_version (safe upgrades), runs.chain_scheme and run_signatures (signed heads),
 archived_runs (tombstones of archived runs)
 
-Revision ID: 0008
-Revises: 0005
+Revision ID: 0008_yearlong
+Revises: 0008_reviews
 Create Date: 2026-12-01 21:00:00.000000
 """
 from alembic import op
 import sqlalchemy as sa
 
 
-revision = '0008'
-down_revision = '0005'
+revision = '0008_yearlong'
+down_revision = '0008_reviews'
 branch_labels = None
 depends_on = None
 

@@ -1,0 +1,53 @@
+"""Sign-off of completed runs (supervisor)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Response, status
+
+from app.api.deps import RunIdPath, RunsDep, SupervisorDep
+from app.api.idempotency import REPLAYED_HEADER, IdempotencyKey, idempotency_of
+from app.api.responses import BODY, SUPERVISOR, errors
+from app.api.review_schemas import SignOffRequest
+from app.api.run_schemas import SignedHeadsOut, SignOffOut
+from app.runs.signoff import SignOff, sign_off
+
+router = APIRouter(prefix="/runs", tags=["sign-off"])
+
+
+def signoff_out(signed: SignOff) -> SignOffOut:
+    return SignOffOut(
+        signer=signed.signer,
+        at=signed.at,
+        heads=SignedHeadsOut(
+            decisions=signed.heads.get("decisions"), events=signed.heads.get("events")
+        ),
+        statement=signed.statement,
+    )
+
+
+@router.post(
+    "/{run_id}/signoff",
+    status_code=status.HTTP_201_CREATED,
+    response_model=SignOffOut,
+    responses=errors(*SUPERVISOR, *BODY, 404, 409),
+)
+def create_signoff(
+    caller: SupervisorDep,
+    run_id: RunIdPath,
+    body: SignOffRequest,
+    runs: RunsDep,
+    response: Response,
+    idempotency_key: IdempotencyKey,
+) -> SignOffOut:
+    """For supervisors: sign off a completed run whose record verifies. Records the signer's
+    key name, the time, the statement and the heads of the decision and event chains."""
+    signed, replayed = sign_off(
+        sessions=runs.sessions,
+        run_id=run_id,
+        signer=caller.name,
+        statement=body.statement,
+        idempotency=idempotency_of(idempotency_key, body),
+    )
+    if replayed:
+        response.headers[REPLAYED_HEADER] = "true"
+    return signoff_out(signed)

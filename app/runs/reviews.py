@@ -1,0 +1,300 @@
+"""Supervisor reviews of decisions (SPEC 11), as keyword-only functions the worker, the
+routes and the CLI call.
+
+A run whose review policy fires pauses inside the graph (`interrupt()`, app.graph.review);
+the worker then records the review here and moves the run to `awaiting_review`, holding
+no slot. A supervisor's resolution is stored with the run and queues it again in one
+transaction; whichever worker claims it resumes the graph with `Command(resume=...)`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.domain.errors import DomainError
+from app.domain.models import Instance
+from app.domain.review import (
+    Resolution,
+    ReviewAction,
+    ReviewPolicy,
+    ReviewState,
+    check_review_policy,
+)
+from app.runs import lifecycle
+from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
+from app.runs.lifecycle import EventKind, RunStatus
+from app.store import repository as repo
+from app.store.db import transaction
+from app.store.models import Decision, Review, Run, as_utc, utcnow
+
+
+class ReviewConflictError(DomainError):
+    """The review is not pending (resolved, closed, or another task's)."""
+
+    status_code = 409
+    location = "path"
+
+    def __init__(self, run_id: str, task_index: int, why: str) -> None:
+        super().__init__(
+            "task_index",
+            f"run '{run_id}' has no pending review of task index {task_index}: {why}. "
+            "List pending reviews with GET /reviews",
+            code="review_not_pending",
+        )
+
+
+@dataclass(frozen=True)
+class PendingReview:
+    run_id: str
+    task_index: int
+    payload: dict[str, Any]
+    requested_at: datetime
+
+
+def policy_for(review: Mapping[str, Any] | None, instance: Instance) -> dict[str, Any] | None:
+    """A request's review policy as the run spec stores it, checked against the instance
+    (DomainError naming the field for an unknown robot, feature or task id)."""
+    if review is None:
+        return None
+    policy = ReviewPolicy.from_json(review)
+    check_review_policy(policy, instance)
+    return policy.to_json()
+
+
+# -- the worker's side ---------------------------------------------------------------------
+
+
+def pause_for_review(session: Session, run: Run, payload: Mapping[str, Any]) -> None:
+    """Record the review the graph paused for (once per decision, also across restarts)
+    and move the run to awaiting_review, in the caller's transaction."""
+    task_index = int(payload["task_index"])
+    existing = session.scalar(
+        select(Review).where(Review.run_id == run.id, Review.task_index == task_index)
+    )
+    if existing is None:
+        session.add(
+            Review(
+                run_id=run.id,
+                task_index=task_index,
+                state=ReviewState.PENDING.value,
+                proposal=dict(payload),
+            )
+        )
+        session.flush()
+        lifecycle.record_event(
+            session,
+            run_id=run.id,
+            kind=EventKind.REVIEW_REQUESTED,
+            detail={
+                "task_index": task_index,
+                "task_id": payload.get("task_id"),
+                "triggers": list(payload.get("triggers", [])),
+                "proposal": payload.get("proposal", {}).get("robot"),
+            },
+        )
+    lifecycle.move(session, run, RunStatus.AWAITING_REVIEW)
+
+
+def resolution_to_apply(session: Session, run_id: str) -> dict[str, Any] | None:
+    """The resolution a worker resumes the run's graph with: a resolved review whose task
+    has no stored decision yet (so a crash after it was applied never applies it twice)."""
+    row = session.scalar(
+        select(Review)
+        .where(Review.run_id == run_id, Review.state == ReviewState.RESOLVED.value)
+        .where(
+            ~select(Decision.id)
+            .where(Decision.run_id == run_id, Decision.task_index == Review.task_index)
+            .exists()
+        )
+        .order_by(Review.task_index)
+        .limit(1)
+    )
+    return None if row is None else dict(row.resolution or {})
+
+
+def recorded_resolutions(*, session: Session, run_id: str) -> dict[int, Resolution]:
+    """A finished run's applied reviews, by task index, as a replay re-applies them."""
+    out: dict[int, Resolution] = {}
+    for d in repo.decisions(session=session, run_id=run_id):
+        review = d.review
+        if not review:
+            continue
+        out[d.task_index] = Resolution(
+            action=ReviewAction(review["action"]),
+            reviewer=str(review["reviewer"]),
+            at=str(review["at"]),
+            triggers=tuple(review.get("triggers") or ()),
+            robot=d.robot_name if review["action"] == ReviewAction.OVERRIDE else None,
+            reason=review.get("reason"),
+        )
+    return out
+
+
+def close_pending(session: Session, run_id: str, why: str) -> None:
+    """Close the run's pending review (a cancel or a revision), with its event."""
+    closed = session.execute(
+        update(Review)
+        .where(Review.run_id == run_id, Review.state == ReviewState.PENDING.value)
+        .values(state=ReviewState.CLOSED.value, resolved_at=utcnow())
+        .returning(Review.task_index)
+        .execution_options(synchronize_session=False)
+    ).all()
+    for (task_index,) in closed:
+        lifecycle.record_event(
+            session,
+            run_id=run_id,
+            kind=EventKind.REVIEW_CLOSED,
+            detail={"task_index": task_index, "reason": why},
+        )
+
+
+# -- the supervisor's side -----------------------------------------------------------------
+
+
+def pending_reviews(*, sessions: sessionmaker[Session], limit: int = 500) -> list[PendingReview]:
+    """Oldest first."""
+    with sessions() as session:
+        rows = session.scalars(
+            select(Review)
+            .where(Review.state == ReviewState.PENDING.value)
+            .order_by(Review.requested_at, Review.id)
+            .limit(limit)
+        )
+        return [
+            PendingReview(
+                run_id=r.run_id,
+                task_index=r.task_index,
+                payload=dict(r.proposal),
+                requested_at=as_utc(r.requested_at),
+            )
+            for r in rows
+        ]
+
+
+@dataclass(frozen=True)
+class Resolved:
+    run_id: str
+    task_index: int
+    resolution: dict[str, Any]
+    waited_s: float  # from the request to this resolution
+    replayed: bool = False  # an Idempotency-Key retry of the resolution that won
+
+
+def resolve(
+    *,
+    sessions: sessionmaker[Session],
+    run_id: str,
+    task_index: int,
+    action: ReviewAction,
+    robot: str | None,
+    reason: str | None,
+    reviewer: str,
+    idempotency: Idempotency | None = None,
+) -> Resolved:
+    """Store the resolution and queue the run again, in one transaction: of two concurrent
+    resolutions the conditional UPDATE lets exactly one through (the other: 409). A retry
+    with the Idempotency-Key of the resolution that won gets its answer again."""
+    reason = (reason or "").strip() or None
+    if action is ReviewAction.OVERRIDE and reason is None:
+        raise DomainError("reason", "an override needs a reason", code="missing")
+    if action is ReviewAction.OVERRIDE and robot is None:
+        raise DomainError("robot", "an override names the robot to use", code="missing")
+    if action is ReviewAction.APPROVE and robot is not None:
+        raise DomainError(
+            "robot", "an approval takes the proposed robot; send action 'override'", code="invalid"
+        )
+    with sessions() as session:
+        if repo.get_run(session=session, run_id=run_id) is None:
+            raise RunNotFoundError(run_id)
+        review = session.scalar(
+            select(Review).where(Review.run_id == run_id, Review.task_index == task_index)
+        )
+        if review is None:
+            raise ReviewConflictError(run_id, task_index, "the run never paused for it")
+        earlier = _retried(review, idempotency)
+        if earlier is not None:
+            return earlier
+        if review.state != ReviewState.PENDING:
+            raise ReviewConflictError(run_id, task_index, f"it is {review.state}")
+        payload = dict(review.proposal)
+    if robot is not None:
+        alternatives = {a["robot"]: a for a in payload["alternatives"]}
+        if robot not in alternatives:
+            raise DomainError(
+                "robot",
+                f"unknown robot '{robot}'; the run's robots are: {', '.join(alternatives)}",
+                code="unknown_robot",
+            )
+        if not alternatives[robot]["cap_feasible"]:
+            raise DomainError(
+                "robot",
+                f"robot '{robot}' cannot take task index {task_index}: the workload cap "
+                "could no longer be met",
+                code="cap_infeasible",
+            )
+    now = utcnow()
+    resolution = Resolution(
+        action=action,
+        reviewer=reviewer,
+        at=now.isoformat(),
+        triggers=tuple(payload.get("triggers", [])),
+        robot=robot,
+        reason=reason,
+    ).to_json()
+    with transaction(sessions) as session:
+        # The first statement writes: on SQLite it takes the write lock at once (a stale read
+        # snapshot cannot be upgraded), on PostgreSQL it locks the row; either way the
+        # state check and the write are one step, so exactly one resolution wins.
+        won = session.execute(
+            update(Review)
+            .where(
+                Review.run_id == run_id,
+                Review.task_index == task_index,
+                Review.state == ReviewState.PENDING.value,
+            )
+            .values(
+                state=ReviewState.RESOLVED.value,
+                resolution=resolution,
+                resolved_at=now,
+                idempotency_key=idempotency.key if idempotency else None,
+                request_digest=idempotency.digest if idempotency else None,
+            )
+            .returning(Review.requested_at)
+            .execution_options(synchronize_session=False)
+        ).first()
+        if won is None:
+            raise ReviewConflictError(run_id, task_index, "another resolution came first")
+        if not lifecycle.move_where(
+            session, run_id=run_id, current=RunStatus.AWAITING_REVIEW, to=RunStatus.QUEUED
+        ):
+            raise RunStateConflictError(run_id, "not awaiting review", "resolve a review", "")
+        lifecycle.record_event(
+            session,
+            run_id=run_id,
+            kind=EventKind.REVIEW_RESOLVED,
+            detail={"task_index": task_index, **resolution},
+        )
+    waited = (now - as_utc(won.requested_at)).total_seconds()
+    return Resolved(run_id=run_id, task_index=task_index, resolution=resolution, waited_s=waited)
+
+
+def _retried(review: Review, idempotency: Idempotency | None) -> Resolved | None:
+    """The stored answer, if this request repeats the one that resolved the review."""
+    if idempotency is None or review.idempotency_key != idempotency.key:
+        return None
+    if review.request_digest != idempotency.digest:
+        raise IdempotencyKeyReusedError(review.run_id)
+    return Resolved(
+        run_id=review.run_id,
+        task_index=review.task_index,
+        resolution=dict(review.resolution or {}),
+        waited_s=0.0,
+        replayed=True,
+    )
