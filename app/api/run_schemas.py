@@ -51,6 +51,8 @@ REPLAY_PAIRING: list[dict[str, Any]] = [
         "then": present("replay_of"),
     },
 ]
+
+
 class ReviewPolicyIn(BaseModel):
     """Which decisions wait for a supervisor (SPEC 11). A decision needs review when any
     listed condition holds; the run pauses before the decision is stored."""
@@ -201,6 +203,8 @@ class Page(BaseModel):
     offset: int = Field(description="Index (in queue order) of the first item returned")
     limit: int = Field(description="At most this many items returned")
     total: int = Field(description="Items in the whole list")
+
+
 class DecisionReviewOut(BaseModel):
     """A supervisor's review of a decision (SPEC 11); covered by the decision's chain hash."""
 

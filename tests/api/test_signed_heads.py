@@ -4,6 +4,7 @@ rewritten with every hash recomputed by the public chain functions fails on its 
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import time
@@ -203,3 +204,19 @@ def test_no_key_means_no_signature_and_a_404_for_the_public_key(client: TestClie
     run_id = _completed(client)
     assert client.get(f"/runs/{run_id}/trace/verify").json()["signature"] is None
     assert client.get("/audit/public-key").status_code == 404
+
+
+def test_a_sign_off_is_signed_too(settings: Settings, tmp_path: Path) -> None:
+    signed = _signed_settings(settings, tmp_path)
+    with TestClient(create_app(signed)) as client:
+        run_id = _completed(client)
+        answer = client.post(f"/runs/{run_id}/signoff", json={"statement": "checked on site"})
+        assert answer.status_code == 201, answer.text
+        verify = client.get(f"/runs/{run_id}/trace/verify").json()
+        export = _export(client, run_id, tmp_path / "signed-off.jsonl")
+        pem = _public_key_file(client, tmp_path / "public.pem")
+    assert verify["ok"] is True
+    assert verify["signature"]["reason"] == "signoff" and verify["signature"]["valid"] is True
+    header = json.loads(export.read_text().splitlines()[0])
+    assert [s["reason"] for s in header["signatures"]] == ["completed", "signoff"]
+    assert _offline(export, pem).returncode == 0
