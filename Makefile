@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 export LTAA_DATA_DIR ?= ./data
 
-.PHONY: run test lint bench bench-llm migrate install clean
+.PHONY: run test lint bench bench-llm screenshots bench-console migrate install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,14 @@ test: lint
 
 bench: install
 	$(BIN)/ltaa bench
+
+# The console in Debian's Chromium: README screenshots (docs/img/console_*.png), and the
+# 10,000-task run page's time to usable (its own section of docs/benchmarks.md).
+screenshots: install
+	$(BIN)/python -m benchmarks.console screenshots
+
+bench-console: install
+	$(BIN)/python -m benchmarks.console bench
 
 # Calls the configured LLM (LTAA_OPENAI_* or the Anthropic key): ~1,700 decisions, and
 # what the server charges for them. Options: make bench-llm ARGS="--reasoner anthropic".

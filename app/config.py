@@ -114,6 +114,9 @@ class Settings(BaseSettings):
     # Last-Event-ID and misses nothing. (A shutdown ends every stream at once.)
     events_max_stream_s: float = Field(300.0, gt=0)
 
+    # A supervisor console session (app.console) ends this long after sign-in: one shift.
+    console_session_s: float = Field(8 * 3600.0, gt=0, le=30 * 24 * 3600.0)
+
     # -- webhooks (docs/webhooks.md) -----------------------------------------------------
     # Fernet keys (comma-separated; the first encrypts, all decrypt) protecting webhook
     # secrets at rest. Unset: a key file generated in data_dir on first use (one process);

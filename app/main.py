@@ -29,12 +29,14 @@ from app.api.routes import (
     health,
     metrics,
     reviews,
+    revisions,
     runs,
     signoffs,
     webhooks,
 )
 from app.api.routes.webhooks import WebhooksContext
 from app.config import Settings, get_settings
+from app.console import install as install_console
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
 from app.runs.factory import make_worker
@@ -164,6 +166,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         catalog,
         allocate,
         runs,
+        revisions,
         signoffs,
         reviews,
         events,
@@ -174,4 +177,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     ):
         app.include_router(module.router)
     install_openapi(app, open_access=keyring.open)
+    install_console(app, keyring=keyring, settings=settings)
     return app

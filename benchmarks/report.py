@@ -18,6 +18,7 @@ SECTIONS = [
     "benchmarks.paper",
     "benchmarks.load",
     "benchmarks.llm_scope",
+    "benchmarks.adaptation",
 ]
 
 

@@ -71,6 +71,33 @@ check '[e["kind"] for e in d["events"]][-1] == "completed"' "completed event"
 [ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace/verify"; check 'd["ok"] is True and d["decisions"] == 36 and d["broken"] is None' "trace hash chains verify"
 [ "$(call GET "/runs/$run_id/trace?format=jsonl" '' "${SUPERVISOR[@]}")" = 200 ] && python3 -c "import json; t=[json.loads(l)['type'] for l in open('$TMP/out')]; assert t[0] == 'run' and t[-1] == 'end' and t.count('decision') == 36" || fail "jsonl trace: $(head -c 300 "$TMP/out")"
 [ "$(call POST "/runs/$run_id/resume" '' "${SUPERVISOR[@]}")" = 409 ] || fail "resume completed run should be 409"
+# Living plans: execution reports (forward only) on the completed run, then a revision
+# with the heavy robot unavailable and tasks 0-17 pinned; the parent stays completed.
+[ "$(call GET "/runs/$run_id" '' "${CLIENT[@]}")" = 200 ] || fail "GET /runs/$run_id"
+first_task=$(python3 -c "import json; print(json.dumps(json.load(open('$TMP/out'))['assignments'][0]['task_id']))")
+[ "$(call POST "/runs/$run_id/execution" "{\"updates\":[{\"task_id\":$first_task,\"state\":\"done\"}]}" "${CLIENT[@]}")" = 200 ] || fail "execution report -> $(head -c 300 "$TMP/out")"
+check "d['states'] == {str($first_task): 'done'}" "execution report stored"
+[ "$(call POST "/runs/$run_id/execution" "{\"updates\":[{\"task_id\":$first_task,\"state\":\"started\"}]}" "${CLIENT[@]}")" = 409 ] || fail "a state going backwards should be 409"
+code=$(call POST "/runs/$run_id/revisions" '{"changes":[{"type":"robot_unavailable","robot":"heavy"}],"pin":{"through_task_index":17},"reason":"smoke: heavy robot fault"}' "${CLIENT[@]}")
+[ "$code" = 202 ] || fail "POST /runs/$run_id/revisions -> $code $(head -c 300 "$TMP/out")"
+revision_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
+for _ in $(seq 1 300); do
+  [ "$(call GET "/runs/$revision_id" '' "${CLIENT[@]}")" = 200 ] || fail "GET /runs/$revision_id"
+  status=$(python3 -c "import json; print(json.load(open('$TMP/out'))['status'])")
+  case "$status" in completed) break;; failed|cancelled) fail "revision ended $status";; esac
+  sleep 0.2
+done
+[ "$status" = completed ] || fail "revision did not complete in time (status $status)"
+check 'd["revision_of"] and sum(a["pinned"] for a in d["assignments"]) == 18 and all(a["robot"] != "heavy" for a in d["assignments"] if not a["pinned"])' "revision keeps the pins, avoids heavy"
+[ "$(call GET "/runs/$run_id" '' "${CLIENT[@]}")" = 200 ] || fail "GET parent"
+check "d['status'] == 'completed' and d['superseded_by'] == '$revision_id'" "completed parent stays completed"
+[ "$(call GET "/runs/$revision_id/diff" '' "${CLIENT[@]}")" = 200 ] || fail "diff"
+check 'd["fleet_changes"] == [{"robot": "heavy", "change": "unavailable"}]' "diff names the fleet change"
+[ "$(call GET "/runs/$revision_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "revision verify"
+check "d['ok'] is True and d['parent']['run_id'] == '$run_id' and d['parent']['ok']" "revision verifies with its parent link"
+[ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "parent verify"
+check 'd["ok"] is True' "completed parent still verifies after reports and a revision"
+echo "smoke: living plans ok (execution reports, revision $revision_id, diff, verify)"
 # Webhooks: create (secret shown once), list, refuse a private target, delete. The event
 # subscribed to is never emitted by a smoke run, so nothing is sent anywhere.
 hook_url="https://hooks.example.com/ltaa-smoke-$$"
@@ -109,4 +136,11 @@ if [ -n "${SMOKE_SUPERVISOR_KEY:-}" ]; then
   [ "$(call GET "/runs/$run_id/trace" '' "${CLIENT[@]}")" = 403 ] || fail "client key on a trace should be 403"
   echo "smoke: access control ok (401 without a key, 403 for a client on the trace)"
 fi
+# The supervisor console's sign-in page: HTML from the same server, no key needed to see it.
+code=$(curl -sS -o "$TMP/out" -D "$TMP/headers" -w '%{http_code}' "$BASE_URL/console/login")
+[ "$code" = 200 ] || fail "GET /console/login -> $code"
+grep -qi '^content-type: text/html' "$TMP/headers" || fail "/console/login is not HTML"
+grep -q 'name="api_key"' "$TMP/out" || grep -q 'Access control is off' "$TMP/out" \
+  || fail "/console/login has no api_key field"
+echo "smoke: console sign-in page ok"
 echo "smoke: all checks passed"

@@ -9,7 +9,13 @@ from typing import Any
 from fastapi.responses import StreamingResponse
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.run_schemas import BrokenLinkOut, ChainHeadsOut, SignatureOut, TraceVerifyOut
+from app.api.run_schemas import (
+    BrokenLinkOut,
+    ChainHeadsOut,
+    ParentLinkOut,
+    SignatureOut,
+    TraceVerifyOut,
+)
 from app.runs import audit
 
 JSONL = "application/x-ndjson"
@@ -69,6 +75,13 @@ def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
             problem=report.signature.problem,
         ),
         annotations_head=report.annotations.head,
+        parent=None
+        if report.parent_link is None
+        else ParentLinkOut(
+            run_id=report.parent_link.parent,
+            ok=report.parent_link.ok,
+            reason=report.parent_link.reason,
+        ),
         broken=None
         if broken is None
         else BrokenLinkOut(

@@ -66,6 +66,12 @@ def _digest(key: str) -> bytes:
     return hashlib.sha256(key.encode("utf-8")).digest()
 
 
+def _session_fingerprint(digest: bytes) -> str:
+    # Derived from the stored digest under its own label, so a console session row holds
+    # neither the key nor the digest the API compares keys with.
+    return hashlib.sha256(b"ltaa console session\0" + digest).hexdigest()
+
+
 class KeyRing:
     def __init__(self, keys: dict[str, Role], names: dict[str, str] | None = None) -> None:
         """`names`: fingerprint -> name; a key not named there is called by its fingerprint."""
@@ -108,6 +114,21 @@ class KeyRing:
     def role_of(self, presented: str) -> Role | None:
         found = self.identify(presented)
         return None if found is None else found[0]
+
+    def fingerprint_of(self, presented: str) -> tuple[Role, str] | None:
+        """The role of a presented key and a fingerprint to store with a console session
+        (never the key), or None for an unknown key."""
+        role = self.role_of(presented)
+        return None if role is None else (role, _session_fingerprint(_digest(presented)))
+
+    def role_of_fingerprint(self, fingerprint: str) -> Role | None:
+        """The role of the configured key a session fingerprint was made from, or None once
+        that key is no longer configured (which ends the session)."""
+        found: Role | None = None
+        for digest, role, _name in self._entries:
+            if hmac.compare_digest(_session_fingerprint(digest), fingerprint):
+                found = role
+        return found
 
     def summary(self) -> str:
         counts = {role: sum(1 for _, r, _ in self._entries if r is role) for role in Role}

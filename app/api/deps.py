@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Path, Request
+from fastapi.concurrency import run_in_threadpool
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -136,7 +138,28 @@ async def require_supervisor(caller: Annotated[Caller, Depends(authenticate)]) -
     return _check_role(caller, Role.SUPERVISOR)
 
 
+# The supervisor console's sign-in (app.console, installed by app.main) as a hook: it reads
+# the request's session cookie and answers with the signed-in caller or None. Only the
+# read-only event stream consults it, because EventSource cannot send headers; every
+# other endpoint of the JSON API takes API keys only, so no cross-site form can reach one.
+StreamCookieAuth = Callable[[Request], Caller | None]
+
+
+async def require_stream_supervisor(
+    request: Request,
+    bearer: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+    header_key: Annotated[str | None, Depends(_api_key_header)],
+) -> Caller:
+    hook: StreamCookieAuth | None = getattr(request.app.state, "stream_cookie_auth", None)
+    if hook is not None and not bearer and not header_key:
+        caller = await run_in_threadpool(hook, request)  # a database read
+        if caller is not None:
+            return _check_role(caller, Role.SUPERVISOR)
+    return _check_role(await authenticate(request, bearer, header_key), Role.SUPERVISOR)
+
+
 # Clients allocate and create and read runs; supervisors may also read traces, live events
 # and metrics, and resume or cancel runs.
 ClientDep = Annotated[Caller, Depends(require_client)]
 SupervisorDep = Annotated[Caller, Depends(require_supervisor)]
+StreamSupervisorDep = Annotated[Caller, Depends(require_stream_supervisor)]

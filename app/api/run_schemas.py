@@ -218,6 +218,12 @@ class DecisionReviewOut(BaseModel):
     )
 
 
+class ExecutionStateOut(BaseModel):
+    state: Literal["started", "done", "failed"]
+    started_at: Timestamp | None
+    ended_at: Timestamp | None
+
+
 class RunAssignment(BaseModel):
     task_index: int
     task_id: int | str
@@ -226,6 +232,10 @@ class RunAssignment(BaseModel):
     success: float
     fallback: bool
     review: DecisionReviewOut | None = None
+    pinned: bool = Field(False, description="Revisions: kept from the parent (SPEC 10)")
+    execution: ExecutionStateOut | None = Field(
+        None, description="The latest execution report on this task, if any"
+    )
 
 
 class SignedHeadsOut(BaseModel):
@@ -267,6 +277,9 @@ class RunOut(BaseModel):
         "before versions were recorded)"
     )
     error: str | None
+    revision_of: str | None = Field(None, description="The run this one revises")
+    revision: int = Field(0, description="Place in the lineage: 0 for a root run")
+    superseded_by: str | None = Field(None, description="The revision that replaced this run")
     created_at: Timestamp
     updated_at: Timestamp
     finished_at: Timestamp | None
@@ -403,6 +416,17 @@ class SignatureOut(BaseModel):
     problem: str | None = Field(description="Why not, in plain language; null when valid")
 
 
+class ParentLinkOut(BaseModel):
+    """A revision's link to the run it revised (SPEC 10)."""
+
+    run_id: str = Field(description="The parent run")
+    ok: bool = Field(
+        description="The revision's chains start from the parent's heads and its change set, "
+        "the parent names this run as superseded_by, and still holds those heads"
+    )
+    reason: str
+
+
 class TraceVerifyOut(BaseModel):
     """The result of recomputing a run's three hash chains (decisions, events, and the
     annotations recorded after it finished) from its rows."""
@@ -422,6 +446,9 @@ class TraceVerifyOut(BaseModel):
         default=True,
         description="Every sign-off's heads are still the heads of the decision and event "
         "chains, and both verify (true when there is no sign-off)",
+    )
+    parent: ParentLinkOut | None = Field(
+        default=None, description="Revisions: the checked link to the parent run"
     )
     unchained: int = Field(
         description="Rows with no chain hash (written before tamper evidence existed); "

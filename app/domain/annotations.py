@@ -12,3 +12,5 @@ from enum import StrEnum
 
 class AnnotationKind(StrEnum):
     SIGNOFF = "signoff"
+    EXECUTION_REPORTED = "execution_reported"
+    SUPERSEDED_BY = "superseded_by"

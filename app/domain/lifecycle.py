@@ -1,7 +1,7 @@
 """A run's life: its statuses, the events of its record, and which moves are allowed.
 
 Pure vocabulary and rules; `app.runs.lifecycle` is the only code that applies them to the
-database. A new status (issues to come: `awaiting_review`, `blocked`, `superseded`) is a
+database. A new status (issues to come: `awaiting_review`, `blocked`) is a
 member here, a row in `STATUS_RULES` and its rows in `TRANSITIONS`; nothing else needs
 hunting down.
 """
@@ -24,6 +24,8 @@ class RunStatus(StrEnum):
     BLOCKED = "blocked"
     # Paused before a decision that its review policy sends to a supervisor (SPEC 11).
     AWAITING_REVIEW = "awaiting_review"
+    # Replaced by a revision before it finished (SPEC 10): terminal, never claimed again.
+    SUPERSEDED = "superseded"
 
 
 class EventKind(StrEnum):
@@ -42,6 +44,11 @@ class EventKind(StrEnum):
     REVIEW_REQUESTED = "review_requested"
     REVIEW_RESOLVED = "review_resolved"
     REVIEW_CLOSED = "review_closed"
+    # SPEC 10: a revision's first event, and its unfinished parent's last.
+    REVISED = "revised"
+    SUPERSEDED = "superseded"
+    # Execution reports while the run is unfinished (after completion: annotations).
+    EXECUTION_REPORTED = "execution_reported"
 
 
 @dataclass(frozen=True)
@@ -61,6 +68,7 @@ STATUS_RULES: dict[RunStatus, StatusRule] = {
     RunStatus.BLOCKED: StatusRule(finished=False, claimable=False, active=False),
     # Nobody holds or claims it: it waits for a resolution, which queues it again.
     RunStatus.AWAITING_REVIEW: StatusRule(finished=False, claimable=False, active=False),
+    RunStatus.SUPERSEDED: StatusRule(finished=True, claimable=False, active=False),
 }
 
 FINISHED: frozenset[RunStatus] = frozenset(s for s, r in STATUS_RULES.items() if r.finished)
@@ -88,6 +96,10 @@ TRANSITIONS: dict[tuple[RunStatus, RunStatus], str] = {
     (RunStatus.RUNNING, RunStatus.AWAITING_REVIEW): "a decision needs a supervisor's review",
     (RunStatus.AWAITING_REVIEW, RunStatus.QUEUED): "the review was resolved",
     (RunStatus.AWAITING_REVIEW, RunStatus.CANCELLED): "cancelled while awaiting review",
+    (RunStatus.QUEUED, RunStatus.SUPERSEDED): "revised before it ran",
+    (RunStatus.RUNNING, RunStatus.SUPERSEDED): "revised while running (its writes are fenced)",
+    (RunStatus.INTERRUPTED, RunStatus.SUPERSEDED): "revised while interrupted",
+    (RunStatus.AWAITING_REVIEW, RunStatus.SUPERSEDED): "revised while awaiting review",
 }
 
 

@@ -30,7 +30,7 @@ def decision_context(
         robot_labels=tuple(r.display for r in inst.robots),
         success=tuple(float(x) for x in inst.success[t]),
         loads=loads,
-        target=inst.target_load,
+        target=problem.target,
         feasible=tuple(view["feasible"]),
         phase=phase,
         mode=problem.mode,

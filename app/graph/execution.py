@@ -56,7 +56,11 @@ def execute(
     reasoners) however the execution ends. RunCancelled and reasoner errors propagate.
     """
     try:
-        result = run_graph(graph, context, thread_id, resume=resume, resume_with=resume_with)
+        result = (
+            run_graph(graph, context, thread_id, resume=resume, resume_with=resume_with)
+            if context.problem.free_tasks  # every task pinned: nothing for the graph to decide
+            else {}
+        )
     finally:
         close_reasoner(context.reasoner)
     decisions = context.recorder.decisions()
@@ -65,7 +69,10 @@ def execute(
         return Execution(
             decisions=decisions, usage=context.recorder.usage(), paused=dict(interrupts[0].value)
         )
-    n_tasks = context.problem.instance.n_tasks
-    if [d.task_index for d in decisions] != list(range(n_tasks)):
-        raise GraphEndedEarly(len(decisions), n_tasks)
+    problem = context.problem
+    # Pins are decided before the graph runs (a revision's own rows) or not recorded at all
+    # (/allocate `pinned`): the graph is complete when every free task has its decision.
+    decided = [d.task_index for d in decisions if d.task_index not in problem.pinned]
+    if decided != list(problem.free_tasks):
+        raise GraphEndedEarly(len(decided), len(problem.free_tasks))
     return Execution(decisions=decisions, usage=context.recorder.usage())

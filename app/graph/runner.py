@@ -65,7 +65,7 @@ def run_graph(
     A thread paused at an interrupt is resumed with `Command(resume=resume_with)`; without
     a value it is left paused, not re-run (invoke(None) would re-run the paused node).
     """
-    n = context.problem.instance.n_tasks
+    n = len(context.problem.free_tasks)  # pinned tasks take no super-step
     config = thread_config(thread_id, n, context.max_retries)
     exists = has_checkpoint(graph, thread_id)
     if not resume and exists:

@@ -9,6 +9,7 @@ derived together share one channel (`view`).
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypedDict
@@ -83,12 +84,15 @@ class GraphContext:
 
 
 def initial_state(problem: Problem) -> dict[str, Any]:
-    loads = [0] * problem.instance.n_robots
+    """The state before the first free task: with pins (a revision, or /allocate `pinned`)
+    the graph decides only the unpinned tasks, starting from the loads the pins make."""
+    loads = list(problem.initial_loads)
+    first = next_task(problem, -1)
     return {
-        "task_index": 0,
-        "done": False,
+        "task_index": first,
+        "done": first >= problem.instance.n_tasks,
         "loads": loads,
-        "view": task_view(problem, 0, loads, None),
+        "view": task_view(problem, min(first, problem.instance.n_tasks - 1), loads, None),
         "attempt": 0,
         "tier": 0,
         "accepted": False,
@@ -105,21 +109,37 @@ def task_view(
     guided_robot: int | None,
     guided_costs: Sequence[float | None] | None = None,
 ) -> TaskView:
-    inst = problem.instance
-    n, target = inst.n_tasks, inst.target_load
-    phase = detect_phase(task_index, n)
+    n = problem.instance.n_tasks
+    # SPEC 10: p = (pins + tasks decided so far) / tasks; with no pins, task_index / n.
+    allocated = problem.allocated_before(task_index)
+    phase = detect_phase(allocated, n)
     weights = strategic_weights(problem.mode, phase)
-    remaining_after = max(0, n - task_index - 1)
     return {
         "phase": phase.value,
-        "progress": balance_urgency(task_index, n),
-        "balance": balance_score(loads, target),
-        "severity": severity(loads, target).value,
+        "progress": balance_urgency(allocated, n),
+        "balance": balance_of(problem, loads),
+        "severity": severity_of(problem, loads),
         "weights": [weights.success, weights.balance],
-        "feasible": problem.cap.feasible_robots(loads, remaining_after),
+        "feasible": problem.cap.feasible_robots(loads, problem.remaining_after(task_index)),
         "guided_robot": guided_robot,
         "guided_costs": list(guided_costs) if guided_costs is not None else None,
     }
+
+
+def next_task(problem: Problem, after: int) -> int:
+    """The next task the graph decides after queue position `after` (n_tasks: none left)."""
+    for t in problem.free_tasks[bisect.bisect_right(problem.free_tasks, after) :]:
+        return t
+    return problem.instance.n_tasks
+
+
+def balance_of(problem: Problem, loads: Sequence[int]) -> float:
+    """Balance score over the robots in the balance (unavailable ones stand outside it)."""
+    return balance_score(problem.cap.balanced(loads), problem.target)
+
+
+def severity_of(problem: Problem, loads: Sequence[int]) -> str:
+    return severity(problem.cap.balanced(loads), problem.target).value
 
 
 class Node(Protocol):

@@ -67,12 +67,17 @@ def _annotation_pages(
 def _decision_pages(
     sessions: sessionmaker[Session],
     run_id: str,
+    pinned: bool | None = None,
 ) -> Iterator[list[tuple[Decision, list[Attempt]]]]:
     after = -1
     while True:
         with sessions() as session:
             page = repo.decisions_page(
-                session=session, run_id=run_id, after_task=after, limit=DECISIONS_PER_PAGE
+                session=session,
+                run_id=run_id,
+                after_task=after,
+                limit=DECISIONS_PER_PAGE,
+                pinned=pinned,
             )
             if not page:
                 return
@@ -99,6 +104,15 @@ class ChainCheckResult:
 
 
 @dataclass(frozen=True)
+class ParentLink:
+    """How a revision hangs off its parent (SPEC 10): checked by trace/verify."""
+
+    parent: str
+    ok: bool
+    reason: str
+
+
+@dataclass(frozen=True)
 class ChainReport:
     decisions: ChainCheckResult
     events: ChainCheckResult
@@ -106,13 +120,15 @@ class ChainReport:
     # Every sign-off's heads are still the heads of the decision and event chains, and
     # those chains verify: what was signed is what the record says now.
     signoffs_ok: bool = True
+    parent_link: ParentLink | None = None
     chain_scheme: str = chain.SCHEME
     signature: SignatureCheck | None = None  # the newest signature's check, if any
 
     @property
     def ok(self) -> bool:
         signed_ok = self.signature is None or self.signature.valid
-        return self.first_break is None and signed_ok
+        parent_ok = self.parent_link is None or self.parent_link.ok
+        return self.first_break is None and parent_ok and signed_ok
 
     @property
     def first_break(self) -> chain.Break | None:
@@ -136,6 +152,7 @@ def _geneses(run: Run) -> dict[str, str]:
             request=run.request,
             mode=run.mode,
             max_deviation=run.max_deviation,
+            anchor=run.chain_anchor,
         )
         for table in ("decisions", "events")
     }
@@ -148,24 +165,42 @@ def verify_trace(
     its newest signature with the public keys, and report the first broken link."""
     with sessions() as session:
         run = _run(session, run_id)
-        status, n_tasks = run.status, run.n_tasks
+        status, n_tasks, anchor = run.status, run.n_tasks, run.chain_anchor
         geneses = _geneses(run)
         scheme = run.chain_scheme or chain.SCHEME
         signature_row = repo.latest_signature(session=session, run_id=run_id)
+        revision_of = run.revision_of
+        order: list[int] | None = None
+        if revision_of is not None:
+            # Pins first, then the graph's decisions: the order they were chained in.
+            pins = repo.decided_indexes(session=session, run_id=run_id, pinned=True)
+            rest = repo.decided_indexes(session=session, run_id=run_id, pinned=False)
+            order = repo.revision_chain_order(pins, rest)
 
     decisions = chain.ChainCheck(
-        "decisions", run_id, first_key=0, genesis_link=geneses["decisions"]
+        "decisions",
+        run_id,
+        first_key=0,
+        anchor=anchor,
+        order=order,
+        genesis_link=geneses["decisions"],
     )
-    for page in _decision_pages(sessions, run_id):
-        for d, attempts in page:
+    passes: tuple[bool | None, ...] = (None,) if revision_of is None else (True, False)
+    for pinned in passes:
+        for page in _decision_pages(sessions, run_id, pinned):
+            for d, attempts in page:
 
-            def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:
-                digest = chain.attempts_digest(_columns(a, chain.ATTEMPT_FIELDS) for a in attempts)
-                return chain.decision_link(prev, _columns(d, chain.DECISION_FIELDS), digest)
+                def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:
+                    digest = chain.attempts_digest(
+                        _columns(a, chain.ATTEMPT_FIELDS) for a in attempts
+                    )
+                    return chain.decision_link(prev, chain.decision_columns(d), digest)
 
-            decisions.feed(d.task_index, d.chain_hash, link)
+                decisions.feed(d.task_index, d.chain_hash, link)
 
-    events = chain.ChainCheck("events", run_id, first_key=1, genesis_link=geneses["events"])
+    events = chain.ChainCheck(
+        "events", run_id, first_key=1, anchor=anchor, genesis_link=geneses["events"]
+    )
     last_kind = None
     for event_page in _event_pages(sessions, run_id):
         for e in event_page:
@@ -178,7 +213,10 @@ def verify_trace(
 
     # The newest rows of a chain leave no gap when deleted; a completed run says where its
     # chains end (n_tasks decisions, and its last event is the one that completed it).
-    if status == RunStatus.COMPLETED and decisions.last_key != n_tasks - 1:
+    complete = (
+        decisions.count == n_tasks if order is not None else decisions.last_key == n_tasks - 1
+    )
+    if status == RunStatus.COMPLETED and not complete:
         last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
         decisions.missing_tail(
             f"the run completed with {n_tasks} tasks but its decisions "
@@ -217,9 +255,59 @@ def verify_trace(
         events=_result(events),
         annotations=_result(annotations),
         signoffs_ok=all(chains_intact and heads == heads_now for heads in signed),
+        parent_link=None
+        if revision_of is None
+        else check_parent_link(sessions=sessions, run_id=run_id, parent_id=revision_of),
         chain_scheme=scheme,
         signature=signature,
     )
+
+
+def check_parent_link(
+    *, sessions: sessionmaker[Session], run_id: str, parent_id: str
+) -> ParentLink:
+    """A revision's first event is `revised`, its chains start from the digest of that
+    event's link (the parent's heads and the change set), the parent names it as
+    `superseded_by`, and the parent's chains still hold the heads it was revised at."""
+
+    def bad(reason: str) -> ParentLink:
+        return ParentLink(parent=parent_id, ok=False, reason=reason)
+
+    with sessions() as session:
+        run = _run(session, run_id)
+        first = repo.events_page(session=session, run_id=run_id, after_seq=0, limit=1)
+        parent = repo.get_run(session=session, run_id=parent_id)
+        if not first or first[0].kind != EventKind.REVISED:
+            return bad("the revision's first event is not 'revised'")
+        detail = first[0].detail or {}
+        if detail.get("parent") != parent_id:
+            return bad(f"the 'revised' event names parent {detail.get('parent')!r}")
+        if chain.revision_anchor(revision_link(detail)) != run.chain_anchor:
+            return bad("the 'revised' event's link does not match the anchor the chains start from")
+        if parent is None:
+            return bad(f"the parent run {parent_id!r} is missing")
+        if parent.superseded_by != run_id:
+            return bad(f"the parent names {parent.superseded_by!r} as its revision, not this run")
+        heads = detail.get("parent_heads") or {}
+        parent_decisions = repo.decisions(session=session, run_id=parent_id)
+        head_now = parent_decisions[-1].chain_hash if parent_decisions else None
+        if heads.get("decisions") != head_now:
+            return bad("the parent's decision chain no longer ends at the head it was revised at")
+        if heads.get("events") is not None and not repo.has_event_hash(
+            session=session, run_id=parent_id, chain_hash=heads["events"]
+        ):
+            return bad("the parent's event chain no longer holds the head it was revised at")
+    return ParentLink(
+        parent=parent_id,
+        ok=True,
+        reason=f"starts from run {parent_id}'s heads at the revision, which its chains still hold",
+    )
+
+
+def revision_link(detail: dict[str, Any]) -> dict[str, Any]:
+    """The part of a `revised` event's detail that a revision's chains are anchored to."""
+    keys = ("parent", "parent_heads", "changes", "pin", "reason")
+    return {k: detail.get(k) for k in keys}
 
 
 # -- export --------------------------------------------------------------------------------
@@ -278,7 +366,7 @@ def _decision_line(d: Decision, attempts: list[Attempt], run_reasoner: str) -> d
     decided = decision_attribution(bool(d.fallback), accepted)
     return {
         "type": "decision",
-        **_columns(d, chain.DECISION_FIELDS),
+        **chain.decision_columns(d),
         "at": _when(d.created_at),
         "chain_hash": d.chain_hash,
         "reasoner": decided.reasoner,

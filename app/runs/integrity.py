@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import bisect
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -23,6 +25,7 @@ class IntegrityReport:
     phase: str
     balance_score: float
     problems: list[str]
+    pinned: int = 0  # a revision's pins among decisions_stored
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -34,20 +37,43 @@ def check_integrity(
     n_tasks: int,
     n_robots: int,
     checkpoint: dict[str, Any] | None,
+    pinned: Mapping[int, int] | None = None,
+    free_tasks: Sequence[int] | None = None,
+    initial_loads: Sequence[int] | None = None,
+    balance_robots: Sequence[int] | None = None,
+    target: float | None = None,
 ) -> IntegrityReport:
     """Queue position, loads recomputed from stored decisions, phase re-derived.
 
     A checkpoint may lag the decisions table by the one task whose `store_and_route`
     node wrote its decision but did not finish: that node re-runs and upserts the same
     row, so a lag of exactly one is consistent. Anything else is reported as a problem.
+
+    A revision (SPEC 10) also has `pinned` rows (task index -> robot) written when it was
+    created: each pin must be stored on its robot, the graph's decisions must be a prefix
+    of the `free_tasks`, and loads count from `initial_loads` (the pins on available robots).
     """
     problems: list[str] = []
-    indices = [d.task_index for d in decisions]
-    contiguous = indices == list(range(len(indices)))
+    pins = dict(pinned or {})
+    free = list(free_tasks) if free_tasks is not None else list(range(n_tasks))
+    stored_pins = {d.task_index: d.robot for d in decisions if d.task_index in pins}
+    graph_made = [d for d in decisions if d.task_index not in pins]
+    if stored_pins != pins:
+        missing = sorted(set(pins) - set(stored_pins))
+        wrong = sorted(t for t, r in stored_pins.items() if pins[t] != r)
+        problems.append(
+            f"pinned tasks missing {missing[:10]} or on another robot {wrong[:10]} "
+            "in the stored decisions"
+        )
+    indices = [d.task_index for d in graph_made]
+    contiguous = indices == free[: len(indices)]
     if not contiguous:
-        problems.append(f"decision task indices are not 0..{len(indices) - 1}: {indices[:10]}")
-    loads = [0] * n_robots
-    for d in decisions:
+        problems.append(
+            f"decision task indices are not the first {len(indices)} free tasks: {indices[:10]}"
+        )
+    start = list(initial_loads) if initial_loads is not None else [0] * n_robots
+    loads = list(start)
+    for d in graph_made:
         loads[d.robot] += 1
         if d.loads_after != loads:
             problems.append(
@@ -60,19 +86,21 @@ def check_integrity(
     cp_loads = list(checkpoint["loads"]) if checkpoint and "loads" in checkpoint else None
     loads_consistent = True
     if cp_index is not None:
-        lag = len(decisions) - cp_index
+        # Free tasks before the checkpoint's task: what the graph had stored by then.
+        position = bisect.bisect_left(free, cp_index)
+        lag = len(graph_made) - position
         if lag not in (0, 1):
             problems.append(
-                f"checkpoint is at task {cp_index} but {len(decisions)} decisions are stored"
+                f"checkpoint is at task {cp_index} but {len(graph_made)} decisions are stored"
             )
         if cp_loads is not None:
-            expected = [0] * n_robots
-            for d in decisions[: min(cp_index, len(decisions))]:
+            expected = list(start)
+            for d in graph_made[: min(position, len(graph_made))]:
                 expected[d.robot] += 1
             # The checkpoint may already count the current task (after update_workload),
             # whose decision is stored only by the next node: its robot is then the
             # checkpoint's own `robot`.
-            current = decisions[cp_index] if cp_index < len(decisions) else None
+            current = graph_made[position] if position < len(graph_made) else None
             robot = current.robot if current is not None else (checkpoint or {}).get("robot")
             counted = expected.copy()
             if isinstance(robot, int) and 0 <= robot < n_robots:
@@ -82,8 +110,9 @@ def check_integrity(
                 problems.append(
                     f"checkpoint loads {cp_loads} disagree with the stored decisions ({expected})"
                 )
-    resume_at = len(decisions)
-    target = n_tasks / n_robots
+    resume_at = free[len(graph_made)] if len(graph_made) < len(free) else n_tasks
+    w = target if target is not None else n_tasks / n_robots
+    counted_loads = [loads[r] for r in balance_robots] if balance_robots is not None else loads
     return IntegrityReport(
         ok=not problems,
         decisions_stored=len(decisions),
@@ -93,7 +122,8 @@ def check_integrity(
         loads_from_decisions=loads,
         loads_in_checkpoint=cp_loads,
         loads_consistent=loads_consistent,
-        phase=detect_phase(resume_at, n_tasks).value,
-        balance_score=balance_score(loads, target),
+        phase=detect_phase(len(pins) + len(graph_made), n_tasks).value,
+        balance_score=balance_score(counted_loads, w),
         problems=problems,
+        pinned=len(pins),
     )

@@ -23,6 +23,7 @@ from app.domain.lifecycle import (
 )
 from app.store import repository as repo
 from app.store.models import Run, RunAnnotation, RunEvent, status_writes, utcnow
+from app.webhooks.events import SIGNED_OFF
 from app.webhooks.outbox import enqueue_for_event
 
 __all__ = [
@@ -60,8 +61,9 @@ def record_annotation(
 ) -> RunAnnotation:
     """Append one record about a run to its annotation chain (app.domain.annotations), in
     this transaction: what is said about a run after it finished, never a change to its
-    decisions or events."""
-    return repo.add_annotation(
+    decisions or events. A sign-off is also a `run.signed_off` webhook, from the outbox
+    row written here."""
+    annotation = repo.add_annotation(
         session=session,
         run_id=run_id,
         kind=AnnotationKind(kind).value,
@@ -69,15 +71,32 @@ def record_annotation(
         idempotency_key=idempotency_key,
         request_digest=request_digest,
     )
+    if annotation.kind == AnnotationKind.SIGNOFF:
+        enqueue_for_event(
+            session,
+            run_id=run_id,
+            kind=SIGNED_OFF,
+            detail=annotation.detail,
+            seq=annotation.seq,
+        )
+    return annotation
 
 
-def new_run(session: Session, *, run_id: str, created: Mapping[str, Any], **fields: Any) -> Run:
-    """A queued run and its `created` event."""
+def new_run(
+    session: Session,
+    *,
+    run_id: str,
+    created: Mapping[str, Any],
+    first_event: EventKind = EventKind.CREATED,
+    **fields: Any,
+) -> Run:
+    """A queued run and its first event: `created`, or `revised` for a revision (SPEC 10),
+    whose detail is the link its chains are anchored to."""
     with status_writes():
         run = Run(id=run_id, status=RunStatus.QUEUED.value, **fields)
     session.add(run)
     session.flush()
-    record_event(session, run_id=run_id, kind=EventKind.CREATED, detail=created)
+    record_event(session, run_id=run_id, kind=first_event, detail=created)
     return run
 
 

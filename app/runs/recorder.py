@@ -25,17 +25,54 @@ class LeaseLost(RunCancelled):
     """Another process took this run (our lease expired): stop without writing anything."""
 
 
+class RunSuperseded(RunCancelled):
+    """A revision replaced this run (SPEC 10): stop without writing anything more."""
+
+
 class RunStop:
-    """Why a run should stop at the next node boundary: a cancel, the process draining, or
-    (scale-out) the run's lease passing to another process."""
+    """Why a run should stop at the next node boundary: a cancel, the process draining,
+    (scale-out) the run's lease passing to another process, or a revision replacing it."""
 
     def __init__(self) -> None:
         self.cancelled = threading.Event()
         self.shutting_down = threading.Event()
         self.lease_lost = threading.Event()
+        self.superseded = threading.Event()
 
     def requested(self) -> bool:
-        return self.cancelled.is_set() or self.shutting_down.is_set() or self.lease_lost.is_set()
+        return (
+            self.cancelled.is_set()
+            or self.shutting_down.is_set()
+            or self.lease_lost.is_set()
+            or self.superseded.is_set()
+        )
+
+
+def status_fence(run_id: str, stop: RunStop) -> Fence:
+    """Every write of a run is fenced by its state: one conditional UPDATE of its row
+    `WHERE status = 'running'` in the write's own transaction. A revision supersedes the
+    parent in one transaction that writes that row first, so a write racing it either
+    commits before (and is pinned) or finds the run superseded and rolls back."""
+
+    def fence(session: Session) -> None:
+        if not repo.still_running(session=session, run_id=run_id):
+            stop.superseded.set()
+            raise RunSuperseded(run_id)
+
+    return fence
+
+
+def fences(*parts: Fence | None) -> Fence | None:
+    """One fence that runs each given part in order."""
+    given = [f for f in parts if f is not None]
+    if not given:
+        return None
+
+    def fence(session: Session) -> None:
+        for part in given:
+            part(session)
+
+    return fence
 
 
 class SqlRecorder:
@@ -62,6 +99,8 @@ class SqlRecorder:
     def check_cancelled(self) -> None:
         if self._stop.lease_lost.is_set():
             raise LeaseLost(self.run_id)
+        if self._stop.superseded.is_set():
+            raise RunSuperseded(self.run_id)
         if self._stop.requested():
             raise RunCancelled(self.run_id)
 

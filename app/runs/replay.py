@@ -101,6 +101,14 @@ def original_spec(*, session: Session, replay_of: str) -> RunSpec:
         )
     if run.status != RunStatus.COMPLETED:
         raise ReplaySourceNotFinishedError(replay_of, run.status)
+    if run.revision_of is not None:
+        # Its pins are rows it was created with, not replies a replay could reuse.
+        raise DomainError(
+            "replay_of",
+            f"run '{replay_of}' is a revision (of run '{run.revision_of}'); replaying a "
+            "revision is not supported yet: replay the run it revised, or revise that replay",
+            code="revision_replay",
+        )
     return RunSpec.from_json(run.request)
 
 

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import statistics
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from sqlalchemy.exc import IntegrityError
@@ -28,7 +29,7 @@ from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Attempt, Run, RunEvent
+from app.store.models import Attempt, ExecutionReport, Run, RunEvent
 
 
 def create_run(
@@ -130,6 +131,13 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
                 "It waits for a supervisor: resolve its review (GET /reviews, "
                 "POST /runs/{id}/reviews/{task_index}).",
             )
+        if run.status == RunStatus.SUPERSEDED:
+            raise RunStateConflictError(
+                run_id,
+                run.status,
+                "resume",
+                f"A revision replaced it: run '{run.superseded_by}' (GET /runs/{{id}}/revisions).",
+            )
         if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
         if run.status in (RunStatus.FAILED, RunStatus.BLOCKED):
@@ -186,6 +194,8 @@ class RunView:
     usage: Usage
     metrics: Metrics | None
     signoffs: list[SignOff] = field(default_factory=list)
+    execution: dict[int, ExecutionReport] = field(default_factory=dict)
+    pinned: frozenset[int] = frozenset()
 
     @property
     def progress(self) -> dict[str, Any]:
@@ -212,6 +222,9 @@ def run_view(
         ]
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
         signed = signoffs(session=session, run_id=run_id)
+        execution = {
+            r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
+        }
     names = [r["name"] for r in spec.instance_data["robots"]]
     workload = dict.fromkeys(names, 0)
     for o in outcomes:
@@ -219,10 +232,20 @@ def run_view(
     regrets = [o.regret for o in outcomes]
     regret = None if any(v is None for v in regrets) else float(sum(regrets))
     metrics = None
+    problem = spec.problem
     if run.status == RunStatus.COMPLETED and len(outcomes) == run.n_tasks:
         metrics = compute_metrics(
-            spec.problem.instance, [o.robot for o in outcomes], seed=spec.seed
+            problem.instance,
+            [o.robot for o in outcomes],
+            seed=spec.seed,
+            scope=problem.balance_scope,
         )
+        if problem.pinned:
+            # A pin keeps the success it was decided with, whatever set_rates changed.
+            metrics = replace(
+                metrics,
+                expected_success=statistics.fmean(o.expected_success for o in outcomes),
+            )
     return RunView(
         run=run,
         spec=spec,
@@ -233,6 +256,8 @@ def run_view(
         regret=regret,
         usage=usage,
         metrics=metrics,
+        execution=execution,
+        pinned=frozenset(problem.pinned),
         signoffs=signed,
     )
 

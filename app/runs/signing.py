@@ -132,6 +132,7 @@ def heads_payload(session: Session, run: Run, reason: str) -> dict[str, Any]:
             request=run.request,
             mode=run.mode,
             max_deviation=run.max_deviation,
+            anchor=run.chain_anchor,
         )
         for table in ("decisions", "events")
     }

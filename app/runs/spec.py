@@ -39,6 +39,14 @@ class RunSpec:
     # existed read as the paper's 'all'.
     llm_scope: str = LLMScope.ALL.value
     llm_margin: float = DEFAULT_LLM_MARGIN
+    # Whether max_deviation was asked for (kept by a revision) or the mode's default
+    # (recomputed for a revision's W); None for runs stored before it was recorded.
+    cap_explicit: bool | None = None
+    # Revisions (SPEC 10): task index (as text, JSON keys) -> robot index of the pins,
+    # robot indexes that take no new task, and the run revised.
+    pinned: dict[str, int] | None = None
+    unavailable: list[int] | None = None
+    revision_of: str | None = None
     # app.domain.review.ReviewPolicy as JSON; None: no review.
     review: dict[str, Any] | None = None
 
@@ -61,6 +69,8 @@ class RunSpec:
             Mode(self.mode),
             self.max_deviation,
             uncapped=self.max_deviation is None,
+            pinned={int(t): r for t, r in (self.pinned or {}).items()},
+            unavailable=self.unavailable or (),
         )
 
     def to_json(self) -> dict[str, Any]:

@@ -35,7 +35,7 @@ from app.runs import lifecycle, records, reviews
 from app.runs.integrity import check_integrity
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
-from app.runs.recorder import Fence, RunStop, SqlRecorder
+from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence
 from app.runs.replay import recorded_replies
 from app.runs.signing import SigningKeys, sign_run
 from app.runs.spec import RunSpec
@@ -148,6 +148,13 @@ class RunWorker:
         if stop is not None:
             stop.cancelled.set()
 
+    def supersede(self, run_id: str) -> None:
+        """A revision replaced the run: if this process executes it, stop it writing."""
+        with self._lock:
+            stop = self._stops.get(run_id)
+        if stop is not None:
+            stop.superseded.set()
+
     def wait(self, run_id: str, timeout: float | None = None) -> None:
         with self._lock:
             future = self._futures.get(run_id)
@@ -192,7 +199,9 @@ class RunWorker:
         if admission is None:
             return False
         spec = admission.spec
-        fence = self.ownership.fence(run_id, stop)
+        # The lease first: a process that lost the run to another is told so (LeaseLost)
+        # before the state check, which also fails once the new owner moved the run.
+        fence = fences(self.ownership.fence(run_id, stop), status_fence(run_id, stop))
         recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop, fence=fence)
         try:
             reasoner = self._reasoner(run_id, spec, fence)
@@ -328,11 +337,17 @@ class RunWorker:
                 records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ]
             values = checkpoint.checkpoint["channel_values"] if checkpoint else None
+            problem = spec.problem
             report = check_integrity(
                 decisions=stored,
                 n_tasks=instance.n_tasks,
                 n_robots=instance.n_robots,
                 checkpoint=values,
+                pinned=problem.pinned,
+                free_tasks=problem.free_tasks,
+                initial_loads=problem.initial_loads,
+                balance_robots=problem.available,
+                target=problem.target,
             )
             if not report.ok:
                 # Resuming would build on a record that the checkpoint contradicts, and its
@@ -390,6 +405,10 @@ class RunWorker:
         )
 
     def _end_stopped(self, run_id: str, stop: RunStop) -> None:
+        if stop.superseded.is_set():
+            # The revision's transaction moved it to superseded, with its event.
+            log.info("run %s stopped: superseded by a revision", run_id)
+            return
         if stop.lease_lost.is_set():
             # Another process owns the run now; its record is no longer ours to write.
             log.warning("run %s stopped here: its lease passed to another process", run_id)
@@ -412,6 +431,10 @@ class RunWorker:
         with transaction(self._sessions) as session:
             run = self.ownership.owned_run(session, run_id)
             if run is None or (only_if_running and run.status != RunStatus.RUNNING):
+                return
+            if run.status == RunStatus.SUPERSEDED:
+                # A revision ended it (made through another process, or between two checks).
+                log.info("run %s stopped: superseded by a revision", run_id)
                 return
             lifecycle.move(
                 session, run, status, event=EventKind(status.value), detail=detail, error=error

@@ -161,8 +161,9 @@ class LTAASolver(Solver):
             err.status_code = exc.status_code
             raise err from exc
         decisions, used = execution.decisions, execution.usage
+        # The graph decides the free tasks only; pins complete the assignment.
         return Solution(
-            [d.robot for d in decisions],
+            problem.complete([d.robot for d in decisions]),
             usage=used,
             details={
                 "reasoner": reasoner.name,

@@ -136,6 +136,9 @@ ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "hard_invalid": _opt_str,
     "feedback": _opt_str,
 }
+# A revision's pinned decisions (SPEC 10) carry these; hashed only when set, so every link
+# written before they existed (and every decision the graph makes) keeps its hash.
+PIN_FIELDS: dict[str, Normaliser] = {"pinned": _opt_bool, "pinned_from": _opt_str}
 EVENT_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
 # Records made after a run finished (app.domain.annotations), chained like the events.
 ANNOTATION_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
@@ -166,15 +169,24 @@ def immutable_digest(request: Any, mode: str, max_deviation: float | None) -> st
 
 
 def genesis(
-    table: Table, run_id: str, scheme: str | None = None, immutable: str | None = None
+    table: Table,
+    run_id: str,
+    anchor: str | None = None,
+    *,
+    scheme: str | None = None,
+    immutable: str | None = None,
 ) -> str:
-    """The link the first row of a run's chain hangs off; scheme None is v1."""
+    """The link the first row of a run's chain hangs off (scheme None is v1). A revision's
+    chains also cover its `anchor` (revision_anchor: the parent's heads and the change
+    set), so the record across revisions is one linked chain; a v2 chain also covers the
+    run's `immutable` fields (immutable_digest)."""
+    tail = "" if anchor is None else f"|{anchor}"
     if scheme in (None, SCHEME):
-        return _sha256(f"{SCHEME}|{table}|{run_id}")
+        return _sha256(f"{SCHEME}|{table}|{run_id}{tail}")
     if scheme == SCHEME_V2:
         if immutable is None:
             raise ValueError(f"{SCHEME_V2} needs the run's immutable_digest")
-        return _sha256(f"{SCHEME_V2}|{table}|{run_id}|{immutable}")
+        return _sha256(f"{SCHEME_V2}|{table}|{run_id}|{immutable}{tail}")
     raise ValueError(f"unknown chain scheme {scheme!r}; known: {', '.join(SCHEMES)}")
 
 
@@ -186,10 +198,28 @@ def run_genesis(
     request: Any,
     mode: str,
     max_deviation: float | None,
+    anchor: str | None = None,
 ) -> str:
     """The genesis of a run's chain from the run's own columns, whatever its scheme."""
     immutable = None if scheme in (None, SCHEME) else immutable_digest(request, mode, max_deviation)
-    return genesis(table, run_id, scheme, immutable)
+    return genesis(table, run_id, anchor, scheme=scheme, immutable=immutable)
+
+
+def revision_anchor(link: Mapping[str, Any]) -> str:
+    """Digest of what ties a revision to its parent: the parent id, its chain heads when
+    the revision was made, the changes, the pin rule and the reason (the `revised` event's
+    detail)."""
+    return _sha256(canonical_json(_json(dict(link))))
+
+
+def decision_columns(row: Any) -> dict[str, Any]:
+    """The hashed columns of a stored decision row (pin columns included when set)."""
+    values = {name: getattr(row, name) for name in DECISION_FIELDS}
+    for name in PIN_FIELDS:
+        value = getattr(row, name, None)
+        if value is not None:
+            values[name] = value
+    return values
 
 
 def attempts_digest(attempts: Iterable[Mapping[Any, Any]]) -> str:
@@ -204,6 +234,9 @@ def decision_link(prev: str, decision: Mapping[str, Any], attempts: str) -> str:
         for name, normalise in DECISION_FIELDS.items()
         if name not in OPTIONAL_DECISION_FIELDS or decision.get(name) is not None
     }
+    for name, normalise in PIN_FIELDS.items():
+        if decision.get(name) is not None:
+            content[name] = normalise(decision[name])
     return _sha256(canonical_json({"prev": prev, "decision": content, "attempts": attempts}))
 
 
@@ -241,16 +274,27 @@ class ChainCheck:
     """
 
     def __init__(
-        self, table: Table, run_id: str, first_key: int, genesis_link: str | None = None
+        self,
+        table: Table,
+        run_id: str,
+        first_key: int,
+        *,
+        anchor: str | None = None,
+        order: list[int] | None = None,
+        genesis_link: str | None = None,
     ) -> None:
+        """`order`: the keys in chain order when they are not first_key, first_key + 1, ...
+        (a revision's decisions: pins first); `anchor`: a revision's link to its parent;
+        `genesis_link`: the genesis by the run's chain scheme (run_genesis)."""
         self.table = table
         self.count = 0
         self.unchained = 0
         self.head: str | None = None
         self.last_key: int | None = None
         self.first_break: Break | None = None
-        self._prev = genesis_link if genesis_link is not None else genesis(table, run_id)
-        self._next_key = first_key
+        self._prev = genesis_link if genesis_link is not None else genesis(table, run_id, anchor)
+        self._order = order
+        self._next_key = order[0] if order else first_key
         self._noun = "task_index" if table == "decisions" else "seq"
 
     def _fail(self, key: int, expected: str | None, stored: str | None, reason: str) -> None:
@@ -302,7 +346,10 @@ class ChainCheck:
         if stored is None:
             self.unchained += 1
         self._prev = next_prev(stored)
-        self._next_key = key + 1
+        if self._order is not None and self.count < len(self._order):
+            self._next_key = self._order[self.count]
+        else:
+            self._next_key = key + 1
 
     def missing_tail(self, reason: str) -> None:
         """A finished run knows how its chain must end; the caller found it ends early."""

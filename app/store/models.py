@@ -76,6 +76,13 @@ class Run(Base):
         String(255), nullable=True, unique=True, index=True
     )
     request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # Revisions (SPEC 10): the run this one revises, its place in the lineage (0 = root),
+    # the revision that replaced this run, and the digest of the link to the parent (its
+    # heads and the change set) that this run's chains start from (app.store.chain).
+    revision_of: Mapped[str | None] = mapped_column(String(32), nullable=True, index=True)
+    revision: Mapped[int] = mapped_column(Integer, default=0)
+    superseded_by: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    chain_anchor: Mapped[str | None] = mapped_column(String(64), nullable=True)
     # The graph version (app.graph.version) the run started under; null for runs from
     # before it was recorded. A resume under another version is refused (status blocked).
     graph_version: Mapped[str | None] = mapped_column(String(64), nullable=True)
@@ -180,6 +187,42 @@ class Decision(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     # Tamper evidence: a hash over this row's content and the previous link of its run.
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # A revision's pin (SPEC 10): copied from the parent's decision with this chain hash.
+    # Null on every decision the graph made; hashed only when set, so older links hold.
+    pinned: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
+    pinned_from: Mapped[str | None] = mapped_column(String(64), nullable=True)
+
+
+class ExecutionReport(Base):
+    """Where the site says a decided task stands (SPEC 10): one row per run and task, moved
+    forward only (started -> done | failed)."""
+
+    __tablename__ = "execution_reports"
+    __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_execution_run_task"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    task_index: Mapped[int] = mapped_column(Integer)
+    task_id: Mapped[str] = mapped_column(String(MAX_NAME_CHARS))
+    state: Mapped[str] = mapped_column(String(16))
+    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    ended_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    updated_at: Mapped[datetime] = mapped_column(
+        DateTime(timezone=True), default=utcnow, onupdate=utcnow
+    )
+
+
+class RequestKey(Base):
+    """The Idempotency-Key of a POST that created no run of its own (execution reports),
+    with a digest of its body: a retry answers as before, a reused key is refused."""
+
+    __tablename__ = "request_keys"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    key: Mapped[str] = mapped_column(String(255), unique=True, index=True)
+    request_digest: Mapped[str] = mapped_column(String(64))
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
 class Review(Base):
@@ -281,3 +324,18 @@ def _guard_bulk_status(state: ORMExecuteState) -> None:
     values = getattr(statement, "_values", None) or {}
     if any(getattr(key, "key", key) == "status" for key in values):
         raise _refuse("by a bulk UPDATE")
+
+
+class ConsoleSession(Base):
+    """A supervisor's signed-in console session (app.console). The cookie holds a random
+    token; only its digest is stored, with a fingerprint of the API key it was opened with
+    (never the key), so removing that key from the configuration ends the session."""
+
+    __tablename__ = "console_sessions"
+
+    token_digest: Mapped[str] = mapped_column(String(64), primary_key=True)
+    # None: opened while access control was off (no keys configured).
+    key_fingerprint: Mapped[str | None] = mapped_column(String(64), nullable=True, index=True)
+    csrf_token: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    expires_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)

@@ -7,18 +7,31 @@ from collections.abc import Mapping, Sequence
 from functools import cache
 from typing import Any, cast
 
-from sqlalchemy import BindParameter, Integer, String, Table, and_, bindparam, func, select
+from sqlalchemy import (
+    BindParameter,
+    Integer,
+    String,
+    Table,
+    and_,
+    bindparam,
+    func,
+    select,
+    update,
+)
 from sqlalchemy.dialects.postgresql import Insert as PostgresqlInsert
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import Insert as SqliteInsert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, defer
 
+from app.domain.lifecycle import RunStatus
 from app.store import chain
 from app.store.models import (
     Attempt,
     Base,
     Decision,
+    ExecutionReport,
+    RequestKey,
     Run,
     RunAnnotation,
     RunEvent,
@@ -57,6 +70,7 @@ def chain_genesis(*, session: Session, table: chain.Table, run_id: str) -> str:
         request=run.request,
         mode=run.mode,
         max_deviation=run.max_deviation,
+        anchor=run.chain_anchor,
     )
 
 
@@ -152,6 +166,24 @@ def annotation_for_key(*, session: Session, idempotency_key: str) -> RunAnnotati
     )
 
 
+def still_running(*, session: Session, run_id: str) -> bool:
+    """Write-lock the run's row if it is still running (a conditional UPDATE that changes
+    nothing), else False: the fence of every recorder write."""
+    stmt = (
+        update(Run)
+        .where(Run.id == run_id, Run.status == RunStatus.RUNNING.value)
+        .values(updated_at=Run.updated_at)
+        .returning(Run.id)
+        .execution_options(synchronize_session=False)
+    )
+    return session.execute(stmt).first() is not None
+
+
+def chain_anchor(*, session: Session, run_id: str) -> str | None:
+    """A revision's link to its parent that its chains start from (None: not a revision)."""
+    return session.scalar(select(Run.chain_anchor).where(Run.id == run_id))
+
+
 def events_page(*, session: Session, run_id: str, after_seq: int, limit: int) -> list[RunEvent]:
     """Events with seq > after_seq, in order: the audit record read in bounded pages."""
     return list(
@@ -164,15 +196,16 @@ def events_page(*, session: Session, run_id: str, after_seq: int, limit: int) ->
     )
 
 
-def decisions_page(*, session: Session, run_id: str, after_task: int, limit: int) -> list[Decision]:
-    return list(
-        session.scalars(
-            select(Decision)
-            .where(Decision.run_id == run_id, Decision.task_index > after_task)
-            .order_by(Decision.task_index)
-            .limit(limit)
-        )
-    )
+def decisions_page(
+    *, session: Session, run_id: str, after_task: int, limit: int, pinned: bool | None = None
+) -> list[Decision]:
+    """`pinned`: True only a revision's pins, False only the rest, None every decision."""
+    query = select(Decision).where(Decision.run_id == run_id, Decision.task_index > after_task)
+    if pinned is True:
+        query = query.where(Decision.pinned.is_(True))
+    elif pinned is False:
+        query = query.where(Decision.pinned.is_(None))
+    return list(session.scalars(query.order_by(Decision.task_index).limit(limit)))
 
 
 def attempts_of_tasks(
@@ -216,19 +249,12 @@ def decisions_slice(
     return list(session.scalars(query if limit is None else query.limit(limit)))
 
 
-def decision_count(*, session: Session, run_id: str) -> int:
-    return int(
-        session.scalar(select(func.count()).select_from(Decision).where(Decision.run_id == run_id))
-        or 0
-    )
-
-
 def decision_outcomes(*, session: Session, run_id: str) -> list[Any]:
-    """(task_index, robot, regret) of every decision in task order: the few columns a run's
-    totals need, without loading each row's record."""
+    """(task_index, robot, regret, expected_success) of every decision in task order: the
+    few columns a run's totals need, without loading each row's record."""
     return list(
         session.execute(
-            select(Decision.task_index, Decision.robot, Decision.regret)
+            select(Decision.task_index, Decision.robot, Decision.regret, Decision.expected_success)
             .where(Decision.run_id == run_id)
             .order_by(Decision.task_index)
         )
@@ -331,17 +357,47 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
     hash, with one indexed SELECT: the previous link joined to the task's attempts.
 
     The attempts must already be written (in this transaction or an earlier one); content
-    equal to what is stored (a re-upsert after a crash) gives the stored hash again."""
+    equal to what is stored (a re-upsert after a crash) gives the stored hash again.
+    A revision's chain runs through its pins first, then the graph's decisions (both in
+    task order): see revision_chain_order."""
     rows = session.execute(
         _decision_link_statement(), {"run_id": run_id, "task_index": values["task_index"]}
     ).all()
+    attempts = [row._mapping for row in rows if row.attempt is not None]
+    anchor = chain_anchor(session=session, run_id=run_id)
+    prev = rows[0].prev if anchor is None else _revision_prev(session, run_id, values)
     prev_link = (
-        rows[0].prev
-        if rows[0].prev is not None
+        prev
+        if prev is not None
         else chain_genesis(session=session, table="decisions", run_id=run_id)
     )
-    attempts = [row._mapping for row in rows if row.attempt is not None]
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
+
+
+def _revision_prev(session: Session, run_id: str, values: Mapping[str, Any]) -> str | None:
+    """The link before this decision in a revision's chain order (None: it is the first)."""
+    t, pinned = values["task_index"], bool(values.get("pinned"))
+
+    def last(*where: Any) -> str | None:
+        row = session.execute(
+            select(Decision.chain_hash)
+            .where(Decision.run_id == run_id, *where)
+            .order_by(Decision.task_index.desc())
+            .limit(1)
+        ).first()
+        return None if row is None else chain.next_prev(row.chain_hash)
+
+    if pinned:
+        return last(Decision.pinned.is_(True), Decision.task_index < t)
+    return last(Decision.pinned.is_(None), Decision.task_index < t) or last(
+        Decision.pinned.is_(True)
+    )
+
+
+def revision_chain_order(pinned: Sequence[int], decided: Sequence[int]) -> list[int]:
+    """The task indexes of a revision's decisions in chain order: pins, then the rest."""
+    pins = set(pinned)
+    return sorted(pins) + sorted(t for t in decided if t not in pins)
 
 
 def upsert_decision(*, session: Session, run_id: str, values: Mapping[str, Any]) -> None:
@@ -392,6 +448,35 @@ def tokens_spent(*, session: Session, run_id: str) -> int:
     return int(total or 0)
 
 
+def decided_indexes(*, session: Session, run_id: str, pinned: bool | None = None) -> list[int]:
+    query = select(Decision.task_index).where(Decision.run_id == run_id)
+    if pinned is True:
+        query = query.where(Decision.pinned.is_(True))
+    elif pinned is False:
+        query = query.where(Decision.pinned.is_(None))
+    return list(session.scalars(query.order_by(Decision.task_index)))
+
+
+def last_event_hash(*, session: Session, run_id: str) -> str | None:
+    return session.scalar(
+        select(RunEvent.chain_hash)
+        .where(RunEvent.run_id == run_id)
+        .order_by(RunEvent.seq.desc())
+        .limit(1)
+    )
+
+
+def has_event_hash(*, session: Session, run_id: str, chain_hash: str) -> bool:
+    return (
+        session.scalar(
+            select(RunEvent.id)
+            .where(RunEvent.run_id == run_id, RunEvent.chain_hash == chain_hash)
+            .limit(1)
+        )
+        is not None
+    )
+
+
 def has_event(*, session: Session, run_id: str, kind: str) -> bool:
     return (
         session.scalar(
@@ -399,3 +484,78 @@ def has_event(*, session: Session, run_id: str, kind: str) -> bool:
         )
         is not None
     )
+
+
+def execution_reports(*, session: Session, run_id: str) -> list[ExecutionReport]:
+    return list(
+        session.scalars(
+            select(ExecutionReport)
+            .where(ExecutionReport.run_id == run_id)
+            .order_by(ExecutionReport.task_index)
+        )
+    )
+
+
+def decided_task_ids(session: Session, run_id: str) -> list[Any]:
+    """(task_id, task_index) of every stored decision of a run."""
+    return list(
+        session.execute(
+            select(Decision.task_id, Decision.task_index).where(Decision.run_id == run_id)
+        )
+    )
+
+
+def decision_count(*, session: Session, run_id: str) -> int:
+    return int(
+        session.scalar(select(func.count()).select_from(Decision).where(Decision.run_id == run_id))
+        or 0
+    )
+
+
+def decision_outline(*, session: Session, run_id: str) -> list[Any]:
+    """(task_index, robot, balance_after) of every decision, in task order: the columns a
+    chart of the whole run needs, without the text of 10,000 reasonings."""
+    return list(
+        session.execute(
+            select(Decision.task_index, Decision.robot, Decision.balance_after)
+            .where(Decision.run_id == run_id)
+            .order_by(Decision.task_index)
+        )
+    )
+
+
+def queue_task_ids(run: Run) -> set[str]:
+    """Every task id (as text, as decisions store it) in the run's queue."""
+    return {str(t["id"]) for t in run.request["instance_data"]["tasks"]}
+
+
+def request_key(*, session: Session, key: str) -> RequestKey | None:
+    return session.scalar(select(RequestKey).where(RequestKey.key == key))
+
+
+def decisions_window(*, session: Session, run_id: str, offset: int, limit: int) -> list[Decision]:
+    return list(
+        session.scalars(
+            select(Decision)
+            .where(Decision.run_id == run_id, Decision.task_index >= offset)
+            .order_by(Decision.task_index)
+            .limit(limit)
+        )
+    )
+
+
+def attempt_summaries_of_tasks(
+    *, session: Session, run_id: str, first: int, last: int
+) -> dict[int, list[Attempt]]:
+    """As attempts_of_tasks, with the prompts and the reply left unloaded (read on demand)."""
+    by_task: dict[int, list[Attempt]] = {}
+    for row in session.scalars(
+        select(Attempt)
+        .options(
+            defer(Attempt.system_prompt), defer(Attempt.user_prompt), defer(Attempt.reply_text)
+        )
+        .where(Attempt.run_id == run_id, Attempt.task_index.between(first, last))
+        .order_by(Attempt.task_index, Attempt.attempt)
+    ):
+        by_task.setdefault(row.task_index, []).append(row)
+    return by_task

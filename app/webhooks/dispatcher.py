@@ -59,7 +59,6 @@ class Dispatcher:
         self._resolver = resolver or resolver_from(settings)
         self.owner = dispatcher_id(settings.worker_name)
         self._rng = random.Random()
-        self._slots = threading.Semaphore(settings.webhook_concurrency)
         self._pool = ThreadPoolExecutor(
             max_workers=settings.webhook_concurrency, thread_name_prefix="ltaa-webhook"
         )

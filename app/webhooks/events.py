@@ -25,7 +25,12 @@ class WebhookEventType(StrEnum):
 
 # Run event kind -> webhook type. Kinds absent here (started, resumed, ...) send nothing.
 # Features that add event kinds (revisions, reviews, sign-off) add their rows here.
-# The last five name the events SPEC 10-11 features will add to EventKind.
+# The string keys name events SPEC 10-11 features have yet to add to EventKind (a
+# sign-off is recorded in the annotation chain, not as a run event: not wired yet).
+# A sign-off is an annotation, not a run event (a completed run's events never change):
+# app.runs.lifecycle.record_annotation enqueues it under this kind.
+SIGNED_OFF = "signed_off"
+
 TYPE_OF_KIND: dict[str, WebhookEventType] = {
     EventKind.CREATED: WebhookEventType.RUN_CREATED,
     EventKind.COMPLETED: WebhookEventType.RUN_COMPLETED,
@@ -34,11 +39,11 @@ TYPE_OF_KIND: dict[str, WebhookEventType] = {
     EventKind.CANCELLED: WebhookEventType.RUN_CANCELLED,
     EventKind.INTERRUPTED: WebhookEventType.RUN_INTERRUPTED,
     EventKind.BUDGET_EXHAUSTED: WebhookEventType.BUDGET_EXHAUSTED,
-    "superseded": WebhookEventType.RUN_SUPERSEDED,
-    "revised": WebhookEventType.RUN_REVISED,
+    EventKind.SUPERSEDED: WebhookEventType.RUN_SUPERSEDED,
+    EventKind.REVISED: WebhookEventType.RUN_REVISED,
     EventKind.REVIEW_REQUESTED: WebhookEventType.REVIEW_REQUESTED,
     EventKind.REVIEW_RESOLVED: WebhookEventType.REVIEW_RESOLVED,
-    "signed_off": WebhookEventType.RUN_SIGNED_OFF,
+    SIGNED_OFF: WebhookEventType.RUN_SIGNED_OFF,
 }
 
 # The run status a kind leaves the run in, for the payload's `data.status`.
@@ -51,6 +56,7 @@ STATUS_OF_KIND: dict[str, RunStatus] = {
     EventKind.INTERRUPTED: RunStatus.INTERRUPTED,
     EventKind.REVIEW_REQUESTED: RunStatus.AWAITING_REVIEW,
     EventKind.REVIEW_RESOLVED: RunStatus.QUEUED,
+    EventKind.SUPERSEDED: RunStatus.SUPERSEDED,
 }
 
 

@@ -2,7 +2,7 @@
 archived_runs (tombstones of archived runs)
 
 Revision ID: 0008_yearlong
-Revises: 0008_reviews
+Revises: 0009
 Create Date: 2026-12-01 21:00:00.000000
 """
 from alembic import op
@@ -10,7 +10,7 @@ import sqlalchemy as sa
 
 
 revision = '0008_yearlong'
-down_revision = '0008_reviews'
+down_revision = '0009'
 branch_labels = None
 depends_on = None
 

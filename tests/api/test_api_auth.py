@@ -32,6 +32,10 @@ CLIENT_ENDPOINTS = [
     ("GET", "/runs"),
     ("GET", "/runs/{id}"),
     ("GET", "/audit/public-key"),
+    ("POST", "/runs/{id}/execution"),
+    ("POST", "/runs/{id}/revisions"),
+    ("GET", "/runs/{id}/revisions"),
+    ("GET", "/runs/{id}/diff"),
 ]
 SUPERVISOR_ENDPOINTS = [
     ("GET", "/runs/{id}/trace"),

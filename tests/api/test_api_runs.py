@@ -109,6 +109,19 @@ def test_cancel_stops_a_running_run(make_client: ClientFactory) -> None:
     assert trace["events"][-1]["kind"] == "cancelled"
 
 
+def test_an_illegal_move_through_the_api_stays_a_409(make_client: ClientFactory) -> None:
+    # The lifecycle table refuses cancelled -> running; the API says so before trying.
+    client = make_client(test_pause="2:reason:before")
+    run_id = client.post("/runs", json=BASELINE).json()["id"]
+    _wait_allocated(client, run_id, 2)
+    assert client.post(f"/runs/{run_id}/cancel").status_code == 200
+    wait_until(client, run_id, ("cancelled",))
+    for action in ("resume", "cancel"):
+        response = client.post(f"/runs/{run_id}/{action}")
+        assert response.status_code == 409, response.text
+        assert "is cancelled" in response.json()["detail"][0]["msg"]
+
+
 @pytest.mark.parametrize("path", ["/runs/nope", "/runs/nope/trace"])
 def test_unknown_run_is_404_naming_the_id(client: TestClient, path: str) -> None:
     response = client.get(path)

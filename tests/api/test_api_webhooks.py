@@ -211,6 +211,20 @@ def test_a_run_sends_created_and_completed_signed(lan: TestClient, receiver: Rec
     assert by_type["run.completed"]["timestamp"].endswith("Z")
 
 
+def test_a_sign_off_sends_run_signed_off(lan: TestClient, receiver: Receiver) -> None:
+    run_id = lan.post("/runs", json=RUN).json()["id"]
+    assert wait_until(lan, run_id)["status"] == "completed"
+    hook = subscribe(lan, receiver.url, ["run.signed_off"])
+    signed = lan.post(f"/runs/{run_id}/signoff", json={"statement": "checked on site"})
+    assert signed.status_code == 201, signed.text
+    receiver.wait_for(lambda got: len(got) >= 1, what="the sign-off webhook")
+    (body,) = receiver.verified(hook["secret"])
+    assert body["type"] == "run.signed_off"
+    data = body["data"]
+    assert data["run_id"] == run_id and data["statement"] == "checked on site"
+    assert data["heads"] == signed.json()["heads"]
+
+
 def test_three_500s_then_delivered_on_the_fourth_with_one_id(
     lan: TestClient, receiver: Receiver
 ) -> None:
@@ -399,3 +413,14 @@ def test_a_dripping_answer_is_cut_off_at_the_timeout(
     first = d["attempt_log"][0]
     assert first["outcome"] == "network_error" and "longer than the timeout" in first["error"]
     assert 450 < first["latency_ms"] < 1500
+
+
+def test_a_review_request_sends_review_requested(lan: TestClient, receiver: Receiver) -> None:
+    hook = subscribe(lan, receiver.url, ["review.requested"])
+    created = lan.post("/runs", json={**RUN, "review": {"on": ["every_decision"]}})
+    assert created.status_code == 202, created.text
+    run_id = created.json()["id"]
+    receiver.wait_for(lambda got: len(got) >= 1, what="a review request")
+    (first, *_) = receiver.verified(hook["secret"])
+    assert first["type"] == "review.requested" and first["data"]["run_id"] == run_id
+    assert first["data"]["event"] == "review_requested"

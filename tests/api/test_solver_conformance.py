@@ -137,9 +137,6 @@ PINNED_CASES: dict[str, dict[str, Any]] = {
         "unavailable": ["medium"],
     },
 }
-_LTAA_PINS = pytest.mark.xfail(
-    strict=True, reason="ltaa honours pins once the graph does (the lead's part of issue 11)"
-)
 
 
 def _pinned_cases() -> list[Any]:
@@ -148,8 +145,7 @@ def _pinned_cases() -> list[Any]:
         for case, body in PINNED_CASES.items():
             if name in ("brute_force",) and case == "baseline_heavy_down":
                 continue  # 2^18 free assignments: above brute force's limit
-            marks = [_LTAA_PINS] if name == "ltaa" else []
-            cases.append(pytest.param(name, body, id=f"{name}-{case}", marks=marks))
+            cases.append(pytest.param(name, body, id=f"{name}-{case}"))
     return cases
 
 

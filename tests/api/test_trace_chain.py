@@ -79,6 +79,7 @@ def test_a_completed_run_verifies_ok_and_reports_its_chain_heads(client: TestCli
         "annotations": 0,
         "annotations_head": None,
         "signoffs_ok": True,
+        "parent": None,
         "unchained": 0,
         "broken": None,
         "heads": {"decisions": decisions[-1]["chain_hash"], "events": events[-1]["chain_hash"]},
@@ -362,7 +363,8 @@ def test_every_audited_column_is_in_the_chain() -> None:
     def columns(model: Any) -> set[str]:
         return {c.name for c in model.__table__.columns}
 
-    assert set(chain.DECISION_FIELDS) == columns(Decision) - {
+    # The pin columns are hashed too, only when set (so links written before them hold).
+    assert set(chain.DECISION_FIELDS) | set(chain.PIN_FIELDS) == columns(Decision) - {
         "id",
         "run_id",
         "created_at",

@@ -15,6 +15,7 @@ import pytest
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from benchmarks import (
+    adaptation,
     durable,
     learners,
     load,
@@ -131,3 +132,14 @@ def test_load_round_bookkeeping() -> None:
     problems = load.failures(result, log)
     assert len(problems) == 4 and sum("database is locked" in p for p in problems) == 2
     assert result.latencies() == [0.1] and result.latencies("dp") == []
+
+
+def test_adaptation_cases_and_figure(tmp_path: Path) -> None:
+    cases = adaptation.cases()
+    assert [len(c.problem.pinned) for c in cases] == [adaptation.HEAVY_AFTER, adaptation.URGENT_AT]
+    assert cases[0].problem.unavailable and not cases[1].problem.unavailable
+    results = adaptation.measure(cases[0], [("optimal", "optimal", {}), ("greedy", "greedy", {})])
+    assert results[0].es == pytest.approx(results[0].optimum)
+    assert results[1].es <= results[1].optimum + 1e-9
+    adaptation.figure(results, "adaptation-test.png", tmp_path)
+    assert (tmp_path / "adaptation-test.png").stat().st_size > 0

@@ -65,6 +65,8 @@ def test_every_spec_type_exists_and_kinds_map_as_documented() -> None:
     }
     assert TYPE_OF_KIND["integrity_failed"] is WebhookEventType.RUN_FAILED
     assert TYPE_OF_KIND["budget_exhausted"] is WebhookEventType.BUDGET_EXHAUSTED
+    assert TYPE_OF_KIND["review_requested"] is WebhookEventType.REVIEW_REQUESTED
+    assert TYPE_OF_KIND["review_resolved"] is WebhookEventType.REVIEW_RESOLVED
     assert "started" not in TYPE_OF_KIND and "resumed" not in TYPE_OF_KIND
 
 

@@ -9,11 +9,11 @@ from collections.abc import AsyncIterator
 from datetime import datetime
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Header
+from fastapi import APIRouter, Depends, Header, Query
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import StreamingResponse
 
-from app.api.deps import RunIdPath, RunsDep, SettingsDep, SupervisorDep
+from app.api.deps import RunIdPath, RunsDep, SettingsDep, StreamSupervisorDep
 from app.api.errors import ApiError
 from app.api.openapi import header_schema
 from app.api.responses import SUPERVISOR, errors
@@ -45,13 +45,27 @@ def start_cursor(
             "continues after it",
         ),
     ] = None,
+    after: Annotated[
+        str | None,
+        Query(
+            max_length=32,
+            json_schema_extra=header_schema(maxLength=32, pattern=rf"^[ \t]*$|{CURSOR_PATTERN}"),
+            description="Start after this event id (as Last-Event-ID does; EventSource "
+            "cannot send that header on its first request). The header wins on a reconnect.",
+        ),
+    ] = None,
 ) -> Cursor:
-    if not last_event_id or not last_event_id.strip(" \t"):
+    text, loc = (
+        (last_event_id, ["header", "last-event-id"])
+        if last_event_id and last_event_id.strip(" \t")
+        else (after, ["query", "after"])
+    )
+    if not text or not text.strip(" \t"):
         return Cursor()
     try:
-        return Cursor.parse(last_event_id)
+        return Cursor.parse(text)
     except ValueError as exc:
-        raise ApiError(422, ["header", "last-event-id"], str(exc), "value_error") from None
+        raise ApiError(422, loc, str(exc), "value_error") from None
 
 
 def _json_value(value: object) -> str:
@@ -88,7 +102,7 @@ def sse(
     responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404, 410)},
 )
 async def run_events(
-    caller: SupervisorDep,  # first: who may ask is settled before whether the run exists
+    caller: StreamSupervisorDep,  # first: who may ask is settled before whether the run exists
     run_id: Annotated[str, Depends(existing_run)],
     cursor: Annotated[Cursor, Depends(start_cursor)],
     runs: RunsDep,
@@ -97,7 +111,8 @@ async def run_events(
     """For supervisors: one `run` event per run event and one `decision` event per
     finalised decision, in order; review requests, resolutions and closings are `review`
     events (same data as `run`); the stream ends when the run does. Reconnect with
-    Last-Event-ID to continue where a stream stopped."""
+    Last-Event-ID to continue where a stream stopped. Besides API keys, this one endpoint
+    also accepts the supervisor console's session cookie (its pages use EventSource)."""
     headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
     return StreamingResponse(
         _stream(run_id, cursor, runs, settings), media_type="text/event-stream", headers=headers

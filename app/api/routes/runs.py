@@ -28,6 +28,7 @@ from app.api.run_schemas import (
     DecisionOut,
     DecisionReviewOut,
     EventOut,
+    ExecutionStateOut,
     Page,
     Progress,
     RunAssignment,
@@ -47,7 +48,7 @@ from app.reasoners.attribution import Attribution, attempt_attribution, decision
 from app.runs import audit, reviews, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
-from app.store.models import Attempt, Run
+from app.store.models import Attempt, ExecutionReport, Run
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -85,6 +86,7 @@ def create_run(
             problem.instance,
             mode=problem.mode.value,
             max_deviation=problem.cap.max_deviation,
+            cap_explicit="max_deviation" in body.model_fields_set,
             seed=body.seed,
             reasoner=reasoner,
             quality_threshold=body.quality_threshold,
@@ -213,6 +215,8 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
                 success=d.expected_success,
                 fallback=d.fallback,
                 review=_review_out(d.review),
+                pinned=d.task_index in view.pinned,
+                execution=_execution_out(view.execution.get(d.task_index)),
             )
             for d in view.decisions
         ],
@@ -223,10 +227,23 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
         resumes=run.resumes,
         graph_version=run.graph_version,
         error=run.error,
+        revision_of=run.revision_of,
+        revision=run.revision,
+        superseded_by=run.superseded_by,
         created_at=run.created_at,
         updated_at=run.updated_at,
         finished_at=run.finished_at,
         signoffs=[signoff_out(s) for s in view.signoffs],
+    )
+
+
+def _execution_out(report: ExecutionReport | None) -> ExecutionStateOut | None:
+    if report is None:
+        return None
+    return ExecutionStateOut(
+        state=report.state,  # type: ignore[arg-type]  # stored from the same Literal
+        started_at=report.started_at,
+        ended_at=report.ended_at,
     )
 
 

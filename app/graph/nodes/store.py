@@ -8,7 +8,7 @@ from langgraph.runtime import Runtime
 
 from app.graph.nodes.common import cancellable, require_attempt
 from app.graph.recorder import DecisionRecord
-from app.graph.state import GraphContext, LTAAState
+from app.graph.state import GraphContext, LTAAState, next_task
 
 
 @cancellable
@@ -51,4 +51,5 @@ def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
     )
     # build_prompt resets the per-task flags; clearing the text scratch keeps the next
     # task's checkpoints small.
-    return {"task_index": t + 1, "done": t + 1 >= inst.n_tasks, "decision": None}
+    following = next_task(ctx.problem, t)  # pinned tasks are not the graph's to decide
+    return {"task_index": following, "done": following >= inst.n_tasks, "decision": None}

@@ -6,9 +6,8 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
-from app.domain.metrics import balance_score, severity
 from app.graph.nodes.common import cancellable
-from app.graph.state import GraphContext, LTAAState
+from app.graph.state import GraphContext, LTAAState, balance_of, severity_of
 
 
 @cancellable
@@ -19,10 +18,9 @@ def update_workload(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
         raise RuntimeError(f"task index {state['task_index']} reached update_workload undecided")
     loads = list(state["loads"])
     loads[robot] += 1
-    target = ctx.problem.instance.target_load
     view = {
         **state["view"],
-        "balance": balance_score(loads, target),
-        "severity": severity(loads, target).value,
+        "balance": balance_of(ctx.problem, loads),
+        "severity": severity_of(ctx.problem, loads),
     }
     return {"loads": loads, "view": view}

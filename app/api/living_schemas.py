@@ -1,0 +1,150 @@
+"""Bodies of the living-plan endpoints (SPEC 10): execution reports and revisions."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
+
+from app.api.run_schemas import Timestamp
+from app.api.schemas import Name, Probability, RobotIn, TaskId, TaskIn
+from app.domain.lifecycle import RunStatus
+from app.domain.models import MAX_ROBOTS, MAX_TASKS
+from app.domain.modes import Mode
+
+MAX_UPDATES = 10_000
+MAX_CHANGES = 100
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ExecutionUpdate(_Strict):
+    task_id: TaskId
+    state: Literal["started", "done", "failed"]
+    at: Timestamp | None = Field(None, description="When it happened (RFC 3339); default now")
+
+
+class ExecutionRequest(_Strict):
+    updates: list[ExecutionUpdate] = Field(min_length=1, max_length=MAX_UPDATES)
+
+
+class ExecutionOut(BaseModel):
+    run_id: str
+    states: dict[str, str] = Field(description="Each reported task's state now, by task id")
+
+
+class RobotUnavailable(_Strict):
+    type: Literal["robot_unavailable"]
+    robot: Name
+
+
+class RobotAvailable(_Strict):
+    type: Literal["robot_available"]
+    robot: Name
+
+
+class SetRates(_Strict):
+    type: Literal["set_rates"]
+    robot: Name
+    success: dict[Name, Probability] = Field(min_length=1, max_length=100)
+
+
+class AddRobot(_Strict):
+    type: Literal["add_robot"]
+    robot: RobotIn
+
+
+class AddTasks(_Strict):
+    type: Literal["add_tasks"]
+    tasks: list[TaskIn] = Field(min_length=1, max_length=MAX_TASKS)
+    position: Literal["next", "end"] = "end"
+
+
+class RemoveTasks(_Strict):
+    type: Literal["remove_tasks"]
+    task_ids: list[TaskId] = Field(min_length=1, max_length=MAX_TASKS)
+
+
+class SetMode(_Strict):
+    type: Literal["set_mode"]
+    mode: Mode
+    max_deviation: float | None = Field(
+        None, ge=0, allow_inf_nan=False, strict=True, description="Omit for the mode's default"
+    )
+
+
+Change = Annotated[
+    RobotUnavailable | RobotAvailable | SetRates | AddRobot | AddTasks | RemoveTasks | SetMode,
+    Field(discriminator="type"),
+]
+
+
+class PinThrough(_Strict):
+    through_task_index: StrictInt = Field(ge=0, le=MAX_TASKS)
+
+
+class PinTasks(_Strict):
+    task_ids: list[TaskId] = Field(min_length=1, max_length=MAX_TASKS)
+
+
+class RevisionRequestIn(_Strict):
+    """A revision of a run: the changes, which decisions stay (pins), and why."""
+
+    changes: list[Change] = Field(default_factory=list, max_length=MAX_CHANGES)
+    pin: Literal["reported", "decided"] | PinThrough | PinTasks = Field(
+        "reported",
+        description="'reported' (tasks reported started or done), 'decided' (every task the "
+        "parent decided), {through_task_index: k} or {task_ids: [...]}",
+    )
+    reason: StrictStr = Field(min_length=1, max_length=2000)
+    reasoner: Name | None = Field(None, description="Override the inherited reasoner")
+    model: Name | None = Field(None, description="Override the inherited model")
+
+
+class RevisionCreated(BaseModel):
+    id: str
+    revision_of: str
+    revision: int
+    status: RunStatus
+    location: str
+
+
+class RevisionItem(BaseModel):
+    id: str
+    revision: int
+    revision_of: str | None
+    superseded_by: str | None
+    status: RunStatus
+    created_at: Timestamp
+
+
+class RobotChange(BaseModel):
+    task_id: int | str
+    task_name: str
+    from_robot: str
+    to_robot: str
+    success_before: float
+    success_after: float
+
+
+class SideMetrics(BaseModel):
+    expected_success: float | None
+    balance_score: float | None
+    decided: int
+    total: int
+
+
+class DiffOut(BaseModel):
+    run_id: str
+    parent: str
+    robot_changes: list[RobotChange]
+    added_tasks: list[int | str]
+    removed_tasks: list[int | str]
+    fleet_changes: list[dict[str, object]]
+    before: SideMetrics
+    after: SideMetrics
+
+
+__all__ = ["MAX_ROBOTS"]

@@ -1,0 +1,177 @@
+"""`ltaa revise`: revise a run on a running server when the site changes, then print the
+diff against its parent with rich. Talks HTTP (the run lives in the server's store)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import httpx
+from rich.console import Console
+from rich.table import Table
+
+
+class ReviseError(RuntimeError):
+    """The server refused the revision (or could not be reached): the message says why."""
+
+
+def parse_pin(text: str) -> str | dict[str, Any]:
+    """'reported' | 'decided' | 'through:17' | 'tasks:a,b'."""
+    if text in ("reported", "decided"):
+        return text
+    kind, _, rest = text.partition(":")
+    if kind == "through" and rest.isdigit():
+        return {"through_task_index": int(rest)}
+    if kind == "tasks" and rest:
+        return {"task_ids": [int(t) if t.isdigit() else t for t in rest.split(",")]}
+    raise ReviseError(
+        f"--pin {text!r}: write reported, decided, through:<task index> or tasks:<id,id,...>"
+    )
+
+
+def parse_rate(text: str) -> tuple[str, str, float]:
+    """'light:heavy=0.95' -> (robot, feature, rate)."""
+    robot, _, rest = text.partition(":")
+    feature, _, value = rest.partition("=")
+    try:
+        return robot, feature, float(value)
+    except ValueError:
+        raise ReviseError(f"--set-rate {text!r}: write <robot>:<feature>=<rate>") from None
+
+
+def parse_task(text: str) -> dict[str, Any]:
+    """'U1:heavy,careful' -> a task needing those features."""
+    task_id, _, features = text.partition(":")
+    if not task_id or not features:
+        raise ReviseError(f"--add-task {text!r}: write <id>:<feature>[,<feature>...]")
+    return {"id": task_id, "features": features.split(",")}
+
+
+def build_changes(
+    *,
+    unavailable: list[str],
+    available: list[str],
+    rates: list[str],
+    add_next: list[str],
+    add_end: list[str],
+    remove: list[str],
+    mode: str | None,
+    max_deviation: float | None,
+) -> list[dict[str, Any]]:
+    changes: list[dict[str, Any]] = [{"type": "robot_unavailable", "robot": r} for r in unavailable]
+    changes += [{"type": "robot_available", "robot": r} for r in available]
+    by_robot: dict[str, dict[str, float]] = {}
+    for text in rates:
+        robot, feature, value = parse_rate(text)
+        by_robot.setdefault(robot, {})[feature] = value
+    changes += [{"type": "set_rates", "robot": r, "success": s} for r, s in by_robot.items()]
+    if add_next:
+        changes.append(
+            {"type": "add_tasks", "tasks": [parse_task(t) for t in add_next], "position": "next"}
+        )
+    if add_end:
+        changes.append(
+            {"type": "add_tasks", "tasks": [parse_task(t) for t in add_end], "position": "end"}
+        )
+    if remove:
+        changes.append(
+            {"type": "remove_tasks", "task_ids": [int(t) if t.isdigit() else t for t in remove]}
+        )
+    if mode is not None or max_deviation is not None:
+        change: dict[str, Any] = {"type": "set_mode", "mode": mode or "balanced"}
+        if max_deviation is not None:
+            change["max_deviation"] = max_deviation
+        changes.append(change)
+    return changes
+
+
+def _check(response: httpx.Response) -> dict[str, Any]:
+    if response.status_code >= 400:
+        try:
+            detail = response.json()["detail"]
+            message = "; ".join(f"{'.'.join(str(p) for p in d['loc'])}: {d['msg']}" for d in detail)
+        except (ValueError, KeyError, TypeError):
+            message = response.text
+        raise ReviseError(f"HTTP {response.status_code}: {message}")
+    return dict(response.json())
+
+
+def revise(
+    *,
+    url: str,
+    api_key: str | None,
+    run_id: str,
+    body: dict[str, Any],
+    wait: bool,
+    timeout: float = 600.0,
+) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """(the revision as created, its diff once it completed; None without waiting)."""
+    headers = {"X-API-Key": api_key} if api_key else {}
+    with httpx.Client(base_url=url, headers=headers, timeout=30) as client:
+        try:
+            created = _check(client.post(f"/runs/{run_id}/revisions", json=body))
+        except httpx.HTTPError as exc:
+            raise ReviseError(f"cannot reach {url}: {exc}") from None
+        if not wait:
+            return created, None
+        deadline = time.monotonic() + timeout
+        while True:
+            state = _check(client.get(f"/runs/{created['id']}"))
+            if state["status"] == "completed":
+                break
+            if state["status"] in ("failed", "cancelled", "superseded"):
+                raise ReviseError(f"revision {created['id']} ended {state['status']}")
+            if time.monotonic() > deadline:
+                raise ReviseError(f"revision {created['id']} still {state['status']}")
+            time.sleep(0.2)
+        return created, _check(client.get(f"/runs/{created['id']}/diff"))
+
+
+def print_diff(created: dict[str, Any], diff: dict[str, Any] | None, console: Console) -> None:
+    console.print(
+        f"[bold]revision {created['revision']}[/] [cyan]{created['id']}[/] of "
+        f"[cyan]{created['revision_of']}[/]: {created['status']}"
+    )
+    if diff is None:
+        return
+    summary = Table(title="Before and after", show_header=True)
+    summary.add_column("")
+    summary.add_column("parent", justify="right")
+    summary.add_column("revision", justify="right")
+    before, after = diff["before"], diff["after"]
+
+    def pct(value: float | None) -> str:
+        return "-" if value is None else f"{value * 100:.2f}%"
+
+    def score(value: float | None) -> str:
+        return "-" if value is None else f"{value:.1f}"
+
+    summary.add_row(
+        "expected success", pct(before["expected_success"]), pct(after["expected_success"])
+    )
+    summary.add_row("balance score", score(before["balance_score"]), score(after["balance_score"]))
+    summary.add_row(
+        "decided", f"{before['decided']}/{before['total']}", f"{after['decided']}/{after['total']}"
+    )
+    console.print(summary)
+    if diff["fleet_changes"]:
+        console.print(
+            "fleet: " + ", ".join(f"{c['robot']} {c['change']}" for c in diff["fleet_changes"])
+        )
+    if diff["added_tasks"] or diff["removed_tasks"]:
+        console.print(
+            f"tasks added: {diff['added_tasks'] or '-'}; removed: {diff['removed_tasks'] or '-'}"
+        )
+    moved = Table(title=f"{len(diff['robot_changes'])} task(s) moved to another robot")
+    for column in ("task", "name", "from", "to", "success before", "success after"):
+        moved.add_column(column)
+    for c in diff["robot_changes"]:
+        moved.add_row(
+            str(c["task_id"]),
+            c["task_name"],
+            c["from_robot"],
+            c["to_robot"],
+            pct(c["success_before"]),
+            pct(c["success_after"]),
+        )
+    console.print(moved)

@@ -1,0 +1,248 @@
+"""The console's pages: runs, a run, its attempts' prompts, its chain check and export,
+the reviews queue; and the run actions a supervisor may take from a run page."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import RedirectResponse, Response
+
+from app.api.audit import jsonl_trace
+from app.console import views
+from app.console.context import (
+    ConsoleDep,
+    CsrfDep,
+    PageNotFound,
+    RunIdDep,
+    SignedInDep,
+    finish,
+    sessions_of,
+)
+from app.domain.lifecycle import ACTIVE, RunStatus
+from app.runs import audit, browse, service
+from app.runs.errors import RunNotFoundError, RunStateConflictError
+
+router = APIRouter(prefix="/console", include_in_schema=False)
+RUNS_PER_PAGE = 50
+
+
+def _not_found(request: Request, console: ConsoleDep, signed: SignedInDep, what: str) -> Response:
+    return console.render(
+        request,
+        "refused.html",
+        {"title": "Not found", "message": what},
+        signed=signed,
+        status_code=404,
+    )
+
+
+def _status_filter(raw: str | None) -> RunStatus | None:
+    try:
+        return RunStatus(raw) if raw else None
+    except ValueError:
+        return None
+
+
+def _runs_context(request: Request, status: str | None, page: int) -> dict[str, object]:
+    chosen = _status_filter(status)
+    page = max(1, page)
+    rows = service.list_run_rows(
+        sessions=sessions_of(request),
+        status=chosen,
+        limit=RUNS_PER_PAGE + 1,  # one more: is there an older page?
+        offset=(page - 1) * RUNS_PER_PAGE,
+    )
+    return {
+        "runs": rows[:RUNS_PER_PAGE],
+        "more": len(rows) > RUNS_PER_PAGE,
+        "page": page,
+        "status": chosen,
+        "statuses": list(RunStatus),
+        "active": {s.value for s in ACTIVE},
+    }
+
+
+@router.get("")
+async def runs_page(
+    request: Request,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    status: Annotated[str | None, Query(max_length=32)] = None,
+    page: Annotated[int, Query(ge=1, le=1_000_000)] = 1,
+) -> Response:
+    context = await run_in_threadpool(_runs_context, request, status, page)
+    return finish(
+        request,
+        console.render(request, "runs.html", {"title": "Runs", **context}, signed=signed),
+    )
+
+
+@router.get("/runs-table")
+async def runs_table(
+    request: Request,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    status: Annotated[str | None, Query(max_length=32)] = None,
+    page: Annotated[int, Query(ge=1, le=1_000_000)] = 1,
+) -> Response:
+    """The runs table's rows alone: what the list page re-reads while a run is active."""
+    context = await run_in_threadpool(_runs_context, request, status, page)
+    return console.render(request, "runs_rows.html", context, signed=signed)
+
+
+@router.get("/runs/{run_id}")
+async def run_page(
+    request: Request,
+    run_id: RunIdDep,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    page: Annotated[int, Query(ge=1, le=1_000_000)] = 1,
+    decision: Annotated[int | None, Query(ge=0, le=1_000_000)] = None,
+) -> Response:
+    try:
+        view = await run_in_threadpool(
+            views.run_page,
+            sessions=sessions_of(request),
+            run_id=run_id,
+            page_number=page,
+            open_decision=decision,
+            cache_dir=console.settings.data_dir / "console-cache",
+        )
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    run = view.overview.run
+    model = view.model or (console.settings.default_model if run.reasoner == "anthropic" else None)
+    context = {
+        "title": f"Run {run.id[:8]}",
+        "v": view,
+        "run": run,
+        "model": model,
+        "finished": run.status not in {s.value for s in ACTIVE},
+        "can_cancel": run.status in {s.value for s in ACTIVE},
+        "can_resume": run.status in (RunStatus.INTERRUPTED, RunStatus.FAILED),
+        "scores_of": views.scores_of,
+        "final_attempt": views.final_attempt,
+    }
+    return finish(request, console.render(request, "run.html", context, signed=signed))
+
+
+@router.get("/runs/{run_id}/attempts/{task_index}/{attempt}")
+async def attempt_page(
+    request: Request,
+    run_id: RunIdDep,
+    task_index: int,
+    attempt: int,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    fragment: bool = False,
+) -> Response:
+    """One attempt's prompts and reply: loaded into the run page on demand (fragment=1),
+    or a page of its own without script."""
+    try:
+        row = await run_in_threadpool(
+            browse.attempt_detail,
+            sessions=sessions_of(request),
+            run_id=run_id,
+            task_index=task_index,
+            attempt=attempt,
+        )
+    except (RunNotFoundError, browse.AttemptNotFoundError) as exc:
+        raise PageNotFound(str(exc)) from None
+    context = {"title": f"Task {task_index}, attempt {attempt}", "a": row, "run_id": run_id}
+    name = "attempt_fragment.html" if fragment else "attempt.html"
+    return finish(request, console.render(request, name, context, signed=signed))
+
+
+@router.get("/runs/{run_id}/frontier")
+async def frontier_page(
+    request: Request,
+    run_id: RunIdDep,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    fragment: bool = False,
+) -> Response:
+    try:
+        part = await run_in_threadpool(
+            views.run_frontier,
+            sessions=sessions_of(request),
+            run_id=run_id,
+            cache_dir=console.settings.data_dir / "console-cache",
+        )
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    context = {"title": "Frontier", "f": part, "run_id": run_id}
+    name = "frontier_fragment.html" if fragment else "frontier.html"
+    return finish(request, console.render(request, name, context, signed=signed))
+
+
+@router.get("/runs/{run_id}/verify")
+async def verify_page(
+    request: Request,
+    run_id: RunIdDep,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    fragment: bool = False,
+) -> Response:
+    try:
+        report = await run_in_threadpool(
+            audit.verify_trace, sessions=sessions_of(request), run_id=run_id
+        )
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    context = {"title": "Chain verification", "report": report, "run_id": run_id}
+    name = "verify_fragment.html" if fragment else "verify.html"
+    return finish(request, console.render(request, name, context, signed=signed))
+
+
+@router.get("/runs/{run_id}/export.jsonl")
+async def export(
+    request: Request, run_id: RunIdDep, console: ConsoleDep, signed: SignedInDep
+) -> Response:
+    """The whole audit record as JSON lines (as GET /runs/{id}/trace?format=jsonl), as a
+    download: the one record, read through the same pages."""
+    try:
+        response = jsonl_trace(sessions=sessions_of(request), run_id=run_id)
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    response.headers["Content-Disposition"] = f'attachment; filename="run-{run_id}.jsonl"'
+    return finish(request, response)
+
+
+async def _act(
+    request: Request, console: ConsoleDep, signed: CsrfDep, run_id: str, action: str
+) -> Response:
+    runs = request.app.state.runs
+    command = service.cancel_run if action == "cancel" else service.resume_run
+    try:
+        await run_in_threadpool(command, sessions=runs.sessions, worker=runs.worker, run_id=run_id)
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    except RunStateConflictError as exc:
+        return console.render(
+            request,
+            "refused.html",
+            {
+                "title": f"Cannot {action}",
+                "message": exc.message,
+                "retry": f"/console/runs/{run_id}",
+            },
+            signed=signed,
+            status_code=409,
+        )
+    return RedirectResponse(f"/console/runs/{run_id}", status_code=303)
+
+
+@router.post("/runs/{run_id}/cancel")
+async def cancel(
+    request: Request, run_id: RunIdDep, console: ConsoleDep, signed: CsrfDep
+) -> Response:
+    return await _act(request, console, signed, run_id, "cancel")
+
+
+@router.post("/runs/{run_id}/resume")
+async def resume(
+    request: Request, run_id: RunIdDep, console: ConsoleDep, signed: CsrfDep
+) -> Response:
+    return await _act(request, console, signed, run_id, "resume")

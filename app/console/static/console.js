@@ -1,0 +1,100 @@
+// The console's only script, for what a server-rendered page cannot do by itself: live
+// progress from the run's event stream (EventSource), live status on the runs list, and
+// details loaded on demand. Every page works without it.
+"use strict";
+
+function watchRun(root) {
+  const url = root.dataset.stream;
+  if (!url || !window.EventSource) return;
+  const total = Number(root.dataset.total);
+  const bar = document.getElementById("progress");
+  const done = document.getElementById("progress-done");
+  const pct = document.getElementById("progress-pct");
+  const status = document.getElementById("run-status");
+  const events = document.getElementById("events");
+  const source = new EventSource(url);
+  source.addEventListener("decision", (msg) => {
+    const d = JSON.parse(msg.data);
+    const allocated = d.task_index + 1;
+    bar.value = allocated;
+    done.textContent = String(allocated);
+    pct.textContent = String(total ? Math.round((100 * allocated) / total) : 100);
+  });
+  source.addEventListener("run", (msg) => {
+    const e = JSON.parse(msg.data);
+    const item = document.createElement("li");
+    const strong = document.createElement("strong");
+    strong.textContent = e.kind.replaceAll("_", " ");
+    item.append(new Date(e.at).toISOString().replace("T", " ").slice(0, 19) + " UTC ", strong);
+    events.append(item);
+    const finished = { completed: 1, failed: 1, cancelled: 1, interrupted: 1, superseded: 1,
+                       awaiting_review: 1 };
+    const shown = { started: "running", resumed: "running", review_resolved: "queued" };
+    const next = finished[e.kind] ? e.kind : shown[e.kind];
+    if (next) {
+      status.textContent = next.replaceAll("_", " ");
+      status.className = "status status-" + next;
+    }
+    if (finished[e.kind] && e.kind !== "awaiting_review") source.close();
+  });
+}
+
+function pollRuns(table) {
+  const url = table.dataset.poll;
+  const body = table.tBodies[0];
+  const tick = async () => {
+    if (!body.querySelector("tr[data-active]")) return; // nothing left to change
+    try {
+      const response = await fetch(url, { credentials: "same-origin" });
+      if (response.ok) body.innerHTML = await response.text();
+    } catch (err) {
+      // offline for a moment: try again at the next tick
+    }
+    setTimeout(tick, 2000);
+  };
+  setTimeout(tick, 2000);
+}
+
+async function loadInto(target, url) {
+  target.textContent = "Loading…";
+  try {
+    const response = await fetch(url, { credentials: "same-origin" });
+    target.innerHTML = response.ok ? await response.text() : "Could not load (" + response.status + ").";
+  } catch (err) {
+    target.textContent = "Could not load: " + err;
+  }
+}
+
+function wirePrompts() {
+  document.addEventListener("click", (event) => {
+    const link = event.target.closest("a.load-prompts");
+    if (!link) return;
+    event.preventDefault();
+    const target = document.getElementById(link.dataset.target);
+    if (target.dataset.loaded) {
+      target.hidden = !target.hidden;
+      return;
+    }
+    target.dataset.loaded = "1";
+    loadInto(target, link.getAttribute("href") + "?fragment=1");
+  });
+}
+
+function wireVerify(box) {
+  const link = document.getElementById("verify-link");
+  const run = () => loadInto(box, box.dataset.src);
+  link.addEventListener("click", (event) => { event.preventDefault(); run(); });
+  if (box.hasAttribute("data-auto")) run();
+}
+
+document.addEventListener("DOMContentLoaded", () => {
+  const run = document.getElementById("run");
+  if (run) watchRun(run);
+  const runs = document.getElementById("runs");
+  if (runs) pollRuns(runs);
+  const verify = document.getElementById("verify");
+  if (verify) wireVerify(verify);
+  const frontier = document.getElementById("frontier");
+  if (frontier && frontier.dataset.src) loadInto(frontier, frontier.dataset.src);
+  wirePrompts();
+});

@@ -1,0 +1,139 @@
+"""What the run page shows, assembled from app.runs (the services the JSON API uses)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from markupsafe import Markup
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.console import charts
+from app.graph.validation import CRITERION_TITLES, WEIGHTS
+from app.runs import browse
+from app.runs.frontier import FrontierPoint, cached_frontier, frontier
+from app.store.models import Attempt
+
+DECISIONS_PER_PAGE = 25
+INLINE_FRONTIER_TASKS = 1000  # up to here the frontier takes milliseconds: drawn in the page
+
+
+@dataclass(frozen=True)
+class Score:
+    key: str
+    title: str
+    weight: float
+    value: float | None
+
+
+def scores_of(attempt: Attempt | None) -> list[Score]:
+    """The eight criteria in the paper's order, with the attempt's score for each."""
+    given: dict[str, Any] = (attempt.scores or {}) if attempt is not None else {}
+    return [
+        Score(key, CRITERION_TITLES[key], weight, _float(given.get(key)))
+        for key, weight in WEIGHTS.items()
+    ]
+
+
+def _float(value: Any) -> float | None:
+    return float(value) if isinstance(value, int | float) else None
+
+
+def final_attempt(attempts: list[Attempt]) -> Attempt | None:
+    accepted = [a for a in attempts if a.accepted]
+    if accepted:
+        return accepted[-1]
+    return attempts[-1] if attempts else None
+
+
+@dataclass(frozen=True)
+class FrontierView:
+    svg: Markup
+    points: list[charts.PlotPoint]
+    run_point: charts.PlotPoint | None
+
+
+def frontier_view(view: browse.RunOverview, points: list[FrontierPoint]) -> FrontierView:
+    plotted = [
+        charts.PlotPoint(
+            "no cap" if p.max_deviation is None else f"cap ±{p.max_deviation:g}",
+            p.balance_score,
+            100 * p.expected_success,
+        )
+        for p in points
+    ]
+    run_point = (
+        charts.PlotPoint("this run", view.balance_score, 100 * view.expected_success)
+        if view.balance_score is not None and view.expected_success is not None
+        else None
+    )
+    return FrontierView(charts.frontier_chart(plotted, run_point), plotted, run_point)
+
+
+def run_frontier(*, sessions: sessionmaker[Session], run_id: str, cache_dir: Path) -> FrontierView:
+    """The frontier part of the run page, computing (and caching) the frontier if need be."""
+    view = browse.overview(sessions=sessions, run_id=run_id)
+    return frontier_view(view, frontier(spec=view.spec, run_id=run_id, cache_dir=cache_dir))
+
+
+@dataclass(frozen=True)
+class RunPage:
+    overview: browse.RunOverview
+    page: browse.DecisionPage
+    page_number: int
+    pages: int
+    open_decision: int | None
+    workload_svg: Markup
+    balance_svg: Markup
+    frontier: FrontierView | None  # None: not computed yet (the page loads it separately)
+    cap_lower: int
+    cap_upper: int | None
+    model: str | None
+    stream_cursor: str
+
+
+def run_page(
+    *,
+    sessions: sessionmaker[Session],
+    run_id: str,
+    page_number: int,
+    open_decision: int | None,
+    cache_dir: Path,
+) -> RunPage:
+    view = browse.overview(sessions=sessions, run_id=run_id)
+    run, spec = view.run, view.spec
+    pages = max(1, -(-run.n_tasks // DECISIONS_PER_PAGE))
+    if open_decision is not None and 0 <= open_decision < run.n_tasks:
+        page_number = open_decision // DECISIONS_PER_PAGE + 1
+    page_number = min(max(1, page_number), pages)
+    page = browse.decision_page(
+        sessions=sessions,
+        run_id=run_id,
+        offset=(page_number - 1) * DECISIONS_PER_PAGE,
+        limit=DECISIONS_PER_PAGE,
+    )
+    cap = spec.problem.cap
+    upper = None if cap.max_deviation is None else cap.upper
+    # A first visit to a large run would wait for the exact optimum at every cap: the page
+    # then comes without it and fetches it (which computes and caches it) once shown.
+    cached = cached_frontier(run_id=run_id, cache_dir=cache_dir)
+    if cached is None and run.n_tasks <= INLINE_FRONTIER_TASKS:
+        cached = frontier(spec=spec, run_id=run_id, cache_dir=cache_dir)
+    last_seq = view.events[-1].seq if view.events else 0
+    return RunPage(
+        overview=view,
+        page=page,
+        page_number=page_number,
+        pages=pages,
+        open_decision=open_decision,
+        workload_svg=charts.workload_chart(
+            view.robots, view.loads, spec.problem.instance.target_load, cap.lower, upper
+        ),
+        balance_svg=charts.balance_chart(view.balance, run.n_tasks),
+        frontier=frontier_view(view, cached) if cached is not None else None,
+        cap_lower=cap.lower,
+        cap_upper=upper,
+        model=spec.model,
+        stream_cursor=f"{last_seq}-{view.allocated}",
+    )

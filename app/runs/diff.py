@@ -1,0 +1,102 @@
+"""A revision against its parent (SPEC 10): what moved, what was added or removed, what the
+fleet lost or gained, and expected success and balance before and after."""
+
+from __future__ import annotations
+
+import statistics
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.domain.metrics import balance_score
+from app.graph.recorder import DecisionRecord
+from app.runs import records
+from app.runs.errors import RunNotFoundError
+from app.runs.revisions import RevisionConflictError
+from app.runs.spec import RunSpec
+from app.store import repository as repo
+from app.store.models import Run
+
+
+@dataclass(frozen=True)
+class Diff:
+    run_id: str
+    parent: str
+    robot_changes: list[dict[str, Any]]
+    added_tasks: list[int | str]
+    removed_tasks: list[int | str]
+    fleet_changes: list[dict[str, Any]]
+    before: dict[str, Any]
+    after: dict[str, Any]
+
+
+def side(run: Run, spec: RunSpec, decisions: list[DecisionRecord]) -> dict[str, Any]:
+    """Expected success over the decided tasks (the recorded success of each, pins
+    included) and the balance of their loads over the robots in the balance."""
+    problem = spec.problem
+    loads = [0] * problem.instance.n_robots
+    for d in decisions:
+        loads[d.robot] += 1
+    es = statistics.fmean(d.expected_success for d in decisions) if decisions else None
+    return {
+        "expected_success": es,
+        "balance_score": balance_score(problem.cap.balanced(loads), problem.target)
+        if decisions
+        else None,
+        "decided": len(decisions),
+        "total": run.n_tasks,
+    }
+
+
+def _load(session: Session, run_id: str) -> tuple[Run, RunSpec, list[DecisionRecord]]:
+    run = repo.get_run(session=session, run_id=run_id)
+    if run is None:
+        raise RunNotFoundError(run_id)
+    decisions = [records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)]
+    return run, RunSpec.from_json(run.request), decisions
+
+
+def diff(*, sessions: sessionmaker[Session], run_id: str) -> Diff:
+    with sessions() as session:
+        run, spec, after = _load(session, run_id)
+        if run.revision_of is None:
+            raise RevisionConflictError(
+                f"run '{run_id}' is not a revision; GET /runs/{{id}}/diff compares a "
+                "revision with the run it revised"
+            )
+        parent, parent_spec, before = _load(session, run.revision_of)
+        first = repo.events_page(session=session, run_id=run_id, after_seq=0, limit=1)
+        detail = first[0].detail if first else {}
+    old = {str(t["id"]) for t in parent_spec.instance_data["tasks"]}
+    new = {str(t["id"]) for t in spec.instance_data["tasks"]}
+    decided_before = {str(d.task_id): d for d in before}
+    changes = []
+    for d in after:
+        was = decided_before.get(str(d.task_id))
+        if was is not None and was.robot_name != d.robot_name:
+            changes.append(
+                {
+                    "task_id": d.task_id,
+                    "task_name": d.task_name,
+                    "from_robot": was.robot_name,
+                    "to_robot": d.robot_name,
+                    "success_before": was.expected_success,
+                    "success_after": d.expected_success,
+                }
+            )
+    order = [t["id"] for t in spec.instance_data["tasks"]]
+    parent_order = [t["id"] for t in parent_spec.instance_data["tasks"]]
+    original = {str(t): t for t in order}
+    for c in changes:
+        c["task_id"] = original.get(str(c["task_id"]), c["task_id"])
+    return Diff(
+        run_id=run_id,
+        parent=parent.id,
+        robot_changes=changes,
+        added_tasks=[t for t in order if str(t) not in old],
+        removed_tasks=[t for t in parent_order if str(t) not in new],
+        fleet_changes=list(detail.get("fleet_changes", [])),
+        before=side(parent, parent_spec, before),
+        after=side(run, spec, after),
+    )

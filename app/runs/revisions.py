@@ -1,0 +1,269 @@
+"""Revisions (SPEC 10): a new run that replaces its parent when the site changes.
+
+Creating a revision and stopping its parent is one transaction. It begins by writing the
+parent's row (a lock: SQLite's write lock, a PostgreSQL row lock), so the decisions it pins
+are exactly those the parent had committed; every recorder write of the parent checks, in
+its own transaction, that the parent is still `running` (app.runs.recorder.StatusFence),
+so a decision it was computing when it was superseded is rolled back, never stored.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.config import Settings
+from app.domain.annotations import AnnotationKind
+from app.domain.errors import DomainError
+from app.domain.lifecycle import FINISHED
+from app.reasoners.factory import close_reasoner, make_reasoner
+from app.runs import lifecycle, records
+from app.runs.audit import revision_link
+from app.runs.errors import RunNotFoundError
+from app.runs.execution import head_of
+from app.runs.idempotency import Idempotency, run_for_key
+from app.runs.lifecycle import EventKind, RunStatus
+from app.runs.revision_plan import ParentDecision, plan_revision
+from app.runs.spec import RunSpec
+from app.runs.worker import RunWorker
+from app.store import chain
+from app.store import repository as repo
+from app.store.db import transaction
+from app.store.models import Run
+
+REVISABLE = frozenset(
+    {RunStatus.QUEUED, RunStatus.RUNNING, RunStatus.INTERRUPTED, RunStatus.COMPLETED}
+)
+
+
+class RevisionConflictError(DomainError):
+    status_code = 409
+    location = "path"
+
+    def __init__(self, message: str, code: str = "conflict") -> None:
+        super().__init__("run_id", message, code=code)
+
+
+@dataclass(frozen=True)
+class RevisionRequest:
+    changes: Sequence[Mapping[str, Any]]
+    pin: str | Mapping[str, Any]
+    reason: str
+    reasoner: str | None = None
+    model: str | None = None
+
+
+def _lock(session: Session, run_id: str) -> Run:
+    """Write the parent's row first: from here on this transaction holds the write lock
+    (SQLite) or the row lock (PostgreSQL), and the parent's fenced writes wait for it."""
+    touched = session.execute(
+        update(Run)
+        .where(Run.id == run_id)
+        .values(updated_at=Run.updated_at)
+        .returning(Run.id)
+        .execution_options(synchronize_session=False)
+    ).first()
+    if touched is None:
+        raise RunNotFoundError(run_id)
+    run = repo.get_run(session=session, run_id=run_id, for_update=True)
+    if run is None:
+        raise RunNotFoundError(run_id)
+    return run
+
+
+def lineage_tokens(session: Session, run: Run) -> int:
+    """Tokens spent by the run and every run it revised."""
+    total, seen = 0, set()
+    current: Run | None = run
+    while current is not None and current.id not in seen:
+        seen.add(current.id)
+        total += repo.tokens_spent(session=session, run_id=current.id)
+        current = (
+            repo.get_run(session=session, run_id=current.revision_of)
+            if current.revision_of
+            else None
+        )
+    return total
+
+
+def create_revision(
+    *,
+    sessions: sessionmaker[Session],
+    worker: RunWorker,
+    parent_id: str,
+    request: RevisionRequest,
+    settings: Settings,
+    idempotency: Idempotency | None = None,
+) -> tuple[Run, bool]:
+    """(the revision, whether an earlier request with the same Idempotency-Key made it)."""
+    _check_reasoner(settings, request)
+    if idempotency is not None:
+        earlier = run_for_key(sessions=sessions, idempotency=idempotency)
+        if earlier is not None:
+            return earlier, True
+    try:
+        run, parent_was_active = _create(sessions, parent_id, request, idempotency)
+    except IntegrityError:
+        if idempotency is None:
+            raise
+        earlier = run_for_key(sessions=sessions, idempotency=idempotency)
+        if earlier is None:
+            raise
+        return earlier, True
+    if parent_was_active:
+        worker.supersede(parent_id)
+    worker.submit(run.id)
+    return run, False
+
+
+def _create(
+    sessions: sessionmaker[Session],
+    parent_id: str,
+    request: RevisionRequest,
+    idempotency: Idempotency | None,
+) -> tuple[Run, bool]:
+    with transaction(sessions) as session:
+        parent = _lock(session, parent_id)
+        if parent.superseded_by is not None:
+            head = head_of(session, parent)
+            raise RevisionConflictError(
+                f"run '{parent_id}' was already revised; revise the head of its revisions, "
+                f"run '{head}' (POST /runs/{head}/revisions)",
+                code="already_revised",
+            )
+        status = RunStatus(parent.status)
+        if status not in REVISABLE:
+            raise RevisionConflictError(
+                f"run '{parent_id}' is {status.value}; only a queued, running, interrupted or "
+                "completed run can be revised (start a new run instead)"
+            )
+        parent_spec = RunSpec.from_json(parent.request)
+        rows = repo.decisions(session=session, run_id=parent_id)
+        decided = {
+            r.task_index: ParentDecision(records.decision_record(r), r.chain_hash) for r in rows
+        }
+        execution = {
+            r.task_index: r.state for r in repo.execution_reports(session=session, run_id=parent_id)
+        }
+        budget = parent_spec.token_budget
+        if budget is not None:
+            budget = max(0, budget - lineage_tokens(session, parent))
+        plan = plan_revision(
+            parent_spec=parent_spec,
+            decided=decided,
+            execution=execution,
+            changes=request.changes,
+            pin=request.pin,
+            reasoner=request.reasoner,
+            model=request.model,
+            parent_id=parent_id,
+            token_budget=budget,
+        )
+        heads = {
+            "decisions": rows[-1].chain_hash if rows else None,
+            "events": repo.last_event_hash(session=session, run_id=parent_id),
+        }
+        run_id = uuid.uuid4().hex
+        revision_no = parent.revision + 1
+        link = {
+            "parent": parent_id,
+            "parent_heads": heads,
+            "changes": [dict(c) for c in request.changes],
+            "pin": request.pin if isinstance(request.pin, str) else dict(request.pin),
+            "reason": request.reason,
+        }
+        detail = {
+            **link,
+            "revision": revision_no,
+            "parent_status": status.value,
+            "pinned": plan.pinned_task_ids,
+            "added_tasks": plan.added_tasks,
+            "removed_tasks": plan.removed_tasks,
+            "fleet_changes": plan.fleet_changes,
+            "reasoner": plan.spec.reasoner,
+            "mode": plan.spec.mode,
+            "tasks": plan.problem.instance.n_tasks,
+            "robots": plan.problem.instance.n_robots,
+            "max_deviation": plan.problem.cap.max_deviation,
+        }
+        run = lifecycle.new_run(
+            session,
+            run_id=run_id,
+            request=plan.spec.to_json(),
+            reasoner=plan.spec.reasoner,
+            mode=plan.spec.mode,
+            max_deviation=plan.problem.cap.max_deviation,
+            n_tasks=plan.problem.instance.n_tasks,
+            n_robots=plan.problem.instance.n_robots,
+            resumes=0,
+            cancel_requested=False,
+            idempotency_key=idempotency.key if idempotency else None,
+            request_digest=idempotency.digest if idempotency else None,
+            revision_of=parent_id,
+            revision=revision_no,
+            chain_anchor=chain.revision_anchor(revision_link(link)),
+            first_event=EventKind.REVISED,
+            created=detail,
+        )
+        for values in plan.pinned_rows:
+            repo.upsert_decision(session=session, run_id=run_id, values=values)
+        parent.superseded_by = run_id
+        active = status not in FINISHED
+        if active:
+            # The other process holding it (PostgreSQL) stops at its next heartbeat.
+            parent.cancel_requested = True
+            lifecycle.move(
+                session,
+                parent,
+                RunStatus.SUPERSEDED,
+                event=EventKind.SUPERSEDED,
+                detail={"by": run_id, "reason": request.reason},
+            )
+        else:
+            lifecycle.record_annotation(
+                session,
+                run_id=parent_id,
+                kind=AnnotationKind.SUPERSEDED_BY,
+                detail={"by": run_id, "reason": request.reason},
+            )
+        session.flush()
+    return run, active
+
+
+def _check_reasoner(settings: Settings, request: RevisionRequest) -> None:
+    """An overriding reasoner must be one this server can build (known, key configured)."""
+    if request.reasoner is None:
+        return
+    try:
+        close_reasoner(make_reasoner(request.reasoner, settings=settings, model=request.model))
+    except DomainError as exc:
+        raise DomainError("reasoner", exc.message, code=exc.code) from None
+
+
+def lineage(*, sessions: sessionmaker[Session], run_id: str) -> list[Run]:
+    """The run's revisions, root to head."""
+    with sessions() as session:
+        run = repo.get_run(session=session, run_id=run_id)
+        if run is None:
+            raise RunNotFoundError(run_id)
+        root, seen = run, {run.id}
+        while root.revision_of is not None:
+            parent = repo.get_run(session=session, run_id=root.revision_of)
+            if parent is None or parent.id in seen:
+                break
+            seen.add(parent.id)
+            root = parent
+        out, listed = [root], {root.id}
+        while out[-1].superseded_by is not None:
+            following = repo.get_run(session=session, run_id=out[-1].superseded_by)
+            if following is None or following.id in listed:
+                break
+            listed.add(following.id)
+            out.append(following)
+        return out

@@ -1,0 +1,126 @@
+"""Execution reports (SPEC 10): forward only, idempotent, only for decided tasks, refused on
+a revised run, events while the run is unfinished and annotations after (verify stays ok);
+and what `pin: "reported"` makes of them."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.api.conftest import ClientFactory
+from tests.api.test_revisions import (
+    BASELINE,
+    completed_run,
+    revise,
+    wait_allocated,
+    wait_status,
+)
+
+
+def report(client: TestClient, run_id: str, *updates: tuple[Any, str], **kw: Any) -> Any:
+    body = {"updates": [{"task_id": t, "state": s} for t, s in updates]}
+    return client.post(f"/runs/{run_id}/execution", json=body, **kw)
+
+
+@pytest.fixture
+def paused(make_client: ClientFactory) -> tuple[TestClient, str]:
+    """A client whose runs hold before reasoning about task 18, and one such run."""
+    client = make_client(test_pause="18:reason:before")
+    run_id = str(client.post("/runs", json=BASELINE).json()["id"])
+    wait_allocated(client, run_id, 18)
+    return client, run_id
+
+
+def test_states_move_forward_only_and_repeats_are_no_ops(client: TestClient) -> None:
+    run_id = completed_run(client)
+    assert report(client, run_id, (0, "started")).json()["states"] == {"0": "started"}
+    assert report(client, run_id, (0, "started")).status_code == 200  # the same: a no-op
+    assert report(client, run_id, (0, "done"), (1, "failed")).json()["states"] == {
+        "0": "done",
+        "1": "failed",
+    }
+    back = report(client, run_id, (0, "started"))
+    assert back.status_code == 409
+    assert back.json()["detail"][0]["loc"] == ["body", "updates", 0, "state"]
+    assert "forward only" in back.text
+    assert report(client, run_id, (1, "done")).status_code == 409  # failed is final
+    # One transaction: a refused update leaves the others unapplied.
+    mixed = report(client, run_id, (2, "started"), (0, "started"))
+    assert mixed.status_code == 409
+    state = client.get(f"/runs/{run_id}").json()
+    by_id = {a["task_id"]: a.get("execution") for a in state["assignments"]}
+    assert by_id[0]["state"] == "done" and by_id[1]["state"] == "failed" and by_id[2] is None
+    # After completion reports go to the annotation chain: the record still verifies.
+    verify = client.get(f"/runs/{run_id}/trace/verify").json()
+    assert verify["ok"] is True and verify["annotations"] == 2  # the no-op wrote nothing
+    assert verify["events"] == 3
+
+
+def test_unknown_and_undecided_tasks(paused: tuple[TestClient, str]) -> None:
+    client, run_id = paused
+    undecided = report(client, run_id, (205, "started"))  # queue position 20
+    assert undecided.status_code == 409 and "'205'" in undecided.text
+    assert undecided.json()["detail"][0]["loc"] == ["body", "updates", 0, "task_id"]
+    unknown = report(client, run_id, ("nope", "done"))
+    assert unknown.status_code == 422 and "'nope'" in unknown.text
+    # While the run is unfinished a report is an event of its record.
+    assert report(client, run_id, (0, "done")).status_code == 200
+    kinds = [e["kind"] for e in client.get(f"/runs/{run_id}/trace").json()["events"]]
+    assert kinds[-1] == "execution_reported"
+
+
+def test_idempotency_key(client: TestClient) -> None:
+    run_id = completed_run(client)
+    key = {"Idempotency-Key": "exec-1"}
+    first = report(client, run_id, (0, "started"), headers=key)
+    assert first.status_code == 200
+    assert report(client, run_id, (0, "started"), headers=key).json() == first.json()
+    other = report(client, run_id, (0, "done"), headers=key)
+    assert other.status_code == 409 and other.json()["detail"][0]["loc"] == [
+        "header",
+        "Idempotency-Key",
+    ]
+
+
+def test_a_revised_run_refuses_reports_naming_the_head(client: TestClient) -> None:
+    run_id = completed_run(client)
+    head = revise(client, run_id, {"changes": [], "pin": "decided", "reason": "re-plan"})["id"]
+    refused = report(client, run_id, (0, "done"))
+    assert refused.status_code == 409 and head in refused.text
+    wait_status(client, head, "completed")
+    assert report(client, head, (0, "done")).status_code == 200
+
+
+def test_pin_reported_excludes_failed_and_started_on_an_unavailable_robot(
+    paused: tuple[TestClient, str],
+) -> None:
+    client, run_id = paused
+    state = client.get(f"/runs/{run_id}").json()
+    robot = {a["task_id"]: a["robot"] for a in state["assignments"]}
+    ids = [a["task_id"] for a in state["assignments"]]
+    on_heavy = [t for t in ids if robot[t] == "heavy"]
+    elsewhere = [t for t in ids if robot[t] != "heavy"]
+    started_heavy, done_heavy = on_heavy[0], on_heavy[1]
+    started_other, failed = elsewhere[0], elsewhere[1]
+    done = elsewhere[2:5]
+    updates = [
+        (started_heavy, "started"),
+        (done_heavy, "started"),
+        (done_heavy, "done"),
+        (started_other, "started"),
+        (failed, "failed"),
+        *((t, "done") for t in done),
+    ]
+    assert report(client, run_id, *updates).status_code == 200
+    created = revise(
+        client,
+        run_id,
+        {"changes": [{"type": "robot_unavailable", "robot": "heavy"}], "reason": "fault"},
+    )
+    revision = client.get(f"/runs/{created['id']}").json()
+    pinned = {a["task_id"] for a in revision["assignments"] if a["pinned"]}
+    assert pinned == {done_heavy, started_other, *done}
+    assert client.get(f"/runs/{run_id}").json()["status"] == "superseded"
+    assert client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]["ok"] is True

@@ -1,0 +1,141 @@
+"""Revisions of completed runs through the API (SPEC 10): the plan, the record, the link."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi.testclient import TestClient
+
+from tests.api.conftest import ClientFactory
+from tests.polling import eventually
+
+BASELINE = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
+HEAVY_DOWN = {
+    "changes": [{"type": "robot_unavailable", "robot": "heavy"}],
+    "pin": {"through_task_index": 17},
+    "reason": "heavy robot hydraulic fault",
+}
+
+
+def wait_status(client: TestClient, run_id: str, *statuses: str) -> dict[str, Any]:
+    def reached(state: dict[str, Any]) -> bool:
+        assert state["status"] not in ("failed", "cancelled"), state  # never completes now
+        return state["status"] in statuses
+
+    state: dict[str, Any] = eventually(
+        lambda: client.get(f"/runs/{run_id}").json(),
+        until=reached,
+        what=f"run {run_id} reached {' or '.join(statuses)}",
+    )
+    return state
+
+
+def wait_allocated(client: TestClient, run_id: str, count: int) -> None:
+    eventually(
+        lambda: client.get(f"/runs/{run_id}").json()["progress"]["allocated"],
+        until=lambda allocated: allocated >= count,
+        what=f"run {run_id} decided {count} tasks",
+    )
+
+
+def completed_run(client: TestClient, body: dict[str, Any] | None = None) -> str:
+    run_id = str(client.post("/runs", json=body or BASELINE).json()["id"])
+    wait_status(client, run_id, "completed")
+    return run_id
+
+
+def revise(client: TestClient, run_id: str, body: dict[str, Any], code: int = 202) -> Any:
+    response = client.post(f"/runs/{run_id}/revisions", json=body)
+    assert response.status_code == code, response.text
+    return response.json()
+
+
+def test_a_completed_parent_revised_stays_completed_and_still_verifies(
+    client: TestClient,
+) -> None:
+    parent = completed_run(client)
+    created = revise(client, parent, HEAVY_DOWN)
+    assert created["revision_of"] == parent and created["revision"] == 1
+    revision = wait_status(client, created["id"], "completed")
+    before = client.get(f"/runs/{parent}").json()
+    assert before["status"] == "completed" and before["superseded_by"] == created["id"]
+    assert revision["revision_of"] == parent
+    pinned = [a for a in revision["assignments"] if a["pinned"]]
+    assert [a["task_index"] for a in pinned] == list(range(18))
+    assert [(a["robot"], a["success"]) for a in pinned] == [
+        (a["robot"], a["success"]) for a in before["assignments"][:18]
+    ]
+    assert all(a["robot"] != "heavy" for a in revision["assignments"] if not a["pinned"])
+    for run_id in (parent, created["id"]):
+        report = client.get(f"/runs/{run_id}/trace/verify").json()
+        assert report["ok"] is True, report
+    link = client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]
+    assert link["run_id"] == parent and link["ok"] is True
+    assert client.get(f"/runs/{parent}/trace/verify").json()["annotations"] == 1
+    # The revision's trace: `revised` first, naming the parent's heads at that moment.
+    trace = client.get(f"/runs/{created['id']}/trace").json()
+    first = trace["events"][0]
+    assert first["kind"] == "revised" and first["detail"]["parent"] == parent
+    heads = client.get(f"/runs/{parent}/trace/verify").json()["heads"]
+    assert first["detail"]["parent_heads"] == heads
+    lineage = client.get(f"/runs/{created['id']}/revisions").json()
+    assert [r["id"] for r in lineage] == [parent, created["id"]]
+    diff = client.get(f"/runs/{created['id']}/diff").json()
+    assert diff["parent"] == parent
+    assert diff["fleet_changes"] == [{"robot": "heavy", "change": "unavailable"}]
+    moved = {c["task_id"] for c in diff["robot_changes"]}
+    was_heavy = {a["task_id"] for a in before["assignments"][18:] if a["robot"] == "heavy"}
+    assert was_heavy and was_heavy <= moved
+    assert all(c["to_robot"] != "heavy" for c in diff["robot_changes"])
+    assert abs(diff["before"]["expected_success"] - before["metrics"]["expected_success"]) < 1e-9
+    assert abs(diff["after"]["expected_success"] - revision["metrics"]["expected_success"]) < 1e-9
+    # A second revision of the same run is a 409 naming the head.
+    again = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN)
+    assert again.status_code == 409 and created["id"] in again.text
+
+
+def test_a_revised_completed_parent_still_replays(client: TestClient) -> None:
+    parent = completed_run(client)
+    revision = revise(client, parent, HEAVY_DOWN)["id"]
+    wait_status(client, revision, "completed")
+    assert (
+        client.post(
+            f"/runs/{parent}/execution", json={"updates": [{"task_id": 0, "state": "done"}]}
+        ).status_code
+        == 409
+    )
+    replay = client.post("/runs", json={"reasoner": "replay", "replay_of": parent})
+    assert replay.status_code == 202, replay.text
+    replayed = wait_status(client, replay.json()["id"], "completed")
+    original = client.get(f"/runs/{parent}").json()
+    assert [a["robot"] for a in replayed["assignments"]] == [
+        a["robot"] for a in original["assignments"]
+    ]
+    assert client.get(f"/runs/{parent}/trace/verify").json()["ok"] is True
+    of_revision = client.post("/runs", json={"reasoner": "replay", "replay_of": revision})
+    assert of_revision.status_code == 422 and "revision" in of_revision.text
+
+
+def test_idempotent_revision_and_a_superseded_run_cannot_resume(
+    make_client: ClientFactory,
+) -> None:
+    client = make_client(test_pause="18:reason:before")
+    parent = str(client.post("/runs", json=BASELINE).json()["id"])
+    wait_allocated(client, parent, 18)
+    key = {"Idempotency-Key": "revise-once"}
+    first = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN, headers=key)
+    again = client.post(f"/runs/{parent}/revisions", json=HEAVY_DOWN, headers=key)
+    assert first.status_code == again.status_code == 202, again.text
+    assert again.json()["id"] == first.json()["id"]
+    assert again.headers["Idempotent-Replayed"] == "true"
+    other = client.post(
+        f"/runs/{parent}/revisions", json={**HEAVY_DOWN, "reason": "another"}, headers=key
+    )
+    assert other.status_code == 409
+    state = client.get(f"/runs/{parent}").json()
+    assert state["status"] == "superseded" and state["progress"]["allocated"] == 18
+    resume = client.post(f"/runs/{parent}/resume")
+    assert resume.status_code == 409 and first.json()["id"] in resume.text
+    cancel = client.post(f"/runs/{parent}/cancel")
+    assert cancel.status_code == 409
+    assert len(client.get(f"/runs/{parent}/revisions").json()) == 2
