@@ -82,6 +82,22 @@ class Settings(BaseSettings):
     # can SIGKILL or SIGTERM the server at a known point. Warned about at start-up.
     test_pause: str | None = Field(None, pattern=r"^[0-9]+:[a-z_]+:(before|after)$")
 
+    # Test-only seam: the graph version this process claims (app.graph.version derives it
+    # from the code), so a test can interrupt a run under one version and restart the
+    # server under another. Warned about at start-up.
+    test_graph_version: str | None = Field(None, min_length=1, max_length=64)
+
+    # Signed chain heads (app.runs.signing): an Ed25519 private key in PEM (`ltaa keygen`
+    # writes one); and a directory of retired public keys (*.pem), kept so that runs signed
+    # before a rotation still verify.
+    signing_key_file: Path | None = None
+    # Where POST /admin/backup may write (a supervisor key must not write anywhere the
+    # server can); default {data_dir}/backups.
+    backup_dir: Path | None = None
+    # Where archived runs' JSON-lines files go; default {data_dir}/archive.
+    archive_dir: Path | None = None
+    retired_public_keys_dir: Path | None = None
+
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
 
     # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.api.auth. A SecretStr so
@@ -162,6 +178,14 @@ class Settings(BaseSettings):
     def db_url(self) -> str:
         """`database_url`, typed as a plain str (derived from data_dir when unset)."""
         return self.database_url or f"sqlite:///{self.data_dir.as_posix()}/ltaa.db"
+
+    @property
+    def archive_root(self) -> Path:
+        return self.archive_dir or self.data_dir / "archive"
+
+    @property
+    def backup_root(self) -> Path:
+        return self.backup_dir or self.data_dir / "backups"
 
     @property
     def checkpoint_file(self) -> Path:

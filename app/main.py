@@ -18,8 +18,12 @@ from app.api.auth import InsecureBindError, KeyRing, check_bind
 from app.api.deps import RunsContext
 from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
+from app.api.openapi import install_openapi
+from app.api.rounding import RoundedJSONResponse
 from app.api.routes import (
+    admin,
     allocate,
+    audit_keys,
     catalog,
     events,
     health,
@@ -148,6 +152,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Phase-adaptive task allocation for heterogeneous construction robots",
         version=app_version(),
         lifespan=lifespan,
+        default_response_class=RoundedJSONResponse,
     )
     app.state.settings = settings
     app.state.keyring = keyring
@@ -167,7 +172,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         events,
         metrics,
         webhooks,
+        admin,
+        audit_keys,
     ):
         app.include_router(module.router)
+    install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)
     return app

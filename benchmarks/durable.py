@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import sqlite3
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -99,3 +100,86 @@ def measure_durable(
             engine.dispose()
     assert sizes is not None
     return DurableMeasure(instance.n_tasks, times[:warmup], times[warmup:], cpu[warmup:], *sizes)
+
+
+@dataclass(frozen=True)
+class StorageMeasure:
+    """Checkpoint storage of one durable run, sampled while it ran."""
+
+    n_tasks: int
+    seconds: float
+    samples: int
+    peak_bytes: int  # largest file + -wal seen
+    peak_file_bytes: int
+    peak_wal_bytes: int
+    final_bytes: int  # file + -wal once the run completed
+
+
+class _Sampler:
+    """Samples a checkpoint file's size (file + -wal) on its own thread until stopped."""
+
+    def __init__(self, path: Path, interval_s: float) -> None:
+        self.path, self.interval_s = path, interval_s
+        self.samples = 0
+        self.peak = self.peak_file = self.peak_wal = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="storage-sampler", daemon=True)
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            self.sample()
+
+    def sample(self) -> None:
+        main, wal = _size(self.path), _size(_wal(self.path))
+        self.samples += 1
+        self.peak = max(self.peak, main + wal)
+        self.peak_file = max(self.peak_file, main)
+        self.peak_wal = max(self.peak_wal, wal)
+
+    def __enter__(self) -> _Sampler:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.sample()
+
+
+def measure_storage(
+    instance: Instance, *, mode: str = "balanced", interval_s: float = 0.05
+) -> StorageMeasure:
+    """One rules run in a fresh data directory, the checkpoint file sampled as it runs."""
+    with tempfile.TemporaryDirectory(prefix="ltaa-bench-") as tmp:
+        settings = Settings(data_dir=Path(tmp), auto_resume=False)
+        upgrade_head(settings.db_url)
+        engine = make_engine(settings.db_url)
+        sessions = make_session_factory(engine)
+        worker = make_worker(settings=settings, sessions=sessions)
+        cp = Path(settings.checkpoint_file)
+        try:
+            spec = RunSpec.for_instance(instance, mode=mode, reasoner="rules")
+            with _Sampler(cp, interval_s) as sampler:
+                start = time.perf_counter()
+                run = service.create_run(
+                    sessions=sessions, worker=worker, settings=settings, spec=spec
+                )
+                worker.wait(run.id)
+                seconds = time.perf_counter() - start
+            with sessions() as session:
+                stored = repo.get_run(session=session, run_id=run.id)
+                if stored is None or stored.status != "completed":
+                    raise RuntimeError("storage benchmark run did not complete")
+            final = _size(cp) + _size(_wal(cp))
+        finally:
+            worker.close()
+            engine.dispose()
+    return StorageMeasure(
+        instance.n_tasks,
+        seconds,
+        sampler.samples,
+        sampler.peak,
+        sampler.peak_file,
+        sampler.peak_wal,
+        final,
+    )

@@ -268,9 +268,10 @@ def durable_part(
         f"3 features), `balanced`; {len(large.seconds)} timed run(s), median. Checkpoint "
         "bytes: the first run in a fresh data directory, the file measured after "
         "`PRAGMA wal_checkpoint(TRUNCATE)` (the -wal file folded in; summing the file and "
-        "-wal as the run left them would count pages twice). The worker deletes a run's "
-        "checkpoints once it completes; SQLite keeps the freed pages for the next run, so "
-        "the file's size is the run's high-water mark.\n\n"
+        "-wal as the run left them would count pages twice). The saver prunes a run's "
+        "superseded checkpoints as it goes (see the bounded-storage section) and the worker "
+        "deletes the rest once it completes; SQLite keeps the freed pages for the next run, "
+        "so the file's size is the run's high-water mark.\n\n"
         + table(["measure", "measured", "target", "verdict"], rows)
         + "\n\n"
         + sizes

@@ -9,7 +9,13 @@ from typing import Any
 from fastapi.responses import StreamingResponse
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.run_schemas import BrokenLinkOut, ChainHeadsOut, ParentLinkOut, TraceVerifyOut
+from app.api.run_schemas import (
+    BrokenLinkOut,
+    ChainHeadsOut,
+    ParentLinkOut,
+    SignatureOut,
+    TraceVerifyOut,
+)
 from app.runs import audit
 
 JSONL = "application/x-ndjson"
@@ -59,6 +65,15 @@ def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
         + report.events.unchained
         + report.annotations.unchained,
         heads=ChainHeadsOut(decisions=report.decisions.head, events=report.events.head),
+        chain_scheme=report.chain_scheme,
+        signature=None
+        if report.signature is None
+        else SignatureOut(
+            key_id=report.signature.key_id,
+            reason=report.signature.reason,
+            valid=report.signature.valid,
+            problem=report.signature.problem,
+        ),
         annotations_head=report.annotations.head,
         parent=None
         if report.parent_link is None

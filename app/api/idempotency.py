@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Any
 
 from fastapi import Depends, Header, Request
 from pydantic import BaseModel
 
 from app.api.errors import ApiError
+from app.api.openapi import header_schema
 from app.runs.idempotency import HEADER, MAX_KEY_LENGTH, Idempotency, request_digest
 
 REPLAYED_HEADER = "Idempotent-Replayed"
+# Visible ASCII, spaces only inside: what survives every proxy unchanged.
+KEY_PATTERN = r"^[!-~]([ -~]*[!-~])?$"
+_KEY = re.compile(KEY_PATTERN)
 
 _KeyHeader = Annotated[
     str | None,
@@ -18,6 +23,7 @@ _KeyHeader = Annotated[
         alias=HEADER,
         min_length=1,
         max_length=MAX_KEY_LENGTH,
+        json_schema_extra=header_schema(minLength=1, maxLength=MAX_KEY_LENGTH, pattern=KEY_PATTERN),
         description="Makes retries safe: a unique value per run you mean to start (e.g. a UUID). "
         "Resending the same key with the same body returns the run the first request created "
         f"(202, same body and Location, `{REPLAYED_HEADER}: true`) instead of starting another; "
@@ -36,6 +42,13 @@ def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
             ["header", HEADER],
             f"{sent} {HEADER} headers were sent; send exactly one, with one key",
             "duplicate_header",
+        )
+    if key is not None and _KEY.match(key) is None:
+        raise ApiError(
+            422,
+            ["header", HEADER],
+            f"{HEADER} must be visible ASCII characters (spaces only between them), e.g. a UUID",
+            "invalid_header",
         )
     return key
 

@@ -32,9 +32,11 @@ _WHEN: dict[int, str] = {
     403: "The API key's role may not call this endpoint",
     404: "No run with this id",
     409: "The request conflicts with the run's state or with an earlier request",
+    410: "The run was archived: the message names its archive file",
     413: "The body is larger than LTAA_MAX_BODY_BYTES",
     422: "The request is invalid; `loc` names the field and `msg` says how to fix it",
     502: "The Messages API refused the server's own credentials (ANTHROPIC_API_KEY)",
+    503: "Runs did not reach a node boundary in time for a backup; retry",
 }
 
 

@@ -3,11 +3,22 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, cast
 
-from pydantic import AfterValidator, BaseModel, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic.config import JsonDict
 
-from app.api.schemas import MAX_SEED, InstanceRequest, MetricsOut, Name, UsageOut
+from app.api.schemas import (
+    CUSTOM_FORM,
+    MAX_SEED,
+    SCENARIO_FORM,
+    InstanceRequest,
+    MetricsOut,
+    Name,
+    UsageOut,
+    absent,
+    present,
+)
 from app.domain.lifecycle import RunStatus
 from app.domain.review import ReviewAction, ReviewOn
 from app.store.models import as_utc
@@ -21,6 +32,25 @@ RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"
 # A date-time without an offset is not RFC 3339 (OpenAPI's format): a client cannot place
 # it, and SQLite hands stored times back without one.
 Timestamp = Annotated[datetime, AfterValidator(as_utc)]
+
+
+# A replay copies its source's instance: it may omit it (or repeat it, the forms above).
+REPLAY_FORM: dict[str, Any] = {
+    "title": "a replay of a completed run",
+    "allOf": [present("replay_of"), absent("scenario"), absent("tasks"), absent("robots")],
+}
+# replay_of goes with the replay reasoner and only with it (an omitted reasoner is the
+# server's default, never "replay").
+REPLAY_PAIRING: list[dict[str, Any]] = [
+    {
+        "if": present("replay_of"),
+        "then": {"required": ["reasoner"], "properties": {"reasoner": {"const": "replay"}}},
+    },
+    {
+        "if": {"required": ["reasoner"], "properties": {"reasoner": {"const": "replay"}}},
+        "then": present("replay_of"),
+    },
+]
 
 
 class ReviewPolicyIn(BaseModel):
@@ -61,6 +91,14 @@ class ReviewPolicyIn(BaseModel):
 
 class RunRequest(InstanceRequest):
     """An LTAA run on an instance, executed durably in the background."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra=cast(
+            JsonDict,
+            {"anyOf": [SCENARIO_FORM, CUSTOM_FORM, REPLAY_FORM], "allOf": REPLAY_PAIRING},
+        ),
+    )
 
     reasoner: Name | None = Field(
         None,
@@ -154,6 +192,19 @@ class Progress(BaseModel):
     phase: Literal["early", "middle", "late"]
 
 
+DEFAULT_PAGE = 1_000
+MAX_PAGE = 10_000
+
+
+class Page(BaseModel):
+    """Which slice of a long list this answer carries; ask for the next with
+    `offset=offset+limit` while `offset + limit < total`."""
+
+    offset: int = Field(description="Index (in queue order) of the first item returned")
+    limit: int = Field(description="At most this many items returned")
+    total: int = Field(description="Items in the whole list")
+
+
 class DecisionReviewOut(BaseModel):
     """A supervisor's review of a decision (SPEC 11); covered by the decision's chain hash."""
 
@@ -210,7 +261,10 @@ class RunOut(BaseModel):
     max_deviation: float | None
     progress: Progress
     workload: dict[str, int]
-    assignments: list[RunAssignment] = Field(description="Decisions so far, in queue order")
+    assignments: list[RunAssignment] = Field(
+        description="Decisions so far, in queue order: one page of them (see assignments_page)"
+    )
+    assignments_page: Page
     metrics: MetricsOut | None = Field(description="Set once the run has completed")
     regret: float | None = Field(
         description="Sum of the per-decision regrets so far: expected success given away "
@@ -218,6 +272,10 @@ class RunOut(BaseModel):
     )
     usage: UsageOut
     resumes: int
+    graph_version: str | None = Field(
+        description="The graph version the run started under (null: not started yet, or "
+        "before versions were recorded)"
+    )
     error: str | None
     revision_of: str | None = Field(None, description="The run this one revises")
     revision: int = Field(0, description="Place in the lineage: 0 for a root run")
@@ -324,7 +382,10 @@ class TraceOut(BaseModel):
     max_deviation: float | None
     robots: list[str]
     events: list[EventOut]
-    decisions: list[DecisionOut]
+    decisions: list[DecisionOut] = Field(
+        description="Decisions in task order: one page of them (see decisions_page)"
+    )
+    decisions_page: Page
 
 
 class BrokenLinkOut(BaseModel):
@@ -346,6 +407,13 @@ class BrokenLinkOut(BaseModel):
 class ChainHeadsOut(BaseModel):
     decisions: str | None = Field(description="Stored hash of the newest decision")
     events: str | None = Field(description="Stored hash of the newest event")
+
+
+class SignatureOut(BaseModel):
+    key_id: str = Field(description="The signing key (GET /audit/public-key lists them)")
+    reason: str = Field(description="When it was signed: completed (later: sign-off)")
+    valid: bool = Field(description="Signed by that key, over the heads recomputed now")
+    problem: str | None = Field(description="Why not, in plain language; null when valid")
 
 
 class ParentLinkOut(BaseModel):
@@ -391,4 +459,14 @@ class TraceVerifyOut(BaseModel):
     )
     broken: BrokenLinkOut | None = Field(
         description="The first broken link (the decisions chain first), or null when ok"
+    )
+    chain_scheme: str = Field(
+        "ltaa-trace-chain/v1",
+        description="How the run's chains are built: v1, or v2 whose genesis also covers "
+        "the run's immutable fields (request, mode, cap)",
+    )
+    signature: SignatureOut | None = Field(
+        None,
+        description="The check of the run's newest signature over its heads (null: not "
+        "signed, e.g. no server signing key); an invalid one makes ok false",
     )

@@ -102,10 +102,32 @@ class RobotIn(BaseModel):
     )
 
 
+def present(field: str) -> dict[str, Any]:
+    """JSON Schema: `field` is sent with a value (the server reads null as not sent)."""
+    return {"required": [field], "properties": {field: {"not": {"type": "null"}}}}
+
+
+def absent(field: str) -> dict[str, Any]:
+    return {"not": present(field)}
+
+
+# The two ways to name an instance, exclusive, one of them required.
+SCENARIO_FORM: dict[str, Any] = {
+    "title": "a built-in scenario",
+    "allOf": [present("scenario"), absent("tasks"), absent("robots")],
+}
+CUSTOM_FORM: dict[str, Any] = {
+    "title": "your own tasks and robots",
+    "allOf": [present("tasks"), present("robots"), absent("scenario")],
+}
+
+
 class InstanceRequest(BaseModel):
     """What to allocate: a built-in `scenario`, or your own `tasks` and `robots` (not both)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(
+        extra="forbid", json_schema_extra={"oneOf": [SCENARIO_FORM, CUSTOM_FORM]}
+    )
 
     scenario: Name | None = Field(None, description="A built-in scenario, see GET /scenarios")
     tasks: list[TaskIn] | None = Field(None, max_length=MAX_TASKS)
@@ -219,6 +241,10 @@ class AllocateResponse(BaseModel):
 class HealthOut(BaseModel):
     status: Literal["ok"] = "ok"
     version: str
+    graph_version: str = Field(
+        description="The graph version runs start under here (app.graph.version); a run "
+        "interrupted under another resumes only under that one"
+    )
     solvers: list[str]
     default_reasoner: str
 

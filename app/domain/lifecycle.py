@@ -19,6 +19,9 @@ class RunStatus(StrEnum):
     COMPLETED = "completed"
     FAILED = "failed"
     CANCELLED = "cancelled"
+    # Its checkpoint belongs to another graph version: no worker takes it up until a
+    # supervisor resumes it under a release of that version (or revises it).
+    BLOCKED = "blocked"
     # Paused before a decision that its review policy sends to a supervisor (SPEC 11).
     AWAITING_REVIEW = "awaiting_review"
     # Replaced by a revision before it finished (SPEC 10): terminal, never claimed again.
@@ -37,6 +40,7 @@ class EventKind(StrEnum):
     CANCELLED = "cancelled"
     INTEGRITY_FAILED = "integrity_failed"
     BUDGET_EXHAUSTED = "budget_exhausted"
+    UPGRADE_BLOCKED = "upgrade_blocked"
     REVIEW_REQUESTED = "review_requested"
     REVIEW_RESOLVED = "review_resolved"
     REVIEW_CLOSED = "review_closed"
@@ -61,6 +65,7 @@ STATUS_RULES: dict[RunStatus, StatusRule] = {
     RunStatus.COMPLETED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.FAILED: StatusRule(finished=True, claimable=False, active=False),
     RunStatus.CANCELLED: StatusRule(finished=True, claimable=False, active=False),
+    RunStatus.BLOCKED: StatusRule(finished=False, claimable=False, active=False),
     # Nobody holds or claims it: it waits for a resolution, which queues it again.
     RunStatus.AWAITING_REVIEW: StatusRule(finished=False, claimable=False, active=False),
     RunStatus.SUPERSEDED: StatusRule(finished=True, claimable=False, active=False),
@@ -84,6 +89,10 @@ TRANSITIONS: dict[tuple[RunStatus, RunStatus], str] = {
     (RunStatus.INTERRUPTED, RunStatus.CANCELLED): "cancelled while interrupted",
     (RunStatus.INTERRUPTED, RunStatus.FAILED): "refused on resume (integrity check, settings)",
     (RunStatus.FAILED, RunStatus.INTERRUPTED): "a supervisor asked to resume it",
+    (RunStatus.INTERRUPTED, RunStatus.BLOCKED): "its checkpoint is of another graph version",
+    (RunStatus.QUEUED, RunStatus.BLOCKED): "its checkpoint is of another graph version",
+    (RunStatus.BLOCKED, RunStatus.INTERRUPTED): "a supervisor asked to resume it",
+    (RunStatus.BLOCKED, RunStatus.CANCELLED): "cancelled while blocked",
     (RunStatus.RUNNING, RunStatus.AWAITING_REVIEW): "a decision needs a supervisor's review",
     (RunStatus.AWAITING_REVIEW, RunStatus.QUEUED): "the review was resolved",
     (RunStatus.AWAITING_REVIEW, RunStatus.CANCELLED): "cancelled while awaiting review",

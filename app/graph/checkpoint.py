@@ -17,16 +17,82 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
+from langchain_core.runnables import RunnableConfig
+from langgraph.checkpoint.base import ChannelVersions, Checkpoint, CheckpointMetadata
 from langgraph.checkpoint.sqlite import SqliteSaver
+
+from app.graph.checkpoint_pruning import KEEP_LATEST, PRUNE_EVERY, PruneSchedule
+
+# The WAL is truncated back to this after each checkpoint of it; without a limit SQLite
+# keeps the file at its high-water mark (169 MB after a 10,000-task run).
+WAL_SIZE_LIMIT = 4 * 1024 * 1024
+# Every this many prunes the WAL is folded into the file and truncated to zero, in case a
+# reader kept the automatic checkpoints from reaching its end.
+TRUNCATE_WAL_EVERY = 10
+
+# Older than the keep-th newest checkpoint of (thread, namespace). Checkpoint ids are
+# time-ordered (uuid6), which is how SqliteSaver itself finds the latest one.
+_OLDER = """
+    thread_id = ? AND checkpoint_ns = ? AND checkpoint_id < (
+        SELECT checkpoint_id FROM checkpoints WHERE thread_id = ? AND checkpoint_ns = ?
+        ORDER BY checkpoint_id DESC LIMIT 1 OFFSET ?
+    )
+"""
 
 
 class CompactSqliteSaver(SqliteSaver):
+    """Integer channel versions, and a thread's superseded checkpoints pruned as it runs."""
+
+    def __init__(
+        self,
+        conn: sqlite3.Connection,
+        *,
+        keep_latest: int = KEEP_LATEST,
+        prune_every: int = PRUNE_EVERY,
+    ) -> None:
+        super().__init__(conn)
+        if keep_latest < 1:
+            raise ValueError("keep_latest must be at least 1: a resume needs the latest")
+        self.keep_latest = keep_latest
+        self._schedule = PruneSchedule(prune_every)
+        self._prunes = 0
+
     def get_next_version(self, current: Any, channel: None) -> Any:
         if current is None:
             return 1
         if isinstance(current, int):
             return current + 1
         return super().get_next_version(current, channel)
+
+    def put(
+        self,
+        config: RunnableConfig,
+        checkpoint: Checkpoint,
+        metadata: CheckpointMetadata,
+        new_versions: ChannelVersions,
+    ) -> RunnableConfig:
+        saved = super().put(config, checkpoint, metadata, new_versions)
+        thread_id = str(config["configurable"]["thread_id"])
+        if self._schedule.due(thread_id):
+            self.prune_thread(thread_id, str(config["configurable"].get("checkpoint_ns", "")))
+        return saved
+
+    def prune_thread(self, thread_id: str, checkpoint_ns: str = "") -> None:
+        """Delete the thread's checkpoints older than its latest keep_latest, with their
+        writes, in one transaction: a kill -9 leaves either all of them or the pruned set,
+        and the latest checkpoint with its pending writes in both."""
+        args = (thread_id, checkpoint_ns, thread_id, checkpoint_ns, self.keep_latest - 1)
+        with self.cursor() as cur:
+            cur.execute(f"DELETE FROM writes WHERE {_OLDER}", args)
+            cur.execute(f"DELETE FROM checkpoints WHERE {_OLDER}", args)
+        self._prunes += 1
+        if self._prunes % TRUNCATE_WAL_EVERY == 0:
+            self.truncate_wal()
+
+    def truncate_wal(self) -> None:
+        """Fold the WAL into the file and cut it to zero; a busy reader makes it a no-op."""
+        with self.cursor(transaction=False) as cur:
+            cur.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchall()
 
 
 def open_sqlite_saver(
@@ -45,6 +111,7 @@ def open_sqlite_saver(
     conn = sqlite3.connect(str(path), check_same_thread=False, timeout=busy_timeout_s)
     saver: SqliteSaver = CompactSqliteSaver(conn) if compact else SqliteSaver(conn)
     saver.setup()
+    conn.execute(f"PRAGMA journal_size_limit={WAL_SIZE_LIMIT}")
     if synchronous is not None:
         conn.execute(f"PRAGMA synchronous={synchronous}")
     return saver

@@ -6,13 +6,20 @@ loads psycopg.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 
 import psycopg
+from langchain_core.runnables import RunnableConfig
+from langgraph.checkpoint.base import ChannelVersions, Checkpoint, CheckpointMetadata
 from langgraph.checkpoint.postgres import PostgresSaver
 from psycopg.rows import dict_row
 from psycopg_pool import ConnectionPool
 from sqlalchemy.engine import make_url
+
+from app.graph.checkpoint_pruning import PRUNE_EVERY, PruneSchedule
+
+log = logging.getLogger("ltaa.runs")
 
 # Shared by every process: replicas starting together must not race through setup()'s
 # CREATE TABLE / INSERT INTO checkpoint_migrations steps.
@@ -25,9 +32,38 @@ def libpq_url(sqlalchemy_url: str) -> str:
     return url.render_as_string(hide_password=False)
 
 
+class PrunedPostgresSaver(PostgresSaver):
+    """PostgresSaver whose threads keep only their latest checkpoint (the saver's own
+    `keep_latest` prune, safe while the thread appends) every PRUNE_EVERY checkpoints."""
+
+    def __init__(
+        self, conn: ConnectionPool[psycopg.Connection[dict[str, object]]], prune_every: int
+    ) -> None:
+        super().__init__(conn)
+        self._schedule = PruneSchedule(prune_every)
+
+    def put(
+        self,
+        config: RunnableConfig,
+        checkpoint: Checkpoint,
+        metadata: CheckpointMetadata,
+        new_versions: ChannelVersions,
+    ) -> RunnableConfig:
+        saved = super().put(config, checkpoint, metadata, new_versions)
+        thread_id = str(config["configurable"]["thread_id"])
+        if self._schedule.due(thread_id):
+            try:
+                self.prune([thread_id], strategy="keep_latest")
+            except psycopg.Error:
+                # A concurrent prune of the same thread (a serialization failure): storage
+                # hygiene, retried at the next schedule; never a failed run.
+                log.warning("could not prune the checkpoints of run %s", thread_id, exc_info=True)
+        return saved
+
+
 def open_postgres_saver(
     sqlalchemy_url: str, *, max_connections: int
-) -> tuple[PostgresSaver, Callable[[], None]]:
+) -> tuple[PrunedPostgresSaver, Callable[[], None]]:
     """A PostgresSaver on its own pool, its tables set up; returns it with its closer.
 
     The connection options are the ones PostgresSaver requires (autocommit, dict rows, no
@@ -44,7 +80,7 @@ def open_postgres_saver(
         name="ltaa-checkpoints",
         open=True,
     )
-    saver = PostgresSaver(pool)
+    saver = PrunedPostgresSaver(pool, prune_every=PRUNE_EVERY)
     try:
         with psycopg.connect(conninfo, autocommit=True) as lock_conn:
             lock_conn.execute("SELECT pg_advisory_lock(%s)", (SETUP_LOCK_KEY,))

@@ -19,7 +19,8 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import EventKind, RunStatus
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
-from app.runs.errors import RunNotFoundError
+from app.runs.signing import SignatureCheck, SigningKeys, check_signature
+from app.runs.tombstones import missing_run
 from app.store import chain
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, Run, RunAnnotation, RunEvent, as_utc
@@ -31,7 +32,7 @@ EVENTS_PER_PAGE = 1000
 def _run(session: Session, run_id: str) -> Run:
     run = repo.get_run(session=session, run_id=run_id)
     if run is None:
-        raise RunNotFoundError(run_id)
+        raise missing_run(session, run_id)
     return run
 
 
@@ -120,10 +121,14 @@ class ChainReport:
     # those chains verify: what was signed is what the record says now.
     signoffs_ok: bool = True
     parent_link: ParentLink | None = None
+    chain_scheme: str = chain.SCHEME
+    signature: SignatureCheck | None = None  # the newest signature's check, if any
 
     @property
     def ok(self) -> bool:
-        return self.first_break is None and (self.parent_link is None or self.parent_link.ok)
+        signed_ok = self.signature is None or self.signature.valid
+        parent_ok = self.parent_link is None or self.parent_link.ok
+        return self.first_break is None and parent_ok and signed_ok
 
     @property
     def first_break(self) -> chain.Break | None:
@@ -138,11 +143,32 @@ def _result(check: chain.ChainCheck) -> ChainCheckResult:
     )
 
 
-def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport:
-    """Recompute both chains of a run from its rows and report the first broken link."""
+def _geneses(run: Run) -> dict[str, str]:
+    return {
+        table: chain.run_genesis(
+            table,
+            run.id,
+            scheme=run.chain_scheme,
+            request=run.request,
+            mode=run.mode,
+            max_deviation=run.max_deviation,
+            anchor=run.chain_anchor,
+        )
+        for table in ("decisions", "events")
+    }
+
+
+def verify_trace(
+    *, sessions: sessionmaker[Session], run_id: str, keys: SigningKeys | None = None
+) -> ChainReport:
+    """Recompute both chains of a run from its rows (by the run's own chain scheme), check
+    its newest signature with the public keys, and report the first broken link."""
     with sessions() as session:
         run = _run(session, run_id)
         status, n_tasks, anchor = run.status, run.n_tasks, run.chain_anchor
+        geneses = _geneses(run)
+        scheme = run.chain_scheme or chain.SCHEME
+        signature_row = repo.latest_signature(session=session, run_id=run_id)
         revision_of = run.revision_of
         order: list[int] | None = None
         if revision_of is not None:
@@ -151,7 +177,14 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
             rest = repo.decided_indexes(session=session, run_id=run_id, pinned=False)
             order = repo.revision_chain_order(pins, rest)
 
-    decisions = chain.ChainCheck("decisions", run_id, first_key=0, anchor=anchor, order=order)
+    decisions = chain.ChainCheck(
+        "decisions",
+        run_id,
+        first_key=0,
+        anchor=anchor,
+        order=order,
+        genesis_link=geneses["decisions"],
+    )
     passes: tuple[bool | None, ...] = (None,) if revision_of is None else (True, False)
     for pinned in passes:
         for page in _decision_pages(sessions, run_id, pinned):
@@ -165,7 +198,9 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
 
                 decisions.feed(d.task_index, d.chain_hash, link)
 
-    events = chain.ChainCheck("events", run_id, first_key=1, anchor=anchor)
+    events = chain.ChainCheck(
+        "events", run_id, first_key=1, anchor=anchor, genesis_link=geneses["events"]
+    )
     last_kind = None
     for event_page in _event_pages(sessions, run_id):
         for e in event_page:
@@ -205,6 +240,16 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
             annotations.feed(a.seq, a.chain_hash, annotation_link)
     heads_now = {"decisions": decisions.head, "events": events.head}
     chains_intact = decisions.first_break is None and events.first_break is None
+    signature = None
+    if signature_row is not None:
+        signature = check_signature(
+            keys or SigningKeys(),
+            signature_row.key_id,
+            signature_row.payload,
+            signature_row.signature,
+            heads_now,
+            geneses,
+        )
     return ChainReport(
         decisions=_result(decisions),
         events=_result(events),
@@ -213,6 +258,8 @@ def verify_trace(*, sessions: sessionmaker[Session], run_id: str) -> ChainReport
         parent_link=None
         if revision_of is None
         else check_parent_link(sessions=sessions, run_id=run_id, parent_id=revision_of),
+        chain_scheme=scheme,
+        signature=signature,
     )
 
 
@@ -273,7 +320,8 @@ def _when(value: datetime | None) -> str | None:
 def _run_line(run: Run) -> dict[str, Any]:
     return {
         "type": "run",
-        "format": chain.SCHEME,
+        "format": run.chain_scheme or chain.SCHEME,
+        "chain_scheme": run.chain_scheme or chain.SCHEME,
         "id": run.id,
         "status": run.status,
         "reasoner": run.reasoner,
@@ -286,10 +334,7 @@ def _run_line(run: Run) -> dict[str, Any]:
         "created_at": _when(run.created_at),
         "finished_at": _when(run.finished_at),
         "request": run.request,
-        "genesis": {
-            "decisions": chain.genesis("decisions", run.id),
-            "events": chain.genesis("events", run.id),
-        },
+        "genesis": _geneses(run),
     }
 
 
@@ -342,6 +387,16 @@ def trace_record(
     Raises RunNotFoundError here, before the first page is asked for."""
     with sessions() as session:
         header = _run_line(_run(session, run_id))
+        header["signatures"] = [
+            {
+                "reason": s.reason,
+                "key_id": s.key_id,
+                "payload": s.payload,
+                "signature": s.signature,
+                "at": _when(s.created_at),
+            }
+            for s in repo.signatures(session=session, run_id=run_id)
+        ]
     return _record_pages(sessions, run_id, header)
 
 

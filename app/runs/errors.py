@@ -15,6 +15,19 @@ class RunNotFoundError(DomainError):
         )
 
 
+class RunArchivedError(DomainError):
+    status_code = 410
+    location = "path"
+
+    def __init__(self, run_id: str, archive_file: str) -> None:
+        super().__init__(
+            "run_id",
+            f"run '{run_id}' was archived to '{archive_file}' (in the server's archive "
+            "directory); its record is that file, which scripts/check_trace.py verifies",
+            code="archived",
+        )
+
+
 class RunStateConflictError(DomainError):
     status_code = 409
     location = "path"

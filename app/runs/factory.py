@@ -65,6 +65,12 @@ def make_worker(
     *, settings: Settings, sessions: sessionmaker[Session], node_hook: NodeHook | None = None
 ) -> RunWorker:
     """`node_hook`: in-process tests pass a hook directly; otherwise LTAA_TEST_PAUSE's."""
+    if settings.test_graph_version is not None:
+        log.warning(
+            "LTAA_TEST_GRAPH_VERSION is set: this process claims graph version %s instead of "
+            "its own (a test seam; never set it in production)",
+            settings.test_graph_version,
+        )
     ownership: Ownership
     if uses_leases(settings.db_url):
         from app.runs.leased import LeaseOwnership

@@ -21,9 +21,11 @@ from app.domain.lifecycle import FINISHED, EventKind
 from app.store.models import Decision, Run, RunEvent, as_utc
 
 _OPENING = (EventKind.CREATED, EventKind.STARTED, EventKind.RESUMED)
+# ASCII digits only (\d would take any script's), as the OpenAPI pattern says.
+CURSOR_PATTERN = r"^[ \t]*([0-9]{1,9})-([0-9]{1,9})[ \t]*$"
+_CURSOR = re.compile(CURSOR_PATTERN)
 # Sent as their own SSE event type, so a supervisor's console can listen for them alone.
 _REVIEW = (EventKind.REVIEW_REQUESTED, EventKind.REVIEW_RESOLVED, EventKind.REVIEW_CLOSED)
-_CURSOR = re.compile(r"^(\d{1,9})-(\d{1,9})$")
 R = TypeVar("R", RunEvent, Decision)
 
 
@@ -40,7 +42,7 @@ class Cursor:
 
     @classmethod
     def parse(cls, text: str) -> Cursor:
-        match = _CURSOR.match(text.strip())
+        match = _CURSOR.match(text)
         if match is None:
             raise ValueError("expected an event id sent by this stream, like '3-17'")
         return cls(int(match[1]), int(match[2]))

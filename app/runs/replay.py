@@ -20,6 +20,7 @@ from app.domain.lifecycle import RunStatus
 from app.reasoners.replay import RecordedReply, ReplyKey
 from app.runs.spec import RunSpec
 from app.store import repository as repo
+from app.store.models import ArchivedRun
 
 REPLAY = "replay"
 # RunSpec fields a replay copies from the original run.
@@ -71,10 +72,27 @@ def check_reasoner(reasoner: str, replay_of: str | None) -> None:
         )
 
 
+class ReplaySourceArchivedError(DomainError):
+    """410: the run named by replay_of was archived; its record is the archive file."""
+
+    status_code = 410
+
+    def __init__(self, run_id: str, archive_file: str) -> None:
+        super().__init__(
+            "replay_of",
+            f"run '{run_id}' was archived to '{archive_file}'; replay a run still stored",
+            code="archived",
+        )
+
+
 def original_spec(*, session: Session, replay_of: str) -> RunSpec:
     """The spec of the completed run to replay. An unknown id is a 422 naming the body
     field (a 404 would suggest the URL is wrong); a run not completed is a 409."""
     run = repo.get_run(session=session, run_id=replay_of)
+    if run is None and session.get(ArchivedRun, replay_of) is not None:
+        gone = session.get(ArchivedRun, replay_of)
+        assert gone is not None
+        raise ReplaySourceArchivedError(replay_of, gone.archive_file)
     if run is None:
         raise DomainError(
             "replay_of",

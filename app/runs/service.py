@@ -18,13 +18,15 @@ from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
 from app.runs import lifecycle, records, reviews
-from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.errors import RunStateConflictError
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import validate_replay
 from app.runs.signoff import SignOff, signoffs
 from app.runs.spec import RunSpec
+from app.runs.tombstones import missing_run
 from app.runs.worker import RunWorker
+from app.store import chain
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import Attempt, ExecutionReport, Run, RunEvent
@@ -63,6 +65,7 @@ def create_run(
             resumes=0,
             cancel_requested=False,
             idempotency_key=idempotency.key if idempotency else None,
+            chain_scheme=chain.SCHEME_V2,
             request_digest=idempotency.digest if idempotency else None,
             created={
                 "reasoner": spec.reasoner,
@@ -107,7 +110,7 @@ def create_or_replay_run(
 def _require(session: Session, run_id: str, *, lock: bool = False) -> Run:
     run = repo.get_run(session=session, run_id=run_id, for_update=lock)
     if run is None:
-        raise RunNotFoundError(run_id)
+        raise missing_run(session, run_id)
     return run
 
 
@@ -137,8 +140,9 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
             )
         if run.status in (RunStatus.QUEUED, RunStatus.RUNNING) or worker.is_active(run_id):
             raise RunStateConflictError(run_id, run.status, "resume", "It is already running.")
-        if run.status == RunStatus.FAILED:
-            # Its error stays readable until a worker takes it up again.
+        if run.status in (RunStatus.FAILED, RunStatus.BLOCKED):
+            # Its error stays readable until a worker takes it up again (a blocked run is
+            # blocked again, with the same error, if this server's graph version differs).
             lifecycle.move(session, run, RunStatus.INTERRUPTED, error=run.error)
     worker.submit(run_id)
     with sessions() as session:
@@ -177,9 +181,16 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
 
 @dataclass
 class RunView:
+    """A run with one page of its decisions; the totals (progress, workload, regret, metrics)
+    cover every decision, so a long run answers a poll without sending them all."""
+
     run: Run
     spec: RunSpec
     decisions: list[DecisionRecord]
+    offset: int
+    allocated: int
+    workload: dict[str, int]
+    regret: float | None
     usage: Usage
     metrics: Metrics | None
     signoffs: list[SignOff] = field(default_factory=list)
@@ -188,47 +199,44 @@ class RunView:
 
     @property
     def progress(self) -> dict[str, Any]:
-        allocated = len(self.decisions)
         return {
-            "allocated": allocated,
+            "allocated": self.allocated,
             "total": self.run.n_tasks,
-            "phase": detect_phase(min(allocated, self.run.n_tasks), self.run.n_tasks).value,
+            "phase": detect_phase(min(self.allocated, self.run.n_tasks), self.run.n_tasks).value,
         }
 
-    @property
-    def regret(self) -> float | None:
-        values = [d.regret for d in self.decisions]
-        if any(v is None for v in values):
-            return None
-        return float(sum(v for v in values if v is not None))
 
-    @property
-    def workload(self) -> dict[str, int]:
-        names = [r["name"] for r in self.spec.instance_data["robots"]]
-        loads = dict.fromkeys(names, 0)
-        for d in self.decisions:
-            loads[names[d.robot]] += 1
-        return loads
-
-
-def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
+def run_view(
+    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
+) -> RunView:
+    """The run with its decisions from the offset-th, at most limit of them (None: all)."""
     with sessions() as session:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
+        outcomes = repo.decision_outcomes(session=session, run_id=run_id)
         decisions = [
-            records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
+            records.decision_record(d)
+            for d in repo.decisions_slice(
+                session=session, run_id=run_id, offset=offset, limit=limit
+            )
         ]
         usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
         signed = signoffs(session=session, run_id=run_id)
         execution = {
             r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
         }
+    names = [r["name"] for r in spec.instance_data["robots"]]
+    workload = dict.fromkeys(names, 0)
+    for o in outcomes:
+        workload[names[o.robot]] += 1
+    regrets = [o.regret for o in outcomes]
+    regret = None if any(v is None for v in regrets) else float(sum(regrets))
     metrics = None
     problem = spec.problem
-    if run.status == RunStatus.COMPLETED and len(decisions) == run.n_tasks:
+    if run.status == RunStatus.COMPLETED and len(outcomes) == run.n_tasks:
         metrics = compute_metrics(
             problem.instance,
-            [d.robot for d in decisions],
+            [o.robot for o in outcomes],
             seed=spec.seed,
             scope=problem.balance_scope,
         )
@@ -236,18 +244,27 @@ def run_view(*, sessions: sessionmaker[Session], run_id: str) -> RunView:
             # A pin keeps the success it was decided with, whatever set_rates changed.
             metrics = replace(
                 metrics,
-                expected_success=statistics.fmean(d.expected_success for d in decisions),
+                expected_success=statistics.fmean(o.expected_success for o in outcomes),
             )
     return RunView(
         run=run,
         spec=spec,
         decisions=decisions,
+        offset=offset,
+        allocated=len(outcomes),
+        workload=workload,
+        regret=regret,
         usage=usage,
         metrics=metrics,
         execution=execution,
         pinned=frozenset(problem.pinned),
         signoffs=signed,
     )
+
+
+def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:
+    with sessions() as session:
+        return _require(session, run_id)
 
 
 def list_run_rows(
@@ -259,23 +276,32 @@ def list_run_rows(
 
 @dataclass
 class Trace:
+    """A run's events with one page of its decisions (and their attempts)."""
+
     run: Run
     events: list[RunEvent]
     decisions: list[DecisionRecord]
     attempts: dict[int, list[Attempt]]
+    total: int
 
 
-def run_trace(*, sessions: sessionmaker[Session], run_id: str) -> Trace:
+def run_trace(
+    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
+) -> Trace:
     with sessions() as session:
         run = _require(session, run_id)
-        by_task: dict[int, list[Attempt]] = {}
-        for a in repo.attempts(session=session, run_id=run_id):
-            by_task.setdefault(a.task_index, []).append(a)
+        page = repo.decisions_slice(session=session, run_id=run_id, offset=offset, limit=limit)
+        attempts = (
+            repo.attempts_of_tasks(
+                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
+            )
+            if page
+            else {}
+        )
         return Trace(
             run=run,
             events=repo.events(session=session, run_id=run_id),
-            decisions=[
-                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
-            ],
-            attempts=by_task,
+            decisions=[records.decision_record(d) for d in page],
+            attempts=attempts,
+            total=repo.decision_count(session=session, run_id=run_id),
         )

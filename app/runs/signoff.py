@@ -18,9 +18,11 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.annotations import AnnotationKind
 from app.runs import audit, lifecycle
-from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.errors import RunStateConflictError
 from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import RunStatus
+from app.runs.signing import SigningKeys, sign_run
+from app.runs.tombstones import missing_run
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import Decision, RunAnnotation, RunEvent, as_utc, utcnow
@@ -67,6 +69,7 @@ def sign_off(
     signer: str,
     statement: str,
     idempotency: Idempotency | None = None,
+    keys: SigningKeys | None = None,
 ) -> tuple[SignOff, bool]:
     """(the sign-off, whether an earlier request with the same Idempotency-Key made it).
 
@@ -79,7 +82,7 @@ def sign_off(
     with sessions() as session:
         run = repo.get_run(session=session, run_id=run_id)
         if run is None:
-            raise RunNotFoundError(run_id)
+            raise missing_run(session, run_id)
         if run.status != RunStatus.COMPLETED:
             raise RunStateConflictError(
                 run_id, run.status, "sign off", "Only a completed run can be signed off."
@@ -121,6 +124,9 @@ def sign_off(
         if earlier is None:
             raise
         return earlier, True
+    if keys is not None:
+        # With a server key the heads are signed at each sign-off too (app.runs.signing).
+        sign_run(sessions=sessions, keys=keys, run_id=run_id, reason="signoff")
     return signed, False
 
 

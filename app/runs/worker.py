@@ -28,6 +28,7 @@ from app.graph.builder import build_graph
 from app.graph.execution import GraphEndedEarly
 from app.graph.pause import NodeHook
 from app.graph.recorder import RunCancelled
+from app.graph.version import compatible, current_version, upgrade_blocked_message
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, reviews
@@ -36,6 +37,7 @@ from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
 from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence
 from app.runs.replay import recorded_replies
+from app.runs.signing import SigningKeys, sign_run
 from app.runs.spec import RunSpec
 from app.runs.token_budget import with_token_budget
 from app.solvers.ltaa import execute_ltaa
@@ -72,6 +74,7 @@ class RunWorker:
         self._sessions = sessions
         self.ownership = ownership
         self.checkpointer, self._close_checkpointer = checkpointer
+        self.signing_keys = SigningKeys.from_settings(settings)
         self.graph = build_graph(self.checkpointer, node_hook=node_hook)
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
@@ -293,6 +296,7 @@ class RunWorker:
             spec = RunSpec.from_json(run.request)
             instance = spec.problem.instance
             resume = checkpoint is not None or run.status == RunStatus.INTERRUPTED
+            version = current_version(self._settings.test_graph_version)
             resolution = reviews.resolution_to_apply(session, run_id) if resume else None
             if resolution is not None and run.status == RunStatus.QUEUED:
                 # Queued by a review's resolution: the paused graph goes on with it. Not a
@@ -300,6 +304,7 @@ class RunWorker:
                 lifecycle.move(session, run, RunStatus.RUNNING)
                 return Admission(spec=spec, resume=True, resume_with=resolution)
             if not resume:
+                run.graph_version = version
                 lifecycle.move(
                     session,
                     run,
@@ -309,10 +314,25 @@ class RunWorker:
                         "reasoner": spec.reasoner,
                         "mode": spec.mode,
                         "tasks": instance.n_tasks,
+                        "graph_version": version,
                         **detail,
                     },
                 )
                 return Admission(spec=spec, resume=False)
+            if not compatible(run.graph_version, version):
+                # Refused before anything runs, and not claimable: no process loops on it.
+                started_under = run.graph_version or ""
+                lifecycle.move(
+                    session,
+                    run,
+                    RunStatus.BLOCKED,
+                    event=EventKind.UPGRADE_BLOCKED,
+                    detail={"started_under": started_under, "current": version, **detail},
+                    error=upgrade_blocked_message(started_under, version),
+                )
+                return None
+            # A run from before versions were recorded goes on under this one, from now on.
+            run.graph_version = version
             stored = [
                 records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
             ]
@@ -418,6 +438,11 @@ class RunWorker:
                 return
             lifecycle.move(
                 session, run, status, event=EventKind(status.value), detail=detail, error=error
+            )
+        if status == RunStatus.COMPLETED:
+            # After the completed event commits: the heads signed are the final ones.
+            sign_run(
+                sessions=self._sessions, keys=self.signing_keys, run_id=run_id, reason="completed"
             )
         if status in (RunStatus.COMPLETED, RunStatus.CANCELLED):
             self._prune_checkpoints(run_id)

@@ -32,9 +32,10 @@ run, a missing decision or a missing final event), and reordered rows (the index
 the content, so a swapped pair breaks at the first of the two). Rows written before the
 chain existed have no hash and are reported as unchained, never as verified.
 What it cannot detect on its own: someone with write access to the database who knows this
-scheme can recompute every link after an edit, since there is no secret key. The verifier
-reports each chain's head hash; a supervisor who records the heads at sign-off can later
-tell that the record changed, however it was rewritten.
+scheme can recompute every link after an edit, since the chain has no secret key. The
+verifier reports each chain's head hash; a supervisor who records the heads at sign-off can
+later tell that the record changed, however it was rewritten; with a server signing key the
+heads are signed (app.runs.signing), so a rewrite needs the private key to pass.
 """
 
 from __future__ import annotations
@@ -50,6 +51,11 @@ Table = Literal["decisions", "events", "annotations"]
 # The previous row exists but was written before chaining: later links hang off this marker.
 UNCHAINED = "0" * 64
 SCHEME = "ltaa-trace-chain/v1"
+# v2: each chain's genesis also covers the run's immutable fields (its stored request:
+# instance, mode, cap, settings), so a record cannot be moved onto another instance.
+# Runs record their scheme (runs.chain_scheme; null is v1) and every scheme verifies.
+SCHEME_V2 = "ltaa-trace-chain/v2"
+SCHEMES = (SCHEME, SCHEME_V2)
 
 
 def _int(value: Any) -> int:
@@ -152,13 +158,51 @@ def _content(fields: Mapping[str, Normaliser], row: Mapping[str, Any]) -> dict[s
     return {name: normalise(row[name]) for name, normalise in fields.items()}
 
 
-def genesis(table: Table, run_id: str, anchor: str | None = None) -> str:
-    """The link the first row of a run's chain hangs off. A revision's chains also cover
-    its `anchor` (revision_anchor: the parent's heads and the change set), so the record
-    across revisions is one linked chain."""
-    if anchor is None:
-        return _sha256(f"{SCHEME}|{table}|{run_id}")
-    return _sha256(f"{SCHEME}|{table}|{run_id}|{anchor}")
+def immutable_digest(request: Any, mode: str, max_deviation: float | None) -> str:
+    """What a v2 genesis covers besides the table and run id: the fields a run never
+    changes (not its status or counters)."""
+    return _sha256(
+        canonical_json(
+            {"request": _json(request), "mode": mode, "max_deviation": _float(max_deviation)}
+        )
+    )
+
+
+def genesis(
+    table: Table,
+    run_id: str,
+    anchor: str | None = None,
+    *,
+    scheme: str | None = None,
+    immutable: str | None = None,
+) -> str:
+    """The link the first row of a run's chain hangs off (scheme None is v1). A revision's
+    chains also cover its `anchor` (revision_anchor: the parent's heads and the change
+    set), so the record across revisions is one linked chain; a v2 chain also covers the
+    run's `immutable` fields (immutable_digest)."""
+    tail = "" if anchor is None else f"|{anchor}"
+    if scheme in (None, SCHEME):
+        return _sha256(f"{SCHEME}|{table}|{run_id}{tail}")
+    if scheme == SCHEME_V2:
+        if immutable is None:
+            raise ValueError(f"{SCHEME_V2} needs the run's immutable_digest")
+        return _sha256(f"{SCHEME_V2}|{table}|{run_id}|{immutable}{tail}")
+    raise ValueError(f"unknown chain scheme {scheme!r}; known: {', '.join(SCHEMES)}")
+
+
+def run_genesis(
+    table: Table,
+    run_id: str,
+    *,
+    scheme: str | None,
+    request: Any,
+    mode: str,
+    max_deviation: float | None,
+    anchor: str | None = None,
+) -> str:
+    """The genesis of a run's chain from the run's own columns, whatever its scheme."""
+    immutable = None if scheme in (None, SCHEME) else immutable_digest(request, mode, max_deviation)
+    return genesis(table, run_id, anchor, scheme=scheme, immutable=immutable)
 
 
 def revision_anchor(link: Mapping[str, Any]) -> str:
@@ -237,16 +281,18 @@ class ChainCheck:
         *,
         anchor: str | None = None,
         order: list[int] | None = None,
+        genesis_link: str | None = None,
     ) -> None:
         """`order`: the keys in chain order when they are not first_key, first_key + 1, ...
-        (a revision's decisions: pins first); `anchor`: a revision's link to its parent."""
+        (a revision's decisions: pins first); `anchor`: a revision's link to its parent;
+        `genesis_link`: the genesis by the run's chain scheme (run_genesis)."""
         self.table = table
         self.count = 0
         self.unchained = 0
         self.head: str | None = None
         self.last_key: int | None = None
         self.first_break: Break | None = None
-        self._prev = genesis(table, run_id, anchor)
+        self._prev = genesis_link if genesis_link is not None else genesis(table, run_id, anchor)
         self._order = order
         self._next_key = order[0] if order else first_key
         self._noun = "task_index" if table == "decisions" else "seq"

@@ -83,6 +83,40 @@ class Run(Base):
     revision: Mapped[int] = mapped_column(Integer, default=0)
     superseded_by: Mapped[str | None] = mapped_column(String(32), nullable=True)
     chain_anchor: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # The graph version (app.graph.version) the run started under; null for runs from
+    # before it was recorded. A resume under another version is refused (status blocked).
+    graph_version: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # How its hash chains are built (app.store.chain.SCHEMES); null: v1, from before.
+    chain_scheme: Mapped[str | None] = mapped_column(String(32), nullable=True)
+
+
+class RunSignature(Base):
+    """A signature over a run's chain heads (at completion, at sign-off), outside the chains:
+    it vouches for them and must not change them."""
+
+    __tablename__ = "run_signatures"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    reason: Mapped[str] = mapped_column(String(32))
+    key_id: Mapped[str] = mapped_column(String(32))
+    payload: Mapped[dict[str, Any]] = mapped_column(JSON)
+    signature: Mapped[str] = mapped_column(String(128))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ArchivedRun(Base):
+    """The tombstone of an archived run: what a lookup answers 410 Gone with."""
+
+    __tablename__ = "archived_runs"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    lineage_head: Mapped[str] = mapped_column(String(32))
+    archive_file: Mapped[str] = mapped_column(String(255))
+    heads: Mapped[dict[str, Any]] = mapped_column(JSON)
+    verified: Mapped[bool] = mapped_column(Boolean)
+    status: Mapped[str] = mapped_column(String(16))
+    archived_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
 class RunEvent(Base):

@@ -35,6 +35,7 @@ from app.store.models import (
     Run,
     RunAnnotation,
     RunEvent,
+    RunSignature,
     utcnow,
 )
 
@@ -56,6 +57,40 @@ def runs_with_status(*, session: Session, statuses: Sequence[str]) -> list[Run]:
     return list(session.scalars(select(Run).where(Run.status.in_(statuses)).order_by(Run.id)))
 
 
+def chain_genesis(*, session: Session, table: chain.Table, run_id: str) -> str:
+    """The genesis of a run's chain, by the run's scheme (one primary-key read; only the
+    first row of a chain needs it)."""
+    run = session.get(Run, run_id)
+    if run is None:
+        return chain.genesis(table, run_id)
+    return chain.run_genesis(
+        table,
+        run_id,
+        scheme=run.chain_scheme,
+        request=run.request,
+        mode=run.mode,
+        max_deviation=run.max_deviation,
+        anchor=run.chain_anchor,
+    )
+
+
+def signatures(*, session: Session, run_id: str) -> list[RunSignature]:
+    return list(
+        session.scalars(
+            select(RunSignature).where(RunSignature.run_id == run_id).order_by(RunSignature.id)
+        )
+    )
+
+
+def latest_signature(*, session: Session, run_id: str) -> RunSignature | None:
+    return session.scalars(
+        select(RunSignature)
+        .where(RunSignature.run_id == run_id)
+        .order_by(RunSignature.id.desc())
+        .limit(1)
+    ).first()
+
+
 def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:
     # One indexed lookup gives both the next seq and the link the new row hangs off.
     last = session.execute(
@@ -68,7 +103,7 @@ def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any
     prev = (
         chain.next_prev(last.chain_hash)
         if last is not None
-        else chain.genesis("events", run_id, chain_anchor(session=session, run_id=run_id))
+        else chain_genesis(session=session, table="events", run_id=run_id)
     )
     link = chain.event_link(prev, {"seq": seq, "kind": kind, "detail": detail})
     event = RunEvent(run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link)
@@ -201,6 +236,31 @@ def decisions(*, session: Session, run_id: str) -> list[Decision]:
     )
 
 
+def decisions_slice(
+    *, session: Session, run_id: str, offset: int, limit: int | None
+) -> list[Decision]:
+    """Decisions in task order from the offset-th, at most limit of them (None: all)."""
+    query = (
+        select(Decision)
+        .where(Decision.run_id == run_id)
+        .order_by(Decision.task_index)
+        .offset(offset)
+    )
+    return list(session.scalars(query if limit is None else query.limit(limit)))
+
+
+def decision_outcomes(*, session: Session, run_id: str) -> list[Any]:
+    """(task_index, robot, regret, expected_success) of every decision in task order: the
+    few columns a run's totals need, without loading each row's record."""
+    return list(
+        session.execute(
+            select(Decision.task_index, Decision.robot, Decision.regret, Decision.expected_success)
+            .where(Decision.run_id == run_id)
+            .order_by(Decision.task_index)
+        )
+    )
+
+
 def attempts(*, session: Session, run_id: str) -> list[Attempt]:
     return list(
         session.scalars(
@@ -305,12 +365,12 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
     ).all()
     attempts = [row._mapping for row in rows if row.attempt is not None]
     anchor = chain_anchor(session=session, run_id=run_id)
-    if anchor is None:
-        prev_link = rows[0].prev if rows[0].prev is not None else chain.genesis("decisions", run_id)
-    else:
-        prev_link = _revision_prev(session, run_id, values) or chain.genesis(
-            "decisions", run_id, anchor
-        )
+    prev = rows[0].prev if anchor is None else _revision_prev(session, run_id, values)
+    prev_link = (
+        prev
+        if prev is not None
+        else chain_genesis(session=session, table="decisions", run_id=run_id)
+    )
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
 
 

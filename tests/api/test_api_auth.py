@@ -31,6 +31,7 @@ CLIENT_ENDPOINTS = [
     ("POST", "/runs"),
     ("GET", "/runs"),
     ("GET", "/runs/{id}"),
+    ("GET", "/audit/public-key"),
     ("POST", "/runs/{id}/execution"),
     ("POST", "/runs/{id}/revisions"),
     ("GET", "/runs/{id}/revisions"),
@@ -53,6 +54,8 @@ SUPERVISOR_ENDPOINTS = [
     ("POST", "/webhooks/{webhook_id}/rotate-secret"),
     ("GET", "/webhooks/{webhook_id}/deliveries"),
     ("POST", "/webhooks/{webhook_id}/deliveries/{delivery_id}/retry"),
+    ("POST", "/admin/backup"),
+    ("POST", "/admin/archive"),
 ]
 
 

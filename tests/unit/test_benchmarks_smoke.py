@@ -6,6 +6,7 @@ change in app/ breaks here rather than at the next `make bench`.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from pathlib import Path
 
@@ -13,7 +14,18 @@ import pytest
 
 from app.domain.modes import Mode
 from app.domain.problem import Problem
-from benchmarks import adaptation, durable, learners, load, ltaa_runs, paper, plots, report, solvers
+from benchmarks import (
+    adaptation,
+    durable,
+    learners,
+    load,
+    ltaa_runs,
+    paper,
+    plots,
+    report,
+    solvers,
+    storage,
+)
 from benchmarks.cache import solved
 
 
@@ -51,6 +63,14 @@ def test_durable_measure_on_a_tiny_run() -> None:
     measure = durable.measure_durable(solvers.first_tasks(3), runs=1)
     assert measure.n_tasks == 3 and len(measure.seconds) == 1
     assert measure.checkpoint_after_wal_checkpoint > 0
+
+
+def test_storage_measure_on_a_tiny_run() -> None:
+    measure = durable.measure_storage(solvers.first_tasks(3), interval_s=0.01)
+    assert measure.n_tasks == 3 and measure.samples >= 1
+    assert measure.peak_bytes > 0 and measure.final_bytes > 0
+    big = dataclasses.replace(measure, n_tasks=10_000)
+    assert "met" in storage.storage_part([measure, big])
 
 
 def test_frontier_is_monotone() -> None:

@@ -15,9 +15,10 @@ from fastapi.responses import StreamingResponse
 
 from app.api.deps import RunIdPath, RunsDep, SettingsDep, StreamSupervisorDep
 from app.api.errors import ApiError
+from app.api.openapi import header_schema
 from app.api.responses import SUPERVISOR, errors
-from app.runs.errors import RunNotFoundError
-from app.runs.progress import Cursor, read_progress, run_status
+from app.runs.progress import CURSOR_PATTERN, Cursor, read_progress, run_status
+from app.runs.tombstones import missing_run
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -27,16 +28,28 @@ RECONNECT_MS = 1000
 def existing_run(run_id: RunIdPath, runs: RunsDep) -> str:
     # A dependency, so an unknown id is a 404 before the stream (and its 200) begins.
     if run_status(sessions=runs.sessions, run_id=run_id) is None:
-        raise RunNotFoundError(run_id)
+        with runs.sessions() as session:
+            raise missing_run(session, run_id)
     return run_id
 
 
 def start_cursor(
-    last_event_id: Annotated[str | None, Header(alias="Last-Event-ID")] = None,
+    last_event_id: Annotated[
+        str | None,
+        Header(
+            alias="Last-Event-ID",
+            # Documented here, checked below (a 422 with this stream's own wording). Empty
+            # or blank is "from the start", as a reconnecting EventSource may send.
+            json_schema_extra=header_schema(pattern=rf"^[ \t]*$|{CURSOR_PATTERN}"),
+            description="The `id` of the last event received, e.g. `3-17`: the stream "
+            "continues after it",
+        ),
+    ] = None,
     after: Annotated[
         str | None,
         Query(
             max_length=32,
+            json_schema_extra=header_schema(maxLength=32, pattern=rf"^[ \t]*$|{CURSOR_PATTERN}"),
             description="Start after this event id (as Last-Event-ID does; EventSource "
             "cannot send that header on its first request). The header wins on a reconnect.",
         ),
@@ -44,10 +57,10 @@ def start_cursor(
 ) -> Cursor:
     text, loc = (
         (last_event_id, ["header", "last-event-id"])
-        if last_event_id
+        if last_event_id and last_event_id.strip(" \t")
         else (after, ["query", "after"])
     )
-    if not text:
+    if not text or not text.strip(" \t"):
         return Cursor()
     try:
         return Cursor.parse(text)
@@ -86,7 +99,7 @@ def sse(
 @router.get(
     "/{run_id}/events",
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404)},
+    responses={200: {"content": {"text/event-stream": {}}}, **errors(*SUPERVISOR, 404, 410)},
 )
 async def run_events(
     caller: StreamSupervisorDep,  # first: who may ask is settled before whether the run exists

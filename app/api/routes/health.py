@@ -6,6 +6,7 @@ from fastapi import APIRouter, Request
 
 from app.api.deps import SettingsDep
 from app.api.schemas import HealthOut
+from app.graph.version import current_version
 from app.solvers.registry import solver_names
 
 router = APIRouter(tags=["health"])
@@ -17,6 +18,7 @@ def health(request: Request, settings: SettingsDep) -> HealthOut:
     """Report that the service is up, its version, solvers and default reasoner."""
     return HealthOut(
         version=request.app.version,
+        graph_version=current_version(settings.test_graph_version),
         solvers=solver_names(),
         default_reasoner=settings.default_reasoner,
     )

@@ -9,17 +9,27 @@ from fastapi.responses import StreamingResponse
 
 from app.api.allocation import build_problem, resolve_instance
 from app.api.audit import JSONL_RESPONSE, jsonl_trace, verify_out
-from app.api.deps import ClientDep, RunIdPath, RunsDep, SettingsDep, SupervisorDep
+from app.api.deps import (
+    ClientDep,
+    RunIdPath,
+    RunsContext,
+    RunsDep,
+    SettingsDep,
+    SupervisorDep,
+)
 from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey, idempotency_of
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.routes.signoffs import signoff_out
 from app.api.run_examples import RUN_EXAMPLES
 from app.api.run_schemas import (
+    DEFAULT_PAGE,
+    MAX_PAGE,
     AttemptOut,
     DecisionOut,
     DecisionReviewOut,
     EventOut,
     ExecutionStateOut,
+    Page,
     Progress,
     RunAssignment,
     RunCreated,
@@ -38,16 +48,20 @@ from app.reasoners.attribution import Attribution, attempt_attribution, decision
 from app.runs import audit, reviews, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
-from app.store.models import Attempt, ExecutionReport
+from app.store.models import Attempt, ExecutionReport, Run
 
 router = APIRouter(prefix="/runs", tags=["runs"])
+
+LOCATION_HEADER: dict[str, Any] = {
+    "Location": {"description": "The run: /runs/{id}", "schema": {"type": "string"}}
+}
 
 
 @router.post(
     "",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=RunCreated,
-    responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409)},
+    responses={202: {"headers": CREATED_HEADERS}, **errors(*CLIENT, *BODY, 409, 410)},
 )
 def create_run(
     caller: ClientDep,
@@ -154,26 +168,33 @@ def list_runs(
 ) -> list[RunSummary]:
     """List runs, newest first, optionally only those with one status."""
     rows = service.list_run_rows(sessions=runs.sessions, status=status_, limit=limit, offset=offset)
-    return [
-        RunSummary(
-            id=r.id,
-            status=RunStatus(r.status),
-            reasoner=r.reasoner,
-            mode=r.mode,
-            n_tasks=r.n_tasks,
-            n_robots=r.n_robots,
-            resumes=r.resumes,
-            created_at=r.created_at,
-        )
-        for r in rows
-    ]
+    return [_summary(r) for r in rows]
+
+
+PageOffset = Annotated[
+    int, Query(ge=0, le=1_000_000_000, description="Skip this many items (queue order)")
+]
+PageLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="Return at most this many")]
+
+
+def _summary(r: Run) -> RunSummary:
+    return RunSummary(
+        id=r.id,
+        status=RunStatus(r.status),
+        reasoner=r.reasoner,
+        mode=r.mode,
+        n_tasks=r.n_tasks,
+        n_robots=r.n_robots,
+        resumes=r.resumes,
+        created_at=r.created_at,
+    )
 
 
 def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
     return None if review is None else DecisionReviewOut.model_validate(review)
 
 
-def _run_out(view: service.RunView) -> RunOut:
+def _run_out(view: service.RunView, limit: int) -> RunOut:
     run, spec = view.run, view.spec
     instance = spec.problem.instance
     names = [r.name for r in instance.robots]
@@ -199,10 +220,12 @@ def _run_out(view: service.RunView) -> RunOut:
             )
             for d in view.decisions
         ],
+        assignments_page=Page(offset=view.offset, limit=limit, total=view.allocated),
         metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
         regret=view.regret,
         usage=UsageOut.from_domain(view.usage),
         resumes=run.resumes,
+        graph_version=run.graph_version,
         error=run.error,
         revision_of=run.revision_of,
         revision=run.revision,
@@ -224,10 +247,21 @@ def _execution_out(report: ExecutionReport | None) -> ExecutionStateOut | None:
     )
 
 
-@router.get("/{run_id}", response_model=RunOut, responses=errors(*CLIENT, 404))
-def get_run(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
-    """A run's status, progress, workload, assignments so far, metrics and usage."""
-    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
+@router.get("/{run_id}", response_model=RunOut, responses=errors(*CLIENT, 404, 410))
+def get_run(
+    caller: ClientDep,
+    run_id: RunIdPath,
+    runs: RunsDep,
+    offset: PageOffset = 0,
+    limit: PageLimit = DEFAULT_PAGE,
+) -> RunOut:
+    """A run's status, progress, workload, a page of its assignments, metrics and usage."""
+    return _page_out(runs, run_id, offset, limit)
+
+
+def _page_out(runs: RunsContext, run_id: str, offset: int, limit: int) -> RunOut:
+    view = service.run_view(sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit)
+    return _run_out(view, limit)
 
 
 def _attempt_out(a: Attempt, prompts: bool, run_reasoner: str) -> AttemptOut:
@@ -259,7 +293,7 @@ def _attempt_out(a: Attempt, prompts: bool, run_reasoner: str) -> AttemptOut:
 @router.get(
     "/{run_id}/trace",
     response_model=TraceOut,
-    responses={**errors(*SUPERVISOR, 404), 200: JSONL_RESPONSE},
+    responses={**errors(*SUPERVISOR, 404, 410), 200: JSONL_RESPONSE},
 )
 def get_trace(
     caller: SupervisorDep,
@@ -273,11 +307,13 @@ def get_trace(
             description="jsonl: stream the whole audit record (with prompts) as JSON lines",
         ),
     ] = "json",
+    offset: PageOffset = 0,
+    limit: PageLimit = DEFAULT_PAGE,
 ) -> TraceOut | StreamingResponse:
     """For supervisors: run events and every decision with its validated attempts."""
     if format_ == "jsonl":
         return jsonl_trace(sessions=runs.sessions, run_id=run_id)
-    trace = service.run_trace(sessions=runs.sessions, run_id=run_id)
+    trace = service.run_trace(sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit)
     spec = RunSpec.from_json(trace.run.request)
     instance = spec.problem.instance
     names = [r.name for r in instance.robots]
@@ -303,6 +339,7 @@ def get_trace(
             )
             for d in trace.decisions
         ],
+        decisions_page=Page(offset=offset, limit=limit, total=trace.total),
     )
 
 
@@ -347,27 +384,35 @@ def _decision_out(
 
 
 @router.get(
-    "/{run_id}/trace/verify", response_model=TraceVerifyOut, responses=errors(*SUPERVISOR, 404)
+    "/{run_id}/trace/verify", response_model=TraceVerifyOut, responses=errors(*SUPERVISOR, 404, 410)
 )
 def verify_trace(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> TraceVerifyOut:
     """For supervisors: recompute the run's hash chains; ok, or the first broken link."""
-    return verify_out(audit.verify_trace(sessions=runs.sessions, run_id=run_id))
+    return verify_out(
+        audit.verify_trace(sessions=runs.sessions, run_id=run_id, keys=runs.worker.signing_keys)
+    )
 
 
 @router.post(
     "/{run_id}/resume",
     status_code=status.HTTP_202_ACCEPTED,
-    response_model=RunOut,
-    responses=errors(*SUPERVISOR, 404, 409),
+    response_model=RunSummary,
+    responses={202: {"headers": LOCATION_HEADER}, **errors(*SUPERVISOR, 404, 409, 410)},
 )
-def resume_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
-    """For supervisors: resume an interrupted (or failed) run from its last checkpoint."""
-    service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
-    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
+def resume_run(
+    caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep, response: Response
+) -> RunSummary:
+    """For supervisors: resume an interrupted (or failed) run from its last checkpoint; poll
+    the Location for its progress."""
+    run = service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
+    response.headers["Location"] = f"/runs/{run.id}"
+    return _summary(run)
 
 
-@router.post("/{run_id}/cancel", response_model=RunOut, responses=errors(*SUPERVISOR, 404, 409))
+@router.post(
+    "/{run_id}/cancel", response_model=RunOut, responses=errors(*SUPERVISOR, 404, 409, 410)
+)
 def cancel_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
     """For supervisors: cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
-    return _run_out(service.run_view(sessions=runs.sessions, run_id=run_id))
+    return _page_out(runs, run_id, 0, DEFAULT_PAGE)

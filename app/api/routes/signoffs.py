@@ -47,6 +47,7 @@ def create_signoff(
         signer=caller.name,
         statement=body.statement,
         idempotency=idempotency_of(idempotency_key, body),
+        keys=runs.worker.signing_keys,
     )
     if replayed:
         response.headers[REPLAYED_HEADER] = "true"

@@ -9,6 +9,7 @@ from langgraph.runtime import Runtime
 
 from app.domain.decision import DecisionContext
 from app.graph.context import decision_context
+from app.graph.gate import NODE_GATE
 from app.graph.prompts import SYSTEM_PROMPT
 from app.graph.recorder import AttemptRecord, Recorder
 from app.graph.state import GraphContext, LTAAState, Node
@@ -16,12 +17,14 @@ from app.graph.state import GraphContext, LTAAState, Node
 
 def cancellable(node: Node) -> Node:
     """Every node starts by checking for cancellation: a cancel, a drain or a lost lease
-    stops the run at the next node boundary, before the node does anything."""
+    stops the run at the next node boundary, before the node does anything. Every node
+    body also runs inside the process's node gate, which a backup holds (app.graph.gate)."""
 
     @functools.wraps(node)
     def checked(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
-        runtime.context.recorder.check_cancelled()
-        return node(state, runtime)
+        with NODE_GATE.passage():
+            runtime.context.recorder.check_cancelled()
+            return node(state, runtime)
 
     return checked
 

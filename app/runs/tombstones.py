@@ -1,0 +1,16 @@
+"""What a lookup of a run id with no row answers: 410 Gone naming the archive, or 404."""
+
+from __future__ import annotations
+
+from sqlalchemy.orm import Session
+
+from app.domain.errors import DomainError
+from app.runs.errors import RunArchivedError, RunNotFoundError
+from app.store.models import ArchivedRun
+
+
+def missing_run(session: Session, run_id: str) -> DomainError:
+    gone = session.get(ArchivedRun, run_id)
+    if gone is not None:
+        return RunArchivedError(run_id, gone.archive_file)
+    return RunNotFoundError(run_id)

@@ -1,0 +1,157 @@
+"""Archive: old terminal lineages become verified JSON-lines files and tombstones (410
+naming the file), runs not selected are untouched, and a kill -9 while archiving leaves
+each run either archived-and-deleted or intact."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from fastapi.testclient import TestClient
+from sqlalchemy import update
+
+from app.config import Settings
+from app.main import create_app
+from app.store.db import make_engine, make_session_factory, transaction
+from app.store.models import Run
+
+ROOT = Path(__file__).resolve().parents[2]
+LONG_AGO = "2020-06-01T00:00:00+00:00"
+BEFORE = "2021-01-01T00:00:00+00:00"
+
+
+def _completed(client: TestClient) -> str:
+    body = {"scenario": "baseline", "reasoner": "rules"}
+    run_id = str(client.post("/runs", json=body).json()["id"])
+    for _ in range(600):
+        if client.get(f"/runs/{run_id}").json()["status"] == "completed":
+            return run_id
+        time.sleep(0.05)
+    raise AssertionError("run did not complete")
+
+
+def _age(settings: Settings, *run_ids: str) -> None:
+    from datetime import datetime
+
+    with transaction(make_session_factory(make_engine(settings.db_url))) as session:
+        session.execute(
+            update(Run)
+            .where(Run.id.in_(run_ids))
+            .values(finished_at=datetime.fromisoformat(LONG_AGO))
+        )
+
+
+def _offline(path: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "check_trace.py"), str(path)],
+        cwd=ROOT,
+        env={"PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def test_old_runs_are_archived_verified_and_answer_410(
+    client: TestClient, settings: Settings
+) -> None:
+    old, recent = _completed(client), _completed(client)
+    _age(settings, old)
+    answer = client.post("/admin/archive", json={"before": BEFORE})
+    assert answer.status_code == 200, answer.text
+    lineages = answer.json()["lineages"]
+    assert [x["runs"] for x in lineages] == [[old]]
+    archive_file = Path(lineages[0]["files"][0])
+    assert archive_file.parent == settings.data_dir / "archive"
+
+    gone = client.get(f"/runs/{old}")
+    assert gone.status_code == 410
+    assert archive_file.name in gone.json()["detail"][0]["msg"]
+    assert client.get(f"/runs/{old}/trace/verify").status_code == 410
+    replay = client.post("/runs", json={"reasoner": "replay", "replay_of": old})
+    assert replay.status_code == 410 and replay.json()["detail"][0]["loc"] == ["body", "replay_of"]
+    assert client.get(f"/runs/{recent}").json()["status"] == "completed"  # untouched
+    assert client.get(f"/runs/{recent}/trace/verify").json()["ok"] is True
+
+    lines = [json.loads(line) for line in archive_file.read_text().splitlines()]
+    assert lines[-1]["type"] == "verify" and lines[-1]["ok"] is True
+    checked = _offline(archive_file)
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+    with sqlite3.connect(settings.data_dir / "ltaa.db") as conn:
+        assert conn.execute("SELECT count(*) FROM decisions WHERE run_id=?", (old,)).fetchone() == (
+            0,
+        )
+        assert conn.execute(
+            "SELECT count(*) FROM decisions WHERE run_id=?", (recent,)
+        ).fetchone() == (36,)
+    # Nothing older is left: a second archive does nothing.
+    assert client.post("/admin/archive", json={"before": BEFORE}).json()["lineages"] == []
+
+
+def test_a_kill_during_archiving_leaves_each_run_archived_or_intact(
+    settings: Settings,
+) -> None:
+    with TestClient(create_app(settings)) as client:
+        runs = [_completed(client) for _ in range(3)]
+    _age(settings, *runs)
+    env = {**os.environ, "LTAA_DATA_DIR": str(settings.data_dir)}
+    killed = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from app.cli import main; main()",
+            "archive",
+            "--before",
+            "2021-01-01",
+        ],
+        cwd=ROOT,
+        env={**env, "LTAA_TEST_ARCHIVE_KILL_AFTER": "2"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+
+    def state(run_id: str) -> tuple[bool, bool]:
+        with sqlite3.connect(settings.data_dir / "ltaa.db") as conn:
+            row = conn.execute("SELECT count(*) FROM runs WHERE id=?", (run_id,)).fetchone()[0]
+            gone = conn.execute(
+                "SELECT count(*) FROM archived_runs WHERE id=?", (run_id,)
+            ).fetchone()[0]
+            decisions = conn.execute(
+                "SELECT count(*) FROM decisions WHERE run_id=?", (run_id,)
+            ).fetchone()[0]
+        assert (row, gone) in ((1, 0), (0, 1)), f"run {run_id}: row {row}, tombstone {gone}"
+        assert decisions == (36 if row else 0)
+        return bool(row), bool(gone)
+
+    states = [state(r) for r in runs]
+    assert states[0] == (False, True)  # archived before the kill
+    assert (True, False) in states  # the run being archived at the kill is intact
+
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from app.cli import main; main()",
+            "archive",
+            "--before",
+            "2021-01-01",
+        ],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["done_by"] == "direct"
+    assert [state(r) for r in runs] == [(False, True)] * 3
+    for run_id in runs:
+        assert _offline(settings.data_dir / "archive" / f"run-{run_id}.jsonl").returncode == 0
