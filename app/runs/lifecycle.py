@@ -78,6 +78,7 @@ def record_annotation(
             kind=SIGNED_OFF,
             detail=annotation.detail,
             seq=annotation.seq,
+            annotation=True,
         )
     return annotation
 

@@ -64,9 +64,14 @@ def enqueue_for_event(
     detail: dict[str, Any],
     seq: int,
     at: datetime | None = None,
+    annotation: bool = False,
 ) -> list[WebhookDelivery]:
     """One pending delivery per live subscription to this event's webhook type that was
-    created before the event; nothing for kinds no webhook type reports."""
+    created before the event; nothing for kinds no webhook type reports.
+
+    `annotation`: `seq` numbers the run's annotation chain (a sign-off), not its events.
+    Such a delivery is keyed by the negated number, so it can never take the outbox slot
+    (subscription, run, event_seq) of the run event with the same number."""
     event_type = TYPE_OF_KIND.get(str(kind))
     if event_type is None:
         return []
@@ -91,7 +96,7 @@ def enqueue_for_event(
             subscription_id=s.id,
             event_type=event_type.value,
             run_id=run_id,
-            event_seq=seq,
+            event_seq=-seq if annotation else seq,
             payload=body,
             state=DeliveryState.PENDING,
             attempts=0,

@@ -212,13 +212,16 @@ def test_a_run_sends_created_and_completed_signed(lan: TestClient, receiver: Rec
 
 
 def test_a_sign_off_sends_run_signed_off(lan: TestClient, receiver: Receiver) -> None:
+    # Subscribed to everything from the start: the sign-off (annotation 1) must not collide
+    # with the run's event 1 (`created`) in the outbox.
+    hook = subscribe(lan, receiver.url, ["*"])
     run_id = lan.post("/runs", json=RUN).json()["id"]
     assert wait_until(lan, run_id)["status"] == "completed"
-    hook = subscribe(lan, receiver.url, ["run.signed_off"])
+    receiver.wait_for(lambda got: len(got) >= 2, what="run.created and run.completed")
     signed = lan.post(f"/runs/{run_id}/signoff", json={"statement": "checked on site"})
     assert signed.status_code == 201, signed.text
-    receiver.wait_for(lambda got: len(got) >= 1, what="the sign-off webhook")
-    (body,) = receiver.verified(hook["secret"])
+    receiver.wait_for(lambda got: len(got) >= 3, what="the sign-off webhook")
+    (body,) = [b for b in receiver.verified(hook["secret"]) if b["type"] == "run.signed_off"]
     assert body["type"] == "run.signed_off"
     data = body["data"]
     assert data["run_id"] == run_id and data["statement"] == "checked on site"
