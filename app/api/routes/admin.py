@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 from fastapi import APIRouter
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, BeforeValidator, Field
 
 from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
@@ -72,8 +73,16 @@ def backup_store(caller: SupervisorDep, body: BackupRequest, settings: SettingsD
     return BackupOut(**report.__dict__)
 
 
+def _rfc3339_text(value: object) -> object:
+    # Only an RFC 3339 string, as the schema's date-time format says: pydantic would take a
+    # bare number as seconds since 1970.
+    if not isinstance(value, str):
+        raise ValueError("must be an RFC 3339 date-time string, e.g. 2026-01-31T00:00:00Z")
+    return value
+
+
 class ArchiveRequest(BaseModel):
-    before: Timestamp = Field(
+    before: Annotated[Timestamp, BeforeValidator(_rfc3339_text)] = Field(
         description="Archive lineages whose head is completed or cancelled and finished "
         "before this time (RFC 3339, with an offset)"
     )
