@@ -26,7 +26,9 @@ KEYS = f"{SUPERVISOR_KEY}:supervisor,{CLIENT_KEY}:client"
 pytestmark = pytest.mark.e2e
 
 
-@pytest.fixture(scope="session")
+# Package scope, not session: the sync API keeps an event loop running in the main thread
+# while it is open, and later tests (tests/e2e/test_load.py) call asyncio.run there.
+@pytest.fixture(scope="package")
 def playwright() -> Iterator[Playwright]:
     if not CHROMIUM.exists():
         pytest.fail(f"{CHROMIUM} is missing: apt-get install -y chromium (.ci/run does this)")
@@ -34,7 +36,7 @@ def playwright() -> Iterator[Playwright]:
         yield p
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def browser(playwright: Playwright) -> Iterator[Browser]:
     browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
     yield browser
