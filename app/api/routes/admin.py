@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from fastapi import APIRouter
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, field_validator
 
 from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
@@ -75,8 +75,16 @@ def backup_store(caller: SupervisorDep, body: BackupRequest, settings: SettingsD
 class ArchiveRequest(BaseModel):
     before: Timestamp = Field(
         description="Archive lineages whose head is completed or cancelled and finished "
-        "before this time (RFC 3339, with an offset)"
+        "before this time (RFC 3339, with an offset)",
     )
+
+    @field_validator("before", mode="before")
+    @classmethod
+    def _text_only(cls, value: object) -> object:
+        # A JSON number is not a date (lax parsing would read it as epoch seconds).
+        if not isinstance(value, str):
+            raise ValueError("an RFC 3339 date-time string, e.g. 2026-06-01T00:00:00Z")
+        return value
 
 
 class ArchivedLineageOut(BaseModel):
