@@ -114,6 +114,26 @@ def screenshots() -> list[Path]:
         page.goto(f"{url}/console/reviews")
         page.locator("article.review").first.wait_for()
         page.screenshot(path=out[2], full_page=True)
+        # The site changed after the plan was made: the heavy lifter is down from task 18.
+        revised = httpx.post(
+            f"{url}/runs/{done}/revisions",
+            json={
+                "changes": [{"type": "robot_unavailable", "robot": "heavy"}],
+                "pin": {"through_task_index": 17},
+                "reason": "heavy lifter down for a hydraulic repair",
+            },
+            headers=AS_CLIENT,
+            timeout=60,
+        )
+        revised.raise_for_status()
+        revision = str(revised.json()["id"])
+        _wait(url, revision)
+        page.goto(f"{url}/console/runs/{revision}")
+        revisions = page.locator("#revisions-h")
+        revisions.scroll_into_view_if_needed()
+        out.append(IMG / "console_revision.png")
+        # The section alone: the lineage and the diff against the original plan.
+        page.locator("section", has=revisions).screenshot(path=out[3])
         httpx.post(
             f"{url}/runs/{running}/cancel", headers={"X-API-Key": SUPERVISOR_KEY}, timeout=60
         )

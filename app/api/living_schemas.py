@@ -118,6 +118,9 @@ class RevisionItem(BaseModel):
     superseded_by: str | None
     status: RunStatus
     created_at: Timestamp
+    reason: str | None = Field(
+        None, description="Why the revision was made, as its request said (None: the original)"
+    )
 
 
 class RobotChange(BaseModel):

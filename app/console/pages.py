@@ -3,7 +3,8 @@ the reviews queue; and the run actions a supervisor may take from a run page."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from collections.abc import Callable
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Form, Query, Request
 from fastapi.concurrency import run_in_threadpool
@@ -21,22 +22,14 @@ from app.console.context import (
     finish,
     sessions_of,
 )
+from app.domain.errors import DomainError
 from app.domain.lifecycle import ACTIVE, RunStatus
 from app.runs import audit, browse, service, signoff
 from app.runs.errors import RunNotFoundError, RunStateConflictError
+from app.runs.revisions import RevisionConflictError
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 RUNS_PER_PAGE = 50
-
-
-def _not_found(request: Request, console: ConsoleDep, signed: SignedInDep, what: str) -> Response:
-    return console.render(
-        request,
-        "refused.html",
-        {"title": "Not found", "message": what},
-        signed=signed,
-        status_code=404,
-    )
 
 
 def _status_filter(raw: str | None) -> RunStatus | None:
@@ -129,6 +122,29 @@ async def run_page(
     return finish(request, console.render(request, "run.html", context, signed=signed))
 
 
+async def _part(
+    request: Request,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    *,
+    run_id: str,
+    template: str,
+    fragment: bool,
+    fetch: Callable[[], dict[str, Any]],
+) -> Response:
+    """A part of a run page read on demand: drawn into the page (fragment=1), or a page of
+    its own for a browser without script."""
+    try:
+        context = await run_in_threadpool(fetch)
+    except RunNotFoundError:
+        raise PageNotFound(f"There is no run '{run_id}'.") from None
+    except (browse.AttemptNotFoundError, RevisionConflictError) as exc:
+        raise PageNotFound(exc.message if isinstance(exc, DomainError) else str(exc)) from None
+    name = f"{template}_fragment.html" if fragment else f"{template}.html"
+    context = {"run_id": run_id, **context}
+    return finish(request, console.render(request, name, context, signed=signed))
+
+
 @router.get("/runs/{run_id}/attempts/{task_index}/{attempt}")
 async def attempt_page(
     request: Request,
@@ -139,21 +155,17 @@ async def attempt_page(
     signed: SignedInDep,
     fragment: bool = False,
 ) -> Response:
-    """One attempt's prompts and reply: loaded into the run page on demand (fragment=1),
-    or a page of its own without script."""
-    try:
-        row = await run_in_threadpool(
-            browse.attempt_detail,
-            sessions=sessions_of(request),
-            run_id=run_id,
-            task_index=task_index,
-            attempt=attempt,
+    """One attempt's prompts and reply."""
+
+    def fetch() -> dict[str, Any]:
+        row = browse.attempt_detail(
+            sessions=sessions_of(request), run_id=run_id, task_index=task_index, attempt=attempt
         )
-    except (RunNotFoundError, browse.AttemptNotFoundError) as exc:
-        raise PageNotFound(str(exc)) from None
-    context = {"title": f"Task {task_index}, attempt {attempt}", "a": row, "run_id": run_id}
-    name = "attempt_fragment.html" if fragment else "attempt.html"
-    return finish(request, console.render(request, name, context, signed=signed))
+        return {"title": f"Task {task_index}, attempt {attempt}", "a": row}
+
+    return await _part(
+        request, console, signed, run_id=run_id, template="attempt", fragment=fragment, fetch=fetch
+    )
 
 
 @router.get("/runs/{run_id}/frontier")
@@ -164,18 +176,19 @@ async def frontier_page(
     signed: SignedInDep,
     fragment: bool = False,
 ) -> Response:
-    try:
-        part = await run_in_threadpool(
-            views.run_frontier,
+    """The run on the exact frontier: computed (and cached) here on a large run's first visit."""
+
+    def fetch() -> dict[str, Any]:
+        part = views.run_frontier(
             sessions=sessions_of(request),
             run_id=run_id,
             cache_dir=console.settings.data_dir / "console-cache",
         )
-    except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
-    context = {"title": "Frontier", "f": part, "run_id": run_id}
-    name = "frontier_fragment.html" if fragment else "frontier.html"
-    return finish(request, console.render(request, name, context, signed=signed))
+        return {"title": "Frontier", "f": part}
+
+    return await _part(
+        request, console, signed, run_id=run_id, template="frontier", fragment=fragment, fetch=fetch
+    )
 
 
 @router.get("/runs/{run_id}/verify")
@@ -186,15 +199,32 @@ async def verify_page(
     signed: SignedInDep,
     fragment: bool = False,
 ) -> Response:
-    try:
-        report = await run_in_threadpool(
-            audit.verify_trace, sessions=sessions_of(request), run_id=run_id
-        )
-    except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
-    context = {"title": "Chain verification", "report": report, "run_id": run_id}
-    name = "verify_fragment.html" if fragment else "verify.html"
-    return finish(request, console.render(request, name, context, signed=signed))
+    def fetch() -> dict[str, Any]:
+        report = audit.verify_trace(sessions=sessions_of(request), run_id=run_id)
+        return {"title": "Chain verification", "report": report}
+
+    return await _part(
+        request, console, signed, run_id=run_id, template="verify", fragment=fragment, fetch=fetch
+    )
+
+
+@router.get("/runs/{run_id}/diff")
+async def diff_page(
+    request: Request,
+    run_id: RunIdDep,
+    console: ConsoleDep,
+    signed: SignedInDep,
+    fragment: bool = False,
+) -> Response:
+    """A revision against its parent (as GET /runs/{id}/diff), its long lists cut short."""
+
+    def fetch() -> dict[str, Any]:
+        part = views.diff_view(sessions=sessions_of(request), run_id=run_id)
+        return {"title": "Revision diff", "dv": part}
+
+    return await _part(
+        request, console, signed, run_id=run_id, template="diff", fragment=fragment, fetch=fetch
+    )
 
 
 @router.get("/runs/{run_id}/export.jsonl")

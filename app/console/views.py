@@ -11,12 +11,16 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.console import charts
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
-from app.runs import browse
+from app.runs import browse, revisions
+from app.runs import diff as diffs
 from app.runs.frontier import FrontierPoint, cached_frontier, frontier
 from app.store.models import Attempt
 
 DECISIONS_PER_PAGE = 25
-INLINE_FRONTIER_TASKS = 1000  # up to here the frontier takes milliseconds: drawn in the page
+# Up to here the frontier and a revision's diff take milliseconds: drawn in the page.
+# Beyond, the page comes without them and fetches each once shown.
+INLINE_TASKS = 1000
+DIFF_ROWS = 200  # rows of each diff list shown; GET /runs/{id}/diff has them all
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,32 @@ def run_frontier(*, sessions: sessionmaker[Session], run_id: str, cache_dir: Pat
 
 
 @dataclass(frozen=True)
+class DiffView:
+    """A revision against its parent, its long lists cut to DIFF_ROWS for the page."""
+
+    diff: diffs.Diff
+    parent_revision: int | None
+    robot_changes: list[dict[str, Any]]
+    added_tasks: list[int | str]
+    removed_tasks: list[int | str]
+    rows_shown: int = DIFF_ROWS
+
+
+def diff_view(*, sessions: sessionmaker[Session], run_id: str) -> DiffView:
+    d = diffs.diff(sessions=sessions, run_id=run_id)
+    parent = next(
+        (r for r in revisions.lineage(sessions=sessions, run_id=run_id) if r.id == d.parent), None
+    )
+    return DiffView(
+        diff=d,
+        parent_revision=parent.revision if parent is not None else None,
+        robot_changes=d.robot_changes[:DIFF_ROWS],
+        added_tasks=d.added_tasks[:DIFF_ROWS],
+        removed_tasks=d.removed_tasks[:DIFF_ROWS],
+    )
+
+
+@dataclass(frozen=True)
 class RunPage:
     overview: browse.RunOverview
     page: browse.DecisionPage
@@ -91,6 +121,13 @@ class RunPage:
     cap_upper: int | None
     model: str | None
     stream_cursor: str
+    lineage: list[revisions.LineageEntry]  # root to head; one entry: never revised
+    diff: DiffView | None  # a revision's, when drawn in the page (see diff_deferred)
+    diff_deferred: bool  # a large revision: the page fetches its diff once shown
+
+    @property
+    def head(self) -> revisions.LineageEntry:
+        return self.lineage[-1]
 
 
 def run_page(
@@ -118,9 +155,11 @@ def run_page(
     # A first visit to a large run would wait for the exact optimum at every cap: the page
     # then comes without it and fetches it (which computes and caches it) once shown.
     cached = cached_frontier(run_id=run_id, cache_dir=cache_dir)
-    if cached is None and run.n_tasks <= INLINE_FRONTIER_TASKS:
+    if cached is None and run.n_tasks <= INLINE_TASKS:
         cached = frontier(spec=spec, run_id=run_id, cache_dir=cache_dir)
     last_seq = view.events[-1].seq if view.events else 0
+    is_revision = run.revision_of is not None
+    inline_diff = is_revision and run.n_tasks <= INLINE_TASKS
     return RunPage(
         overview=view,
         page=page,
@@ -136,4 +175,7 @@ def run_page(
         cap_upper=upper,
         model=spec.model,
         stream_cursor=f"{last_seq}-{view.allocated}",
+        lineage=revisions.lineage_entries(sessions=sessions, run_id=run_id),
+        diff=diff_view(sessions=sessions, run_id=run_id) if inline_diff else None,
+        diff_deferred=is_revision and not inline_diff,
     )

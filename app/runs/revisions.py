@@ -256,6 +256,39 @@ def _check_reasoner(settings: Settings, request: RevisionRequest) -> None:
         raise DomainError("reasoner", exc.message, code=exc.code) from None
 
 
+@dataclass(frozen=True)
+class LineageEntry:
+    """One run of a lineage, with what its revision event says (None for the root)."""
+
+    run: Run
+    reason: str | None
+    changes: list[dict[str, Any]]
+    pinned: int
+
+
+def lineage_entries(*, sessions: sessionmaker[Session], run_id: str) -> list[LineageEntry]:
+    """The lineage, root to head, each revision with its reason, changes and pin count:
+    read from its first event (`revised`), the record the revision's chain starts with."""
+    runs = lineage(sessions=sessions, run_id=run_id)
+    out = []
+    with sessions() as session:
+        for run in runs:
+            detail: dict[str, Any] = {}
+            if run.revision_of is not None:
+                first = repo.events_page(session=session, run_id=run.id, after_seq=0, limit=1)
+                if first and first[0].kind == EventKind.REVISED:
+                    detail = dict(first[0].detail or {})
+            out.append(
+                LineageEntry(
+                    run=run,
+                    reason=detail.get("reason"),
+                    changes=list(detail.get("changes", [])),
+                    pinned=len(detail.get("pinned", [])),
+                )
+            )
+    return out
+
+
 def lineage(*, sessions: sessionmaker[Session], run_id: str) -> list[Run]:
     """The run's revisions, root to head."""
     with sessions() as session:

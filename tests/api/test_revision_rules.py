@@ -112,6 +112,7 @@ def test_robot_available_brings_a_robot_back_for_the_unpinned_tasks(client: Test
     assert any(a["robot"] == "heavy" for a in state["assignments"][21:])
     lineage = client.get(f"/runs/{parent}/revisions").json()
     assert [r["id"] for r in lineage] == [parent, down["id"], back["id"]]
+    assert [r["reason"] for r in lineage] == [None, "fault", "repaired"]
     assert client.get(f"/runs/{back['id']}/trace/verify").json()["ok"] is True
 
 

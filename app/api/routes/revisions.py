@@ -118,14 +118,15 @@ def list_revisions(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> list[
     """The run's lineage, root to head."""
     return [
         RevisionItem(
-            id=r.id,
-            revision=r.revision,
-            revision_of=r.revision_of,
-            superseded_by=r.superseded_by,
-            status=RunStatus(r.status),
-            created_at=r.created_at,
+            id=e.run.id,
+            revision=e.run.revision,
+            revision_of=e.run.revision_of,
+            superseded_by=e.run.superseded_by,
+            status=RunStatus(e.run.status),
+            created_at=e.run.created_at,
+            reason=e.reason,
         )
-        for r in revisions.lineage(sessions=runs.sessions, run_id=run_id)
+        for e in revisions.lineage_entries(sessions=runs.sessions, run_id=run_id)
     ]
 
 

@@ -94,7 +94,7 @@ document.addEventListener("DOMContentLoaded", () => {
   if (runs) pollRuns(runs);
   const verify = document.getElementById("verify");
   if (verify) wireVerify(verify);
-  const frontier = document.getElementById("frontier");
-  if (frontier && frontier.dataset.src) loadInto(frontier, frontier.dataset.src);
+  // Parts too slow to draw with a large run's page (its frontier, a revision's diff).
+  for (const part of document.querySelectorAll("[data-load]")) loadInto(part, part.dataset.load);
   wirePrompts();
 });
