@@ -60,6 +60,7 @@ class ProgressItem:
 class ProgressBatch:
     items: list[ProgressItem]
     cursor: Cursor
+    status: str  # the run's status, read before these rows
     ended: bool  # the run had ended before these rows were read: nothing more will come
 
 
@@ -140,4 +141,4 @@ def read_progress(
             else:
                 cursor = Cursor(cursor.events, row.task_index + 1)
                 items.append(ProgressItem("decision", _decision_data(row), at, cursor))
-    return ProgressBatch(items=items, cursor=cursor, ended=status in FINISHED)
+    return ProgressBatch(items=items, cursor=cursor, status=status, ended=status in FINISHED)

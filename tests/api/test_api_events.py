@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime, timedelta
+from itertools import pairwise
 
 from fastapi.testclient import TestClient
 
@@ -20,7 +21,14 @@ def stream(client: TestClient, path: str, **headers: str) -> list[Event]:
 
 def test_a_watched_run_streams_every_event_in_order_then_ends(client: TestClient) -> None:
     run_id = client.post("/runs", json=BASELINE).json()["id"]
-    events = stream(client, f"/runs/{run_id}/events")  # connected while it runs
+    everything = stream(client, f"/runs/{run_id}/events")  # connected while it runs
+    # The status, on connecting and at each change, the stream's last word when finished.
+    statuses = [e.data for e in everything if e.event == "status"]
+    assert statuses[-1] == {"status": "completed", "finished": True}
+    assert everything[-1].event == "status" and everything[-1].id == "3-36"
+    assert all(not s["finished"] for s in statuses[:-1])
+    assert all(a["status"] != b["status"] for a, b in pairwise(statuses))
+    events = [e for e in everything if e.event != "status"]
 
     kinds = [e.data["kind"] if e.event == "run" else e.event for e in events]
     assert kinds == ["created", "started", *["decision"] * 36, "completed"]
@@ -38,7 +46,7 @@ def test_a_watched_run_streams_every_event_in_order_then_ends(client: TestClient
         "expected_success",
     }
     assert decisions[0]["phase"] == "early" and decisions[-1]["phase"] == "late"
-    assert events[0].retry == 1000 and events[0].id == "1-0" and events[-1].id == "3-36"
+    assert everything[0].retry == 1000 and events[0].id == "1-0" and events[-1].id == "3-36"
     # The stream agrees with the run's own record.
     assigned = [a["robot"] for a in client.get(f"/runs/{run_id}").json()["assignments"]]
     assert [d["robot"] for d in decisions] == assigned
@@ -59,7 +67,11 @@ def test_last_event_id_continues_where_the_stream_stopped(client: TestClient) ->
         (e.event, e.id, e.data) for e in full[cut + 1 :]
     ]
     assert [e.data.get("task_index") for e in rest][:6] == list(range(30, 36))
-    assert stream(client, f"/runs/{run_id}/events", **{"Last-Event-ID": str(full[-1].id)}) == []
+    # After the last event only the (finished) status is left to say.
+    last = stream(client, f"/runs/{run_id}/events", **{"Last-Event-ID": str(full[-1].id)})
+    assert [(e.event, e.data) for e in last] == [
+        ("status", {"status": "completed", "finished": True})
+    ]
 
 
 def test_unknown_run_and_bad_last_event_id_are_4xx_in_the_error_shape(

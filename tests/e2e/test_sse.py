@@ -76,7 +76,12 @@ def test_sse_delivers_all_36_decisions_in_order(tmp_path: Path) -> None:
         "started",
         "completed",
     ]
-    assert events[-1].event == "run" and events[-1].data["kind"] == "completed"
+    # The run's last event, then the status the stream ends on.
+    assert [(e.event, e.data.get("kind", e.data.get("status"))) for e in events[-2:]] == [
+        ("run", "completed"),
+        ("status", "completed"),
+    ]
+    assert events[-1].data["finished"] is True
     assert finished["status"] == "completed" and finished["progress"]["allocated"] == 36
     log = server.log.read_text()
     assert "Traceback" not in log and SUPERVISOR_KEY not in log and CLIENT_KEY not in log

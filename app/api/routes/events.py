@@ -110,7 +110,9 @@ async def run_events(
 ) -> StreamingResponse:
     """For supervisors: one `run` event per run event and one `decision` event per
     finalised decision, in order; review requests, resolutions and closings are `review`
-    events (same data as `run`); the stream ends when the run does. Reconnect with
+    events (same data as `run`); a `status` event (`status`, `finished`) on connecting and
+    whenever the run's status changes, `finished` on the last; the stream ends when the run
+    does. Reconnect with
     Last-Event-ID to continue where a stream stopped. Besides API keys, this one endpoint
     also accepts the supervisor console's session cookie (its pages use EventSource)."""
     headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
@@ -124,6 +126,7 @@ async def _stream(
 ) -> AsyncIterator[str]:
     deadline = time.monotonic() + settings.events_max_stream_s
     retry: int | None = RECONNECT_MS
+    sent_status: str | None = None
     while True:
         batch = await run_in_threadpool(
             read_progress, sessions=runs.sessions, run_id=run_id, cursor=cursor
@@ -134,6 +137,14 @@ async def _stream(
             yield sse(event=item.kind, id=str(item.cursor), data=item.data, retry=retry)
             retry = None
         cursor = batch.cursor
+        if batch.status != sent_status:
+            # Not every status change writes an event (a requeue, a hand-over between
+            # processes does not), so watchers get the status itself rather than having
+            # to infer it from event kinds. After the rows: a finished status is the
+            # stream's last word, and a watcher may hang up on it.
+            data = {"status": batch.status, "finished": batch.ended}
+            yield sse(event="status", id=str(cursor), data=data, retry=retry)
+            retry, sent_status = None, batch.status
         if batch.ended:
             return
         if runs.worker.draining:

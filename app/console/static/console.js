@@ -20,22 +20,22 @@ function watchRun(root) {
     done.textContent = String(allocated);
     pct.textContent = String(total ? Math.round((100 * allocated) / total) : 100);
   });
-  source.addEventListener("run", (msg) => {
+  const addEvent = (msg) => {
     const e = JSON.parse(msg.data);
     const item = document.createElement("li");
     const strong = document.createElement("strong");
     strong.textContent = e.kind.replaceAll("_", " ");
     item.append(new Date(e.at).toISOString().replace("T", " ").slice(0, 19) + " UTC ", strong);
     events.append(item);
-    const finished = { completed: 1, failed: 1, cancelled: 1, interrupted: 1, superseded: 1,
-                       awaiting_review: 1 };
-    const shown = { started: "running", resumed: "running", review_resolved: "queued" };
-    const next = finished[e.kind] ? e.kind : shown[e.kind];
-    if (next) {
-      status.textContent = next.replaceAll("_", " ");
-      status.className = "status status-" + next;
-    }
-    if (finished[e.kind] && e.kind !== "awaiting_review") source.close();
+  };
+  source.addEventListener("run", addEvent);
+  source.addEventListener("review", addEvent);
+  // The server says what the status is (some changes write no event): nothing inferred here.
+  source.addEventListener("status", (msg) => {
+    const s = JSON.parse(msg.data);
+    status.textContent = s.status.replaceAll("_", " ");
+    status.className = "status status-" + s.status;
+    if (s.finished) source.close(); // or EventSource would reconnect to an ended stream
   });
 }
 
