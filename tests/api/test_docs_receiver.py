@@ -1,4 +1,4 @@
-"""The README's webhook receiver example, run as written against signed messages."""
+"""The webhook receiver example of docs/webhooks.md, run as written against signed messages."""
 
 from __future__ import annotations
 
@@ -14,22 +14,22 @@ from fastapi.testclient import TestClient
 from app.webhooks import signing
 from app.webhooks.secret_box import new_secret
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+WEBHOOKS_DOC = Path(__file__).resolve().parents[2] / "docs" / "webhooks.md"
 
 
 def receiver_source() -> str:
-    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    blocks = re.findall(r"```python\n(.*?)```", WEBHOOKS_DOC.read_text(), flags=re.S)
     (source,) = [b for b in blocks if b.startswith("# receiver.py")]
     return source
 
 
-def test_the_readme_receiver_verifies_and_deduplicates(
+def test_the_documented_receiver_verifies_and_deduplicates(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     secret = new_secret()
     monkeypatch.setenv("LTAA_WEBHOOK_SECRET", secret)
     namespace: dict[str, Any] = {}
-    exec(compile(receiver_source(), "README.md:receiver.py", "exec"), namespace)
+    exec(compile(receiver_source(), "docs/webhooks.md:receiver.py", "exec"), namespace)
     body = json.dumps(
         {
             "type": "run.completed",

@@ -1,0 +1,71 @@
+"""The offline chain check of docs/audit.md, run as written against a real export."""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from fastapi.testclient import TestClient
+
+from tests.polling import eventually
+
+ROOT = Path(__file__).resolve().parents[2]
+AUDIT_DOC = ROOT / "docs" / "audit.md"
+
+
+def check_trace_source() -> str:
+    blocks = re.findall(r"```python\n(.*?)```", AUDIT_DOC.read_text(), flags=re.S)
+    (source,) = [b for b in blocks if "chain.decision_link" in b]
+    return source
+
+
+def _export(client: TestClient, tmp_path: Path) -> tuple[Path, dict[str, str]]:
+    run_id = str(client.post("/runs", json={"scenario": "baseline"}).json()["id"])
+    eventually(
+        lambda: client.get(f"/runs/{run_id}").json()["status"],
+        until=lambda status: status == "completed",
+        what=f"run {run_id} completed",
+    )
+    export = tmp_path / f"run-{run_id}.jsonl"
+    export.write_text(client.get(f"/runs/{run_id}/trace", params={"format": "jsonl"}).text)
+    return export, client.get(f"/runs/{run_id}/trace/verify").json()["heads"]
+
+
+def _check(script: Path, export: Path) -> subprocess.CompletedProcess[str]:
+    # "in the repository": the script imports app.store.chain from this checkout.
+    return subprocess.run(
+        [sys.executable, str(script), str(export)],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def test_the_documented_offline_check_prints_the_heads_verify_reports(
+    client: TestClient, tmp_path: Path
+) -> None:
+    script = tmp_path / "check_trace.py"
+    script.write_text(check_trace_source())
+    export, heads = _export(client, tmp_path)
+
+    done = _check(script, export)
+    assert done.returncode == 0, done.stderr
+    printed = done.stdout.strip().removeprefix("ok; heads: ")
+    assert ast.literal_eval(printed) == heads
+
+    lines = export.read_text().splitlines()
+    decision = json.loads(lines[5])
+    assert decision["type"] == "decision"
+    decision["reasoning"] += " (edited after the fact)"
+    lines[5] = json.dumps(decision)
+    export.write_text("\n".join(lines) + "\n")
+    tampered = _check(script, export)
+    assert tampered.returncode != 0
+    assert "broken at decision" in tampered.stderr
