@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, StateConflictError
 
 
 class RunNotFoundError(DomainError):
@@ -28,11 +28,6 @@ class RunArchivedError(DomainError):
         )
 
 
-class RunStateConflictError(DomainError):
-    status_code = 409
-    location = "path"
-
+class RunStateConflictError(StateConflictError):
     def __init__(self, run_id: str, status: str, action: str, hint: str) -> None:
-        super().__init__(
-            "run_id", f"run '{run_id}' is {status}; cannot {action}. {hint}", code="conflict"
-        )
+        super().__init__("run_id", f"run '{run_id}' is {status}; cannot {action}. {hint}")

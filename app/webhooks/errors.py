@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from app.domain.errors import DomainError
-
-IDEMPOTENCY_HEADER = "Idempotency-Key"
+from app.domain.errors import IDEMPOTENCY_HEADER, DomainError, StateConflictError
+from app.domain.errors import IdempotencyKeyReusedError as _KeyReusedError
 
 
 class WebhookNotFoundError(DomainError):
@@ -44,29 +43,20 @@ class DuplicateSubscriptionError(DomainError):
         )
 
 
-class DeliveryStateConflictError(DomainError):
-    status_code = 409
-    location = "path"
-
+class DeliveryStateConflictError(StateConflictError):
     def __init__(self, delivery_id: str, status: str) -> None:
         super().__init__(
             "delivery_id",
             f"delivery '{delivery_id}' is {status}; only a delivered, failed or waiting "
             "delivery can be retried",
-            code="conflict",
         )
 
 
-class IdempotencyKeyReusedError(DomainError):
-    status_code = 409
-    location = "header"
-
+class IdempotencyKeyReusedError(_KeyReusedError):
     def __init__(self, what: str) -> None:
         super().__init__(
-            IDEMPOTENCY_HEADER,
             f"this {IDEMPOTENCY_HEADER} was already used with a different request ({what}); "
-            "send a new key for a new request, or resend the original request",
-            code="idempotency_key_reused",
+            "send a new key for a new request, or resend the original request"
         )
 
 
