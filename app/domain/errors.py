@@ -18,6 +18,16 @@ class DomainError(ValueError):
         self.code = code
 
 
+class NotFoundError(DomainError):
+    """No such thing as the path names (404); the message says where to list them."""
+
+    status_code = 404
+    location = "path"
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(field, message, code="not_found")
+
+
 class StateConflictError(DomainError):
     """The thing named in the path is in a state that forbids the action (409). One shape
     for runs and webhook deliveries alike, so clients read every such conflict the same

@@ -2,17 +2,12 @@
 
 from __future__ import annotations
 
-from app.domain.errors import DomainError, StateConflictError
+from app.domain.errors import DomainError, NotFoundError, StateConflictError
 
 
-class RunNotFoundError(DomainError):
-    status_code = 404
-    location = "path"
-
+class RunNotFoundError(NotFoundError):
     def __init__(self, run_id: str) -> None:
-        super().__init__(
-            "run_id", f"no run with id '{run_id}'; list runs with GET /runs", code="not_found"
-        )
+        super().__init__("run_id", f"no run with id '{run_id}'; list runs with GET /runs")
 
 
 class RunArchivedError(DomainError):

@@ -2,32 +2,24 @@
 
 from __future__ import annotations
 
-from app.domain.errors import IDEMPOTENCY_HEADER, DomainError, StateConflictError
+from app.domain.errors import IDEMPOTENCY_HEADER, DomainError, NotFoundError, StateConflictError
 from app.domain.errors import IdempotencyKeyReusedError as _KeyReusedError
 
 
-class WebhookNotFoundError(DomainError):
-    status_code = 404
-    location = "path"
-
+class WebhookNotFoundError(NotFoundError):
     def __init__(self, webhook_id: str) -> None:
         super().__init__(
             "webhook_id",
             f"no webhook subscription with id '{webhook_id}'; list them with GET /webhooks",
-            code="not_found",
         )
 
 
-class DeliveryNotFoundError(DomainError):
-    status_code = 404
-    location = "path"
-
+class DeliveryNotFoundError(NotFoundError):
     def __init__(self, webhook_id: str, delivery_id: str) -> None:
         super().__init__(
             "delivery_id",
             f"webhook '{webhook_id}' has no delivery '{delivery_id}'; "
             f"see GET /webhooks/{webhook_id}/deliveries",
-            code="not_found",
         )
 
 
