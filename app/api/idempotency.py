@@ -1,11 +1,12 @@
-"""The Idempotency-Key header of POST /runs, as the route reads and documents it."""
+"""The Idempotency-Key header, as the routes read and document it, and the request it keys."""
 
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from typing import Annotated, Any
 
-from fastapi import Depends, Header, Request
+from fastapi import Depends, Header, Request, Response
 from pydantic import BaseModel
 
 from app.api.errors import ApiError
@@ -32,9 +33,9 @@ _KeyHeader = Annotated[
 ]
 
 
-def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
+def refuse_repeated_key(request: Request) -> None:
     # The header parameter alone reads only the first of several: a retry repeating the
-    # other one (or a proxy joining them into "a, b") would then start another run.
+    # other one (or a proxy joining them into "a, b") would then act twice.
     sent = len(request.headers.getlist(HEADER))
     if sent > 1:
         raise ApiError(
@@ -43,6 +44,10 @@ def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
             f"{sent} {HEADER} headers were sent; send exactly one, with one key",
             "duplicate_header",
         )
+
+
+def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
+    refuse_repeated_key(request)
     if key is not None and _KEY.match(key) is None:
         raise ApiError(
             422,
@@ -65,11 +70,18 @@ CREATED_HEADERS: dict[str, Any] = {
 }
 
 
+def keyed(key: str | None, request: Mapping[str, Any]) -> Idempotency | None:
+    """The key with the digest of what the route counts as its request; None without one."""
+    return None if key is None else Idempotency(key=key, digest=request_digest(request))
+
+
 def idempotency_of(key: str | None, body: BaseModel) -> Idempotency | None:
     # Only the fields the client sent: an explicit `"max_deviation": null` (no cap) and an
     # omitted one (the mode's cap) are different requests.
-    if key is None:
-        return None
-    return Idempotency(
-        key=key, digest=request_digest(body.model_dump(mode="json", exclude_unset=True))
-    )
+    return keyed(key, body.model_dump(mode="json", exclude_unset=True))
+
+
+def mark_replayed(response: Response, replayed: bool) -> None:
+    """Tells the client that an earlier request with the same key made this answer."""
+    if replayed:
+        response.headers[REPLAYED_HEADER] = "true"

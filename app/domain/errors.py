@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+IDEMPOTENCY_HEADER = "Idempotency-Key"
+
 
 class DomainError(ValueError):
     """A request that cannot be served as sent. `field` is a dotted path into the request."""
@@ -14,6 +16,39 @@ class DomainError(ValueError):
         self.field = field
         self.message = message
         self.code = code
+
+
+class NotFoundError(DomainError):
+    """No such thing as the path names (404); the message says where to list them."""
+
+    status_code = 404
+    location = "path"
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(field, message, code="not_found")
+
+
+class StateConflictError(DomainError):
+    """The thing named in the path is in a state that forbids the action (409). One shape
+    for runs and webhook deliveries alike, so clients read every such conflict the same
+    way."""
+
+    status_code = 409
+    location = "path"
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(field, message, code="conflict")
+
+
+class IdempotencyKeyReusedError(DomainError):
+    """An Idempotency-Key sent again with another request (409): `message` names what the
+    key did the first time and how to go on."""
+
+    status_code = 409
+    location = "header"
+
+    def __init__(self, message: str) -> None:
+        super().__init__(IDEMPOTENCY_HEADER, message, code="idempotency_key_reused")
 
 
 class InfeasibleCapError(DomainError):

@@ -17,11 +17,9 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
-from langchain_core.runnables import RunnableConfig
-from langgraph.checkpoint.base import ChannelVersions, Checkpoint, CheckpointMetadata
 from langgraph.checkpoint.sqlite import SqliteSaver
 
-from app.graph.checkpoint_pruning import KEEP_LATEST, PRUNE_EVERY, PruneSchedule
+from app.graph.checkpoint_pruning import KEEP_LATEST, PRUNE_EVERY, PruneSchedule, PruningPutMixin
 
 # The WAL is truncated back to this after each checkpoint of it; without a limit SQLite
 # keeps the file at its high-water mark (169 MB after a 10,000-task run).
@@ -40,7 +38,7 @@ _OLDER = """
 """
 
 
-class CompactSqliteSaver(SqliteSaver):
+class CompactSqliteSaver(PruningPutMixin, SqliteSaver):
     """Integer channel versions, and a thread's superseded checkpoints pruned as it runs."""
 
     def __init__(
@@ -64,18 +62,8 @@ class CompactSqliteSaver(SqliteSaver):
             return current + 1
         return super().get_next_version(current, channel)
 
-    def put(
-        self,
-        config: RunnableConfig,
-        checkpoint: Checkpoint,
-        metadata: CheckpointMetadata,
-        new_versions: ChannelVersions,
-    ) -> RunnableConfig:
-        saved = super().put(config, checkpoint, metadata, new_versions)
-        thread_id = str(config["configurable"]["thread_id"])
-        if self._schedule.due(thread_id):
-            self.prune_thread(thread_id, str(config["configurable"].get("checkpoint_ns", "")))
-        return saved
+    def prune_due(self, thread_id: str, checkpoint_ns: str) -> None:
+        self.prune_thread(thread_id, checkpoint_ns)
 
     def prune_thread(self, thread_id: str, checkpoint_ns: str = "") -> None:
         """Delete the thread's checkpoints older than its latest keep_latest, with their

@@ -10,14 +10,12 @@ import logging
 from collections.abc import Callable
 
 import psycopg
-from langchain_core.runnables import RunnableConfig
-from langgraph.checkpoint.base import ChannelVersions, Checkpoint, CheckpointMetadata
 from langgraph.checkpoint.postgres import PostgresSaver
 from psycopg.rows import dict_row
 from psycopg_pool import ConnectionPool
 from sqlalchemy.engine import make_url
 
-from app.graph.checkpoint_pruning import PRUNE_EVERY, PruneSchedule
+from app.graph.checkpoint_pruning import PRUNE_EVERY, PruneSchedule, PruningPutMixin
 
 log = logging.getLogger("ltaa.runs")
 
@@ -32,7 +30,7 @@ def libpq_url(sqlalchemy_url: str) -> str:
     return url.render_as_string(hide_password=False)
 
 
-class PrunedPostgresSaver(PostgresSaver):
+class PrunedPostgresSaver(PruningPutMixin, PostgresSaver):
     """PostgresSaver whose threads keep only their latest checkpoint (the saver's own
     `keep_latest` prune, safe while the thread appends) every PRUNE_EVERY checkpoints."""
 
@@ -42,23 +40,13 @@ class PrunedPostgresSaver(PostgresSaver):
         super().__init__(conn)
         self._schedule = PruneSchedule(prune_every)
 
-    def put(
-        self,
-        config: RunnableConfig,
-        checkpoint: Checkpoint,
-        metadata: CheckpointMetadata,
-        new_versions: ChannelVersions,
-    ) -> RunnableConfig:
-        saved = super().put(config, checkpoint, metadata, new_versions)
-        thread_id = str(config["configurable"]["thread_id"])
-        if self._schedule.due(thread_id):
-            try:
-                self.prune([thread_id], strategy="keep_latest")
-            except psycopg.Error:
-                # A concurrent prune of the same thread (a serialization failure): storage
-                # hygiene, retried at the next schedule; never a failed run.
-                log.warning("could not prune the checkpoints of run %s", thread_id, exc_info=True)
-        return saved
+    def prune_due(self, thread_id: str, checkpoint_ns: str) -> None:
+        try:
+            self.prune([thread_id], strategy="keep_latest")
+        except psycopg.Error:
+            # A concurrent prune of the same thread (a serialization failure): storage
+            # hygiene, retried at the next schedule; never a failed run.
+            log.warning("could not prune the checkpoints of run %s", thread_id, exc_info=True)
 
 
 def open_postgres_saver(

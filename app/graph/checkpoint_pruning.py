@@ -10,6 +10,14 @@ from __future__ import annotations
 import threading
 from collections import Counter
 
+from langchain_core.runnables import RunnableConfig
+from langgraph.checkpoint.base import (
+    BaseCheckpointSaver,
+    ChannelVersions,
+    Checkpoint,
+    CheckpointMetadata,
+)
+
 # Kept per thread and namespace: the latest one is all a resume needs; a few more cost
 # little and keep a parent in place for whatever looks one step back.
 KEEP_LATEST = 4
@@ -34,3 +42,27 @@ class PruneSchedule:
                 return False
             del self._counts[thread_id]
             return True
+
+
+class PruningPutMixin(BaseCheckpointSaver[str]):
+    """Prunes a thread once its schedule says so, right after the checkpoint that made it
+    due is stored; the saver says how it prunes. Listed before the saver in the bases, so
+    that super().put is the saver's own."""
+
+    _schedule: PruneSchedule
+
+    def prune_due(self, thread_id: str, checkpoint_ns: str) -> None:
+        raise NotImplementedError
+
+    def put(
+        self,
+        config: RunnableConfig,
+        checkpoint: Checkpoint,
+        metadata: CheckpointMetadata,
+        new_versions: ChannelVersions,
+    ) -> RunnableConfig:
+        saved = super().put(config, checkpoint, metadata, new_versions)
+        thread_id = str(config["configurable"]["thread_id"])
+        if self._schedule.due(thread_id):
+            self.prune_due(thread_id, str(config["configurable"].get("checkpoint_ns", "")))
+        return saved

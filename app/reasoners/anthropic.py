@@ -18,18 +18,19 @@ import time
 from typing import Any
 
 import anthropic
-import pydantic
 from anthropic.types import Message
 
 from app.domain.decision import DecisionContext
-from app.domain.errors import DomainError
 from app.reasoners.base import ReasonerReply
 from app.reasoners.transport import (
+    DEFAULT_MAX_TOKENS,
+    DEFAULT_TEMPERATURE,
+    DEFAULT_TIMEOUT_S,
+    DEFAULT_TRANSPORT_RETRIES,
     ReasonerRejectedError,
-    gave_up,
-    rejected,
-    transient,
-    unreadable,
+    connection_failed,
+    parse_reply,
+    status_failed,
 )
 
 __all__ = ["AnthropicReasoner", "ReasonerRejectedError"]
@@ -37,28 +38,10 @@ __all__ = ["AnthropicReasoner", "ReasonerRejectedError"]
 # claude-sonnet-4-5 reaches end-of-life on 2026-11-30 (the SDK warns); 4.6 still takes
 # a temperature on API version 2023-06-01.
 DEFAULT_MODEL = "claude-sonnet-4-6"
-DEFAULT_TEMPERATURE = 0.1
-DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
-DEFAULT_TIMEOUT_S = 60.0
-DEFAULT_TRANSPORT_RETRIES = 3
 SAMPLING_API_VERSION = "2023-06-01"  # the last API version accepting `temperature`
-
-
-def _message(raw: anthropic.APIResponse[Any]) -> Message:
-    """The reply body as a Message, validated: the SDK's lenient parse() would return a str
-    for a non-JSON content type, a Message without its fields for JSON of another shape,
-    and raise a bare ValueError for an empty or cut-off body."""
-    body: bytes = raw.http_response.content
-    try:
-        return Message.model_validate_json(body)
-    except pydantic.ValidationError as exc:
-        raise unreadable(
-            exc,
-            status=raw.status_code,
-            body=body,
-            content_type=raw.headers.get("content-type"),
-            retries=raw.retries_taken,
-        ) from exc
+# Named in the message of a refused call, with what the operator should check.
+API = "the Messages API"
+CHECK = "the server's ANTHROPIC_API_KEY and model access"
 
 
 class AnthropicReasoner:
@@ -100,12 +83,10 @@ class AnthropicReasoner:
                 **sampling,
             )
         except anthropic.APIConnectionError as exc:  # includes APITimeoutError
-            raise gave_up(exc, type(exc).__name__) from exc
+            raise connection_failed(exc) from exc
         except anthropic.APIStatusError as exc:
-            if not transient(exc.status_code):
-                raise _rejected(exc, self.model) from exc
-            raise gave_up(exc, f"HTTP {exc.status_code}") from exc
-        message = _message(raw)
+            raise status_failed(exc, api=API, model=self.model, check=CHECK) from exc
+        message = parse_reply(raw, Message)
         latency_ms = (time.perf_counter() - started) * 1000.0
         text = "".join(getattr(block, "text", "") for block in message.content)
         extra: dict[str, Any] = {
@@ -125,13 +106,3 @@ class AnthropicReasoner:
 
     def close(self) -> None:
         self._client.close()
-
-
-def _rejected(exc: anthropic.APIStatusError, model: str) -> DomainError:
-    return rejected(
-        api="the Messages API",
-        status=exc.status_code,
-        message=exc.message,
-        model=model,
-        check="the server's ANTHROPIC_API_KEY and model access",
-    )

@@ -25,41 +25,37 @@ from typing import Any
 
 import httpx2
 import openai
-import pydantic
 from openai._legacy_response import LegacyAPIResponse
 from openai.types.chat import ChatCompletion
 
 from app.domain.decision import DecisionContext
-from app.domain.errors import DomainError
 from app.reasoners.base import ReasonerError, ReasonerReply
-from app.reasoners.transport import gave_up, rejected, transient, unreadable
+from app.reasoners.transport import (
+    DEFAULT_MAX_TOKENS,
+    DEFAULT_TEMPERATURE,
+    DEFAULT_TIMEOUT_S,
+    DEFAULT_TRANSPORT_RETRIES,
+    connection_failed,
+    parse_reply,
+    status_failed,
+)
 
-DEFAULT_TEMPERATURE = 0.1
-DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
-DEFAULT_TIMEOUT_S = 60.0
-DEFAULT_TRANSPORT_RETRIES = 3
+# Named in the message of a refused call, with what the operator should check.
+API = "the Chat Completions server"
+CHECK = "the server's LTAA_OPENAI_API_KEY, LTAA_OPENAI_MODEL and LTAA_OPENAI_BASE_URL"
+
 # Local servers (vLLM without --api-key, Ollama, llama.cpp) take any bearer token; the SDK
 # refuses to start without one and would otherwise read OPENAI_API_KEY.
 NO_KEY = "no-key"
 
 
 def _completion(raw: LegacyAPIResponse[Any]) -> ChatCompletion:
-    """The reply body as a ChatCompletion, validated (the SDK's lenient parse would accept
-    an HTML page or JSON of another shape)."""
-    body: bytes = raw.http_response.content
-    try:
-        completion = ChatCompletion.model_validate_json(body)
-    except pydantic.ValidationError as exc:
-        raise unreadable(
-            exc,
-            status=raw.status_code,
-            body=body,
-            content_type=raw.headers.get("content-type"),
-            retries=raw.retries_taken,
-        ) from exc
+    """The reply body as a ChatCompletion, validated, with a choice to read."""
+    completion = parse_reply(raw, ChatCompletion)
     if not completion.choices:
         raise ReasonerError(
-            f"unreadable reply (HTTP {raw.status_code}, {len(body)} bytes): no choices",
+            f"unreadable reply (HTTP {raw.status_code}, "
+            f"{len(raw.http_response.content)} bytes): no choices",
             transport_retries=raw.retries_taken,
         )
     return completion
@@ -111,11 +107,9 @@ class OpenAIReasoner:
                 **sampling,
             )
         except openai.APIConnectionError as exc:  # includes APITimeoutError
-            raise gave_up(exc, type(exc).__name__) from exc
+            raise connection_failed(exc) from exc
         except openai.APIStatusError as exc:
-            if not transient(exc.status_code):
-                raise _rejected(exc, self.model) from exc
-            raise gave_up(exc, f"HTTP {exc.status_code}") from exc
+            raise status_failed(exc, api=API, model=self.model, check=CHECK) from exc
         completion = _completion(raw)
         latency_ms = (time.perf_counter() - started) * 1000.0
         choice = completion.choices[0]
@@ -150,13 +144,3 @@ def _forget_environment(client: openai.OpenAI) -> None:
     client.webhook_secret = None
     client._custom_headers = {}  # OPENAI_CUSTOM_HEADERS, parsed unconditionally
     client._ambient_authorizations = frozenset()
-
-
-def _rejected(exc: openai.APIStatusError, model: str) -> DomainError:
-    return rejected(
-        api="the Chat Completions server",
-        status=exc.status_code,
-        message=exc.message,
-        model=model,
-        check="the server's LTAA_OPENAI_API_KEY, LTAA_OPENAI_MODEL and LTAA_OPENAI_BASE_URL",
-    )

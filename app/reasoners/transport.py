@@ -13,7 +13,7 @@ it becomes ReasonerRejectedError, which ends the run or request with that messag
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import pydantic
 
@@ -22,6 +22,15 @@ from app.reasoners.base import ReasonerError
 
 # Statuses worth another try later (after the SDK's own retries): the rest are our fault.
 TRANSIENT_STATUSES = frozenset({408, 409, 429})
+
+# Every SDK-backed reasoner's defaults: the SPEC's temperature, and one transport budget so
+# that the providers fail alike.
+DEFAULT_TEMPERATURE = 0.1
+DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
+DEFAULT_TIMEOUT_S = 60.0
+DEFAULT_TRANSPORT_RETRIES = 3
+
+_Reply = TypeVar("_Reply", bound=pydantic.BaseModel)
 
 
 class _Request(Protocol):
@@ -34,6 +43,37 @@ class SDKError(Protocol):
 
     @property
     def request(self) -> _Request: ...
+
+
+class SDKStatusError(SDKError, Protocol):
+    """The attributes both SDKs' APIStatusError carries."""
+
+    @property
+    def status_code(self) -> int: ...
+
+    @property
+    def message(self) -> str: ...
+
+
+class _Body(Protocol):
+    @property
+    def content(self) -> bytes: ...
+
+
+class RawReply(Protocol):
+    """What both SDKs' `with_raw_response` hands back."""
+
+    @property
+    def http_response(self) -> _Body: ...
+
+    @property
+    def status_code(self) -> int: ...
+
+    @property
+    def headers(self) -> Mapping[str, str]: ...
+
+    @property
+    def retries_taken(self) -> int: ...
 
 
 def transient(status_code: int) -> bool:
@@ -55,6 +95,40 @@ def gave_up(exc: SDKError, what: str) -> ReasonerError:
     return ReasonerError(
         f"{what} after {retries} transport retries: {exc}", transport_retries=retries
     )
+
+
+def connection_failed(exc: SDKError) -> ReasonerError:
+    """The SDK could not reach the server or timed out, after its retries."""
+    return gave_up(exc, type(exc).__name__)
+
+
+def status_failed(
+    exc: SDKStatusError, *, api: str, model: str, check: str
+) -> ReasonerError | DomainError:
+    """An HTTP error status after the SDK's retries: a failed attempt if it is worth another
+    try later, else the call refused (see `rejected` for api and check)."""
+    if not transient(exc.status_code):
+        return rejected(
+            api=api, status=exc.status_code, message=exc.message, model=model, check=check
+        )
+    return gave_up(exc, f"HTTP {exc.status_code}")
+
+
+def parse_reply(raw: RawReply, reply_type: type[_Reply]) -> _Reply:
+    """The body validated as `reply_type`: the SDKs' lenient parse would return a str for a
+    non-JSON content type, a model without its fields for JSON of another shape, and raise
+    a bare ValueError for an empty or cut-off body."""
+    body = raw.http_response.content
+    try:
+        return reply_type.model_validate_json(body)
+    except pydantic.ValidationError as exc:
+        raise unreadable(
+            exc,
+            status=raw.status_code,
+            body=body,
+            content_type=raw.headers.get("content-type"),
+            retries=raw.retries_taken,
+        ) from exc
 
 
 def unreadable(

@@ -2,17 +2,12 @@
 
 from __future__ import annotations
 
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, NotFoundError, StateConflictError
 
 
-class RunNotFoundError(DomainError):
-    status_code = 404
-    location = "path"
-
+class RunNotFoundError(NotFoundError):
     def __init__(self, run_id: str) -> None:
-        super().__init__(
-            "run_id", f"no run with id '{run_id}'; list runs with GET /runs", code="not_found"
-        )
+        super().__init__("run_id", f"no run with id '{run_id}'; list runs with GET /runs")
 
 
 class RunArchivedError(DomainError):
@@ -28,11 +23,6 @@ class RunArchivedError(DomainError):
         )
 
 
-class RunStateConflictError(DomainError):
-    status_code = 409
-    location = "path"
-
+class RunStateConflictError(StateConflictError):
     def __init__(self, run_id: str, status: str, action: str, hint: str) -> None:
-        super().__init__(
-            "run_id", f"run '{run_id}' is {status}; cannot {action}. {hint}", code="conflict"
-        )
+        super().__init__("run_id", f"run '{run_id}' is {status}; cannot {action}. {hint}")

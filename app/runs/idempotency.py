@@ -15,10 +15,11 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.errors import DomainError
+from app.domain.errors import IDEMPOTENCY_HEADER
+from app.domain.errors import IdempotencyKeyReusedError as _KeyReusedError
 from app.store.models import Run
 
-HEADER = "Idempotency-Key"
+HEADER = IDEMPOTENCY_HEADER
 MAX_KEY_LENGTH = 255  # the width of runs.idempotency_key
 
 
@@ -37,17 +38,12 @@ def request_digest(body: Mapping[str, Any]) -> str:
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
-class IdempotencyKeyReusedError(DomainError):
-    status_code = 409
-    location = "header"
-
+class IdempotencyKeyReusedError(_KeyReusedError):
     def __init__(self, run_id: str) -> None:
         super().__init__(
-            HEADER,
             f"this {HEADER} was already used with a different request body (it "
             f"created run '{run_id}'); send a new key for a new request, or resend the "
-            "original body to get that run",
-            code="idempotency_key_reused",
+            "original body to get that run"
         )
 
 

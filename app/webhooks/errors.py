@@ -2,33 +2,24 @@
 
 from __future__ import annotations
 
-from app.domain.errors import DomainError
+from app.domain.errors import IDEMPOTENCY_HEADER, DomainError, NotFoundError, StateConflictError
+from app.domain.errors import IdempotencyKeyReusedError as _KeyReusedError
 
-IDEMPOTENCY_HEADER = "Idempotency-Key"
 
-
-class WebhookNotFoundError(DomainError):
-    status_code = 404
-    location = "path"
-
+class WebhookNotFoundError(NotFoundError):
     def __init__(self, webhook_id: str) -> None:
         super().__init__(
             "webhook_id",
             f"no webhook subscription with id '{webhook_id}'; list them with GET /webhooks",
-            code="not_found",
         )
 
 
-class DeliveryNotFoundError(DomainError):
-    status_code = 404
-    location = "path"
-
+class DeliveryNotFoundError(NotFoundError):
     def __init__(self, webhook_id: str, delivery_id: str) -> None:
         super().__init__(
             "delivery_id",
             f"webhook '{webhook_id}' has no delivery '{delivery_id}'; "
             f"see GET /webhooks/{webhook_id}/deliveries",
-            code="not_found",
         )
 
 
@@ -44,29 +35,20 @@ class DuplicateSubscriptionError(DomainError):
         )
 
 
-class DeliveryStateConflictError(DomainError):
-    status_code = 409
-    location = "path"
-
+class DeliveryStateConflictError(StateConflictError):
     def __init__(self, delivery_id: str, status: str) -> None:
         super().__init__(
             "delivery_id",
             f"delivery '{delivery_id}' is {status}; only a delivered, failed or waiting "
             "delivery can be retried",
-            code="conflict",
         )
 
 
-class IdempotencyKeyReusedError(DomainError):
-    status_code = 409
-    location = "header"
-
+class IdempotencyKeyReusedError(_KeyReusedError):
     def __init__(self, what: str) -> None:
         super().__init__(
-            IDEMPOTENCY_HEADER,
             f"this {IDEMPOTENCY_HEADER} was already used with a different request ({what}); "
-            "send a new key for a new request, or resend the original request",
-            code="idempotency_key_reused",
+            "send a new key for a new request, or resend the original request"
         )
 
 

@@ -7,6 +7,7 @@ import json
 import uuid
 from dataclasses import dataclass
 from datetime import timedelta
+from typing import Protocol
 
 from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
@@ -33,12 +34,15 @@ from app.webhooks.secret_box import SecretBox, new_secret
 from app.webhooks.status import DeliveryState
 
 
-@dataclass(frozen=True)
-class Keyed:
-    """An Idempotency-Key and the digest of the request it came with."""
+class Keyed(Protocol):
+    """An Idempotency-Key and the digest of the request it came with (the API's
+    Idempotency; structural, since webhooks do not import runs)."""
 
-    key: str
-    digest: str
+    @property
+    def key(self) -> str: ...
+
+    @property
+    def digest(self) -> str: ...
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,6 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.domain.catalog import scenario
 from app.graph.checkpoint_postgres import open_postgres_saver
-from app.graph.recorder import DecisionRecord
 from app.runs import service
 from app.runs.factory import make_worker
 from app.runs.leased import LeaseOwnership
@@ -33,7 +32,7 @@ from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
 from app.store.models import Run, status_writes
 from tests.e2e.postgres import fresh_database, query
-from tests.factories import run_row
+from tests.factories import decision_record, run_row
 from tests.polling import eventually
 
 pytestmark = pytest.mark.e2e
@@ -187,27 +186,7 @@ def test_a_process_that_lost_its_lease_stops_and_writes_nothing(
     recorder = SqlRecorder(
         run_id=run_id, sessions=sessions, stop=stop, fence=lease(worker).fence(run_id, stop)
     )
-    record = DecisionRecord(
-        task_index=3,
-        task_id=3,
-        task_name="t",
-        robot=0,
-        robot_name="light",
-        phase="early",
-        expected_success=0.5,
-        reasoning="",
-        confidence="High",
-        tradeoff="",
-        quality=1.0,
-        fallback=False,
-        attempts=1,
-        failure_log=[],
-        loads_before=[1, 1, 1],
-        loads_after=[2, 1, 1],
-        balance_before=100.0,
-        balance_after=90.0,
-        severity_after="low",
-    )
+    record = decision_record(3)
     with pytest.raises(LeaseLost):
         recorder.save_decision(record)
     assert stop.lease_lost.is_set()

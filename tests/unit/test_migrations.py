@@ -12,14 +12,12 @@ from sqlalchemy import inspect
 from sqlalchemy.exc import IntegrityError
 
 from app.domain.models import MAX_NAME_CHARS
-from app.graph.recorder import DecisionRecord
 from app.runs import records
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
-from app.store.models import Decision
 from tests.e2e.postgres import fresh_database
-from tests.factories import run_row
+from tests.factories import decision_record, decision_row, run_row
 
 
 def test_upgrade_head_matches_the_models(tmp_path: Path) -> None:
@@ -34,32 +32,12 @@ def test_one_decision_per_run_and_task_is_enforced(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'app.db'}"
     upgrade_head(url)
     sessions = make_session_factory(make_engine(url))
-    row = {
-        "task_id": "0",
-        "task_name": "t",
-        "robot": 0,
-        "robot_name": "a",
-        "phase": "early",
-        "expected_success": 0.5,
-        "reasoning": "",
-        "confidence": "High",
-        "tradeoff": "",
-        "quality": 1.0,
-        "fallback": False,
-        "attempts": 1,
-        "failure_log": [],
-        "loads_before": [0],
-        "loads_after": [1],
-        "balance_before": 0.0,
-        "balance_after": 0.0,
-        "severity_after": "low",
-    }
     with transaction(sessions) as session:
         session.add(run_row("r1", "queued"))
         session.flush()
-        session.add(Decision(run_id="r1", task_index=0, **row))
+        session.add(decision_row("r1", 0))
     with pytest.raises(IntegrityError), transaction(sessions) as session:
-        session.add(Decision(run_id="r1", task_index=0, **row))
+        session.add(decision_row("r1", 0))
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
@@ -88,26 +66,8 @@ def test_the_longest_names_the_api_accepts_fit_the_columns(migrated_url: str) ->
                 session=session,
                 run_id="r1",
                 values=records.decision_values(
-                    DecisionRecord(
-                        task_index=0,
-                        task_id=longest,
-                        task_name=longest,
-                        robot=0,
-                        robot_name=longest,
-                        phase="early",
-                        expected_success=0.5,
-                        reasoning="",
-                        confidence="High",
-                        tradeoff="",
-                        quality=1.0,
-                        fallback=False,
-                        attempts=1,
-                        failure_log=[],
-                        loads_before=[0],
-                        loads_after=[1],
-                        balance_before=0.0,
-                        balance_after=1.0,
-                        severity_after="low",
+                    decision_record(
+                        0, task_id=longest, task_name=longest, robot_name=longest, balance_after=1.0
                     )
                 ),
             )

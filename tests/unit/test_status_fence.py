@@ -7,38 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from app.graph.recorder import DecisionRecord
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.recorder import RunStop, RunSuperseded, SqlRecorder, status_fence
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
-from tests.factories import run_row
-
-
-def decision(task_index: int) -> DecisionRecord:
-    return DecisionRecord(
-        task_index=task_index,
-        task_id=task_index,
-        task_name="t",
-        robot=0,
-        robot_name="a",
-        phase="early",
-        expected_success=0.5,
-        reasoning="",
-        confidence="High",
-        tradeoff="",
-        quality=1.0,
-        fallback=False,
-        attempts=1,
-        failure_log=[],
-        loads_before=[task_index],
-        loads_after=[task_index + 1],
-        balance_before=0.0,
-        balance_after=0.0,
-        severity_after="low",
-    )
+from tests.factories import decision_record, run_row
 
 
 def test_a_superseded_run_stores_nothing_more(tmp_path: Path) -> None:
@@ -53,13 +28,13 @@ def test_a_superseded_run_stores_nothing_more(tmp_path: Path) -> None:
     recorder = SqlRecorder(
         run_id="r1", sessions=sessions, stop=stop, fence=status_fence("r1", stop)
     )
-    recorder.save_decision(decision(0))
+    recorder.save_decision(decision_record(0))
     with transaction(sessions) as session:
         run = repo.get_run(session=session, run_id="r1")
         assert run is not None
         lifecycle.move(session, run, RunStatus.SUPERSEDED, event=EventKind.SUPERSEDED)
     with pytest.raises(RunSuperseded):
-        recorder.save_decision(decision(1))
+        recorder.save_decision(decision_record(1))
     assert stop.superseded.is_set()
     with sessions() as session:
         assert [d.task_index for d in repo.decisions(session=session, run_id="r1")] == [0]

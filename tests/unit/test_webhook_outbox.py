@@ -12,11 +12,11 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
-from app.store.models import Decision, utcnow
+from app.store.models import utcnow
 from app.store.webhook_models import WebhookDelivery, WebhookSubscription
 from app.webhooks.events import TYPE_OF_KIND, WebhookEventType
 from app.webhooks.outbox import enqueue_for_event
-from tests.factories import run_row
+from tests.factories import decision_row, run_row
 
 RUN_ID = "a" * 32
 
@@ -125,30 +125,7 @@ def test_completed_carries_status_and_the_runs_expected_success(
         session.add(run_row(RUN_ID, "completed", n_tasks=2))
         session.flush()
         for index, success in enumerate((0.8, 0.6)):
-            session.add(
-                Decision(
-                    run_id=RUN_ID,
-                    task_index=index,
-                    task_id=str(index),
-                    task_name="t",
-                    robot=0,
-                    robot_name="a",
-                    phase="early",
-                    expected_success=success,
-                    reasoning="",
-                    confidence="High",
-                    tradeoff="",
-                    quality=1.0,
-                    fallback=False,
-                    attempts=1,
-                    failure_log=[],
-                    loads_before=[0],
-                    loads_after=[1],
-                    balance_before=0.0,
-                    balance_after=0.0,
-                    severity_after="low",
-                )
-            )
+            session.add(decision_row(RUN_ID, index, expected_success=success))
         session.flush()
         enqueue_for_event(session, run_id=RUN_ID, kind="completed", detail={"decisions": 2}, seq=3)
     data = json.loads(stored(sessions)[0].payload)["data"]

@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Path, Request, Response
 
 from app.api.deps import RunIdPath, RunsDep, SupervisorDep
-from app.api.idempotency import REPLAYED_HEADER, IdempotencyKey, idempotency_of
+from app.api.idempotency import IdempotencyKey, idempotency_of, mark_replayed
 from app.api.responses import BODY, SUPERVISOR, errors
 from app.api.review_schemas import (
     AlternativeOut,
@@ -70,9 +70,8 @@ def resolve_review(
         reviewer=caller.name,
         idempotency=idempotency_of(idempotency_key, body),
     )
-    if resolved.replayed:
-        response.headers[REPLAYED_HEADER] = "true"
-    else:
+    mark_replayed(response, resolved.replayed)
+    if not resolved.replayed:
         request.app.state.metrics.review_resolved(resolved.waited_s)
         runs.worker.submit(run_id)
     r = resolved.resolution

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Response, status
 
 from app.api.deps import ClientDep, RunIdPath, RunsDep, SettingsDep
-from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey
+from app.api.idempotency import CREATED_HEADERS, IdempotencyKey, keyed, mark_replayed
 from app.api.living_schemas import (
     DiffOut,
     ExecutionOut,
@@ -19,16 +19,14 @@ from app.api.living_schemas import (
 from app.api.responses import BODY, CLIENT, errors
 from app.domain.lifecycle import RunStatus
 from app.runs import diff, execution, revisions
-from app.runs.idempotency import Idempotency, request_digest
+from app.runs.idempotency import Idempotency
 
 router = APIRouter(prefix="/runs", tags=["living plans"])
 
 
 def _idempotency(key: str | None, run_id: str, body: dict[str, object]) -> Idempotency | None:
     # The run in the path is part of the request: the same body to another run differs.
-    if key is None:
-        return None
-    return Idempotency(key=key, digest=request_digest({"run_id": run_id, "body": body}))
+    return keyed(key, {"run_id": run_id, "body": body})
 
 
 @router.post(
@@ -100,8 +98,7 @@ def create_revision(
         idempotency=_idempotency(idempotency_key, run_id, sent),
     )
     response.headers["Location"] = f"/runs/{run.id}"
-    if replayed:
-        response.headers[REPLAYED_HEADER] = "true"
+    mark_replayed(response, replayed)
     return RevisionCreated(
         id=run.id,
         revision_of=run_id if run.revision_of is None else run.revision_of,

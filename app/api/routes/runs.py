@@ -17,7 +17,7 @@ from app.api.deps import (
     SettingsDep,
     SupervisorDep,
 )
-from app.api.idempotency import CREATED_HEADERS, REPLAYED_HEADER, IdempotencyKey, idempotency_of
+from app.api.idempotency import CREATED_HEADERS, IdempotencyKey, idempotency_of, mark_replayed
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.routes.signoffs import signoff_out
 from app.api.run_examples import RUN_EXAMPLES
@@ -111,8 +111,7 @@ def create_run(
         idempotency=idempotency_of(idempotency_key, body),
     )
     response.headers["Location"] = f"/runs/{run.id}"
-    if replayed:
-        response.headers[REPLAYED_HEADER] = "true"
+    mark_replayed(response, replayed)
     # A replay answers as the first request was answered, when the run was just queued.
     return RunCreated(
         id=run.id,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Response, status
 
 from app.api.deps import RunIdPath, RunsDep, SupervisorDep
-from app.api.idempotency import REPLAYED_HEADER, IdempotencyKey, idempotency_of
+from app.api.idempotency import IdempotencyKey, idempotency_of, mark_replayed
 from app.api.responses import BODY, SUPERVISOR, errors
 from app.api.review_schemas import SignOffRequest
 from app.api.run_schemas import SignedHeadsOut, SignOffOut
@@ -49,6 +49,5 @@ def create_signoff(
         idempotency=idempotency_of(idempotency_key, body),
         keys=runs.worker.signing_keys,
     )
-    if replayed:
-        response.headers[REPLAYED_HEADER] = "true"
+    mark_replayed(response, replayed)
     return signoff_out(signed)

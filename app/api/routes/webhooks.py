@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, Depends, Header, Path, Query, Request, Response, status
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.deps import SettingsDep, SupervisorDep
-from app.api.errors import ApiError
-from app.api.idempotency import REPLAYED_HEADER
+from app.api.idempotency import REPLAYED_HEADER, keyed, mark_replayed, refuse_repeated_key
 from app.api.responses import BODY, SUPERVISOR, errors
 from app.api.webhook_schemas import (
     WEBHOOK_ID_PATTERN,
@@ -19,7 +18,7 @@ from app.api.webhook_schemas import (
     WebhookCreated,
     WebhookOut,
 )
-from app.runs.idempotency import HEADER, MAX_KEY_LENGTH, request_digest
+from app.runs.idempotency import HEADER, MAX_KEY_LENGTH
 from app.webhooks import service
 from app.webhooks.dispatcher import Dispatcher
 from app.webhooks.secret_box import SecretBox
@@ -59,22 +58,11 @@ def _one_key(
         ),
     ] = None,
 ) -> str | None:
-    sent = len(request.headers.getlist(HEADER))
-    if sent > 1:
-        raise ApiError(
-            422,
-            ["header", HEADER],
-            f"{sent} {HEADER} headers were sent; send exactly one, with one key",
-            "duplicate_header",
-        )
+    refuse_repeated_key(request)
     return key
 
 
 IdempotencyKey = Annotated[str | None, Depends(_one_key)]
-
-
-def _keyed(key: str | None, request: dict[str, Any]) -> service.Keyed | None:
-    return None if key is None else service.Keyed(key=key, digest=request_digest(request))
 
 
 def _created(issued: service.Issued) -> WebhookCreated:
@@ -103,11 +91,10 @@ def create_webhook(
         url=url,
         events=list(body.events),
         description=body.description,
-        keyed=_keyed(idempotency_key, body.model_dump(mode="json", exclude_unset=True)),
+        keyed=keyed(idempotency_key, body.model_dump(mode="json", exclude_unset=True)),
     )
     response.headers["Location"] = f"/webhooks/{issued.subscription.id}"
-    if replayed:
-        response.headers[REPLAYED_HEADER] = "true"
+    mark_replayed(response, replayed)
     return _created(issued)
 
 
@@ -152,10 +139,9 @@ def rotate_secret(
         box=webhooks.box,
         webhook_id=webhook_id,
         grace_s=settings.webhook_secret_grace_s,
-        keyed=_keyed(idempotency_key, {"rotate_secret": webhook_id}),
+        keyed=keyed(idempotency_key, {"rotate_secret": webhook_id}),
     )
-    if replayed:
-        response.headers[REPLAYED_HEADER] = "true"
+    mark_replayed(response, replayed)
     return _created(issued)
 
 
