@@ -20,6 +20,7 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
+from app.runs.audit import revision_link
 from app.runs.signing import key_id, payload_bytes
 from app.store import chain
 
@@ -31,6 +32,14 @@ def check(lines: list[dict[str, Any]], keys: dict[str, Ed25519PublicKey]) -> tup
     run = lines[0]
     if run.get("type") != "run" or lines[-1].get("type") != "end":
         return False, "not a whole record: it must start with a run line and end with an end line"
+    # A revision's chains hang off its link to the parent (the first event, `revised`): the
+    # anchor is recomputed from that event, so an edited link breaks the chains.
+    first = next((line for line in lines[1:-1] if line["type"] == "event"), None)
+    anchor = (
+        chain.revision_anchor(revision_link(first["detail"]))
+        if first is not None and first["kind"] == "revised"
+        else None
+    )
     prev = {
         table: chain.run_genesis(
             table,
@@ -39,6 +48,7 @@ def check(lines: list[dict[str, Any]], keys: dict[str, Ed25519PublicKey]) -> tup
             request=run["request"],
             mode=run["mode"],
             max_deviation=run["max_deviation"],
+            anchor=anchor,
         )
         for table in ("decisions", "events")
     }

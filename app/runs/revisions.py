@@ -214,6 +214,7 @@ def _create(
             revision_of=parent_id,
             revision=revision_no,
             chain_anchor=chain.revision_anchor(revision_link(link)),
+            chain_scheme=chain.SCHEME_V2,
             first_event=EventKind.REVISED,
             created=detail,
         )

@@ -24,9 +24,6 @@ class WebhookEventType(StrEnum):
 
 
 # Run event kind -> webhook type. Kinds absent here (started, resumed, ...) send nothing.
-# Features that add event kinds (revisions, reviews, sign-off) add their rows here.
-# The string keys name events SPEC 10-11 features have yet to add to EventKind (a
-# sign-off is recorded in the annotation chain, not as a run event: not wired yet).
 # A sign-off is an annotation, not a run event (a completed run's events never change):
 # app.runs.lifecycle.record_annotation enqueues it under this kind.
 SIGNED_OFF = "signed_off"

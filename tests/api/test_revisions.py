@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+from pathlib import Path
 from typing import Any
 
 from fastapi.testclient import TestClient
@@ -9,6 +13,7 @@ from fastapi.testclient import TestClient
 from tests.api.conftest import ClientFactory
 from tests.polling import eventually
 
+ROOT = Path(__file__).resolve().parents[2]
 BASELINE = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
 HEAVY_DOWN = {
     "changes": [{"type": "robot_unavailable", "robot": "heavy"}],
@@ -69,6 +74,8 @@ def test_a_completed_parent_revised_stays_completed_and_still_verifies(
     for run_id in (parent, created["id"]):
         report = client.get(f"/runs/{run_id}/trace/verify").json()
         assert report["ok"] is True, report
+        # A revision's chains, like any new run's, also cover its immutable fields.
+        assert report["chain_scheme"] == "ltaa-trace-chain/v2", report
     link = client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]
     assert link["run_id"] == parent and link["ok"] is True
     assert client.get(f"/runs/{parent}/trace/verify").json()["annotations"] == 1
@@ -163,3 +170,40 @@ def test_a_run_awaiting_review_revised_is_superseded_and_its_review_closed(
     revision = client.get(f"/runs/{created['id']}").json()
     assert sum(a["pinned"] for a in revision["assignments"]) == decided
     assert client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]["ok"] is True
+
+
+def test_a_revisions_export_verifies_offline_and_a_forged_link_does_not(
+    client: TestClient, tmp_path: Path
+) -> None:
+    """scripts/check_trace.py recomputes a revision's chain anchor from its `revised` event,
+    as trace/verify does: an export of a revision checks out, one whose link was edited
+    (another reason than the one its chains were anchored to) is refused."""
+    parent = completed_run(client)
+    created = revise(client, parent, HEAVY_DOWN)
+    wait_status(client, created["id"], "completed")
+    text = client.get(f"/runs/{created['id']}/trace", params={"format": "jsonl"}).text
+    export = tmp_path / "revision.jsonl"
+    export.write_text(text)
+    done = _offline(export)
+    assert done.returncode == 0, done.stdout + done.stderr
+    heads = client.get(f"/runs/{created['id']}/trace/verify").json()["heads"]
+    assert heads["decisions"] in done.stdout and heads["events"] in done.stdout
+
+    lines = [json.loads(line) for line in text.splitlines()]
+    first = next(line for line in lines if line["type"] == "event")
+    assert first["kind"] == "revised"
+    first["detail"]["reason"] = "nothing happened"
+    export.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    forged = _offline(export)
+    assert forged.returncode == 1, forged.stdout + forged.stderr
+
+
+def _offline(export: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "check_trace.py"), str(export)],
+        cwd=ROOT,
+        env={"PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
