@@ -16,6 +16,7 @@ from typing import Any
 from langgraph.types import interrupt
 
 from app.domain.decision import DecisionContext
+from app.domain.models import TaskId
 from app.domain.review import Proposal, Resolution, ReviewAction, ReviewPolicy
 
 # (task index, loads before, robot) -> success points given away over the rest of the queue
@@ -40,7 +41,7 @@ class Reviewed:
 def review_payload(
     dctx: DecisionContext,
     *,
-    task_id: str,
+    task_id: TaskId,
     robot: int,
     decision: Mapping[str, Any],
     reasoning: str,
@@ -96,7 +97,7 @@ def gate(
     g: ReviewGate,
     dctx: DecisionContext,
     *,
-    task_id: str,
+    task_id: TaskId,
     robot: int,
     decision: Mapping[str, Any],
     text: Callable[[], tuple[str, str]],
@@ -115,7 +116,7 @@ def gate(
         for r in range(len(names))
     ]
     proposal = Proposal(
-        task_id=task_id,
+        task_id=str(task_id),  # the policy names tasks as strings, whatever the request's type
         features=dctx.features,
         robot=names[robot],
         fallback=bool(decision["fallback"]),

@@ -9,7 +9,7 @@ watching is read-only.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any, Literal, TypeVar
@@ -18,6 +18,8 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.lifecycle import FINISHED, EventKind
+from app.domain.models import TaskId
+from app.runs.spec import RunSpec
 from app.store.models import Decision, Run, RunEvent, as_utc
 
 _OPENING = (EventKind.CREATED, EventKind.STARTED, EventKind.RESUMED)
@@ -64,10 +66,10 @@ class ProgressBatch:
     ended: bool  # the run had ended before these rows were read: nothing more will come
 
 
-def _decision_data(d: Decision) -> dict[str, Any]:
+def _decision_data(d: Decision, ids: Sequence[TaskId]) -> dict[str, Any]:
     return {
         "task_index": d.task_index,
-        "task_id": d.task_id,
+        "task_id": ids[d.task_index] if d.task_index < len(ids) else d.task_id,
         "task_name": d.task_name,
         "robot": d.robot_name,
         "phase": d.phase,
@@ -100,10 +102,24 @@ def run_status(*, sessions: sessionmaker[Session], run_id: str) -> str | None:
         return session.scalar(select(Run.status).where(Run.id == run_id))
 
 
+def task_ids(*, sessions: sessionmaker[Session], run_id: str) -> list[TaskId]:
+    """The run's task ids as its request gave them (the decisions table keeps them as text:
+    a watcher should see 300 where GET /runs/{id} says 300, not "300")."""
+    with sessions() as session:
+        request = session.scalar(select(Run.request).where(Run.id == run_id))
+    if request is None:
+        return []
+    return [t["id"] for t in RunSpec.from_json(request).instance_data["tasks"]]
+
+
 def read_progress(
-    *, sessions: sessionmaker[Session], run_id: str, cursor: Cursor
+    *,
+    sessions: sessionmaker[Session],
+    run_id: str,
+    cursor: Cursor,
+    ids: Sequence[TaskId] = (),
 ) -> ProgressBatch | None:
-    """Everything after `cursor`, or None if there is no such run."""
+    """Everything after `cursor`, or None if there is no such run. `ids`: task_ids(...)."""
     with sessions() as session:
         # Status first: rows read afterwards include everything written before it changed,
         # so a run seen ended here is complete in the rows below.
@@ -140,5 +156,5 @@ def read_progress(
                 items.append(ProgressItem(kind, _event_data(row), at, cursor))
             else:
                 cursor = Cursor(cursor.events, row.task_index + 1)
-                items.append(ProgressItem("decision", _decision_data(row), at, cursor))
+                items.append(ProgressItem("decision", _decision_data(row, ids), at, cursor))
     return ProgressBatch(items=items, cursor=cursor, status=status, ended=status in FINISHED)

@@ -48,8 +48,11 @@ def test_a_watched_run_streams_every_event_in_order_then_ends(client: TestClient
     assert decisions[0]["phase"] == "early" and decisions[-1]["phase"] == "late"
     assert everything[0].retry == 1000 and events[0].id == "1-0" and events[-1].id == "3-36"
     # The stream agrees with the run's own record.
-    assigned = [a["robot"] for a in client.get(f"/runs/{run_id}").json()["assignments"]]
-    assert [d["robot"] for d in decisions] == assigned
+    assignments = client.get(f"/runs/{run_id}").json()["assignments"]
+    assert [d["robot"] for d in decisions] == [a["robot"] for a in assignments]
+    # Task ids as the request gave them (numbers here), as GET /runs/{id} shows them.
+    assert [d["task_id"] for d in decisions] == [a["task_id"] for a in assignments]
+    assert all(isinstance(d["task_id"], int) for d in decisions)
     # Times as RFC 3339 with their offset, as in every other response.
     for event in (e for e in events if e.event == "run"):
         assert datetime.fromisoformat(event.data["at"]).utcoffset() == timedelta(0)

@@ -78,6 +78,9 @@ def test_every_decision_pauses_36_times_and_approvals_give_the_proposals_plan(
     proposals = [r["proposal"]["robot"] for r in reviews]
     assert [a["robot"] for a in done["assignments"]] == proposals
     assert proposals == [a["robot"] for a in plain["assignments"]]  # same as without review
+    # Task ids as the request gave them (the baseline's are numbers), as the run shows them.
+    assert [r["task_id"] for r in reviews] == [a["task_id"] for a in done["assignments"]]
+    assert all(isinstance(r["task_id"], int) for r in reviews)
     assert done["resumes"] == 0  # resolutions are not crash resumes
     kinds = _events(client, run_id)
     assert kinds.count("review_requested") == kinds.count("review_resolved") == 36

@@ -17,7 +17,7 @@ from app.api.deps import RunIdPath, RunsDep, SettingsDep, StreamSupervisorDep
 from app.api.errors import ApiError
 from app.api.openapi import header_schema
 from app.api.responses import SUPERVISOR, errors
-from app.runs.progress import CURSOR_PATTERN, Cursor, read_progress, run_status
+from app.runs.progress import CURSOR_PATTERN, Cursor, read_progress, run_status, task_ids
 from app.runs.tombstones import missing_run
 
 router = APIRouter(prefix="/runs", tags=["runs"])
@@ -127,9 +127,10 @@ async def _stream(
     deadline = time.monotonic() + settings.events_max_stream_s
     retry: int | None = RECONNECT_MS
     sent_status: str | None = None
+    ids = await run_in_threadpool(task_ids, sessions=runs.sessions, run_id=run_id)
     while True:
         batch = await run_in_threadpool(
-            read_progress, sessions=runs.sessions, run_id=run_id, cursor=cursor
+            read_progress, sessions=runs.sessions, run_id=run_id, cursor=cursor, ids=ids
         )
         if batch is None:
             return

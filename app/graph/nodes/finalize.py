@@ -75,7 +75,7 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
         reviewed = gate(
             ctx.review,
             dctx,
-            task_id=str(task.id),
+            task_id=task.id,  # as the request gave it: GET /reviews shows it so
             robot=robot,
             decision=decision,
             text=texts,
