@@ -55,8 +55,15 @@ def test_a_revision_page_shows_the_lineage_and_the_diff_the_api_states(
     diff = _json(server, f"/runs/{revision}/diff")
     assert diff["robot_changes"], "taking a robot away moved no task: nothing to show"
 
+    # The runs list says which plan each run is.
+    sign_in(page, server)
+    expect(page.locator(f'tr[data-run="{revision}"] td.plan')).to_have_text("revision 1")
+    expect(page.locator(f'tr[data-run="{parent}"] td.plan')).to_have_text("original, revised")
+    link = page.locator(f'tr[data-run="{parent}"] td.plan a')
+    expect(link).to_have_attribute("href", f"/console/runs/{revision}")
+
     # The parent's page says it was revised and leads to the current plan.
-    sign_in(page, server, then=f"/console/runs/{parent}")
+    page.goto(f"{server.url}/console/runs/{parent}")
     notice = page.locator("#superseded-notice")
     expect(notice).to_contain_text("revision 1")
     notice.get_by_role("link", name="revision 1").click()
