@@ -20,7 +20,6 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
-from app.runs.audit import revision_link
 from app.runs.signing import key_id, payload_bytes
 from app.store import chain
 
@@ -36,7 +35,7 @@ def check(lines: list[dict[str, Any]], keys: dict[str, Ed25519PublicKey]) -> tup
     # anchor is recomputed from that event, so an edited link breaks the chains.
     first = next((line for line in lines[1:-1] if line["type"] == "event"), None)
     anchor = (
-        chain.revision_anchor(revision_link(first["detail"]))
+        chain.revision_anchor(chain.revision_link(first["detail"]))
         if first is not None and first["kind"] == "revised"
         else None
     )

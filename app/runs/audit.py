@@ -64,6 +64,12 @@ def _annotation_pages(
         after = page[-1].seq
 
 
+def _chain_passes(revision_of: str | None) -> tuple[bool | None, ...]:
+    """How to read a run's decisions in the order they were chained: all of them in task
+    order, or a revision's pins first, then the rest (repo.revision_chain_order)."""
+    return (None,) if revision_of is None else (True, False)
+
+
 def _decision_pages(
     sessions: sessionmaker[Session],
     run_id: str,
@@ -185,8 +191,7 @@ def verify_trace(
         order=order,
         genesis_link=geneses["decisions"],
     )
-    passes: tuple[bool | None, ...] = (None,) if revision_of is None else (True, False)
-    for pinned in passes:
+    for pinned in _chain_passes(revision_of):
         for page in _decision_pages(sessions, run_id, pinned):
             for d, attempts in page:
 
@@ -282,7 +287,7 @@ def check_parent_link(
         detail = first[0].detail or {}
         if detail.get("parent") != parent_id:
             return bad(f"the 'revised' event names parent {detail.get('parent')!r}")
-        if chain.revision_anchor(revision_link(detail)) != run.chain_anchor:
+        if chain.revision_anchor(chain.revision_link(detail)) != run.chain_anchor:
             return bad("the 'revised' event's link does not match the anchor the chains start from")
         if parent is None:
             return bad(f"the parent run {parent_id!r} is missing")
@@ -302,12 +307,6 @@ def check_parent_link(
         ok=True,
         reason=f"starts from run {parent_id}'s heads at the revision, which its chains still hold",
     )
-
-
-def revision_link(detail: dict[str, Any]) -> dict[str, Any]:
-    """The part of a `revised` event's detail that a revision's chains are anchored to."""
-    keys = ("parent", "parent_heads", "changes", "pin", "reason")
-    return {k: detail.get(k) for k in keys}
 
 
 # -- export --------------------------------------------------------------------------------
@@ -334,6 +333,8 @@ def _run_line(run: Run) -> dict[str, Any]:
         "created_at": _when(run.created_at),
         "finished_at": _when(run.finished_at),
         "request": run.request,
+        "revision_of": run.revision_of,
+        "revision": run.revision,
         "genesis": _geneses(run),
     }
 
@@ -408,8 +409,10 @@ def _record_pages(
     for events in _event_pages(sessions, run_id):
         n_events += len(events)
         yield [_event_line(e) for e in events]
-    for decisions in _decision_pages(sessions, run_id):
-        n_decisions += len(decisions)
-        n_attempts += sum(len(a) for _, a in decisions)
-        yield [_decision_line(d, a, header["reasoner"]) for d, a in decisions]
+    # In chain order, so a checker links the lines as they come (a revision: pins first).
+    for pinned in _chain_passes(header["revision_of"]):
+        for decisions in _decision_pages(sessions, run_id, pinned):
+            n_decisions += len(decisions)
+            n_attempts += sum(len(a) for _, a in decisions)
+            yield [_decision_line(d, a, header["reasoner"]) for d, a in decisions]
     yield [{"type": "end", "events": n_events, "decisions": n_decisions, "attempts": n_attempts}]

@@ -24,7 +24,6 @@ from app.domain.errors import DomainError
 from app.domain.lifecycle import FINISHED
 from app.reasoners.factory import close_reasoner, make_reasoner
 from app.runs import lifecycle, records, reviews
-from app.runs.audit import revision_link
 from app.runs.errors import RunNotFoundError
 from app.runs.execution import head_of
 from app.runs.idempotency import Idempotency, run_for_key
@@ -213,7 +212,7 @@ def _create(
             request_digest=idempotency.digest if idempotency else None,
             revision_of=parent_id,
             revision=revision_no,
-            chain_anchor=chain.revision_anchor(revision_link(link)),
+            chain_anchor=chain.revision_anchor(chain.revision_link(link)),
             chain_scheme=chain.SCHEME_V2,
             first_event=EventKind.REVISED,
             created=detail,

@@ -205,6 +205,12 @@ def run_genesis(
     return genesis(table, run_id, anchor, scheme=scheme, immutable=immutable)
 
 
+def revision_link(detail: Mapping[str, Any]) -> dict[str, Any]:
+    """The part of a `revised` event's detail that a revision's chains are anchored to."""
+    keys = ("parent", "parent_heads", "changes", "pin", "reason")
+    return {k: detail.get(k) for k in keys}
+
+
 def revision_anchor(link: Mapping[str, Any]) -> str:
     """Digest of what ties a revision to its parent: the parent id, its chain heads when
     the revision was made, the changes, the pin rule and the reason (the `revised` event's

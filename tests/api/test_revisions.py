@@ -8,9 +8,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import pytest
 from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
+from tests.api.test_docs_check_trace import check_trace_source
 from tests.polling import eventually
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -172,35 +174,49 @@ def test_a_run_awaiting_review_revised_is_superseded_and_its_review_closed(
     assert client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]["ok"] is True
 
 
+@pytest.mark.parametrize(
+    "pin",
+    [
+        {"through_task_index": 17},
+        # Pins that are not the first tasks: chained first all the same, and so exported.
+        "task_ids",
+    ],
+)
 def test_a_revisions_export_verifies_offline_and_a_forged_link_does_not(
-    client: TestClient, tmp_path: Path
+    client: TestClient, tmp_path: Path, pin: Any
 ) -> None:
-    """scripts/check_trace.py recomputes a revision's chain anchor from its `revised` event,
-    as trace/verify does: an export of a revision checks out, one whose link was edited
-    (another reason than the one its chains were anchored to) is refused."""
+    """scripts/check_trace.py and the docs' snippet check a revision's export as trace/verify
+    checks the revision; an export whose link was edited (another reason than the one its
+    chains were anchored to) is refused."""
     parent = completed_run(client)
-    created = revise(client, parent, HEAVY_DOWN)
+    if pin == "task_ids":
+        ids = [a["task_id"] for a in client.get(f"/runs/{parent}").json()["assignments"]]
+        pin = {"task_ids": [ids[5], ids[9], ids[30]]}
+    created = revise(client, parent, {**HEAVY_DOWN, "pin": pin})
     wait_status(client, created["id"], "completed")
     text = client.get(f"/runs/{created['id']}/trace", params={"format": "jsonl"}).text
     export = tmp_path / "revision.jsonl"
     export.write_text(text)
-    done = _offline(export)
-    assert done.returncode == 0, done.stdout + done.stderr
     heads = client.get(f"/runs/{created['id']}/trace/verify").json()["heads"]
-    assert heads["decisions"] in done.stdout and heads["events"] in done.stdout
+    snippet = tmp_path / "check_trace_snippet.py"
+    snippet.write_text(check_trace_source())
+    for script in (ROOT / "scripts" / "check_trace.py", snippet):
+        done = _offline(export, script)
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert heads["decisions"] in done.stdout and heads["events"] in done.stdout
 
     lines = [json.loads(line) for line in text.splitlines()]
     first = next(line for line in lines if line["type"] == "event")
     assert first["kind"] == "revised"
     first["detail"]["reason"] = "nothing happened"
     export.write_text("".join(json.dumps(line) + "\n" for line in lines))
-    forged = _offline(export)
+    forged = _offline(export, ROOT / "scripts" / "check_trace.py")
     assert forged.returncode == 1, forged.stdout + forged.stderr
 
 
-def _offline(export: Path) -> subprocess.CompletedProcess[str]:
+def _offline(export: Path, script: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "check_trace.py"), str(export)],
+        [sys.executable, str(script), str(export)],
         cwd=ROOT,
         env={"PYTHONPATH": str(ROOT)},
         capture_output=True,
