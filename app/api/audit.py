@@ -32,9 +32,11 @@ JSONL_RESPONSE: dict[str, Any] = {
                 "description": "One JSON object per line, each with a `type`: first `run` (the "
                 "run, its stored request and the genesis of its two hash chains), then every "
                 "`event` in seq order, then every `decision` in task order with its "
-                "`attempt_records` (prompts, replies, scores, verdicts), all under their stored "
-                "column names with their `chain_hash`; last an `end` line with the counts, so a "
-                "cut-off download is recognisable.",
+                "`attempt_records` (prompts, replies, scores, verdicts), then every `annotation` "
+                "in seq order (what was recorded after the run finished: sign-offs, execution "
+                "reports, superseded_by; their own chain), all under their stored column names "
+                "with their `chain_hash`; last an `end` line with the counts, so a cut-off "
+                "download is recognisable.",
             }
         }
     },

@@ -176,7 +176,8 @@ class RunRequest(InstanceRequest):
         "run's instance, mode, max_deviation, quality_threshold, max_retries, guidance, "
         "seed, llm_scope and llm_margin: omit them, or send the original's values (any "
         "other value is a 422 naming the field); model, temperature and token_budget do "
-        "not apply. Unknown id: 422; a run not completed: 409",
+        "not apply; review is refused (the replay re-applies the original's review "
+        "settings and recorded resolutions). Unknown id: 422; a run not completed: 409",
     )
 
 

@@ -25,6 +25,10 @@ CONTEXT_FIELDS = ("run_id", "task_index")
 _EMPTY: Mapping[str, Any] = MappingProxyType({})
 _context: ContextVar[Mapping[str, Any]] = ContextVar("ltaa_log_context", default=_EMPTY)
 _OURS = "_ltaa_handler"
+# The LLM SDKs' HTTP clients (httpx2 under openai and anthropic, httpx under the webhook
+# sender) log every request URL at INFO: a line per LLM call or delivery that says nothing
+# the trace and the delivery rows do not. Their warnings and errors still come through.
+QUIET_LIBRARIES = ("httpx", "httpx2", "openai", "anthropic")
 
 
 def bind(**fields: Any) -> None:
@@ -116,6 +120,8 @@ def configure_logging(settings: Settings) -> None:
     handler.addFilter(AccessFields())
     root.addHandler(handler)
     root.setLevel(settings.log_level)
+    for name in QUIET_LIBRARIES:
+        logging.getLogger(name).setLevel(logging.WARNING)
     if settings.log_format == "json":
         # uvicorn's own text handlers would interleave non-JSON lines: send its records
         # through the root handler instead.

@@ -348,6 +348,15 @@ def _event_line(e: RunEvent) -> dict[str, Any]:
     }
 
 
+def _annotation_line(a: RunAnnotation) -> dict[str, Any]:
+    return {
+        "type": "annotation",
+        **_columns(a, chain.ANNOTATION_FIELDS),
+        "at": _when(a.created_at),
+        "chain_hash": a.chain_hash,
+    }
+
+
 def _attempt_line(a: Attempt, run_reasoner: str) -> tuple[dict[str, Any], Attribution]:
     who = attempt_attribution(a.reply_extra, a.reply_model, run_reasoner)
     line = {
@@ -382,7 +391,8 @@ def trace_record(
     run_id: str,
 ) -> Iterator[list[dict[str, Any]]]:
     """The whole audit record as pages of self-describing lines: the run, its events, its
-    decisions (each with its attempts, prompts and replies), then an end line with counts
+    decisions (each with its attempts, prompts and replies), its annotations (what was
+    recorded after it finished: sign-offs, execution reports), then an end line with counts
     so a reader can tell a complete record from a cut-off download.
 
     Raises RunNotFoundError here, before the first page is asked for."""
@@ -415,4 +425,16 @@ def _record_pages(
             n_decisions += len(decisions)
             n_attempts += sum(len(a) for _, a in decisions)
             yield [_decision_line(d, a, header["reasoner"]) for d, a in decisions]
-    yield [{"type": "end", "events": n_events, "decisions": n_decisions, "attempts": n_attempts}]
+    n_annotations = 0
+    for annotation_page in _annotation_pages(sessions, run_id):
+        n_annotations += len(annotation_page)
+        yield [_annotation_line(a) for a in annotation_page]
+    yield [
+        {
+            "type": "end",
+            "events": n_events,
+            "decisions": n_decisions,
+            "attempts": n_attempts,
+            "annotations": n_annotations,
+        }
+    ]

@@ -128,7 +128,10 @@ class LocalOwnership:
         return False  # no other process runs anything on this store
 
     def owned_run(self, session: Session, run_id: str) -> Run | None:
-        return repo.get_run(session=session, run_id=run_id)
+        # Locked as the protocol says (on SQLite: the write lock first), so the status read
+        # is the one this transaction's move replaces: a cancel committed between a plain
+        # read and the worker's write was overwritten (a cancelled run set running again).
+        return repo.get_run(session=session, run_id=run_id, for_update=True)
 
     def fence(self, run_id: str, stop: RunStop) -> Fence | None:
         return None

@@ -4,7 +4,8 @@ A replay re-runs a completed run with `reasoner: "replay"`. Everything that deci
 verdicts is copied from the original: the instance, mode, cap, quality threshold,
 max_retries, guidance and seed. A request may repeat any of these (it then must equal
 the original's) or omit it; `model`, `temperature` and `token_budget` do not apply, since
-a replay calls no model and spends no tokens.
+a replay calls no model and spends no tokens. The review policy is copied with the
+recorded resolutions, and a request may not send one.
 """
 
 from __future__ import annotations
@@ -37,6 +38,10 @@ COPIED = (
 )
 # Request fields that have no meaning for a replay.
 NOT_FOR_REPLAY = ("model", "temperature", "token_budget")
+# The review policy is copied too, but a request may not even repeat it: the replay
+# re-applies the original's recorded resolutions and never waits, so a policy of its own
+# would read as a promise of new reviews that cannot happen.
+REVIEW = "review"
 # Request fields naming the instance; they all map onto the spec's instance_data.
 _INSTANCE_FIELDS = ("scenario", "tasks", "robots")
 
@@ -117,9 +122,19 @@ def _spec_field(request_field: str) -> str:
 
 
 def check_conflicts(original: RunSpec, replay_of: str, values: Mapping[str, Any]) -> None:
-    """Each given value (by request field; None-valued NOT_FOR_REPLAY fields are absent)
-    must be one a replay accepts: a copied field equal to the original's."""
+    """Each given value (by request field; None-valued NOT_FOR_REPLAY and review fields
+    are absent) must be one a replay accepts: a copied field equal to the original's."""
     for name, value in values.items():
+        if name == REVIEW:
+            if value is None:
+                continue
+            raise DomainError(
+                name,
+                "a replay re-applies the original run's review settings and its recorded "
+                "resolutions (it never waits for a supervisor), so it takes no 'review' of "
+                "its own; omit it",
+                code="not_for_replay",
+            )
         if name in NOT_FOR_REPLAY:
             if value is None:
                 continue

@@ -16,6 +16,7 @@ from sqlalchemy import (
     bindparam,
     func,
     select,
+    text,
     update,
 )
 from sqlalchemy.dialects.postgresql import Insert as PostgresqlInsert
@@ -41,9 +42,19 @@ from app.store.models import (
 
 
 def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run | None:
-    """`for_update` locks the row until the transaction ends (PostgreSQL; SQLite has no
-    row locks and serialises writers anyway)."""
-    return session.get(Run, run_id, with_for_update=for_update or None)
+    """`for_update` makes the row read current until the transaction ends: PostgreSQL locks
+    it (FOR UPDATE); SQLite, which has no row locks, takes the database's write lock first.
+    Without that, SQLite reads the row before the transaction writes anything, and a
+    writer that commits in between (a review resolution queueing the run a cancel read as
+    awaiting review) is overwritten by a decision made on the stale status."""
+    if for_update and session.get_bind().dialect.name == "sqlite":
+        # A write that changes nothing: the transaction begins here, holding the write
+        # lock (waiting up to the busy timeout for it), so the read below is current.
+        # (n_tasks never changes; the key is not rewritten, which would check the children.)
+        session.execute(text("UPDATE runs SET n_tasks = n_tasks WHERE id = :id"), {"id": run_id})
+    return session.get(
+        Run, run_id, with_for_update=for_update or None, populate_existing=for_update
+    )
 
 
 def list_runs(*, session: Session, status: str | None, limit: int, offset: int) -> list[Run]:

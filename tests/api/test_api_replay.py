@@ -198,6 +198,8 @@ def bad_replays(done: str, paused: str) -> list[tuple[dict[str, Any], int, str]]
         ({**replay, "guidance": "optimizer"}, 422, "guidance"),
         ({**replay, "model": "claude-test"}, 422, "model"),
         ({**replay, "token_budget": 100}, 422, "token_budget"),
+        ({**replay, "review": {"on": ["every_decision"]}}, 422, "review"),
+        ({**replay, "review": {}}, 422, "review"),
     ]
 
 
@@ -227,6 +229,14 @@ def test_bad_replay_requests_are_4xx_naming_the_field_and_write_nothing(
     cancelled = client.post("/runs", json={"reasoner": "replay", "replay_of": paused})
     assert cancelled.status_code == 409 and "cancelled" in cancelled.json()["detail"][0]["msg"]
 
+    # A replay's reviews are the original's: it re-applies the recorded resolutions.
+    own_review = client.post(
+        "/runs",
+        json={"reasoner": "replay", "replay_of": done["id"], "review": {"on": ["fallback"]}},
+    )
+    assert own_review.status_code == 422, own_review.text
+    assert "re-applies the original run's review settings" in own_review.json()["detail"][0]["msg"]
+
     # The original's own values may be repeated (null model/token_budget mean "none").
     same = client.post(
         "/runs",
@@ -238,6 +248,7 @@ def test_bad_replay_requests_are_4xx_naming_the_field_and_write_nothing(
             "seed": 0,
             "model": None,
             "token_budget": None,
+            "review": None,
         },
     )
     assert same.status_code == 202, same.text

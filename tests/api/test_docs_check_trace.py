@@ -31,9 +31,14 @@ def _export(client: TestClient, tmp_path: Path) -> tuple[Path, dict[str, str]]:
         until=lambda status: status == "completed",
         what=f"run {run_id} completed",
     )
+    # Signed off: the export then has an annotation line, a chain of its own to check.
+    signed = client.post(f"/runs/{run_id}/signoff", json={"statement": "checked on site"})
+    assert signed.status_code == 201, signed.text
     export = tmp_path / f"run-{run_id}.jsonl"
     export.write_text(client.get(f"/runs/{run_id}/trace", params={"format": "jsonl"}).text)
-    return export, client.get(f"/runs/{run_id}/trace/verify").json()["heads"]
+    verify = client.get(f"/runs/{run_id}/trace/verify").json()
+    assert verify["annotations_head"] is not None
+    return export, {**verify["heads"], "annotations": verify["annotations_head"]}
 
 
 def _check(script: Path, export: Path) -> subprocess.CompletedProcess[str]:

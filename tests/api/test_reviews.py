@@ -373,3 +373,63 @@ def test_a_resolution_retried_with_its_idempotency_key_gets_the_same_answer(
     assert client.post(url, json={"action": "approve"}).status_code == 409  # no key: a conflict
     _awaiting(client, run_id)
     assert _events(client, run_id).count("review_resolved") == 1
+
+
+RACES = 40
+TERMINAL = ("completed", "cancelled", "failed")
+
+
+def _race_cancel_and_approve(client: TestClient, run_id: str) -> dict[str, int | str]:
+    """Cancel and approve the run's pending review at the same moment, from two threads."""
+    barrier = threading.Barrier(2)
+    answers: dict[str, int | str] = {}
+
+    def call(name: str, path: str, body: dict[str, Any] | None) -> None:
+        barrier.wait()
+        try:
+            answers[name] = client.post(path, json=body).status_code
+        except Exception as exc:  # the TestClient re-raises the cause of a 500
+            answers[name] = f"{type(exc).__name__}: {exc}"
+
+    threads = [
+        threading.Thread(target=call, args=("cancel", f"/runs/{run_id}/cancel", None)),
+        threading.Thread(
+            target=call, args=("approve", f"/runs/{run_id}/reviews/0", {"action": "approve"})
+        ),
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return answers
+
+
+def test_cancel_racing_an_approval_answers_2xx_or_409_and_leaves_one_consistent_state(
+    client: TestClient,
+) -> None:
+    outcomes: list[tuple[str, int | str, int | str]] = []
+    for _ in range(RACES):
+        run_id = client.post("/runs", json={**TIGHT, "review": {"task_ids": ["T0"]}}).json()["id"]
+        _awaiting(client, run_id)
+        answers = _race_cancel_and_approve(client, run_id)
+        cancel, approve = answers["cancel"], answers["approve"]
+        assert cancel in (200, 409) and approve in (200, 409), answers
+        state = wait_until(client, run_id, TERMINAL)
+        events = _events(client, run_id)
+        # The review ended one way only: resolved by the approval or closed by the cancel.
+        assert (events.count("review_resolved"), events.count("review_closed")) == (
+            (1, 0) if approve == 200 else (0, 1)
+        ), (answers, events)
+        if approve == 409:
+            assert cancel == 200 and state["status"] == "cancelled", (answers, state)
+            assert state["assignments"] == [], state
+        if cancel == 409:  # only once the run had ended, so the approval came first
+            assert approve == 200 and state["status"] == "completed", (answers, state)
+        # One terminal event, the last, matching the status; nothing after it.
+        assert sum(events.count(kind) for kind in TERMINAL) == 1, (answers, events)
+        assert events[-1] == state["status"] != "failed", (answers, events, state)
+        assert [r for r in client.get("/reviews").json() if r["run_id"] == run_id] == []
+        assert client.get(f"/runs/{run_id}/trace/verify").json()["ok"] is True
+        outcomes.append((state["status"], cancel, approve))
+    # Both orders happened, or the race was not a race.
+    assert {approve for _, _, approve in outcomes} == {200, 409}, outcomes

@@ -3,7 +3,12 @@ trace/verify's signoffs_ok against later edits of the record."""
 
 from __future__ import annotations
 
+import json
 import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
@@ -11,6 +16,7 @@ from pydantic import SecretStr
 
 from app.api.auth import key_fingerprint
 from app.config import Settings
+from app.store import chain
 from tests.api.conftest import ClientFactory
 from tests.polling import wait_until
 
@@ -20,6 +26,7 @@ AS_CLIENT = {"Authorization": f"Bearer {CLIENT_KEY}"}
 AS_SUPERVISOR = {"Authorization": f"Bearer {SUPERVISOR_KEY}"}
 BASELINE = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
 STATEMENT = {"statement": "Plan checked against the site register; approved for shift 2."}
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture
@@ -149,3 +156,93 @@ def test_signoff_honours_an_idempotency_key(secured: TestClient) -> None:
     other = secured.post(f"/runs/{run_id}/signoff", json={"statement": "x"}, headers=headers)
     assert other.status_code == 409
     assert len(secured.get(f"/runs/{run_id}", headers=AS_CLIENT).json()["signoffs"]) == 1
+
+
+def _export(client: TestClient, run_id: str) -> list[dict[str, Any]]:
+    response = client.get(
+        f"/runs/{run_id}/trace", params={"format": "jsonl"}, headers=AS_SUPERVISOR
+    )
+    assert response.status_code == 200, response.text
+    return [json.loads(line) for line in response.text.splitlines()]
+
+
+def _offline(lines: list[dict[str, Any]], path: Path) -> subprocess.CompletedProcess[str]:
+    """The offline check the README points to, run on an export as a file."""
+    path.write_text("".join(json.dumps(line, ensure_ascii=False) + "\n" for line in lines))
+    return subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "check_trace.py"), str(path)],
+        cwd=ROOT,
+        env={"PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def _signed_off_and_reported(client: TestClient) -> tuple[str, dict[str, Any]]:
+    run_id = _completed(client)
+    signed = client.post(f"/runs/{run_id}/signoff", json=STATEMENT, headers=AS_SUPERVISOR)
+    assert signed.status_code == 201, signed.text
+    reported = client.post(
+        f"/runs/{run_id}/execution",
+        json={"updates": [{"task_id": 0, "state": "started"}]},
+        headers=AS_CLIENT,
+    )
+    assert reported.status_code == 200, reported.text
+    return run_id, signed.json()
+
+
+def test_the_export_carries_the_annotation_chain_and_verifies_offline(
+    secured: TestClient, tmp_path: Path
+) -> None:
+    run_id, signed = _signed_off_and_reported(secured)
+    lines = _export(secured, run_id)
+    annotations = [line for line in lines if line["type"] == "annotation"]
+    assert [(a["seq"], a["kind"]) for a in annotations] == [
+        (1, "signoff"),
+        (2, "execution_reported"),
+    ]
+    # After the decisions, before `end`, which counts them.
+    assert [line["type"] for line in lines[-3:]] == ["annotation", "annotation", "end"]
+    assert lines[-1]["annotations"] == 2
+    signoff = annotations[0]["detail"]
+    assert (signoff["statement"], signoff["heads"]) == (signed["statement"], signed["heads"])
+    verify = secured.get(f"/runs/{run_id}/trace/verify", headers=AS_SUPERVISOR).json()
+    assert annotations[-1]["chain_hash"] == verify["annotations_head"]
+    assert verify["ok"] is True and verify["annotations"] == 2
+
+    checked = _offline(lines, tmp_path / "run.jsonl")
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+    assert verify["annotations_head"] in checked.stdout
+
+
+def test_a_tampered_annotation_line_fails_the_offline_check(
+    secured: TestClient, tmp_path: Path
+) -> None:
+    run_id, _ = _signed_off_and_reported(secured)
+    lines = _export(secured, run_id)
+    first = next(i for i, line in enumerate(lines) if line["type"] == "annotation")
+
+    edited = [dict(line) for line in lines]
+    edited[first]["detail"] = {**edited[first]["detail"], "statement": "Approved for all shifts."}
+    checked = _offline(edited, tmp_path / "edited.jsonl")
+    assert checked.returncode == 1, checked.stdout
+    assert "broken at annotation 1" in checked.stdout
+
+    dropped = [line for i, line in enumerate(lines) if i != first]
+    checked = _offline(dropped, tmp_path / "dropped.jsonl")
+    assert checked.returncode == 1, checked.stdout
+
+    # A sign-off whose heads are not the record's (its hash recomputed to match) is caught
+    # as well: what was signed is not what the record says.
+    forged = [dict(line) for line in lines]
+    heads = dict(forged[first]["detail"]["heads"])
+    heads["decisions"] = "f" * 64
+    forged[first]["detail"] = {**forged[first]["detail"], "heads": heads}
+    prev = chain.genesis("annotations", run_id)
+    for line in forged:
+        if line["type"] == "annotation":
+            line["chain_hash"] = prev = chain.annotation_link(prev, line)
+    checked = _offline(forged, tmp_path / "forged.jsonl")
+    assert checked.returncode == 1, checked.stdout
+    assert "sign-off" in checked.stdout

@@ -260,7 +260,13 @@ def test_jsonl_streams_the_whole_record_line_by_line(client: TestClient) -> None
     header, end = lines[0], lines[-1]
     assert header["id"] == run_id and header["status"] == "completed"
     assert header["n_tasks"] == N_TASKS and header["request"]["reasoner"] == "rules"
-    assert end == {"type": "end", "events": 3, "decisions": N_TASKS, "attempts": N_TASKS}
+    assert end == {
+        "type": "end",
+        "events": 3,
+        "decisions": N_TASKS,
+        "attempts": N_TASKS,
+        "annotations": 0,
+    }
 
     events = [line for line in lines if line["type"] == "event"]
     assert [(e["seq"], e["kind"], e["detail"]) for e in events] == [

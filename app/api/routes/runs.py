@@ -154,6 +154,8 @@ def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
     ):
         if name in sent:
             values[name] = getattr(body, name)
+    if "review" in sent:
+        values["review"] = None if body.review is None else body.review.model_dump(mode="json")
     return values
 
 
