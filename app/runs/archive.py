@@ -17,6 +17,7 @@ A lineage is a run and its revisions. Until revisions exist every run is its own
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sqlite3
 from collections.abc import Callable
@@ -24,13 +25,16 @@ from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.lifecycle import RunStatus
 from app.runs import audit
+from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import ArchivedRun, Run, as_utc
+from app.store.models import ArchivedRun, Run, RunAnnotation, as_utc
+
+log = logging.getLogger("ltaa.archive")
 
 # A lineage may be archived only when its head can never change again.
 TERMINAL = (RunStatus.COMPLETED, RunStatus.CANCELLED)
@@ -102,6 +106,18 @@ def _export_lines(
     return lines, {"heads": heads, "ok": report.ok}
 
 
+def _state(session: Session, run_id: str) -> tuple[str | None, str | None, int]:
+    """What may still change about a finished run: its status (a failed run resumed), the
+    revision that replaced it, and how many annotations it has."""
+    run = session.get(Run, run_id)
+    if run is None:
+        return None, None, 0
+    count = session.scalar(
+        select(func.count()).select_from(RunAnnotation).where(RunAnnotation.run_id == run_id)
+    )
+    return run.status, run.superseded_by, int(count or 0)
+
+
 def candidates(*, sessions: sessionmaker[Session], before: datetime) -> list[list[str]]:
     """Lineages (run ids, oldest first) whose head is terminal and finished before `before`."""
     cutoff = as_utc(before)
@@ -135,6 +151,8 @@ def archive(
     done = []
     for lineage in candidates(sessions=sessions, before=before):
         files, tombstones = [], []
+        with sessions() as session:
+            exported = {run_id: _state(session, run_id) for run_id in lineage}
         for run_id in lineage:
             lines, summary = _export_lines(sessions, run_id)
             path = dest / f"run-{run_id}.jsonl"
@@ -144,6 +162,17 @@ def archive(
             files.append(str(path))
             tombstones.append((run_id, summary))
         with transaction(sessions) as session:
+            # Under the write lock: a lineage revised, signed off or reported on while its
+            # files were written would lose that from the archive; it stays, for next time.
+            repo.get_run(session=session, run_id=lineage[-1], for_update=True)
+            now = {run_id: _state(session, run_id) for run_id in lineage}
+            if now != exported:
+                log.warning(
+                    "lineage %s changed while it was being archived; left in place", lineage
+                )
+                for path_text in files:
+                    Path(path_text).unlink(missing_ok=True)
+                continue
             for (run_id, summary), path_text in zip(tombstones, files, strict=True):
                 run = session.get(Run, run_id)
                 if run is None:

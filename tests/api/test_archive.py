@@ -11,6 +11,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from datetime import datetime
 from pathlib import Path
 
 from fastapi.testclient import TestClient
@@ -18,6 +19,7 @@ from sqlalchemy import update
 
 from app.config import Settings
 from app.main import create_app
+from app.runs.archive import archive
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.models import Run
 
@@ -37,8 +39,6 @@ def _completed(client: TestClient) -> str:
 
 
 def _age(settings: Settings, *run_ids: str) -> None:
-    from datetime import datetime
-
     with transaction(make_session_factory(make_engine(settings.db_url))) as session:
         session.execute(
             update(Run)
@@ -155,3 +155,36 @@ def test_a_kill_during_archiving_leaves_each_run_archived_or_intact(
     assert [state(r) for r in runs] == [(False, True)] * 3
     for run_id in runs:
         assert _offline(settings.data_dir / "archive" / f"run-{run_id}.jsonl").returncode == 0
+
+
+def test_a_run_signed_off_while_its_file_is_written_stays_unarchived(
+    client: TestClient, settings: Settings
+) -> None:
+    """The archive writes a lineage's files, then deletes its rows: a sign-off that lands in
+    between would be in neither. The lineage is left in place (and its file removed), to be
+    archived whole next time."""
+    run_id = _completed(client)
+    _age(settings, run_id)
+    dest = settings.data_dir / "archive-race"
+
+    def sign_off_now(written: str) -> None:
+        assert written == run_id
+        signed = client.post(f"/runs/{run_id}/signoff", json={"statement": "checked late"})
+        assert signed.status_code == 201, signed.text
+
+    sessions = make_session_factory(make_engine(settings.db_url))
+    done = archive(
+        sessions=sessions,
+        before=datetime.fromisoformat(BEFORE),
+        dest=dest,
+        after_file=sign_off_now,
+    )
+    assert done == []
+    assert list(dest.iterdir()) == []
+    state = client.get(f"/runs/{run_id}").json()
+    assert state["status"] == "completed" and len(state["signoffs"]) == 1
+    # Next time the lineage goes whole: its file has the sign-off.
+    again = client.post("/admin/archive", json={"before": BEFORE}).json()["lineages"]
+    assert [x["runs"] for x in again] == [[run_id]]
+    lines = Path(again[0]["files"][0]).read_text().splitlines()
+    assert any(json.loads(line)["type"] == "annotation" for line in lines)
