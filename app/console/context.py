@@ -22,6 +22,7 @@ from app.config import Settings
 from app.console import format as fmt
 from app.console import sessions
 from app.console.sessions import COOKIE, SignedIn
+from app.runs import tombstones
 
 HERE = Path(__file__).resolve().parent
 
@@ -86,17 +87,35 @@ class SignInRequired(Exception):
 
 
 class PageNotFound(Exception):
-    """No such run (or attempt): answered with a page saying so, a 404."""
+    """No such run (or attempt): answered with a page saying so, a 404; an archived run's
+    page is a 410 naming its archive file, as the JSON API answers."""
 
-    def __init__(self, message: str) -> None:
+    def __init__(self, message: str, *, gone: bool = False) -> None:
         super().__init__(message)
         self.message = message
+        self.gone = gone
+
+
+def no_run(request: Request, run_id: str) -> PageNotFound:
+    """What to answer for a run id with no row: archived (its file) or unknown."""
+    archived = tombstones.archive_file_of(sessions=sessions_of(request), run_id=run_id)
+    if archived is None:
+        return PageNotFound(f"There is no run '{run_id}'.")
+    return PageNotFound(
+        f"Run '{run_id}' was archived to '{archived}' (in the server's archive directory): "
+        "its record is that file, which scripts/check_trace.py verifies.",
+        gone=True,
+    )
 
 
 def on_page_not_found(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, PageNotFound)
+    title = "Archived" if exc.gone else "Not found"
     return console_of(request).render(
-        request, "refused.html", {"title": "Not found", "message": exc.message}, status_code=404
+        request,
+        "refused.html",
+        {"title": title, "message": exc.message},
+        status_code=410 if exc.gone else 404,
     )
 
 

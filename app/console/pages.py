@@ -20,6 +20,7 @@ from app.console.context import (
     RunIdDep,
     SignedInDep,
     finish,
+    no_run,
     sessions_of,
 )
 from app.domain.errors import DomainError
@@ -105,7 +106,7 @@ async def run_page(
             cache_dir=console.settings.data_dir / "console-cache",
         )
     except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
+        raise no_run(request, run_id) from None
     run = view.overview.run
     model = view.model or (console.settings.default_model if run.reasoner == "anthropic" else None)
     context = {
@@ -116,6 +117,7 @@ async def run_page(
         "finished": run.status not in {s.value for s in ACTIVE},
         "can_cancel": run.status in {s.value for s in ACTIVE},
         "can_resume": run.status in (RunStatus.INTERRUPTED, RunStatus.FAILED),
+        "inline_tasks": views.INLINE_TASKS,
         "scores_of": views.scores_of,
         "final_attempt": views.final_attempt,
     }
@@ -137,7 +139,7 @@ async def _part(
     try:
         context = await run_in_threadpool(fetch)
     except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
+        raise no_run(request, run_id) from None
     except (browse.AttemptNotFoundError, RevisionConflictError) as exc:
         raise PageNotFound(exc.message if isinstance(exc, DomainError) else str(exc)) from None
     name = f"{template}_fragment.html" if fragment else f"{template}.html"
@@ -236,7 +238,7 @@ async def export(
     try:
         response = jsonl_trace(sessions=sessions_of(request), run_id=run_id)
     except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
+        raise no_run(request, run_id) from None
     response.headers["Content-Disposition"] = f'attachment; filename="run-{run_id}.jsonl"'
     return finish(request, response)
 
@@ -249,7 +251,7 @@ async def _act(
     try:
         await run_in_threadpool(command, sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
+        raise no_run(request, run_id) from None
     except RunStateConflictError as exc:
         return console.render(
             request,
@@ -296,7 +298,7 @@ async def sign_off(
             statement=statement.strip(),
         )
     except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
+        raise no_run(request, run_id) from None
     except RunStateConflictError as exc:
         return console.render(
             request,

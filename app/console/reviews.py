@@ -14,10 +14,10 @@ from fastapi.responses import RedirectResponse, Response
 from app.console.context import (
     ConsoleDep,
     CsrfDep,
-    PageNotFound,
     RunIdDep,
     SignedInDep,
     finish,
+    no_run,
     sessions_of,
 )
 from app.domain.errors import DomainError
@@ -88,7 +88,7 @@ async def resolve(
             reviewer=signed.name,
         )
     except RunNotFoundError:
-        raise PageNotFound(f"There is no run '{run_id}'.") from None
+        raise no_run(request, run_id) from None
     except ValueError as exc:  # DomainError is a ValueError too: unknown action, robot...
         status = getattr(exc, "status_code", 422) if isinstance(exc, DomainError) else 422
         message = exc.message if isinstance(exc, DomainError) else f"unknown action '{action}'"

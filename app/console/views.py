@@ -10,15 +10,17 @@ from markupsafe import Markup
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.console import charts
+from app.domain.models import TaskId
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
 from app.runs import browse, revisions
 from app.runs import diff as diffs
+from app.runs.errors import RunNotFoundError
 from app.runs.frontier import FrontierPoint, cached_frontier, frontier
 from app.store.models import Attempt
 
 DECISIONS_PER_PAGE = 25
 # Up to here the frontier and a revision's diff take milliseconds: drawn in the page.
-# Beyond, the page comes without them and fetches each once shown.
+# Beyond, the page comes without them and its script fetches each after the page loads.
 INLINE_TASKS = 1000
 DIFF_ROWS = 200  # rows of each diff list shown; GET /runs/{id}/diff has them all
 
@@ -83,27 +85,36 @@ def run_frontier(*, sessions: sessionmaker[Session], run_id: str, cache_dir: Pat
 
 @dataclass(frozen=True)
 class DiffView:
-    """A revision against its parent, its long lists cut to DIFF_ROWS for the page."""
+    """A revision against its parent, its long lists cut to DIFF_ROWS for the page; or,
+    with the parent's rows gone (archived), only the parent's id (`diff` None)."""
 
-    diff: diffs.Diff
-    parent_revision: int | None
+    parent: str
+    parent_revision: int
+    diff: diffs.Diff | None
     robot_changes: list[dict[str, Any]]
-    added_tasks: list[int | str]
-    removed_tasks: list[int | str]
-    rows_shown: int = DIFF_ROWS
+    added_tasks: list[TaskId]
+    removed_tasks: list[TaskId]
+    rows_shown: int
 
 
 def diff_view(*, sessions: sessionmaker[Session], run_id: str) -> DiffView:
-    d = diffs.diff(sessions=sessions, run_id=run_id)
-    parent = next(
-        (r for r in revisions.lineage(sessions=sessions, run_id=run_id) if r.id == d.parent), None
-    )
+    run = browse.run_row(sessions=sessions, run_id=run_id)
+    if run.revision_of is None:
+        raise revisions.RevisionConflictError(
+            f"run '{run_id}' is not a revision: it has no diff against a parent"
+        )
+    try:
+        d = diffs.diff(sessions=sessions, run_id=run_id)
+    except RunNotFoundError:
+        return DiffView(run.revision_of, run.revision - 1, None, [], [], [], DIFF_ROWS)
     return DiffView(
+        parent=d.parent,
+        parent_revision=run.revision - 1,  # a revision is its parent's revision + 1
         diff=d,
-        parent_revision=parent.revision if parent is not None else None,
         robot_changes=d.robot_changes[:DIFF_ROWS],
         added_tasks=d.added_tasks[:DIFF_ROWS],
         removed_tasks=d.removed_tasks[:DIFF_ROWS],
+        rows_shown=DIFF_ROWS,
     )
 
 
@@ -123,7 +134,7 @@ class RunPage:
     stream_cursor: str
     lineage: list[revisions.LineageEntry]  # root to head; one entry: never revised
     diff: DiffView | None  # a revision's, when drawn in the page (see diff_deferred)
-    diff_deferred: bool  # a large revision: the page fetches its diff once shown
+    diff_deferred: bool  # a large revision: the page's script fetches its diff
 
     @property
     def head(self) -> revisions.LineageEntry:
@@ -153,13 +164,17 @@ def run_page(
     cap = spec.problem.cap
     upper = None if cap.max_deviation is None else cap.upper
     # A first visit to a large run would wait for the exact optimum at every cap: the page
-    # then comes without it and fetches it (which computes and caches it) once shown.
+    # then comes without it, and its script fetches it (which computes and caches it).
     cached = cached_frontier(run_id=run_id, cache_dir=cache_dir)
     if cached is None and run.n_tasks <= INLINE_TASKS:
         cached = frontier(spec=spec, run_id=run_id, cache_dir=cache_dir)
     last_seq = view.events[-1].seq if view.events else 0
+    lineage = revisions.lineage_entries(sessions=sessions, run_id=run_id)
     is_revision = run.revision_of is not None
-    inline_diff = is_revision and run.n_tasks <= INLINE_TASKS
+    # The diff reads both runs' decisions: the parent may be the large one.
+    parent = next((e.run for e in lineage if e.run.id == run.revision_of), None)
+    largest = max(run.n_tasks, parent.n_tasks if parent is not None else 0)
+    inline_diff = is_revision and largest <= INLINE_TASKS
     return RunPage(
         overview=view,
         page=page,
@@ -175,7 +190,7 @@ def run_page(
         cap_upper=upper,
         model=spec.model,
         stream_cursor=f"{last_seq}-{view.allocated}",
-        lineage=revisions.lineage_entries(sessions=sessions, run_id=run_id),
+        lineage=lineage,
         diff=diff_view(sessions=sessions, run_id=run_id) if inline_diff else None,
         diff_deferred=is_revision and not inline_diff,
     )

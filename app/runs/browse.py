@@ -54,6 +54,12 @@ def _require(session: Session, run_id: str) -> Run:
     return run
 
 
+def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:
+    """The run's row alone (RunNotFoundError if there is none)."""
+    with sessions() as session:
+        return _require(session, run_id)
+
+
 def overview(*, sessions: sessionmaker[Session], run_id: str) -> RunOverview:
     with sessions() as session:
         run = _require(session, run_id)

@@ -19,7 +19,6 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.lifecycle import FINISHED, EventKind
 from app.domain.models import TaskId
-from app.runs.spec import RunSpec
 from app.store.models import Decision, Run, RunEvent, as_utc
 
 _OPENING = (EventKind.CREATED, EventKind.STARTED, EventKind.RESUMED)
@@ -107,9 +106,9 @@ def task_ids(*, sessions: sessionmaker[Session], run_id: str) -> list[TaskId]:
     a watcher should see 300 where GET /runs/{id} says 300, not "300")."""
     with sessions() as session:
         request = session.scalar(select(Run.request).where(Run.id == run_id))
-    if request is None:
-        return []
-    return [t["id"] for t in RunSpec.from_json(request).instance_data["tasks"]]
+    # The stored request as it is (no RunSpec): a request an older release stored reads too.
+    tasks = ((request or {}).get("instance_data") or {}).get("tasks") or []
+    return [t["id"] for t in tasks]
 
 
 def read_progress(
@@ -117,7 +116,7 @@ def read_progress(
     sessions: sessionmaker[Session],
     run_id: str,
     cursor: Cursor,
-    ids: Sequence[TaskId] = (),
+    ids: Sequence[TaskId],
 ) -> ProgressBatch | None:
     """Everything after `cursor`, or None if there is no such run. `ids`: task_ids(...)."""
     with sessions() as session:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.errors import DomainError
 from app.runs.errors import RunArchivedError, RunNotFoundError
@@ -14,3 +14,10 @@ def missing_run(session: Session, run_id: str) -> DomainError:
     if gone is not None:
         return RunArchivedError(run_id, gone.archive_file)
     return RunNotFoundError(run_id)
+
+
+def archive_file_of(*, sessions: sessionmaker[Session], run_id: str) -> str | None:
+    """The archive file of an archived run, or None (never archived, or no such run)."""
+    with sessions() as session:
+        gone = session.get(ArchivedRun, run_id)
+        return gone.archive_file if gone is not None else None
