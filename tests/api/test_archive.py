@@ -22,6 +22,7 @@ from app.main import create_app
 from app.runs.archive import archive
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.models import Run
+from tests.offline_check import check_offline
 
 ROOT = Path(__file__).resolve().parents[2]
 LONG_AGO = "2020-06-01T00:00:00+00:00"
@@ -47,17 +48,6 @@ def _age(settings: Settings, *run_ids: str) -> None:
         )
 
 
-def _offline(path: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "check_trace.py"), str(path)],
-        cwd=ROOT,
-        env={"PYTHONPATH": str(ROOT)},
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
 def test_old_runs_are_archived_verified_and_answer_410(
     client: TestClient, settings: Settings
 ) -> None:
@@ -81,7 +71,7 @@ def test_old_runs_are_archived_verified_and_answer_410(
 
     lines = [json.loads(line) for line in archive_file.read_text().splitlines()]
     assert lines[-1]["type"] == "verify" and lines[-1]["ok"] is True
-    checked = _offline(archive_file)
+    checked = check_offline(archive_file)
     assert checked.returncode == 0, checked.stdout + checked.stderr
     with sqlite3.connect(settings.data_dir / "ltaa.db") as conn:
         assert conn.execute("SELECT count(*) FROM decisions WHERE run_id=?", (old,)).fetchone() == (
@@ -154,7 +144,7 @@ def test_a_kill_during_archiving_leaves_each_run_archived_or_intact(
     assert json.loads(done.stdout)["done_by"] == "direct"
     assert [state(r) for r in runs] == [(False, True)] * 3
     for run_id in runs:
-        assert _offline(settings.data_dir / "archive" / f"run-{run_id}.jsonl").returncode == 0
+        assert check_offline(settings.data_dir / "archive" / f"run-{run_id}.jsonl").returncode == 0
 
 
 def test_a_run_signed_off_while_its_file_is_written_stays_unarchived(

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import ast
 import json
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 from fastapi.testclient import TestClient
 
+from tests.offline_check import check_offline
 from tests.polling import eventually
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,18 +39,6 @@ def _export(client: TestClient, tmp_path: Path) -> tuple[Path, dict[str, str]]:
     return export, {**verify["heads"], "annotations": verify["annotations_head"]}
 
 
-def _check(script: Path, export: Path) -> subprocess.CompletedProcess[str]:
-    # "in the repository": the script imports app.store.chain from this checkout.
-    return subprocess.run(
-        [sys.executable, str(script), str(export)],
-        cwd=ROOT,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-
-
 def test_the_documented_offline_check_prints_the_heads_verify_reports(
     client: TestClient, tmp_path: Path
 ) -> None:
@@ -60,7 +46,7 @@ def test_the_documented_offline_check_prints_the_heads_verify_reports(
     script.write_text(check_trace_source())
     export, heads = _export(client, tmp_path)
 
-    done = _check(script, export)
+    done = check_offline(export, script=script)
     assert done.returncode == 0, done.stderr
     printed = done.stdout.strip().removeprefix("ok; heads: ")
     assert ast.literal_eval(printed) == heads
@@ -71,6 +57,6 @@ def test_the_documented_offline_check_prints_the_heads_verify_reports(
     decision["reasoning"] += " (edited after the fact)"
     lines[5] = json.dumps(decision)
     export.write_text("\n".join(lines) + "\n")
-    tampered = _check(script, export)
+    tampered = check_offline(export, script=script)
     assert tampered.returncode != 0
     assert "broken at decision" in tampered.stderr

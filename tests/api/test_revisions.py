@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +11,7 @@ from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
 from tests.api.test_docs_check_trace import check_trace_source
+from tests.offline_check import CHECK_TRACE, check_offline
 from tests.polling import eventually
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -200,8 +199,8 @@ def test_a_revisions_export_verifies_offline_and_a_forged_link_does_not(
     heads = client.get(f"/runs/{created['id']}/trace/verify").json()["heads"]
     snippet = tmp_path / "check_trace_snippet.py"
     snippet.write_text(check_trace_source())
-    for script in (ROOT / "scripts" / "check_trace.py", snippet):
-        done = _offline(export, script)
+    for script in (CHECK_TRACE, snippet):
+        done = check_offline(export, script=script)
         assert done.returncode == 0, done.stdout + done.stderr
         assert heads["decisions"] in done.stdout and heads["events"] in done.stdout
 
@@ -210,16 +209,5 @@ def test_a_revisions_export_verifies_offline_and_a_forged_link_does_not(
     assert first["kind"] == "revised"
     first["detail"]["reason"] = "nothing happened"
     export.write_text("".join(json.dumps(line) + "\n" for line in lines))
-    forged = _offline(export, ROOT / "scripts" / "check_trace.py")
+    forged = check_offline(export)
     assert forged.returncode == 1, forged.stdout + forged.stderr
-
-
-def _offline(export: Path, script: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, str(script), str(export)],
-        cwd=ROOT,
-        env={"PYTHONPATH": str(ROOT)},
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )

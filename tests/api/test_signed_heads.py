@@ -5,8 +5,6 @@ rewritten with every hash recomputed by the public chain functions fails on its 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,6 +20,7 @@ from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.models import Decision, Run, RunSignature
 from tests.factories import run_row
+from tests.offline_check import check_offline
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -76,17 +75,6 @@ def _export(client: TestClient, run_id: str, path: Path) -> Path:
     return path
 
 
-def _offline(export: Path, *keys: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "check_trace.py"), str(export), *map(str, keys)],
-        cwd=ROOT,
-        env={"PYTHONPATH": str(ROOT)},
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
 def _public_key_file(client: TestClient, path: Path) -> Path:
     path.write_text(client.get("/audit/public-key").json()["current"]["public_key_pem"])
     return path
@@ -108,7 +96,7 @@ def test_a_completed_run_is_signed_and_verifies(settings: Settings, tmp_path: Pa
         "problem": None,
     }
     assert keys["algorithm"] == "Ed25519" and keys["retired"] == []
-    checked = _offline(export, pem)
+    checked = check_offline(export, pem)
     assert checked.returncode == 0, checked.stdout + checked.stderr
     assert "signature ok" in checked.stdout
 
@@ -142,10 +130,10 @@ def test_a_rewritten_and_rehashed_record_fails_on_its_signature(
     assert verify["broken"] is None  # every link recomputed: the chains alone pass
     assert verify["ok"] is False and verify["signature"]["valid"] is False
     assert "differ from the signed ones" in verify["signature"]["problem"]
-    offline = _offline(export, pem)
+    offline = check_offline(export, pem)
     assert offline.returncode == 1 and "bad signature" in offline.stdout
     assert reforged["ok"] is False and "bad signature" in reforged["signature"]["problem"]
-    offline2 = _offline(export2, pem)
+    offline2 = check_offline(export2, pem)
     assert offline2.returncode == 1 and "bad signature" in offline2.stdout
 
 
@@ -184,7 +172,7 @@ def test_a_run_written_under_the_old_chain_scheme_still_verifies(
     assert verify["ok"] is True and verify["chain_scheme"] == chain.SCHEME
     assert verify["signature"] is None and verify["events"] == 2
     export = _export(client, "legacy", tmp_path / "legacy.jsonl")
-    assert _offline(export).returncode == 0
+    assert check_offline(export).returncode == 0
 
 
 def test_the_v2_genesis_covers_the_runs_immutable_fields(
@@ -219,4 +207,4 @@ def test_a_sign_off_is_signed_too(settings: Settings, tmp_path: Path) -> None:
     assert verify["signature"]["reason"] == "signoff" and verify["signature"]["valid"] is True
     header = json.loads(export.read_text().splitlines()[0])
     assert [s["reason"] for s in header["signatures"]] == ["completed", "signoff"]
-    assert _offline(export, pem).returncode == 0
+    assert check_offline(export, pem).returncode == 0

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import sqlite3
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +17,7 @@ from app.api.auth import key_fingerprint
 from app.config import Settings
 from app.store import chain
 from tests.api.conftest import ClientFactory
+from tests.offline_check import check_offline
 from tests.polling import wait_until
 
 CLIENT_KEY = "client-key-7Hq2vN9xLp4Rt8Zw"
@@ -169,14 +169,7 @@ def _export(client: TestClient, run_id: str) -> list[dict[str, Any]]:
 def _offline(lines: list[dict[str, Any]], path: Path) -> subprocess.CompletedProcess[str]:
     """The offline check the README points to, run on an export as a file."""
     path.write_text("".join(json.dumps(line, ensure_ascii=False) + "\n" for line in lines))
-    return subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "check_trace.py"), str(path)],
-        cwd=ROOT,
-        env={"PYTHONPATH": str(ROOT)},
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    return check_offline(path)
 
 
 def _signed_off_and_reported(client: TestClient) -> tuple[str, dict[str, Any]]:
