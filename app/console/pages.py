@@ -142,8 +142,10 @@ async def _part(
         raise no_run(request, run_id) from None
     except (browse.AttemptNotFoundError, RevisionConflictError) as exc:
         raise PageNotFound(exc.message if isinstance(exc, DomainError) else str(exc)) from None
-    name = f"{template}_fragment.html" if fragment else f"{template}.html"
-    context = {"run_id": run_id, **context}
+    # Without script, the part is a page of its own (part.html) around the same fragment.
+    page = {"back": f"/console/runs/{run_id}", "back_text": "Back to the run", "heading": ""}
+    context = {"run_id": run_id, **page, **context, "fragment": f"{template}_fragment.html"}
+    name = context["fragment"] if fragment else "part.html"
     return finish(request, console.render(request, name, context, signed=signed))
 
 
@@ -163,7 +165,15 @@ async def attempt_page(
         row = browse.attempt_detail(
             sessions=sessions_of(request), run_id=run_id, task_index=task_index, attempt=attempt
         )
-        return {"title": f"Task {task_index}, attempt {attempt}", "a": row}
+        title = f"Task {task_index}, attempt {attempt}"
+        back = f"/console/runs/{run_id}?decision={task_index}#decision-{task_index}"
+        return {
+            "title": title,
+            "heading": title,
+            "back": back,
+            "back_text": "Back to the decision",
+            "a": row,
+        }
 
     return await _part(
         request, console, signed, run_id=run_id, template="attempt", fragment=fragment, fetch=fetch
@@ -186,7 +196,7 @@ async def frontier_page(
             run_id=run_id,
             cache_dir=console.settings.data_dir / "console-cache",
         )
-        return {"title": "Frontier", "f": part}
+        return {"title": "Frontier", "heading": f"Run {run_id} on the frontier", "f": part}
 
     return await _part(
         request, console, signed, run_id=run_id, template="frontier", fragment=fragment, fetch=fetch
@@ -203,7 +213,7 @@ async def verify_page(
 ) -> Response:
     def fetch() -> dict[str, Any]:
         report = audit.verify_trace(sessions=sessions_of(request), run_id=run_id)
-        return {"title": "Chain verification", "report": report}
+        return {"title": "Chain verification", "heading": "Chain verification", "report": report}
 
     return await _part(
         request, console, signed, run_id=run_id, template="verify", fragment=fragment, fetch=fetch
@@ -222,7 +232,8 @@ async def diff_page(
 
     def fetch() -> dict[str, Any]:
         part = views.diff_view(sessions=sessions_of(request), run_id=run_id)
-        return {"title": "Revision diff", "dv": part}
+        heading = f"Revision {run_id} against its parent"
+        return {"title": "Revision diff", "heading": heading, "dv": part}
 
     return await _part(
         request, console, signed, run_id=run_id, template="diff", fragment=fragment, fetch=fetch

@@ -53,6 +53,14 @@ def test_a_lineage_of_three_from_its_middle(client: TestClient) -> None:
     head_page = _text(client.get(f"/console/runs/{head}").text)
     assert "What changed against revision 1" in head_page
     assert "Revision 2 of the original plan : heavy repaired" in head_page
+    # Without script each part is a page of its own, leading back to the run.
+    for part, heading in (("diff", f"Revision {head} against its parent"), ("verify", "")):
+        alone = client.get(f"/console/runs/{head}/{part}")
+        assert alone.status_code == 200 and "<h1>" in alone.text
+        assert (
+            heading in alone.text and f'href="/console/runs/{head}">Back to the run' in alone.text
+        )
+    assert "What changed against revision 1" in _text(client.get(f"/console/runs/{head}/diff").text)
 
 
 def test_long_diff_lists_are_cut_and_say_so(
