@@ -24,7 +24,7 @@ from app.console.context import (
     sessions_of,
 )
 from app.domain.errors import DomainError
-from app.domain.lifecycle import ACTIVE, RunStatus
+from app.domain.lifecycle import ACTIVE, FINISHED, RunStatus
 from app.runs import audit, browse, service, signoff
 from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.revisions import RevisionConflictError
@@ -114,7 +114,8 @@ async def run_page(
         "v": view,
         "run": run,
         "model": model,
-        "finished": run.status not in {s.value for s in ACTIVE},
+        # The page follows any run that may still change (awaiting review, interrupted...).
+        "finished": run.status in {s.value for s in FINISHED},
         "can_cancel": run.status in {s.value for s in ACTIVE},
         "can_resume": run.status in (RunStatus.INTERRUPTED, RunStatus.FAILED),
         "inline_tasks": views.INLINE_TASKS,

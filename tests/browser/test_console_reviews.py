@@ -69,3 +69,30 @@ def test_a_completed_run_is_signed_off_and_shows_its_verified_heads(
     expect(page.locator("#signoffs")).to_contain_text("Checked against the site plan.")
     expect(page.locator("#head-decisions")).to_have_text(heads["decisions"])
     expect(page.locator("#head-events")).to_have_text(heads["events"])
+
+
+def test_a_run_page_awaiting_review_follows_a_resolution_made_elsewhere(
+    page: Page, server: Server
+) -> None:
+    """The page of a run waiting for a supervisor streams too: resolved elsewhere (here
+    through the API), its status goes on to completed in place, and the page says its
+    forms are those of the status it was drawn in."""
+    run_id = _run_with_review(server)
+    wait_status(server, run_id, "awaiting_review")
+    sign_in(page, server, then=f"/console/runs/{run_id}")
+    expect(page.locator("#run-status")).to_have_text("awaiting review")
+    expect(page.locator("#status-changed")).to_be_hidden()
+    page.evaluate("window.__same_page = true")
+    httpx.post(
+        f"{server.url}/runs/{run_id}/reviews/5",
+        json={"action": "approve"},
+        headers={"X-API-Key": SUPERVISOR_KEY},
+        timeout=30,
+    ).raise_for_status()
+    expect(page.locator("#run-status")).to_have_text("completed", timeout=60_000)
+    expect(page.locator("#status-changed")).to_be_visible()
+    expect(page.locator("#status-now")).to_have_text("completed")
+    expect(page.locator("#events")).to_contain_text("review resolved")
+    assert page.evaluate("window.__same_page") is True
+    page.locator("#status-changed").get_by_role("link", name="reload this page").click()
+    expect(page.get_by_role("button", name="Sign off")).to_be_visible()

@@ -31,10 +31,18 @@ function watchRun(root) {
   source.addEventListener("run", addEvent);
   source.addEventListener("review", addEvent);
   // The server says what the status is (some changes write no event): nothing inferred here.
+  const rendered = root.dataset.status;
+  const moving = new Set(["queued", "running"]); // progress, not a change of what can be done
+  const changed = document.getElementById("status-changed");
   source.addEventListener("status", (msg) => {
     const s = JSON.parse(msg.data);
     status.textContent = s.status.replaceAll("_", " ");
     status.className = "status status-" + s.status;
+    // The page's forms (cancel, resume, sign-off) are those of the status it was drawn in.
+    if (s.status !== rendered && !(moving.has(s.status) && moving.has(rendered))) {
+      document.getElementById("status-now").textContent = s.status.replaceAll("_", " ");
+      changed.hidden = false;
+    }
     if (s.finished) source.close(); // or EventSource would reconnect to an ended stream
   });
 }
