@@ -3,9 +3,7 @@ override forms that resolve one (the same service as POST /runs/{id}/reviews/{ta
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from datetime import datetime
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, Form, Path, Request
 from fastapi.concurrency import run_in_threadpool
@@ -28,32 +26,8 @@ from app.runs.errors import RunNotFoundError
 router = APIRouter(prefix="/console", include_in_schema=False)
 
 
-@dataclass(frozen=True)
-class ReviewItem:
-    run_id: str
-    task_index: int
-    task_id: Any
-    task_name: str
-    proposal: dict[str, Any]
-    triggers: list[str]
-    alternatives: list[dict[str, Any]]
-    requested_at: datetime
-
-
-def _pending(request: Request) -> list[ReviewItem]:
-    return [
-        ReviewItem(
-            run_id=r.run_id,
-            task_index=r.task_index,
-            task_id=r.payload["task_id"],
-            task_name=r.payload["task_name"],
-            proposal=dict(r.payload["proposal"]),
-            triggers=list(r.payload["triggers"]),
-            alternatives=[dict(a) for a in r.payload["alternatives"]],
-            requested_at=r.requested_at,
-        )
-        for r in review_service.pending_reviews(sessions=sessions_of(request))
-    ]
+def _pending(request: Request) -> list[review_service.PendingReview]:
+    return review_service.pending_reviews(sessions=sessions_of(request))
 
 
 @router.get("/reviews")

@@ -52,10 +52,33 @@ class ReviewConflictError(DomainError):
 
 @dataclass(frozen=True)
 class PendingReview:
+    """A decision waiting for a supervisor; `payload` is what the graph paused with
+    (app.graph.review.review_payload), read through the properties below."""
+
     run_id: str
     task_index: int
     payload: dict[str, Any]
     requested_at: datetime
+
+    @property
+    def task_id(self) -> Any:
+        return self.payload["task_id"]
+
+    @property
+    def task_name(self) -> str:
+        return str(self.payload["task_name"])
+
+    @property
+    def proposal(self) -> dict[str, Any]:
+        return dict(self.payload["proposal"])
+
+    @property
+    def triggers(self) -> list[str]:
+        return list(self.payload["triggers"])
+
+    @property
+    def alternatives(self) -> list[dict[str, Any]]:
+        return [dict(a) for a in self.payload["alternatives"]]
 
 
 def policy_for(review: Mapping[str, Any] | None, instance: Instance) -> dict[str, Any] | None:

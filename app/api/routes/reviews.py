@@ -32,11 +32,11 @@ def list_reviews(caller: SupervisorDep, runs: RunsDep) -> list[PendingReviewOut]
         PendingReviewOut(
             run_id=r.run_id,
             task_index=r.task_index,
-            task_id=r.payload["task_id"],
-            task_name=r.payload["task_name"],
-            proposal=ProposalOut(**r.payload["proposal"]),
-            triggers=list(r.payload["triggers"]),
-            alternatives=[AlternativeOut(**a) for a in r.payload["alternatives"]],
+            task_id=r.task_id,
+            task_name=r.task_name,
+            proposal=ProposalOut(**r.proposal),
+            triggers=r.triggers,
+            alternatives=[AlternativeOut(**a) for a in r.alternatives],
             requested_at=r.requested_at,
         )
         for r in reviews.pending_reviews(sessions=runs.sessions)
