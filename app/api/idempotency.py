@@ -46,7 +46,8 @@ def refuse_repeated_key(request: Request) -> None:
         )
 
 
-def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
+def checked_key(request: Request, key: str | None) -> str | None:
+    """The one Idempotency-Key sent, if any, checked as every route documents it."""
     refuse_repeated_key(request)
     if key is not None and _KEY.match(key) is None:
         raise ApiError(
@@ -56,6 +57,10 @@ def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
             "invalid_header",
         )
     return key
+
+
+def _one_key(request: Request, key: _KeyHeader = None) -> str | None:
+    return checked_key(request, key)
 
 
 IdempotencyKey = Annotated[str | None, Depends(_one_key)]

@@ -168,6 +168,16 @@ def test_idempotency_key_replays_the_first_answer(lan: TestClient, receiver: Rec
         headers=[("Idempotency-Key", "a"), ("Idempotency-Key", "b")],
     )
     assert one_error(twice, 422)["type"] == "duplicate_header"
+    # As every route documents the key: visible ASCII, spaces only between characters.
+    for bad in (b"k\t1", "clé".encode()):  # as raw bytes: httpx sends only ASCII str
+        refused = lan.post(
+            "/webhooks",
+            json={"events": ["run.failed"], "url": receiver.url},
+            headers=[(b"Idempotency-Key", bad)],
+        )
+        err = one_error(refused, 422)
+        assert err["loc"] == ["header", "Idempotency-Key"] and err["type"] == "invalid_header"
+    assert len(lan.get("/webhooks").json()) == 1
 
 
 def test_the_database_holds_no_secret_in_plain_text(

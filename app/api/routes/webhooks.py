@@ -9,7 +9,8 @@ from fastapi import APIRouter, Depends, Header, Path, Query, Request, Response, 
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.deps import SettingsDep, SupervisorDep
-from app.api.idempotency import REPLAYED_HEADER, keyed, mark_replayed, refuse_repeated_key
+from app.api.idempotency import KEY_PATTERN, REPLAYED_HEADER, checked_key, keyed, mark_replayed
+from app.api.openapi import header_schema
 from app.api.responses import BODY, SUPERVISOR, errors
 from app.api.webhook_schemas import (
     WEBHOOK_ID_PATTERN,
@@ -52,14 +53,16 @@ def _one_key(
             alias=HEADER,
             min_length=1,
             max_length=MAX_KEY_LENGTH,
+            json_schema_extra=header_schema(
+                minLength=1, maxLength=MAX_KEY_LENGTH, pattern=KEY_PATTERN
+            ),
             description="Makes retries safe: resending the same key with the same request "
             f"returns the first answer (secret included, `{REPLAYED_HEADER}: true`) "
             "instead of acting twice; the same key with another request is a 409.",
         ),
     ] = None,
 ) -> str | None:
-    refuse_repeated_key(request)
-    return key
+    return checked_key(request, key)
 
 
 IdempotencyKey = Annotated[str | None, Depends(_one_key)]
