@@ -34,7 +34,7 @@ from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Run
+from app.store.models import ExecutionReport, Run
 
 REVISABLE = frozenset(
     {
@@ -153,9 +153,10 @@ def _create(
         decided = {
             r.task_index: ParentDecision(records.decision_record(r), r.chain_hash) for r in rows
         }
-        execution = {
-            r.task_index: r.state for r in repo.execution_reports(session=session, run_id=parent_id)
+        reports = {
+            r.task_index: r for r in repo.execution_reports(session=session, run_id=parent_id)
         }
+        execution = {t: r.state for t, r in reports.items()}
         budget = parent_spec.token_budget
         if budget is not None:
             budget = max(0, budget - lineage_tokens(session, parent))
@@ -188,6 +189,8 @@ def _create(
             "revision": revision_no,
             "parent_status": status.value,
             "pinned": plan.pinned_task_ids,
+            # The site's reports on pinned tasks, carried to the revision (_carry_execution).
+            "execution": _carried(plan.pinned_rows, reports),
             "added_tasks": plan.added_tasks,
             "removed_tasks": plan.removed_tasks,
             "fleet_changes": plan.fleet_changes,
@@ -219,6 +222,7 @@ def _create(
         )
         for values in plan.pinned_rows:
             repo.upsert_decision(session=session, run_id=run_id, values=values)
+        _carry_execution(session, run_id, plan.pinned_rows, reports)
         parent.superseded_by = run_id
         active = status not in FINISHED
         if active:
@@ -244,6 +248,46 @@ def _create(
             )
         session.flush()
     return run, active
+
+
+def _carried_rows(
+    pinned_rows: Sequence[Mapping[str, Any]], reports: Mapping[int, ExecutionReport]
+) -> list[tuple[Mapping[str, Any], ExecutionReport]]:
+    by_task_id = {r.task_id: r for r in reports.values()}
+    out = []
+    for values in pinned_rows:
+        was = by_task_id.get(str(values["task_id"]))
+        if was is not None:
+            out.append((values, was))
+    return out
+
+
+def _carried(
+    pinned_rows: Sequence[Mapping[str, Any]], reports: Mapping[int, ExecutionReport]
+) -> dict[str, str]:
+    return {was.task_id: was.state for _, was in _carried_rows(pinned_rows, reports)}
+
+
+def _carry_execution(
+    session: Session,
+    run_id: str,
+    pinned_rows: Sequence[Mapping[str, Any]],
+    reports: Mapping[int, ExecutionReport],
+) -> None:
+    """A pinned task keeps where the site said it stands: the revision, the head the site
+    now reports to, must know a task is done, or its own revision (pin "reported") would
+    plan it again. Unpinned tasks are planned afresh, so their old state stays behind."""
+    for values, was in _carried_rows(pinned_rows, reports):
+        session.add(
+            ExecutionReport(
+                run_id=run_id,
+                task_index=values["task_index"],
+                task_id=was.task_id,
+                state=was.state,
+                started_at=was.started_at,
+                ended_at=was.ended_at,
+            )
+        )
 
 
 def _check_reasoner(settings: Settings, request: RevisionRequest) -> None:

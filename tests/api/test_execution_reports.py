@@ -124,3 +124,32 @@ def test_pin_reported_excludes_failed_and_started_on_an_unavailable_robot(
     assert pinned == {done_heavy, started_other, *done}
     assert client.get(f"/runs/{run_id}").json()["status"] == "superseded"
     assert client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]["ok"] is True
+
+
+def test_a_revision_keeps_the_reports_of_what_it_pinned_so_its_own_revision_does_too(
+    client: TestClient,
+) -> None:
+    """The site reports to the head: a revision must carry where its pinned tasks stand, or
+    revising it (pin "reported", the default) would plan again a task already done."""
+    parent = completed_run(client)
+    ids = [a["task_id"] for a in client.get(f"/runs/{parent}").json()["assignments"]]
+    done, started, failed = ids[3], ids[7], ids[9]
+    updates = [(done, "started"), (done, "done"), (started, "started"), (failed, "failed")]
+    assert report(client, parent, *updates).status_code == 200
+    first = revise(client, parent, {"changes": [], "reason": "re-plan the rest"})["id"]
+    wait_status(client, first, "completed")
+    state = {a["task_id"]: a for a in client.get(f"/runs/{first}").json()["assignments"]}
+    assert {t for t, a in state.items() if a["pinned"]} == {done, started}
+    assert state[done]["execution"]["state"] == "done"
+    assert state[started]["execution"]["state"] == "started"
+    assert state[failed]["execution"] is None  # re-planned: its old failure stays behind
+    events = client.get(f"/runs/{first}/trace").json()["events"]
+    assert events[0]["detail"]["execution"] == {str(done): "done", str(started): "started"}
+
+    second = revise(client, first, {"changes": [], "reason": "and again"})["id"]
+    wait_status(client, second, "completed")
+    again = {a["task_id"]: a for a in client.get(f"/runs/{second}").json()["assignments"]}
+    assert {t for t, a in again.items() if a["pinned"]} == {done, started}
+    # The head accepts the rest of the story: started -> done.
+    assert report(client, second, (started, "done")).status_code == 200
+    assert client.get(f"/runs/{second}/trace/verify").json()["ok"] is True
