@@ -11,6 +11,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
+from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.routing import iter_route_contexts
@@ -18,6 +19,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.domain.errors import DomainError
+from app.runs.errors import RunArchivedError, RunNotFoundError
+from app.runs.tombstones import archive_file_of
 
 Loc = Sequence[str | int]
 log = logging.getLogger("ltaa.api")
@@ -108,8 +111,24 @@ async def _on_validation(_: Request, exc: RequestValidationError) -> JSONRespons
     return JSONResponse(validation_error_body(exc.errors()), status_code=422)
 
 
-async def _on_domain(_: Request, exc: DomainError) -> JSONResponse:
+async def _on_domain(request: Request, exc: DomainError) -> JSONResponse:
+    if isinstance(exc, RunNotFoundError):
+        exc = await run_in_threadpool(_archived_or, request, exc)
     return JSONResponse(domain_error_body(exc), status_code=exc.status_code)
+
+
+def _archived_or(request: Request, exc: RunNotFoundError) -> DomainError:
+    """A run id with no row that was archived is 410 Gone naming its file, whichever route
+    looked it up (SPEC 15), at the place in the request the lookup named."""
+    runs = getattr(request.app.state, "runs", None)
+    if runs is None:
+        return exc
+    archived = archive_file_of(sessions=runs.sessions, run_id=exc.run_id)
+    if archived is None:
+        return exc
+    gone = RunArchivedError(exc.run_id, archived)
+    gone.field, gone.location = exc.field, exc.location
+    return gone
 
 
 def _allowed_methods(request: Request) -> str:

@@ -8,6 +8,7 @@ from app.domain.errors import DomainError, NotFoundError, StateConflictError
 class RunNotFoundError(NotFoundError):
     def __init__(self, run_id: str) -> None:
         super().__init__("run_id", f"no run with id '{run_id}'; list runs with GET /runs")
+        self.run_id = run_id  # the API answers 410 instead when this id was archived
 
 
 class RunArchivedError(DomainError):

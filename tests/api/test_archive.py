@@ -64,6 +64,18 @@ def test_old_runs_are_archived_verified_and_answer_410(
     assert gone.status_code == 410
     assert archive_file.name in gone.json()["detail"][0]["msg"]
     assert client.get(f"/runs/{old}/trace/verify").status_code == 410
+    # Every route that looks a run up says the same, at the place it named the run.
+    for method, path, body in (
+        ("GET", f"/runs/{old}/diff", None),
+        ("GET", f"/runs/{old}/revisions", None),
+        ("POST", f"/runs/{old}/revisions", {"changes": [], "reason": "late"}),
+        ("POST", f"/runs/{old}/execution", {"updates": [{"task_id": 0, "state": "done"}]}),
+    ):
+        answer = client.request(method, path, json=body)
+        assert answer.status_code == 410, (path, answer.text)
+        detail = answer.json()["detail"][0]
+        assert detail["loc"] == ["path", "run_id"] and archive_file.name in detail["msg"]
+    assert client.get(f"/runs/{'0' * 32}/diff").status_code == 404  # never was: still 404
     replay = client.post("/runs", json={"reasoner": "replay", "replay_of": old})
     assert replay.status_code == 410 and replay.json()["detail"][0]["loc"] == ["body", "replay_of"]
     assert client.get(f"/runs/{recent}").json()["status"] == "completed"  # untouched
