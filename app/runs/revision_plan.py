@@ -430,6 +430,8 @@ def pinned_rows(
                 "balance_after": balance_score(cap.balanced(loads), problem.target),
                 "severity_after": severity(cap.balanced(loads), problem.target).value,
                 "regret": 0.0,
+                # A supervisor's approval or override of the pinned decision stays with it.
+                "review": d.review,
                 "pinned": True,
                 "pinned_from": parent.chain_hash,
             }

@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from app.domain.catalog import scenario
 from tests.api.conftest import ClientFactory
 from tests.api.test_docs_check_trace import check_trace_source
 from tests.offline_check import CHECK_TRACE, check_offline
@@ -211,3 +212,30 @@ def test_a_revisions_export_verifies_offline_and_a_forged_link_does_not(
     export.write_text("".join(json.dumps(line) + "\n" for line in lines))
     forged = check_offline(export)
     assert forged.returncode == 1, forged.stdout + forged.stderr
+
+
+def test_a_pinned_decision_keeps_the_supervisors_override(client: TestClient) -> None:
+    task = scenario("baseline").instance.tasks[5]
+    run_id = client.post("/runs", json={**BASELINE, "review": {"task_ids": [task.id]}}).json()["id"]
+    wait_status(client, run_id, "awaiting_review")
+    (pending,) = [r for r in client.get("/reviews").json() if r["run_id"] == run_id]
+    other = next(
+        a["robot"]
+        for a in pending["alternatives"]
+        if a["robot"] != pending["proposal"]["robot"] and a["cap_feasible"]
+    )
+    resolved = client.post(
+        f"/runs/{run_id}/reviews/5",
+        json={"action": "override", "robot": other, "reason": "crane access from the north"},
+    )
+    assert resolved.status_code == 200, resolved.text
+    wait_status(client, run_id, "completed")
+    created = revise(client, run_id, HEAVY_DOWN)
+    wait_status(client, created["id"], "completed")
+    trace = client.get(f"/runs/{created['id']}/trace").json()
+    five = trace["decisions"][5]
+    assignment = client.get(f"/runs/{created['id']}").json()["assignments"][5]
+    assert assignment["pinned"] is True and assignment["robot"] == five["robot"] == other
+    assert five["review"]["action"] == "override"
+    assert five["review"]["reason"] == "crane access from the north"
+    assert client.get(f"/runs/{created['id']}/trace/verify").json()["ok"] is True
