@@ -6,7 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
-from app.api.run_schemas import Timestamp
+from app.api.run_schemas import RequestTime, Timestamp
 from app.api.schemas import Name, Probability, RobotIn, TaskId, TaskIn
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_ROBOTS, MAX_TASKS
@@ -23,7 +23,11 @@ class _Strict(BaseModel):
 class ExecutionUpdate(_Strict):
     task_id: TaskId
     state: Literal["started", "done", "failed"]
-    at: Timestamp | None = Field(None, description="When it happened (RFC 3339); default now")
+    at: RequestTime | None = Field(
+        None,
+        description="When it happened: RFC 3339 with an offset (Z or +05:00), stored in UTC; "
+        "default now",
+    )
 
 
 class ExecutionRequest(_Strict):

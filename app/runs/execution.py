@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
 
@@ -148,7 +148,8 @@ def _report(
             if current == update.state:
                 continue
             pending[update.task_id] = update.state
-            at = as_utc(update.at) if update.at is not None else utcnow()
+            # Stored in UTC: SQLite keeps no offset, so 09:30+05:00 would read back as 09:30Z.
+            at = as_utc(update.at).astimezone(UTC) if update.at is not None else utcnow()
             changed.append(
                 {
                     "task_id": update.task_id,

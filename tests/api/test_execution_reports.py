@@ -4,6 +4,7 @@ and what `pin: "reported"` makes of them."""
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -124,3 +125,54 @@ def test_pin_reported_excludes_failed_and_started_on_an_unavailable_robot(
     assert pinned == {done_heavy, started_other, *done}
     assert client.get(f"/runs/{run_id}").json()["status"] == "superseded"
     assert client.get(f"/runs/{created['id']}/trace/verify").json()["parent"]["ok"] is True
+
+
+def _timed(client: TestClient, run_id: str, *updates: tuple[Any, str, Any]) -> Any:
+    body = {"updates": [{"task_id": t, "state": s, "at": at} for t, s, at in updates]}
+    return client.post(f"/runs/{run_id}/execution", json=body)
+
+
+def _execution(client: TestClient, run_id: str, task_id: Any) -> Any:
+    state = client.get(f"/runs/{run_id}").json()
+    return next(a["execution"] for a in state["assignments"] if a["task_id"] == task_id)
+
+
+def test_a_time_with_an_offset_is_stored_and_shown_in_utc(client: TestClient) -> None:
+    run_id = completed_run(client)
+    answer = _timed(
+        client,
+        run_id,
+        (0, "started", "2026-12-01T09:30:00+05:00"),
+        (0, "done", "2026-12-01T01:15:00-06:00"),
+    )
+    assert answer.status_code == 200, answer.text
+    shown = _execution(client, run_id, 0)
+    assert shown["started_at"] == "2026-12-01T04:30:00Z"
+    assert shown["ended_at"] == "2026-12-01T07:15:00Z"
+    export = client.get(f"/runs/{run_id}/trace", params={"format": "jsonl"}).text
+    lines = [json.loads(line) for line in export.splitlines()]
+    recorded = next(x["detail"]["updates"] for x in lines if "updates" in x.get("detail", {}))
+    assert [u["at"] for u in recorded] == ["2026-12-01T04:30:00+00:00", "2026-12-01T07:15:00+00:00"]
+
+
+@pytest.mark.parametrize(
+    "at",
+    [
+        "2026-12-01T09:30:00",  # no offset: the site's local time, or UTC?
+        "2026-12-01",
+        1700000000,  # a bare number, which pydantic would take as seconds since 1970
+        "1700000000",
+        "0001-01-01T00:00:00+14:00",  # its UTC time is before year 1
+        "9999-12-31T23:59:59-01:00",  # and this one after year 9999
+    ],
+)
+def test_a_time_without_an_offset_or_out_of_range_is_a_422_naming_it(
+    client: TestClient, at: Any
+) -> None:
+    run_id = completed_run(client)
+    refused = _timed(client, run_id, (1, "started", "2026-12-01T09:30:00Z"), (0, "started", at))
+    assert refused.status_code == 422, refused.text
+    detail = refused.json()["detail"]
+    assert [d["loc"] for d in detail] == [["body", "updates", 1, "at"]]
+    assert "offset" in detail[0]["msg"] or "range" in detail[0]["msg"]
+    assert _execution(client, run_id, 1) is None  # nothing half-written
