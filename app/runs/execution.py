@@ -1,10 +1,11 @@
 """Execution reports (SPEC 10): where the site says each decided task stands.
 
 States move forward only: started -> done | failed, done and failed are final, and the
-same report again is a no-op. A report on a run that was revised is refused (the site
-reports to the head of the lineage). While the run is unfinished each accepted report is
-an event of its record; after it finished it goes to the annotation chain, so a completed
-run's decision and event chains (and every sign-off over them) stay as they were.
+same report again is a no-op; a task is not done (or failed) at a time before it started.
+A report on a run that was revised is refused (the site reports to the head of the
+lineage). While the run is unfinished each accepted report is an event of its record;
+after it finished it goes to the annotation chain, so a completed run's decision and event
+chains (and every sign-off over them) stay as they were.
 """
 
 from __future__ import annotations
@@ -150,6 +151,15 @@ def _report(
             pending[update.task_id] = update.state
             # Stored in UTC: SQLite keeps no offset, so 09:30+05:00 would read back as 09:30Z.
             at = as_utc(update.at).astimezone(UTC) if update.at is not None else utcnow()
+            started = row.started_at if row is not None else None
+            if update.state in FINAL and started is not None and at < as_utc(started):
+                sent = at.isoformat() if update.at is not None else f"now ({at.isoformat()})"
+                raise DomainError(
+                    f"updates.{i}.at",
+                    f"task '{update.task_id}' started at {as_utc(started).isoformat()}; it "
+                    f"cannot be {update.state} earlier, at {sent}",
+                    code="before_started",
+                )
             changed.append(
                 {
                     "task_id": update.task_id,

@@ -176,3 +176,30 @@ def test_a_time_without_an_offset_or_out_of_range_is_a_422_naming_it(
     assert [d["loc"] for d in detail] == [["body", "updates", 1, "at"]]
     assert "offset" in detail[0]["msg"] or "range" in detail[0]["msg"]
     assert _execution(client, run_id, 1) is None  # nothing half-written
+
+
+def test_a_done_or_failed_time_before_the_started_time_is_a_422_naming_it(
+    client: TestClient,
+) -> None:
+    run_id = completed_run(client)
+    assert _timed(client, run_id, (0, "started", "2026-12-01T10:00:00Z")).status_code == 200
+    # 10:00+05:00 is 05:00Z: earlier than the recorded start, although its digits are not.
+    early = _timed(client, run_id, (0, "done", "2026-12-01T10:00:00+05:00"))
+    assert early.status_code == 422, early.text
+    detail = early.json()["detail"][0]
+    assert detail["loc"] == ["body", "updates", 0, "at"]
+    assert "2026-12-01T10:00:00" in detail["msg"] and "started" in detail["msg"]
+    # Within one report: the start it reports counts, and nothing is applied.
+    same = _timed(
+        client,
+        run_id,
+        (1, "started", "2026-12-01T10:00:00Z"),
+        (1, "failed", "2026-12-01T09:59:59Z"),
+    )
+    assert same.status_code == 422, same.text
+    assert same.json()["detail"][0]["loc"] == ["body", "updates", 1, "at"]
+    assert _execution(client, run_id, 1) is None
+    assert _execution(client, run_id, 0)["state"] == "started"
+    # The same instant as the start, or later, is fine.
+    assert _timed(client, run_id, (0, "done", "2026-12-01T10:00:00Z")).status_code == 200
+    assert _execution(client, run_id, 0)["ended_at"] == "2026-12-01T10:00:00Z"
