@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
 from app.api.run_schemas import RequestTime, Timestamp
-from app.api.schemas import Name, Probability, RobotIn, TaskId, TaskIn
+from app.api.schemas import Name, NoNul, Probability, RobotIn, TaskId, TaskIn
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_ROBOTS, MAX_TASKS
 from app.domain.modes import Mode
@@ -102,7 +102,7 @@ class RevisionRequestIn(_Strict):
         description="'reported' (tasks reported started or done), 'decided' (every task the "
         "parent decided), {through_task_index: k} or {task_ids: [...]}",
     )
-    reason: StrictStr = Field(min_length=1, max_length=2000)
+    reason: Annotated[StrictStr, NoNul] = Field(min_length=1, max_length=2000)
     reasoner: Name | None = Field(None, description="Override the inherited reasoner")
     model: Name | None = Field(None, description="Override the inherited model")
 

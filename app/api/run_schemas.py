@@ -17,6 +17,7 @@ from app.api.schemas import (
     InstanceRequest,
     MetricsOut,
     Name,
+    TaskId,
     UsageOut,
     absent,
     present,
@@ -122,7 +123,7 @@ class ReviewPolicyIn(BaseModel):
         "over the rest of the queue against the exact optimum (the unit of the guidance "
         "costs, not divided by the number of tasks)",
     )
-    task_ids: list[int | str] = Field(
+    task_ids: list[TaskId] = Field(
         default_factory=list, max_length=10_000, description="Review these tasks"
     )
     features: list[Name] = Field(
