@@ -48,10 +48,17 @@ class Update:
 
 
 class ExecutionConflictError(DomainError):
+    """A report that conflicts with what is stored (409). `location` is the part of the
+    request `field` points into: the body (an update's task or state), or the path (the run
+    itself, when it was revised)."""
+
     status_code = 409
 
-    def __init__(self, field: str, message: str, code: str = "conflict") -> None:
+    def __init__(
+        self, field: str, message: str, code: str = "conflict", *, location: str = "body"
+    ) -> None:
         super().__init__(field, message, code=code)
+        self.location = location
 
 
 def allowed(current: ExecutionState | None, to: ExecutionState) -> bool:
@@ -116,6 +123,7 @@ def _report(
                 f"run '{run_id}' was revised; report execution to the head of its "
                 f"revisions, run '{head}' (POST /runs/{head}/execution)",
                 code="revised",
+                location="path",
             )
         tasks = repo.queue_task_ids(run)
         decided = {d.task_id: d.task_index for d in repo.decided_task_ids(session, run_id)}

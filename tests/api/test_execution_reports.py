@@ -90,6 +90,9 @@ def test_a_revised_run_refuses_reports_naming_the_head(client: TestClient) -> No
     head = revise(client, run_id, {"changes": [], "pin": "decided", "reason": "re-plan"})["id"]
     refused = report(client, run_id, (0, "done"))
     assert refused.status_code == 409 and head in refused.text
+    # The run id is in the path, not the body.
+    assert refused.json()["detail"][0]["loc"] == ["path", "run_id"]
+    assert refused.json()["detail"][0]["type"] == "revised"
     wait_status(client, head, "completed")
     assert report(client, head, (0, "done")).status_code == 200
 
