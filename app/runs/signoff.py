@@ -17,7 +17,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.annotations import AnnotationKind
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, refuse_nul
 from app.runs import audit, lifecycle
 from app.runs.errors import RunStateConflictError
 from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
@@ -81,6 +81,7 @@ def sign_off(
         raise DomainError(
             "statement", "a sign-off needs a statement, not only whitespace", code="missing"
         )
+    refuse_nul("statement", statement)
     if idempotency is not None:
         earlier = _for_key(sessions, idempotency, run_id)
         if earlier is not None:
