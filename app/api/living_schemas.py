@@ -6,8 +6,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
-from app.api.run_schemas import Timestamp
-from app.api.schemas import Name, Probability, RobotIn, TaskId, TaskIn
+from app.api.run_schemas import RequestTime, Timestamp
+from app.api.schemas import Name, NoNul, Probability, RobotIn, TaskId, TaskIn
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_ROBOTS, MAX_TASKS
 from app.domain.modes import Mode
@@ -23,7 +23,11 @@ class _Strict(BaseModel):
 class ExecutionUpdate(_Strict):
     task_id: TaskId
     state: Literal["started", "done", "failed"]
-    at: Timestamp | None = Field(None, description="When it happened (RFC 3339); default now")
+    at: RequestTime | None = Field(
+        None,
+        description="When it happened: RFC 3339 with an offset (Z or +05:00), stored in UTC; "
+        "default now",
+    )
 
 
 class ExecutionRequest(_Strict):
@@ -98,7 +102,7 @@ class RevisionRequestIn(_Strict):
         description="'reported' (tasks reported started or done), 'decided' (every task the "
         "parent decided), {through_task_index: k} or {task_ids: [...]}",
     )
-    reason: StrictStr = Field(min_length=1, max_length=2000)
+    reason: Annotated[StrictStr, NoNul] = Field(min_length=1, max_length=2000)
     reasoner: Name | None = Field(None, description="Override the inherited reasoner")
     model: Name | None = Field(None, description="Override the inherited model")
 

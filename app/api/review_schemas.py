@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Annotated
+
 from pydantic import BaseModel, Field
 
 from app.api.run_schemas import Timestamp
-from app.api.schemas import Name
+from app.api.schemas import Name, NoNul
 from app.domain.lifecycle import RunStatus
 from app.domain.review import ReviewAction
 
@@ -13,7 +15,7 @@ MAX_STATEMENT_CHARS = 4000
 
 
 class SignOffRequest(BaseModel):
-    statement: str = Field(
+    statement: Annotated[str, NoNul] = Field(
         min_length=1,
         max_length=MAX_STATEMENT_CHARS,
         description="What the supervisor states about the run, recorded with their name",
@@ -25,7 +27,7 @@ class ReviewRequest(BaseModel):
 
     action: ReviewAction = Field(description="'approve' the proposal, or 'override' it")
     robot: Name | None = Field(None, description="override only: the robot to use instead")
-    reason: str | None = Field(
+    reason: Annotated[str, NoNul] | None = Field(
         None, max_length=MAX_STATEMENT_CHARS, description="Why; required for an override"
     )
 

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import json
-from typing import Any, Literal, get_args
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.api.run_schemas import Timestamp
+from app.api.schemas import NoNul
 from app.store.webhook_models import WebhookAttempt, WebhookDelivery, WebhookSubscription
 from app.webhooks.events import ALL, WebhookEventType
 from app.webhooks.targets import MAX_URL_CHARS
@@ -56,7 +57,7 @@ class WebhookCreate(BaseModel):
     events: list[EventName] = Field(
         min_length=1, max_length=32, description='Event types, or ["*"] for every type'
     )
-    description: str = Field("", max_length=500)
+    description: Annotated[str, NoNul] = Field("", max_length=500)
 
 
 class WebhookOut(BaseModel):

@@ -319,6 +319,21 @@ async def sign_off(
             signed=signed,
             status_code=409,
         )
+    except DomainError as exc:
+        if exc.status_code != 422:
+            raise
+        # The statement itself (a NUL character): say so on a page, like a blank one.
+        return console.render(
+            request,
+            "refused.html",
+            {
+                "title": "Not signed off",
+                "message": f"The statement {exc.message}.",
+                "retry": f"/console/runs/{run_id}",
+            },
+            signed=signed,
+            status_code=422,
+        )
     return RedirectResponse(f"/console/runs/{run_id}#signoffs", status_code=303)
 
 

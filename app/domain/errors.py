@@ -18,6 +18,15 @@ class DomainError(ValueError):
         self.code = code
 
 
+def refuse_nul(field: str, value: str | None) -> None:
+    """PostgreSQL refuses a NUL in any text value: refuse it up front, naming the field, for
+    callers that reach a service past the API's body models (the console's forms)."""
+    if value is not None and "\x00" in value:
+        raise DomainError(
+            field, "must not contain a NUL character (\\u0000); remove it", code="nul_character"
+        )
+
+
 class NotFoundError(DomainError):
     """No such thing as the path names (404); the message says where to list them."""
 

@@ -1,17 +1,18 @@
 """Execution reports (SPEC 10): where the site says each decided task stands.
 
 States move forward only: started -> done | failed, done and failed are final, and the
-same report again is a no-op. A report on a run that was revised is refused (the site
-reports to the head of the lineage). While the run is unfinished each accepted report is
-an event of its record; after it finished it goes to the annotation chain, so a completed
-run's decision and event chains (and every sign-off over them) stay as they were.
+same report again is a no-op; a task is not done (or failed) at a time before it started.
+A report on a run that was revised is refused (the site reports to the head of the
+lineage). While the run is unfinished each accepted report is an event of its record;
+after it finished it goes to the annotation chain, so a completed run's decision and event
+chains (and every sign-off over them) stay as they were.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
 
@@ -47,10 +48,17 @@ class Update:
 
 
 class ExecutionConflictError(DomainError):
+    """A report that conflicts with what is stored (409). `location` is the part of the
+    request `field` points into: the body (an update's task or state), or the path (the run
+    itself, when it was revised)."""
+
     status_code = 409
 
-    def __init__(self, field: str, message: str, code: str = "conflict") -> None:
+    def __init__(
+        self, field: str, message: str, code: str = "conflict", *, location: str = "body"
+    ) -> None:
         super().__init__(field, message, code=code)
+        self.location = location
 
 
 def allowed(current: ExecutionState | None, to: ExecutionState) -> bool:
@@ -115,6 +123,7 @@ def _report(
                 f"run '{run_id}' was revised; report execution to the head of its "
                 f"revisions, run '{head}' (POST /runs/{head}/execution)",
                 code="revised",
+                location="path",
             )
         tasks = repo.queue_task_ids(run)
         decided = {d.task_id: d.task_index for d in repo.decided_task_ids(session, run_id)}
@@ -148,7 +157,17 @@ def _report(
             if current == update.state:
                 continue
             pending[update.task_id] = update.state
-            at = as_utc(update.at) if update.at is not None else utcnow()
+            # Stored in UTC: SQLite keeps no offset, so 09:30+05:00 would read back as 09:30Z.
+            at = as_utc(update.at).astimezone(UTC) if update.at is not None else utcnow()
+            started = row.started_at if row is not None else None
+            if update.state in FINAL and started is not None and at < as_utc(started):
+                sent = at.isoformat() if update.at is not None else f"now ({at.isoformat()})"
+                raise DomainError(
+                    f"updates.{i}.at",
+                    f"task '{update.task_id}' started at {as_utc(started).isoformat()}; it "
+                    f"cannot be {update.state} earlier, at {sent}",
+                    code="before_started",
+                )
             changed.append(
                 {
                     "task_id": update.task_id,

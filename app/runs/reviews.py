@@ -17,7 +17,7 @@ from typing import Any
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, refuse_nul
 from app.domain.models import Instance
 from app.domain.review import (
     Resolution,
@@ -229,6 +229,7 @@ def resolve(
     resolutions the conditional UPDATE lets exactly one through (the other: 409). A retry
     with the Idempotency-Key of the resolution that won gets its answer again."""
     reason = (reason or "").strip() or None
+    refuse_nul("reason", reason)
     if action is ReviewAction.OVERRIDE and reason is None:
         raise DomainError("reason", "an override needs a reason", code="missing")
     if action is ReviewAction.OVERRIDE and robot is None:

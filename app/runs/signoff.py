@@ -17,6 +17,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.annotations import AnnotationKind
+from app.domain.errors import DomainError, refuse_nul
 from app.runs import audit, lifecycle
 from app.runs.errors import RunStateConflictError
 from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
@@ -75,6 +76,12 @@ def sign_off(
 
     RunStateConflictError unless the run completed and its record verifies: a signature
     over a record that is already broken would vouch for the break."""
+    if not statement.strip():
+        # Like an override's reason: whitespace alone states nothing.
+        raise DomainError(
+            "statement", "a sign-off needs a statement, not only whitespace", code="missing"
+        )
+    refuse_nul("statement", statement)
     if idempotency is not None:
         earlier = _for_key(sessions, idempotency, run_id)
         if earlier is not None:

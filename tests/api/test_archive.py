@@ -14,6 +14,7 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import update
 
@@ -190,3 +191,40 @@ def test_a_run_signed_off_while_its_file_is_written_stays_unarchived(
     assert [x["runs"] for x in again] == [[run_id]]
     lines = Path(again[0]["files"][0]).read_text().splitlines()
     assert any(json.loads(line)["type"] == "annotation" for line in lines)
+
+
+@pytest.mark.parametrize(
+    ("body", "loc", "type_"),
+    [
+        ({"before": "2021-01-01T00:00:00"}, ["body", "before"], "timezone_aware"),
+        ({"before": "1609459200"}, ["body", "before"], "datetime_parsing"),
+        ({"before": 1609459200}, ["body", "before"], "datetime_type"),
+        ({"before": "0001-01-01T00:00:00+14:00"}, ["body", "before"], "datetime_out_of_range"),
+        ({"before": BEFORE, "dry_run": True}, ["body", "dry_run"], "extra_forbidden"),
+    ],
+)
+def test_archive_takes_an_offset_and_nothing_else_naming_the_field(
+    client: TestClient, body: dict[str, object], loc: list[str], type_: str
+) -> None:
+    refused = client.post("/admin/archive", json=body)
+    assert refused.status_code == 422, refused.text
+    assert [(d["loc"], d["type"]) for d in refused.json()["detail"]] == [(loc, type_)]
+
+
+def test_archive_before_with_an_offset_is_the_same_instant_in_utc(
+    client: TestClient, settings: Settings
+) -> None:
+    old = _completed(client)
+    _age(settings, old)  # finished 2020-06-01T00:00:00Z
+    # 2020-06-01T03:00+05:00 is 2020-05-31T22:00Z: before the run finished, so not archived.
+    early = client.post("/admin/archive", json={"before": "2020-06-01T03:00:00+05:00"})
+    assert early.status_code == 200, early.text
+    assert early.json()["lineages"] == []
+    late = client.post("/admin/archive", json={"before": "2020-05-31T21:00:00-05:00"})
+    assert [x["runs"] for x in late.json()["lineages"]] == [[old]]
+
+
+def test_backup_forbids_extra_fields_too(client: TestClient) -> None:
+    refused = client.post("/admin/backup", json={"dest": "/nowhere", "force": True})
+    assert refused.status_code == 422, refused.text
+    assert [d["loc"] for d in refused.json()["detail"]] == [["body", "force"]]

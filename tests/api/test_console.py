@@ -237,3 +237,35 @@ def test_the_cookie_is_secure_over_https(make_client: ClientFactory) -> None:
     cookie = answer.headers["set-cookie"]
     assert "ltaa_console=" in cookie
     assert "Secure" in cookie and "HttpOnly" in cookie and "SameSite=strict" in cookie
+
+
+def test_a_nul_character_in_a_console_form_is_refused_with_a_page_and_nothing_written(
+    client: TestClient,
+) -> None:
+    # The console calls the services directly, past the API's body models: the services
+    # refuse the NUL themselves (PostgreSQL could not store it).
+    run_id = _run(client)
+    token = TOKEN.search(client.get(f"/console/runs/{run_id}").text)
+    assert token
+    signed = client.post(
+        f"/console/runs/{run_id}/signoff",
+        data={"csrf_token": token[1], "statement": "checked\x00"},
+        follow_redirects=False,
+    )
+    assert signed.status_code == 422, signed.text
+    assert "NUL" in signed.text
+    assert client.get(f"/runs/{run_id}").json()["signoffs"] == []
+
+    review = {"scenario": "baseline", "reasoner": "rules", "review": {"on": ["every_decision"]}}
+    waiting = str(client.post("/runs", json=review).json()["id"])
+    wait_until(client, waiting, ("awaiting_review",))
+    token = TOKEN.search(client.get("/console/reviews").text)
+    assert token
+    resolved = client.post(
+        f"/console/runs/{waiting}/reviews/0",
+        data={"csrf_token": token[1], "action": "override", "robot": "light", "reason": "x\x00"},
+        follow_redirects=False,
+    )
+    assert resolved.status_code == 422, resolved.text
+    assert "NUL" in resolved.text
+    assert [r["run_id"] for r in client.get("/reviews").json()] == [waiting]

@@ -4,6 +4,7 @@ and what `pin: "reported"` makes of them."""
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -89,6 +90,9 @@ def test_a_revised_run_refuses_reports_naming_the_head(client: TestClient) -> No
     head = revise(client, run_id, {"changes": [], "pin": "decided", "reason": "re-plan"})["id"]
     refused = report(client, run_id, (0, "done"))
     assert refused.status_code == 409 and head in refused.text
+    # The run id is in the path, not the body.
+    assert refused.json()["detail"][0]["loc"] == ["path", "run_id"]
+    assert refused.json()["detail"][0]["type"] == "revised"
     wait_status(client, head, "completed")
     assert report(client, head, (0, "done")).status_code == 200
 
@@ -153,3 +157,81 @@ def test_a_revision_keeps_the_reports_of_what_it_pinned_so_its_own_revision_does
     # The head accepts the rest of the story: started -> done.
     assert report(client, second, (started, "done")).status_code == 200
     assert client.get(f"/runs/{second}/trace/verify").json()["ok"] is True
+
+
+def _timed(client: TestClient, run_id: str, *updates: tuple[Any, str, Any]) -> Any:
+    body = {"updates": [{"task_id": t, "state": s, "at": at} for t, s, at in updates]}
+    return client.post(f"/runs/{run_id}/execution", json=body)
+
+
+def _execution(client: TestClient, run_id: str, task_id: Any) -> Any:
+    state = client.get(f"/runs/{run_id}").json()
+    return next(a["execution"] for a in state["assignments"] if a["task_id"] == task_id)
+
+
+def test_a_time_with_an_offset_is_stored_and_shown_in_utc(client: TestClient) -> None:
+    run_id = completed_run(client)
+    answer = _timed(
+        client,
+        run_id,
+        (0, "started", "2026-12-01T09:30:00+05:00"),
+        (0, "done", "2026-12-01T01:15:00-06:00"),
+    )
+    assert answer.status_code == 200, answer.text
+    shown = _execution(client, run_id, 0)
+    assert shown["started_at"] == "2026-12-01T04:30:00Z"
+    assert shown["ended_at"] == "2026-12-01T07:15:00Z"
+    export = client.get(f"/runs/{run_id}/trace", params={"format": "jsonl"}).text
+    lines = [json.loads(line) for line in export.splitlines()]
+    recorded = next(x["detail"]["updates"] for x in lines if "updates" in x.get("detail", {}))
+    assert [u["at"] for u in recorded] == ["2026-12-01T04:30:00+00:00", "2026-12-01T07:15:00+00:00"]
+
+
+@pytest.mark.parametrize(
+    "at",
+    [
+        "2026-12-01T09:30:00",  # no offset: the site's local time, or UTC?
+        "2026-12-01",
+        1700000000,  # a bare number, which pydantic would take as seconds since 1970
+        "1700000000",
+        "0001-01-01T00:00:00+14:00",  # its UTC time is before year 1
+        "9999-12-31T23:59:59-01:00",  # and this one after year 9999
+    ],
+)
+def test_a_time_without_an_offset_or_out_of_range_is_a_422_naming_it(
+    client: TestClient, at: Any
+) -> None:
+    run_id = completed_run(client)
+    refused = _timed(client, run_id, (1, "started", "2026-12-01T09:30:00Z"), (0, "started", at))
+    assert refused.status_code == 422, refused.text
+    detail = refused.json()["detail"]
+    assert [d["loc"] for d in detail] == [["body", "updates", 1, "at"]]
+    assert "offset" in detail[0]["msg"] or "range" in detail[0]["msg"]
+    assert _execution(client, run_id, 1) is None  # nothing half-written
+
+
+def test_a_done_or_failed_time_before_the_started_time_is_a_422_naming_it(
+    client: TestClient,
+) -> None:
+    run_id = completed_run(client)
+    assert _timed(client, run_id, (0, "started", "2026-12-01T10:00:00Z")).status_code == 200
+    # 10:00+05:00 is 05:00Z: earlier than the recorded start, although its digits are not.
+    early = _timed(client, run_id, (0, "done", "2026-12-01T10:00:00+05:00"))
+    assert early.status_code == 422, early.text
+    detail = early.json()["detail"][0]
+    assert detail["loc"] == ["body", "updates", 0, "at"]
+    assert "2026-12-01T10:00:00" in detail["msg"] and "started" in detail["msg"]
+    # Within one report: the start it reports counts, and nothing is applied.
+    same = _timed(
+        client,
+        run_id,
+        (1, "started", "2026-12-01T10:00:00Z"),
+        (1, "failed", "2026-12-01T09:59:59Z"),
+    )
+    assert same.status_code == 422, same.text
+    assert same.json()["detail"][0]["loc"] == ["body", "updates", 1, "at"]
+    assert _execution(client, run_id, 1) is None
+    assert _execution(client, run_id, 0)["state"] == "started"
+    # The same instant as the start, or later, is fine.
+    assert _timed(client, run_id, (0, "done", "2026-12-01T10:00:00Z")).status_code == 200
+    assert _execution(client, run_id, 0)["ended_at"] == "2026-12-01T10:00:00Z"

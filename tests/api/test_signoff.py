@@ -142,6 +142,13 @@ def test_signoff_validates_its_body_and_run(secured: TestClient) -> None:
     run_id = _completed(secured)
     empty = secured.post(f"/runs/{run_id}/signoff", json={"statement": ""}, headers=AS_SUPERVISOR)
     assert empty.status_code == 422 and empty.json()["detail"][0]["loc"] == ["body", "statement"]
+    # Only whitespace states nothing either, like an override's reason of only spaces.
+    blank = secured.post(
+        f"/runs/{run_id}/signoff", json={"statement": " \n\t "}, headers=AS_SUPERVISOR
+    )
+    assert blank.status_code == 422, blank.text
+    assert blank.json()["detail"][0]["loc"] == ["body", "statement"]
+    assert secured.get(f"/runs/{run_id}", headers=AS_CLIENT).json()["signoffs"] == []
     missing = secured.post(f"/runs/{'0' * 32}/signoff", json=STATEMENT, headers=AS_SUPERVISOR)
     assert missing.status_code == 404
 

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
 
 from fastapi import APIRouter
-from pydantic import BaseModel, BeforeValidator, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
 from app.api.responses import BODY, SUPERVISOR, errors
-from app.api.run_schemas import Timestamp
+from app.api.run_schemas import RequestTime
 from app.graph.gate import GateTimeoutError
 from app.runs import archive, backup
 from app.runs.factory import uses_leases
@@ -20,6 +19,8 @@ router = APIRouter(prefix="/admin", tags=["admin"])
 
 
 class BackupRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
     dest: str = Field(
         min_length=1,
         max_length=4096,
@@ -73,18 +74,12 @@ def backup_store(caller: SupervisorDep, body: BackupRequest, settings: SettingsD
     return BackupOut(**report.__dict__)
 
 
-def _rfc3339_text(value: object) -> object:
-    # Only an RFC 3339 string, as the schema's date-time format says: pydantic would take a
-    # bare number as seconds since 1970.
-    if not isinstance(value, str):
-        raise ValueError("must be an RFC 3339 date-time string, e.g. 2026-01-31T00:00:00Z")
-    return value
-
-
 class ArchiveRequest(BaseModel):
-    before: Annotated[Timestamp, BeforeValidator(_rfc3339_text)] = Field(
+    model_config = ConfigDict(extra="forbid")
+
+    before: RequestTime = Field(
         description="Archive lineages whose head is completed or cancelled and finished "
-        "before this time (RFC 3339, with an offset)"
+        "before this time (RFC 3339, with an offset: Z or +05:00)"
     )
 
 
