@@ -31,6 +31,15 @@ def _run_with_review(server: Server) -> str:
     return str(created.json()["id"])
 
 
+def _approve_through_the_api(server: Server, run_id: str) -> None:
+    httpx.post(
+        f"{server.url}/runs/{run_id}/reviews/5",
+        json={"action": "approve"},
+        headers={"X-API-Key": SUPERVISOR_KEY},
+        timeout=30,
+    ).raise_for_status()
+
+
 def test_a_pending_review_is_resolved_from_the_reviews_page_and_the_run_goes_on(
     page: Page, server: Server
 ) -> None:
@@ -51,12 +60,7 @@ def test_a_completed_run_is_signed_off_and_shows_its_verified_heads(
 ) -> None:
     run_id = _run_with_review(server)
     wait_status(server, run_id, "awaiting_review")
-    httpx.post(
-        f"{server.url}/runs/{run_id}/reviews/5",
-        json={"action": "approve"},
-        headers={"X-API-Key": SUPERVISOR_KEY},
-        timeout=30,
-    ).raise_for_status()
+    _approve_through_the_api(server, run_id)
     wait_status(server, run_id)
     heads = httpx.get(
         f"{server.url}/runs/{run_id}/trace/verify",
@@ -83,12 +87,7 @@ def test_a_run_page_awaiting_review_follows_a_resolution_made_elsewhere(
     expect(page.locator("#run-status")).to_have_text("awaiting review")
     expect(page.locator("#status-changed")).to_be_hidden()
     page.evaluate("window.__same_page = true")
-    httpx.post(
-        f"{server.url}/runs/{run_id}/reviews/5",
-        json={"action": "approve"},
-        headers={"X-API-Key": SUPERVISOR_KEY},
-        timeout=30,
-    ).raise_for_status()
+    _approve_through_the_api(server, run_id)
     expect(page.locator("#run-status")).to_have_text("completed", timeout=60_000)
     expect(page.locator("#status-changed")).to_be_visible()
     expect(page.locator("#status-now")).to_have_text("completed")
