@@ -15,6 +15,8 @@ MAX_STATEMENT_CHARS = 4000
 
 
 class SignOffRequest(BaseModel):
+    model_config = {"extra": "forbid"}
+
     statement: Annotated[str, NoNul] = Field(
         min_length=1,
         max_length=MAX_STATEMENT_CHARS,

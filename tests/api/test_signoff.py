@@ -148,6 +148,11 @@ def test_signoff_validates_its_body_and_run(secured: TestClient) -> None:
     )
     assert blank.status_code == 422, blank.text
     assert blank.json()["detail"][0]["loc"] == ["body", "statement"]
+    # A field this body does not have (a typo, or a signer the key does not name) is refused.
+    extra = secured.post(
+        f"/runs/{run_id}/signoff", json={**STATEMENT, "signer": "someone"}, headers=AS_SUPERVISOR
+    )
+    assert extra.status_code == 422 and extra.json()["detail"][0]["loc"] == ["body", "signer"]
     assert secured.get(f"/runs/{run_id}", headers=AS_CLIENT).json()["signoffs"] == []
     missing = secured.post(f"/runs/{'0' * 32}/signoff", json=STATEMENT, headers=AS_SUPERVISOR)
     assert missing.status_code == 404
