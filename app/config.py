@@ -87,7 +87,7 @@ class Settings(BaseSettings):
     # server under another. Warned about at start-up.
     test_graph_version: str | None = Field(None, min_length=1, max_length=64)
 
-    # Signed chain heads (app.runs.signing): an Ed25519 private key in PEM (`ltaa keygen`
+    # Signed chain heads (app.audit.signing): an Ed25519 private key in PEM (`ltaa keygen`
     # writes one); and a directory of retired public keys (*.pem), kept so that runs signed
     # before a rotation still verify.
     signing_key_file: Path | None = None

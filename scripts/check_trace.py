@@ -23,7 +23,7 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
-from app.runs.signing import key_id, payload_bytes
+from app.audit.signing import key_id, payload_bytes
 from app.store import chain
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 
-from app.api.schemas import (
+from app.api.schemas.allocation import (
     AllocateRequest,
     AllocateResponse,
     Assignment,

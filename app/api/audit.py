@@ -9,14 +9,14 @@ from typing import Any
 from fastapi.responses import StreamingResponse
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.run_schemas import (
+from app.api.schemas.runs import (
     BrokenLinkOut,
     ChainHeadsOut,
     ParentLinkOut,
     SignatureOut,
     TraceVerifyOut,
 )
-from app.runs import audit
+from app.audit import record as audit
 
 JSONL = "application/x-ndjson"
 

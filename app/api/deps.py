@@ -14,7 +14,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import Caller, KeyRing, Role
 from app.api.errors import ApiError
-from app.api.run_schemas import RUN_ID_PATTERN
+from app.api.schemas.runs import RUN_ID_PATTERN
 from app.config import Settings
 from app.runs.worker import RunWorker
 

@@ -18,9 +18,8 @@ from fastapi.routing import iter_route_contexts
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.domain.errors import DomainError
-from app.runs.errors import RunArchivedError, RunNotFoundError
-from app.runs.tombstones import archive_file_of
+from app.domain.errors import DomainError, RunArchivedError, RunNotFoundError
+from app.store.tombstones import archive_file_of
 
 Loc = Sequence[str | int]
 log = logging.getLogger("ltaa.api")

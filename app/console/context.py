@@ -17,12 +17,12 @@ from fastapi.templating import Jinja2Templates
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import Caller, KeyRing, Role
-from app.api.run_schemas import RUN_ID_PATTERN
+from app.api.schemas.runs import RUN_ID_PATTERN
 from app.config import Settings
 from app.console import format as fmt
 from app.console import sessions
 from app.console.sessions import COOKIE, SignedIn
-from app.runs import tombstones
+from app.store import tombstones
 
 HERE = Path(__file__).resolve().parent
 

@@ -11,8 +11,9 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import RedirectResponse, Response
 
 from app.api.audit import jsonl_trace
-from app.api.review_schemas import MAX_STATEMENT_CHARS
-from app.console import views
+from app.api.schemas.reviews import MAX_STATEMENT_CHARS
+from app.audit import record as audit
+from app.console import browse, views
 from app.console.context import (
     ConsoleDep,
     CsrfDep,
@@ -23,11 +24,11 @@ from app.console.context import (
     no_run,
     sessions_of,
 )
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, RunNotFoundError, RunStateConflictError
 from app.domain.lifecycle import ACTIVE, FINISHED, RunStatus
-from app.runs import audit, browse, service, signoff
-from app.runs.errors import RunNotFoundError, RunStateConflictError
-from app.runs.revisions import RevisionConflictError
+from app.plans.revisions import RevisionConflictError
+from app.reviews import signoff
+from app.runs import service
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 RUNS_PER_PAGE = 50

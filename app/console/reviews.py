@@ -18,10 +18,9 @@ from app.console.context import (
     no_run,
     sessions_of,
 )
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, RunNotFoundError
 from app.domain.review import ReviewAction
-from app.runs import reviews as review_service
-from app.runs.errors import RunNotFoundError
+from app.reviews import service as review_service
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 

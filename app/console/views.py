@@ -9,13 +9,13 @@ from typing import Any
 from markupsafe import Markup
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.console import charts
+from app.console import browse, charts
+from app.console.frontier import FrontierPoint, cached_frontier, frontier
+from app.domain.errors import RunNotFoundError
 from app.domain.models import TaskId
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
-from app.runs import browse, revisions
-from app.runs import diff as diffs
-from app.runs.errors import RunNotFoundError
-from app.runs.frontier import FrontierPoint, cached_frontier, frontier
+from app.plans import diff as diffs
+from app.plans import revisions
 from app.store.models import Attempt
 
 DECISIONS_PER_PAGE = 25

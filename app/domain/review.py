@@ -1,7 +1,7 @@
 """Supervisor review of decisions (SPEC 11): the policy a run is created with, the triggers
 it fires on the true facts of a decision, and the vocabulary of a resolution.
 
-Pure rules; the graph evaluates them at each decision and app.runs.reviews stores them.
+Pure rules; the graph evaluates them at each decision and app.reviews.service stores them.
 """
 
 from __future__ import annotations

@@ -73,7 +73,7 @@ def make_worker(
         )
     ownership: Ownership
     if uses_leases(settings.db_url):
-        from app.runs.leased import LeaseOwnership
+        from app.runs.ownership import LeaseOwnership
 
         ownership = LeaseOwnership(settings=settings, sessions=sessions)
         open_checkpointer = postgres_checkpointer

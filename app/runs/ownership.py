@@ -3,16 +3,36 @@
 - `LocalOwnership` (the embedded SQLite default): this process is the only one on the
   store (an advisory lock proves it), so it owns every run; a run found `running` at
   start-up belonged to a process that died.
-- `app.runs.leased.LeaseOwnership` (PostgreSQL scale-out): runs are leased, renewed and
-  fenced, so several processes share the database and never execute one run twice.
+- `LeaseOwnership` (PostgreSQL scale-out): runs are leased, renewed and fenced, so
+  several processes share the database and never execute one run twice.
 
 The worker hands each strategy a `Slots` view of itself (start a run, count free slots,
 see the runs it holds), so a strategy decides *which* runs this process executes while the
 worker decides *how*.
+
+Leases, in detail (several API processes sharing runs on one PostgreSQL database):
+
+- Claim: a process with a free slot leases runs that are `queued` (or `interrupted`, with
+  auto-resume) and unleased, with `SELECT ... FOR UPDATE SKIP LOCKED` (a background poll
+  every `claim_poll_s`; `POST /runs` and resume also claim at once). Only the lease
+  holder executes a run.
+- Renew: a heartbeat thread extends every held lease each `lease_s / 3`, and every
+  recorder write renews its run's lease in the write's own transaction. Both are
+  conditional on still owning the run: a process that lost a lease (it stalled past
+  expiry and another process took the run) stops that run at once, writing nothing.
+- Take over: a run `running` under an expired lease belonged to a process that died. Any
+  poller marks it `interrupted` (an event naming the lost owner) and it is claimed like
+  any interrupted run; the resume goes through the usual integrity check and `resumed`
+  event, from the Postgres checkpointer shared by all processes.
 """
 
 from __future__ import annotations
 
+import logging
+import os
+import socket
+import threading
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
@@ -23,11 +43,14 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind, RunStatus
-from app.runs.recorder import Fence, RunStop
-from app.runs.store_lock import StoreLock
+from app.runs.recorder import Fence, LeaseLost, RunStop
+from app.store import leases
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.lock import StoreLock
 from app.store.models import Run
+
+log = logging.getLogger("ltaa.runs")
 
 
 class Slots(Protocol):
@@ -159,3 +182,193 @@ def _claim_store(database_url: str) -> Callable[[], None]:
     lock = StoreLock(Path(database))
     lock.acquire()
     return lock.release
+
+
+# -- PostgreSQL scale-out: leases ------------------------------------------------------------
+
+
+def lease_owner_id(name: str | None) -> str:
+    """Unique per process start: a restarted process must not inherit its old leases, or
+    it would skip the integrity check for runs it never ran."""
+    return f"{name or socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+
+
+class Periodic:
+    """Calls `fn` every `interval_s` on a daemon thread until stopped; errors are logged,
+    never fatal (a database blip must not end the heartbeat)."""
+
+    def __init__(self, name: str, interval_s: float, fn: Callable[[], object]) -> None:
+        self._interval_s = interval_s
+        self._fn = fn
+        self._stopped = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stopped.set()
+        if self._thread.is_alive():
+            self._thread.join()
+
+    def _loop(self) -> None:
+        while not self._stopped.wait(self._interval_s):
+            try:
+                self._fn()
+            except Exception:
+                log.exception("%s failed; retrying in %.1f s", self._thread.name, self._interval_s)
+
+
+class LeaseOwnership:
+    """The Ownership strategy of a process sharing runs with others on PostgreSQL."""
+
+    def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
+        self.owner = lease_owner_id(settings.worker_name)
+        self._settings = settings
+        self._sessions = sessions
+        self._lease_s = settings.lease_s
+        self._slots: Slots | None = None
+        # Serialises this process's claims so that free slots are counted once.
+        self._claim_lock = threading.Lock()
+        self._heartbeat = Periodic("ltaa-lease-heartbeat", settings.lease_s / 3, self._renew)
+        self._poller = Periodic("ltaa-run-claims", settings.claim_poll_s, self._poll)
+
+    def attach(self, slots: Slots) -> None:
+        self._slots = slots
+        # Started now, not in recover(): `ltaa run` claims runs without ever polling.
+        self._heartbeat.start()
+
+    @property
+    def slots(self) -> Slots:
+        if self._slots is None:
+            raise RuntimeError("LeaseOwnership is used before a worker attached it")
+        return self._slots
+
+    # -- the Ownership protocol --------------------------------------------------------
+
+    def recover(self) -> list[str]:
+        """Start-up: take what is waiting now, then keep polling. Runs that other live
+        processes hold are left alone; their leases say so."""
+        resumed = self._poll()
+        self._poller.start()
+        return resumed
+
+    def stop_taking(self) -> None:
+        self._poller.stop()
+
+    def close(self) -> None:
+        # Draining runs have marked themselves interrupted and released their leases, so a
+        # peer resumes them at its next poll instead of after lease expiry.
+        self._heartbeat.stop()
+
+    def submit(self, run_id: str) -> None:
+        with self._claim_lock:
+            if self.slots.free_slots() > 0:
+                with transaction(self._sessions) as session:
+                    claimed = leases.claim_run(
+                        session=session, run_id=run_id, owner=self.owner, lease_s=self._lease_s
+                    )
+                if claimed:
+                    self._start_claimed(run_id)
+                    return
+        # No room here, or another process has it: queued runs go to whichever process
+        # has a free slot first, so an explicitly resumed run is queued too.
+        with transaction(self._sessions) as session:
+            lifecycle.move_where(
+                session,
+                run_id=run_id,
+                current=RunStatus.INTERRUPTED,
+                to=RunStatus.QUEUED,
+                where=(leases.unleased(),),
+            )
+
+    def is_active(self, run_id: str) -> bool:
+        with self._sessions() as session:
+            return leases.is_leased(session=session, run_id=run_id)
+
+    def owned_run(self, session: Session, run_id: str) -> Run | None:
+        # The row lock makes "still mine" hold until this transaction commits.
+        run = repo.get_run(session=session, run_id=run_id, for_update=True)
+        return run if run is not None and run.lease_owner == self.owner else None
+
+    def fence(self, run_id: str, stop: RunStop) -> Fence:
+        def fence(session: Session) -> None:
+            alive = leases.renew(
+                session=session, owner=self.owner, run_ids=[run_id], lease_s=self._lease_s
+            )
+            if run_id not in alive:
+                stop.lease_lost.set()
+                raise LeaseLost(run_id)
+            if alive[run_id]:
+                stop.cancelled.set()
+
+        return fence
+
+    def event_detail(self) -> dict[str, Any]:
+        return {"worker": self.owner}
+
+    def finished(self, run_id: str, stop: RunStop) -> None:
+        if not stop.lease_lost.is_set():
+            self._release(run_id)
+
+    # -- claim, renew, take over --------------------------------------------------------
+
+    def _start_claimed(self, run_id: str) -> None:
+        if not self.slots.start(run_id):  # closing: hand the run straight back
+            self._release(run_id)
+
+    def _poll(self) -> list[str]:
+        """Reap expired leases, then claim up to the free slots; returns resumed run ids."""
+        with transaction(self._sessions) as session:
+            for run, previous in leases.expired_running(session=session):
+                lifecycle.move(
+                    session,
+                    run,
+                    RunStatus.INTERRUPTED,
+                    event=EventKind.INTERRUPTED,
+                    detail={
+                        "reason": f"the lease of {previous or 'no process'} "
+                        "expired: the process running it stopped",
+                        "lease_owner": previous,
+                        "worker": self.owner,
+                    },
+                )
+        statuses = (
+            [RunStatus.QUEUED, RunStatus.INTERRUPTED]
+            if self._settings.auto_resume
+            else [RunStatus.QUEUED]
+        )
+        with self._claim_lock:
+            with transaction(self._sessions) as session:
+                claimed = leases.claim_runs(
+                    session=session,
+                    owner=self.owner,
+                    lease_s=self._lease_s,
+                    limit=self.slots.free_slots(),
+                    statuses=statuses,
+                )
+            for run_id, _ in claimed:
+                self._start_claimed(run_id)
+        if claimed:
+            log.info("claimed %d run(s): %s", len(claimed), ", ".join(r for r, _ in claimed))
+        return [run_id for run_id, status in claimed if status == RunStatus.INTERRUPTED]
+
+    def _renew(self) -> None:
+        held = self.slots.held()
+        if not held:
+            return
+        with transaction(self._sessions) as session:
+            alive = leases.renew(
+                session=session, owner=self.owner, run_ids=list(held), lease_s=self._lease_s
+            )
+        for run_id, stop in held.items():
+            if run_id not in alive:
+                if not stop.lease_lost.is_set():
+                    log.warning("lost the lease of run %s; stopping it here", run_id)
+                stop.lease_lost.set()
+            elif alive[run_id]:
+                stop.cancelled.set()  # cancelled through another process
+
+    def _release(self, run_id: str) -> None:
+        with transaction(self._sessions) as session:
+            leases.release(session=session, run_id=run_id, owner=self.owner)

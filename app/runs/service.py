@@ -10,26 +10,26 @@ from typing import Any
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.signoffs import SignOff, signoffs
 from app.config import Settings
+from app.domain.errors import RunStateConflictError
 from app.domain.lifecycle import FINISHED
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.runs import lifecycle, records, reviews
-from app.runs.errors import RunStateConflictError
+from app.runs import lifecycle, records, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import validate_replay
-from app.runs.signoff import SignOff, signoffs
 from app.runs.spec import RunSpec
-from app.runs.tombstones import missing_run
 from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import Attempt, ExecutionReport, Run, RunEvent
+from app.store.tombstones import missing_run
 
 
 def create_run(
@@ -158,7 +158,7 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
         run.cancel_requested = True
         if run.status == RunStatus.AWAITING_REVIEW:
             # Nobody holds it: close its review, then cancel (the last event is `cancelled`).
-            reviews.close_pending(session, run_id, "the run was cancelled")
+            review_gate.close_pending(session, run_id, "the run was cancelled")
             lifecycle.move(
                 session,
                 run,

@@ -22,6 +22,7 @@ from typing import Any
 from langgraph.checkpoint.base import BaseCheckpointSaver, CheckpointTuple
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.signing import SigningKeys, sign_run
 from app.config import Settings
 from app.domain.errors import DomainError
 from app.graph.builder import build_graph
@@ -31,13 +32,12 @@ from app.graph.recorder import RunCancelled
 from app.graph.version import compatible, current_version, upgrade_blocked_message
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
-from app.runs import lifecycle, records, reviews
+from app.runs import lifecycle, records, review_gate
 from app.runs.integrity import check_integrity
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
 from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence
 from app.runs.replay import recorded_replies
-from app.runs.signing import SigningKeys, sign_run
 from app.runs.spec import RunSpec
 from app.runs.token_budget import with_token_budget
 from app.solvers.ltaa import execute_ltaa
@@ -219,7 +219,7 @@ class RunWorker:
         if spec.replay_of is not None:
             # A replay re-applies the original's resolutions and never waits for a review.
             with self._sessions() as session:
-                recorded = reviews.recorded_resolutions(session=session, run_id=spec.replay_of)
+                recorded = review_gate.recorded_resolutions(session=session, run_id=spec.replay_of)
         try:
             execution = execute_ltaa(
                 spec.problem,
@@ -268,7 +268,7 @@ class RunWorker:
                 )
                 cancelled = True
             else:
-                reviews.pause_for_review(session, run, payload)
+                review_gate.pause_for_review(session, run, payload)
                 cancelled = False
         if cancelled:
             self._prune_checkpoints(run_id)
@@ -297,7 +297,7 @@ class RunWorker:
             instance = spec.problem.instance
             resume = checkpoint is not None or run.status == RunStatus.INTERRUPTED
             version = current_version(self._settings.test_graph_version)
-            resolution = reviews.resolution_to_apply(session, run_id) if resume else None
+            resolution = review_gate.resolution_to_apply(session, run_id) if resume else None
             if resolution is not None and run.status == RunStatus.QUEUED:
                 # Queued by a review's resolution: the paused graph goes on with it. Not a
                 # crash resume, so neither `resumes` nor a `resumed` event.

@@ -35,7 +35,7 @@ What it cannot detect on its own: someone with write access to the database who 
 scheme can recompute every link after an edit, since the chain has no secret key. The
 verifier reports each chain's head hash; a supervisor who records the heads at sign-off can
 later tell that the record changed, however it was rewritten; with a server signing key the
-heads are signed (app.runs.signing), so a rewrite needs the private key to pass.
+heads are signed (app.audit.signing), so a rewrite needs the private key to pass.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ def make_client(settings: Settings) -> Iterator[ClientFactory]:
     def factory(**overrides: Any) -> TestClient:
         if opened and "data_dir" not in overrides:
             # Clients stay open until teardown, and one SQLite store serves one process at
-            # a time (app.runs.store_lock): each further client gets a store of its own.
+            # a time (app.store.lock): each further client gets a store of its own.
             # (model_copy runs no validators: the paths derived from data_dir are reset too.)
             overrides |= {
                 "data_dir": settings.data_dir.with_name(f"data-{len(opened) + 1}"),

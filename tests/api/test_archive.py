@@ -20,7 +20,7 @@ from sqlalchemy import update
 
 from app.config import Settings
 from app.main import create_app
-from app.runs.archive import archive
+from app.operations.archive import archive
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.models import Run
 from tests.offline_check import check_offline

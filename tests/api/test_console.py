@@ -14,8 +14,8 @@ from pydantic import SecretStr
 
 from app.api.auth import KeyRing, Role
 from app.console import charts
+from app.console.frontier import MAX_CAPS, compute_frontier, frontier
 from app.domain.catalog import scenario
-from app.runs.frontier import MAX_CAPS, compute_frontier, frontier
 from app.runs.spec import RunSpec
 from tests.api.conftest import ClientFactory
 from tests.polling import eventually, wait_until

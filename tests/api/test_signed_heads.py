@@ -12,9 +12,9 @@ from fastapi.testclient import TestClient
 from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.signing import generate_key_file
 from app.config import Settings
 from app.main import create_app
-from app.runs.signing import generate_key_file
 from app.store import chain
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction

@@ -153,7 +153,7 @@ def _instance_of(body: dict[str, Any]) -> Any:
     if "scenario" in body:
         return scenario(body["scenario"]).instance
     from app.api.allocation import resolve_instance
-    from app.api.schemas import InstanceRequest
+    from app.api.schemas.allocation import InstanceRequest
 
     return resolve_instance(
         InstanceRequest.model_validate({k: body[k] for k in ("tasks", "robots")})

@@ -8,7 +8,7 @@ from fastapi.testclient import TestClient
 from app.config import Settings
 from app.graph.pause import PausePoint
 from app.main import create_app
-from app.runs.store_lock import StoreInUseError
+from app.store.lock import StoreInUseError
 from tests.polling import wait_logged, wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}

@@ -18,8 +18,9 @@ from sqlalchemy import create_engine
 from sqlalchemy.orm import sessionmaker
 
 from app.api.rounding import rounded
+from app.audit import record as audit
 from app.config import Settings
-from app.runs import audit, records
+from app.runs import records
 from app.store import chain
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, RunEvent

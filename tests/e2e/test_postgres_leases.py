@@ -22,7 +22,7 @@ from app.domain.catalog import scenario
 from app.graph.checkpoint_postgres import open_postgres_saver
 from app.runs import service
 from app.runs.factory import make_worker
-from app.runs.leased import LeaseOwnership
+from app.runs.ownership import LeaseOwnership
 from app.runs.recorder import LeaseLost, RunStop, SqlRecorder
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker

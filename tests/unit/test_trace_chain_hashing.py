@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit import record as audit
 from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
-from app.runs import audit, records
+from app.runs import records
 from app.store import chain
 from app.store import repository as repo
 from app.store.db import make_engine, transaction

@@ -10,9 +10,9 @@ from pydantic import BaseModel, ConfigDict, Field
 from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
 from app.api.responses import BODY, SUPERVISOR, errors
-from app.api.run_schemas import RequestTime
+from app.api.schemas.runs import RequestTime
 from app.graph.gate import GateTimeoutError
-from app.runs import archive, backup
+from app.operations import archive, backup
 from app.runs.factory import uses_leases
 
 router = APIRouter(prefix="/admin", tags=["admin"])

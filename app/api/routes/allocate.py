@@ -11,7 +11,7 @@ from fastapi.openapi.models import Example
 from app.api.allocation import allocate as run_allocation
 from app.api.deps import ClientDep, SettingsDep
 from app.api.responses import BODY, CLIENT, errors
-from app.api.schemas import AllocateRequest, AllocateResponse
+from app.api.schemas.allocation import AllocateRequest, AllocateResponse
 
 router = APIRouter(tags=["allocate"])
 

@@ -8,7 +8,7 @@ from pydantic import BaseModel, Field
 from app.api.deps import ClientDep, RunsDep
 from app.api.errors import ApiError
 from app.api.responses import CLIENT, errors
-from app.runs.signing import ALGORITHM, public_pem
+from app.audit.signing import ALGORITHM, public_pem
 
 router = APIRouter(prefix="/audit", tags=["audit"])
 

@@ -9,7 +9,7 @@ from fastapi import APIRouter
 from app.api.allocation import load_solver
 from app.api.deps import ClientDep
 from app.api.responses import CLIENT, errors
-from app.api.schemas import RobotOut, ScenarioOut, SolverOut, TaskOut
+from app.api.schemas.allocation import RobotOut, ScenarioOut, SolverOut, TaskOut
 from app.domain import catalog
 from app.domain.errors import DomainError
 from app.solvers.registry import solver_names

@@ -18,7 +18,7 @@ from app.api.errors import ApiError
 from app.api.openapi import header_schema
 from app.api.responses import SUPERVISOR, errors
 from app.runs.progress import CURSOR_PATTERN, Cursor, read_progress, run_status, task_ids
-from app.runs.tombstones import missing_run
+from app.store.tombstones import missing_run
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Request
 
 from app.api.deps import SettingsDep
-from app.api.schemas import HealthOut
+from app.api.schemas.allocation import HealthOut
 from app.graph.version import current_version
 from app.solvers.registry import solver_names
 

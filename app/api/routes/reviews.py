@@ -9,7 +9,7 @@ from fastapi import APIRouter, Path, Request, Response
 from app.api.deps import RunIdPath, RunsDep, SupervisorDep
 from app.api.idempotency import IdempotencyKey, idempotency_of, mark_replayed
 from app.api.responses import BODY, SUPERVISOR, errors
-from app.api.review_schemas import (
+from app.api.schemas.reviews import (
     AlternativeOut,
     PendingReviewOut,
     ProposalOut,
@@ -17,7 +17,7 @@ from app.api.review_schemas import (
     ReviewResolvedOut,
 )
 from app.domain.lifecycle import RunStatus
-from app.runs import reviews
+from app.reviews import service as reviews
 
 router = APIRouter(tags=["reviews"])
 

@@ -6,7 +6,8 @@ from fastapi import APIRouter, Response, status
 
 from app.api.deps import ClientDep, RunIdPath, RunsDep, SettingsDep
 from app.api.idempotency import CREATED_HEADERS, IdempotencyKey, keyed, mark_replayed
-from app.api.living_schemas import (
+from app.api.responses import BODY, CLIENT, errors
+from app.api.schemas.plans import (
     DiffOut,
     ExecutionOut,
     ExecutionRequest,
@@ -16,9 +17,9 @@ from app.api.living_schemas import (
     RobotChange,
     SideMetrics,
 )
-from app.api.responses import BODY, CLIENT, errors
 from app.domain.lifecycle import RunStatus
-from app.runs import diff, execution, revisions
+from app.plans import diff, revisions
+from app.plans import reports as execution
 from app.runs.idempotency import Idempotency
 
 router = APIRouter(prefix="/runs", tags=["living plans"])

@@ -20,8 +20,9 @@ from app.api.deps import (
 from app.api.idempotency import CREATED_HEADERS, IdempotencyKey, idempotency_of, mark_replayed
 from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.routes.signoffs import signoff_out
-from app.api.run_examples import RUN_EXAMPLES
-from app.api.run_schemas import (
+from app.api.schemas.allocation import MetricsOut, UsageOut
+from app.api.schemas.examples import RUN_EXAMPLES
+from app.api.schemas.runs import (
     DEFAULT_PAGE,
     MAX_PAGE,
     AttemptOut,
@@ -40,12 +41,12 @@ from app.api.run_schemas import (
     TraceOut,
     TraceVerifyOut,
 )
-from app.api.schemas import MetricsOut, UsageOut
+from app.audit import record as audit
 from app.domain.models import Instance
 from app.domain.serialize import instance_to_dict
 from app.graph.recorder import DecisionRecord
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
-from app.runs import audit, reviews, service
+from app.runs import review_gate, service
 from app.runs.replay import replay_spec
 from app.runs.spec import RunSpec
 from app.store.models import Attempt, ExecutionReport, Run
@@ -98,7 +99,7 @@ def create_run(
             if body.token_budget is not None
             else settings.run_token_budget,
             **scope_of(body),
-            review=reviews.policy_for(
+            review=review_gate.policy_for(
                 body.review.model_dump(mode="json") if body.review is not None else None,
                 problem.instance,
             ),

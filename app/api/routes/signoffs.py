@@ -7,9 +7,10 @@ from fastapi import APIRouter, Response, status
 from app.api.deps import RunIdPath, RunsDep, SupervisorDep
 from app.api.idempotency import IdempotencyKey, idempotency_of, mark_replayed
 from app.api.responses import BODY, SUPERVISOR, errors
-from app.api.review_schemas import SignOffRequest
-from app.api.run_schemas import SignedHeadsOut, SignOffOut
-from app.runs.signoff import SignOff, sign_off
+from app.api.schemas.reviews import SignOffRequest
+from app.api.schemas.runs import SignedHeadsOut, SignOffOut
+from app.audit.signoffs import SignOff
+from app.reviews.signoff import sign_off
 
 router = APIRouter(prefix="/runs", tags=["sign-off"])
 

@@ -12,7 +12,7 @@ from app.api.deps import SettingsDep, SupervisorDep
 from app.api.idempotency import KEY_PATTERN, REPLAYED_HEADER, checked_key, keyed, mark_replayed
 from app.api.openapi import header_schema
 from app.api.responses import BODY, SUPERVISOR, errors
-from app.api.webhook_schemas import (
+from app.api.schemas.webhooks import (
     WEBHOOK_ID_PATTERN,
     DeliveryOut,
     WebhookCreate,

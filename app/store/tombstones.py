@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.errors import DomainError
-from app.runs.errors import RunArchivedError, RunNotFoundError
+from app.domain.errors import DomainError, RunArchivedError, RunNotFoundError
 from app.store.models import ArchivedRun
 
 

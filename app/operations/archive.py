@@ -3,7 +3,7 @@ verified JSON-lines files, their rows deleted, a tombstone left behind.
 
 Per lineage, in this order, so a kill -9 at any point leaves each run either archived and
 deleted or intact:
-1. each run's export (app.runs.audit.trace_record, the format scripts/check_trace.py
+1. each run's export (app.audit.record.trace_record, the format scripts/check_trace.py
    verifies) with a last `verify` line (the chain check and heads) goes to a temporary
    file, fsynced, then renamed into place: a file is whole or absent;
 2. one transaction deletes the lineage's rows (events, decisions, attempts and signatures
@@ -28,8 +28,8 @@ from pathlib import Path
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit import record as audit
 from app.domain.lifecycle import RunStatus
-from app.runs import audit
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import ArchivedRun, Run, RunAnnotation, as_utc

@@ -9,11 +9,11 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.errors import RunNotFoundError
 from app.domain.metrics import balance_score
 from app.graph.recorder import DecisionRecord
+from app.plans.revisions import RevisionConflictError
 from app.runs import records
-from app.runs.errors import RunNotFoundError
-from app.runs.revisions import RevisionConflictError
 from app.runs.spec import RunSpec
 from app.store import repository as repo
 from app.store.models import Run

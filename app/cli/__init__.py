@@ -21,7 +21,7 @@ from rich.table import Table
 from app.api.allocation import allocate as run_allocation
 from app.api.errors import domain_error_body, validation_error_body
 from app.api.rounding import rounded
-from app.api.schemas import AllocateRequest, AllocateResponse
+from app.api.schemas.allocation import AllocateRequest, AllocateResponse
 from app.config import Settings, get_settings
 from app.domain.errors import DomainError
 from app.domain.lifecycle import RunStatus
@@ -279,8 +279,8 @@ def run(
     ] = LLMScope.ALL,
 ) -> None:
     """Run the LTAA graph durably in the local data directory, with a progress bar."""
-    from app.cli_run import print_summary, run_locally
-    from app.runs.store_lock import StoreInUseError
+    from app.cli.runs import print_summary, run_locally
+    from app.store.lock import StoreInUseError
 
     console = Console()
     try:
@@ -317,8 +317,8 @@ def backup_command(
 ) -> None:
     """Back up the data directory's two SQLite files, consistent with each other, while the
     server runs (it holds its runs at a node boundary meanwhile)."""
-    from app.cli_store import StoreCommandError, run_backup
-    from app.runs.backup import BackupError
+    from app.cli.store import StoreCommandError, run_backup
+    from app.operations.backup import BackupError
 
     try:
         manifest, how = run_backup(get_settings(), dest, url=url, api_key=api_key)
@@ -334,8 +334,8 @@ def restore_command(
 ) -> None:
     """Fill an empty data directory (LTAA_DATA_DIR) from a backup; then start the server
     there: runs that were running resume from the backup's point."""
-    from app.cli_store import StoreCommandError, run_restore
-    from app.runs.backup import BackupError
+    from app.cli.store import StoreCommandError, run_restore
+    from app.operations.backup import BackupError
 
     try:
         written = run_restore(get_settings(), source)
@@ -362,8 +362,8 @@ def archive_command(
 ) -> None:
     """Archive old runs: verified JSON-lines files in LTAA_ARCHIVE_DIR, their rows deleted,
     tombstones left (lookups answer 410 naming the file), then VACUUM."""
-    from app.cli_store import StoreCommandError, run_archive
-    from app.runs.backup import BackupError
+    from app.cli.store import StoreCommandError, run_archive
+    from app.operations.backup import BackupError
 
     when = before if before.tzinfo is not None else before.replace(tzinfo=UTC)
     # Test seam: die (SIGKILL) after this many archive files are in place.
@@ -391,7 +391,7 @@ def keygen_command(
 ) -> None:
     """Write a new Ed25519 signing key for signed chain heads; point LTAA_SIGNING_KEY_FILE
     at it. Keep the previous key's public half in LTAA_RETIRED_PUBLIC_KEYS_DIR."""
-    from app.runs.signing import generate_key_file
+    from app.audit.signing import generate_key_file
 
     try:
         kid = generate_key_file(path)
@@ -440,8 +440,8 @@ def revise(
     wait: Annotated[bool, typer.Option(help="Wait for the revision and print the diff")] = True,
 ) -> None:
     """Revise a run on a server (SPEC 10) and print the diff against its parent."""
-    from app.cli_revise import ReviseError, build_changes, parse_pin, print_diff
-    from app.cli_revise import revise as post_revision
+    from app.cli.revise import ReviseError, build_changes, parse_pin, print_diff
+    from app.cli.revise import revise as post_revision
 
     console = Console()
     try:
@@ -555,7 +555,7 @@ _KEY = Annotated[
 @cli.command()
 def reviews(url: _URL = "http://127.0.0.1:8000", key: _KEY = None) -> None:
     """List the decisions waiting for a supervisor's review (GET /reviews)."""
-    from app.cli_reviews import ApiFailed, make_client, pending, print_reviews
+    from app.cli.reviews import ApiFailed, make_client, pending, print_reviews
 
     try:
         with make_client(url, key) as client:
@@ -581,7 +581,7 @@ def review(
     key: _KEY = None,
 ) -> None:
     """Resolve a review: --approve, or --override ROBOT --reason TEXT."""
-    from app.cli_reviews import ApiFailed, make_client, resolve
+    from app.cli.reviews import ApiFailed, make_client, resolve
 
     if approve == (override is not None):
         raise typer.BadParameter("give exactly one of --approve and --override ROBOT")

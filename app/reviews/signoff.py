@@ -8,59 +8,24 @@ that were signed (`signoffs_ok`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from datetime import datetime
 from typing import Any
 
-from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit import record as audit
+from app.audit.heads import chain_heads
+from app.audit.signing import SigningKeys, sign_run
+from app.audit.signoffs import SignOff
 from app.domain.annotations import AnnotationKind
-from app.domain.errors import DomainError, refuse_nul
-from app.runs import audit, lifecycle
-from app.runs.errors import RunStateConflictError
+from app.domain.errors import DomainError, RunStateConflictError, refuse_nul
+from app.runs import lifecycle
 from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import RunStatus
-from app.runs.signing import SigningKeys, sign_run
-from app.runs.tombstones import missing_run
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Decision, RunAnnotation, RunEvent, as_utc, utcnow
-
-
-@dataclass(frozen=True)
-class SignOff:
-    signer: str
-    at: datetime
-    heads: dict[str, str | None]
-    statement: str
-
-    @classmethod
-    def of(cls, row: RunAnnotation) -> SignOff:
-        detail = row.detail or {}
-        return cls(
-            signer=str(detail["signer"]),
-            at=as_utc(datetime.fromisoformat(detail["at"])),
-            heads=dict(detail["heads"]),
-            statement=str(detail["statement"]),
-        )
-
-
-def _heads(session: Session, run_id: str) -> dict[str, str | None]:
-    decision = session.scalar(
-        select(Decision.chain_hash)
-        .where(Decision.run_id == run_id)
-        .order_by(Decision.task_index.desc())
-        .limit(1)
-    )
-    event = session.scalar(
-        select(RunEvent.chain_hash)
-        .where(RunEvent.run_id == run_id)
-        .order_by(RunEvent.seq.desc())
-        .limit(1)
-    )
-    return {"decisions": decision, "events": event}
+from app.store.models import utcnow
+from app.store.tombstones import missing_run
 
 
 def sign_off(
@@ -111,7 +76,7 @@ def sign_off(
             detail: dict[str, Any] = {
                 "signer": signer,
                 "at": at.isoformat(),
-                "heads": _heads(session, run_id),
+                "heads": chain_heads(session, run_id).as_dict(),
                 "statement": statement,
             }
             row = lifecycle.record_annotation(
@@ -132,7 +97,7 @@ def sign_off(
             raise
         return earlier, True
     if keys is not None:
-        # With a server key the heads are signed at each sign-off too (app.runs.signing).
+        # With a server key the heads are signed at each sign-off too (app.audit.signing).
         sign_run(sessions=sessions, keys=keys, run_id=run_id, reason="signoff")
     return signed, False
 
@@ -147,12 +112,3 @@ def _for_key(
     if row.request_digest != idempotency.digest or row.run_id != run_id:
         raise IdempotencyKeyReusedError(row.run_id)
     return SignOff.of(row)
-
-
-def signoffs(*, session: Session, run_id: str) -> list[SignOff]:
-    return [
-        SignOff.of(row)
-        for row in repo.annotations_page(
-            session=session, run_id=run_id, kind=AnnotationKind.SIGNOFF.value
-        )
-    ]

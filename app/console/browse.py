@@ -12,13 +12,13 @@ from dataclasses import dataclass
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.signoffs import SignOff, signoffs
+from app.domain.errors import RunNotFoundError
 from app.domain.metrics import balance_score, expected_success
 from app.domain.phases import detect_phase
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.runs import records
-from app.runs.errors import RunNotFoundError
-from app.runs.signoff import SignOff, signoffs
 from app.runs.spec import RunSpec
 from app.store import repository as repo
 from app.store.models import Attempt, Run, RunEvent

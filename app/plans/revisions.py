@@ -20,15 +20,14 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
 from app.domain.annotations import AnnotationKind
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, RunNotFoundError
 from app.domain.lifecycle import FINISHED
+from app.plans.reports import head_of
+from app.plans.revision_plan import ParentDecision, plan_revision
 from app.reasoners.factory import close_reasoner, make_reasoner
-from app.runs import lifecycle, records, reviews
-from app.runs.errors import RunNotFoundError
-from app.runs.execution import head_of
+from app.runs import lifecycle, records, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
-from app.runs.revision_plan import ParentDecision, plan_revision
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import chain
@@ -229,7 +228,7 @@ def _create(
             if status == RunStatus.AWAITING_REVIEW:
                 # Its pending decision was never stored, so it is not pinned; a later
                 # resolution of that review is a 409.
-                reviews.close_pending(session, parent_id, "the run was revised")
+                review_gate.close_pending(session, parent_id, "the run was revised")
             # The other process holding it (PostgreSQL) stops at its next heartbeat.
             parent.cancel_requested = True
             lifecycle.move(

@@ -16,14 +16,15 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.heads import geneses as chain_geneses
+from app.audit.signing import SignatureCheck, SigningKeys, check_signature
 from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import EventKind, RunStatus
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
-from app.runs.signing import SignatureCheck, SigningKeys, check_signature
-from app.runs.tombstones import missing_run
 from app.store import chain
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, Run, RunAnnotation, RunEvent, as_utc
+from app.store.tombstones import missing_run
 
 DECISIONS_PER_PAGE = 100  # with their attempts' prompts: about 1-3 MB per page
 EVENTS_PER_PAGE = 1000
@@ -149,21 +150,6 @@ def _result(check: chain.ChainCheck) -> ChainCheckResult:
     )
 
 
-def _geneses(run: Run) -> dict[str, str]:
-    return {
-        table: chain.run_genesis(
-            table,
-            run.id,
-            scheme=run.chain_scheme,
-            request=run.request,
-            mode=run.mode,
-            max_deviation=run.max_deviation,
-            anchor=run.chain_anchor,
-        )
-        for table in ("decisions", "events")
-    }
-
-
 def verify_trace(
     *, sessions: sessionmaker[Session], run_id: str, keys: SigningKeys | None = None
 ) -> ChainReport:
@@ -172,7 +158,7 @@ def verify_trace(
     with sessions() as session:
         run = _run(session, run_id)
         status, n_tasks, anchor = run.status, run.n_tasks, run.chain_anchor
-        geneses = _geneses(run)
+        geneses = chain_geneses(run)
         scheme = run.chain_scheme or chain.SCHEME
         signature_row = repo.latest_signature(session=session, run_id=run_id)
         revision_of = run.revision_of
@@ -335,7 +321,7 @@ def _run_line(run: Run) -> dict[str, Any]:
         "request": run.request,
         "revision_of": run.revision_of,
         "revision": run.revision,
-        "genesis": _geneses(run),
+        "genesis": chain_geneses(run),
     }
 
 

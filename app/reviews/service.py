@@ -1,15 +1,12 @@
-"""Supervisor reviews of decisions (SPEC 11), as keyword-only functions the worker, the
-routes and the CLI call.
+"""Supervisor reviews of decisions (SPEC 11): the queue of decisions waiting for a person,
+and their resolution, as keyword-only functions the routes, the console and the CLI call.
 
-A run whose review policy fires pauses inside the graph (`interrupt()`, app.graph.review);
-the worker then records the review here and moves the run to `awaiting_review`, holding
-no slot. A supervisor's resolution is stored with the run and queues it again in one
-transaction; whichever worker claims it resumes the graph with `Command(resume=...)`.
+A resolution is stored with the run and queues it again in one transaction; the worker's
+side of a review (pausing, resuming with the resolution) is app.runs.review_gate.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -17,22 +14,18 @@ from typing import Any
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.errors import DomainError, refuse_nul
-from app.domain.models import Instance
+from app.domain.errors import DomainError, RunNotFoundError, RunStateConflictError, refuse_nul
 from app.domain.review import (
     Resolution,
     ReviewAction,
-    ReviewPolicy,
     ReviewState,
-    check_review_policy,
 )
 from app.runs import lifecycle
-from app.runs.errors import RunNotFoundError, RunStateConflictError
 from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind, RunStatus
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Decision, Review, Run, as_utc, utcnow
+from app.store.models import Review, as_utc, utcnow
 
 
 class ReviewConflictError(DomainError):
@@ -79,107 +72,6 @@ class PendingReview:
     @property
     def alternatives(self) -> list[dict[str, Any]]:
         return [dict(a) for a in self.payload["alternatives"]]
-
-
-def policy_for(review: Mapping[str, Any] | None, instance: Instance) -> dict[str, Any] | None:
-    """A request's review policy as the run spec stores it, checked against the instance
-    (DomainError naming the field for an unknown robot, feature or task id)."""
-    if review is None:
-        return None
-    policy = ReviewPolicy.from_json(review)
-    check_review_policy(policy, instance)
-    return policy.to_json()
-
-
-# -- the worker's side ---------------------------------------------------------------------
-
-
-def pause_for_review(session: Session, run: Run, payload: Mapping[str, Any]) -> None:
-    """Record the review the graph paused for (once per decision, also across restarts)
-    and move the run to awaiting_review, in the caller's transaction."""
-    task_index = int(payload["task_index"])
-    existing = session.scalar(
-        select(Review).where(Review.run_id == run.id, Review.task_index == task_index)
-    )
-    if existing is None:
-        session.add(
-            Review(
-                run_id=run.id,
-                task_index=task_index,
-                state=ReviewState.PENDING.value,
-                proposal=dict(payload),
-            )
-        )
-        session.flush()
-        lifecycle.record_event(
-            session,
-            run_id=run.id,
-            kind=EventKind.REVIEW_REQUESTED,
-            detail={
-                "task_index": task_index,
-                "task_id": payload.get("task_id"),
-                "triggers": list(payload.get("triggers", [])),
-                "proposal": payload.get("proposal", {}).get("robot"),
-            },
-        )
-    lifecycle.move(session, run, RunStatus.AWAITING_REVIEW)
-    # Nobody holds a run that waits for a person: its lease (PostgreSQL scale-out) ends in
-    # the same transaction, not a moment later when the worker's thread winds down.
-    run.lease_owner = None
-    run.lease_expires_at = None
-
-
-def resolution_to_apply(session: Session, run_id: str) -> dict[str, Any] | None:
-    """The resolution a worker resumes the run's graph with: a resolved review whose task
-    has no stored decision yet (so a crash after it was applied never applies it twice)."""
-    row = session.scalar(
-        select(Review)
-        .where(Review.run_id == run_id, Review.state == ReviewState.RESOLVED.value)
-        .where(
-            ~select(Decision.id)
-            .where(Decision.run_id == run_id, Decision.task_index == Review.task_index)
-            .exists()
-        )
-        .order_by(Review.task_index)
-        .limit(1)
-    )
-    return None if row is None else dict(row.resolution or {})
-
-
-def recorded_resolutions(*, session: Session, run_id: str) -> dict[int, Resolution]:
-    """A finished run's applied reviews, by task index, as a replay re-applies them."""
-    out: dict[int, Resolution] = {}
-    for d in repo.decisions(session=session, run_id=run_id):
-        review = d.review
-        if not review:
-            continue
-        out[d.task_index] = Resolution(
-            action=ReviewAction(review["action"]),
-            reviewer=str(review["reviewer"]),
-            at=str(review["at"]),
-            triggers=tuple(review.get("triggers") or ()),
-            robot=d.robot_name if review["action"] == ReviewAction.OVERRIDE else None,
-            reason=review.get("reason"),
-        )
-    return out
-
-
-def close_pending(session: Session, run_id: str, why: str) -> None:
-    """Close the run's pending review (a cancel or a revision), with its event."""
-    closed = session.execute(
-        update(Review)
-        .where(Review.run_id == run_id, Review.state == ReviewState.PENDING.value)
-        .values(state=ReviewState.CLOSED.value, resolved_at=utcnow())
-        .returning(Review.task_index)
-        .execution_options(synchronize_session=False)
-    ).all()
-    for (task_index,) in closed:
-        lifecycle.record_event(
-            session,
-            run_id=run_id,
-            kind=EventKind.REVIEW_CLOSED,
-            detail={"task_index": task_index, "reason": why},
-        )
 
 
 # -- the supervisor's side -----------------------------------------------------------------

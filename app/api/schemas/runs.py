@@ -10,7 +10,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 from pydantic.config import JsonDict
 from pydantic_core import PydanticCustomError
 
-from app.api.schemas import (
+from app.api.schemas.allocation import (
     CUSTOM_FORM,
     MAX_SEED,
     SCENARIO_FORM,

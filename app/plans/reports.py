@@ -20,10 +20,9 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.annotations import AnnotationKind
-from app.domain.errors import DomainError
+from app.domain.errors import DomainError, RunNotFoundError
 from app.domain.lifecycle import FINISHED
 from app.runs import lifecycle
-from app.runs.errors import RunNotFoundError
 from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind
 from app.store import repository as repo

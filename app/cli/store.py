@@ -16,8 +16,8 @@ from typing import Any
 import httpx
 
 from app.config import Settings
-from app.runs import backup
-from app.runs.store_lock import StoreInUseError, StoreLock
+from app.operations import backup
+from app.store.lock import StoreInUseError, StoreLock
 
 
 class StoreCommandError(RuntimeError):
@@ -80,7 +80,7 @@ def run_archive(
     after_file: Callable[[str], None] | None = None,
 ) -> tuple[dict[str, Any], str]:
     """Archive through the server holding the store, or directly under the store lock."""
-    from app.runs import archive
+    from app.operations import archive
     from app.store.db import make_engine, make_session_factory
     from app.store.migrate import upgrade_head
 

@@ -22,13 +22,13 @@ from typing import Any
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
-from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.heads import chain_heads, geneses
 from app.config import Settings
 from app.store import chain
 from app.store.db import transaction
-from app.store.models import Decision, Run, RunEvent, RunSignature
+from app.store.models import Run, RunSignature
 
 ALGORITHM = "Ed25519"
 PAYLOAD_FORMAT = "ltaa-signed-heads/v1"
@@ -112,42 +112,16 @@ def payload_bytes(payload: dict[str, Any]) -> bytes:
 
 def heads_payload(session: Session, run: Run, reason: str) -> dict[str, Any]:
     """What is signed: the run, its scheme, both geneses and both heads with their counts."""
-    last_decision = session.execute(
-        select(Decision.chain_hash, Decision.task_index)
-        .where(Decision.run_id == run.id)
-        .order_by(Decision.task_index.desc())
-        .limit(1)
-    ).first()
-    last_event = session.execute(
-        select(RunEvent.chain_hash, RunEvent.seq)
-        .where(RunEvent.run_id == run.id)
-        .order_by(RunEvent.seq.desc())
-        .limit(1)
-    ).first()
-    geneses = {
-        table: chain.run_genesis(
-            table,
-            run.id,
-            scheme=run.chain_scheme,
-            request=run.request,
-            mode=run.mode,
-            max_deviation=run.max_deviation,
-            anchor=run.chain_anchor,
-        )
-        for table in ("decisions", "events")
-    }
+    heads = chain_heads(session, run.id)
     return {
         "format": PAYLOAD_FORMAT,
         "run_id": run.id,
         "reason": reason,
         "chain_scheme": run.chain_scheme or chain.SCHEME,
-        "genesis": geneses,
-        "heads": {
-            "decisions": last_decision.chain_hash if last_decision else None,
-            "events": last_event.chain_hash if last_event else None,
-        },
-        "decisions": last_decision.task_index + 1 if last_decision else 0,
-        "events": last_event.seq if last_event else 0,
+        "genesis": geneses(run),
+        "heads": heads.as_dict(),
+        "decisions": heads.decisions,
+        "events": heads.events,
     }
 
 

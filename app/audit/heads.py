@@ -1,0 +1,60 @@
+"""Where a run's chains start and end: the geneses its immutable fields give, and the last
+link of each chain as stored. Sign-offs record the heads, signatures sign both."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from app.store import chain
+from app.store.models import Decision, Run, RunEvent
+
+
+@dataclass(frozen=True)
+class ChainHeads:
+    decision_hash: str | None
+    decisions: int  # decisions chained so far (the last task index + 1)
+    event_hash: str | None
+    events: int  # events so far (the last seq)
+
+    def as_dict(self) -> dict[str, str | None]:
+        return {"decisions": self.decision_hash, "events": self.event_hash}
+
+
+def chain_heads(session: Session, run_id: str) -> ChainHeads:
+    last_decision = session.execute(
+        select(Decision.chain_hash, Decision.task_index)
+        .where(Decision.run_id == run_id)
+        .order_by(Decision.task_index.desc())
+        .limit(1)
+    ).first()
+    last_event = session.execute(
+        select(RunEvent.chain_hash, RunEvent.seq)
+        .where(RunEvent.run_id == run_id)
+        .order_by(RunEvent.seq.desc())
+        .limit(1)
+    ).first()
+    return ChainHeads(
+        decision_hash=last_decision.chain_hash if last_decision else None,
+        decisions=last_decision.task_index + 1 if last_decision else 0,
+        event_hash=last_event.chain_hash if last_event else None,
+        events=last_event.seq if last_event else 0,
+    )
+
+
+def geneses(run: Run) -> dict[str, str]:
+    """The genesis of the run's decision and event chains, by its own chain scheme."""
+    return {
+        table: chain.run_genesis(
+            table,
+            run.id,
+            scheme=run.chain_scheme,
+            request=run.request,
+            mode=run.mode,
+            max_deviation=run.max_deviation,
+            anchor=run.chain_anchor,
+        )
+        for table in ("decisions", "events")
+    }
