@@ -16,7 +16,8 @@ from app.api.schemas.runs import (
     SignatureOut,
     TraceVerifyOut,
 )
-from app.audit import record as audit
+from app.audit.export import trace_record
+from app.audit.verify import ChainReport
 
 JSONL = "application/x-ndjson"
 
@@ -51,11 +52,11 @@ def _encoded(pages: Iterator[list[dict[str, Any]]]) -> Iterator[str]:
 
 def jsonl_trace(*, sessions: sessionmaker[Session], run_id: str) -> StreamingResponse:
     """Raises RunNotFoundError (a 404) before any byte is sent."""
-    pages = audit.trace_record(sessions=sessions, run_id=run_id)
+    pages = trace_record(sessions=sessions, run_id=run_id)
     return StreamingResponse(_encoded(pages), media_type=JSONL)
 
 
-def verify_out(report: audit.ChainReport) -> TraceVerifyOut:
+def verify_out(report: ChainReport) -> TraceVerifyOut:
     broken = report.first_break
     return TraceVerifyOut(
         ok=report.ok,

@@ -12,7 +12,7 @@ from fastapi.responses import RedirectResponse, Response
 
 from app.api.audit import jsonl_trace
 from app.api.schemas.reviews import MAX_STATEMENT_CHARS
-from app.audit import record as audit
+from app.audit.verify import verify_trace
 from app.console import browse, views
 from app.console.context import (
     ConsoleDep,
@@ -214,7 +214,7 @@ async def verify_page(
     fragment: bool = False,
 ) -> Response:
     def fetch() -> dict[str, Any]:
-        report = audit.verify_trace(sessions=sessions_of(request), run_id=run_id)
+        report = verify_trace(sessions=sessions_of(request), run_id=run_id)
         return {"title": "Chain verification", "heading": "Chain verification", "report": report}
 
     return await _part(

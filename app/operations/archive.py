@@ -3,7 +3,7 @@ verified JSON-lines files, their rows deleted, a tombstone left behind.
 
 Per lineage, in this order, so a kill -9 at any point leaves each run either archived and
 deleted or intact:
-1. each run's export (app.audit.record.trace_record, the format scripts/check_trace.py
+1. each run's export (app.audit.export.trace_record, the format scripts/check_trace.py
    verifies) with a last `verify` line (the chain check and heads) goes to a temporary
    file, fsynced, then renamed into place: a file is whole or absent;
 2. one transaction deletes the lineage's rows (events, decisions, attempts and signatures
@@ -28,7 +28,8 @@ from pathlib import Path
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.audit import record as audit
+from app.audit.export import trace_record
+from app.audit.verify import verify_trace
 from app.domain.lifecycle import RunStatus
 from app.store import repository as repo
 from app.store.db import transaction
@@ -87,10 +88,10 @@ def _write_atomically(path: Path, lines: list[str]) -> None:
 def _export_lines(
     sessions: sessionmaker[Session], run_id: str
 ) -> tuple[list[str], dict[str, object]]:
-    report = audit.verify_trace(sessions=sessions, run_id=run_id)
+    report = verify_trace(sessions=sessions, run_id=run_id)
     lines = [
         json.dumps(line, ensure_ascii=False) + "\n"
-        for page in audit.trace_record(sessions=sessions, run_id=run_id)
+        for page in trace_record(sessions=sessions, run_id=run_id)
         for line in page
     ]
     heads = {"decisions": report.decisions.head, "events": report.events.head}

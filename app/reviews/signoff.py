@@ -13,10 +13,10 @@ from typing import Any
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.audit import record as audit
 from app.audit.heads import chain_heads
 from app.audit.signing import SigningKeys, sign_run
 from app.audit.signoffs import SignOff
+from app.audit.verify import verify_trace
 from app.domain.annotations import AnnotationKind
 from app.domain.errors import DomainError, RunStateConflictError, refuse_nul
 from app.runs import lifecycle
@@ -59,7 +59,7 @@ def sign_off(
             raise RunStateConflictError(
                 run_id, run.status, "sign off", "Only a completed run can be signed off."
             )
-    report = audit.verify_trace(sessions=sessions, run_id=run_id)
+    report = verify_trace(sessions=sessions, run_id=run_id)
     if report.decisions.first_break is not None or report.events.first_break is not None:
         raise RunStateConflictError(
             run_id,

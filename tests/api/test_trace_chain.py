@@ -18,7 +18,9 @@ from sqlalchemy import create_engine
 from sqlalchemy.orm import sessionmaker
 
 from app.api.rounding import rounded
-from app.audit import record as audit
+from app.audit import pages as record_pages
+from app.audit.export import trace_record
+from app.audit.verify import verify_trace
 from app.config import Settings
 from app.runs import records
 from app.store import chain
@@ -317,16 +319,16 @@ def test_the_record_is_read_in_pages_with_nothing_lost_at_page_boundaries(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     run_id = _completed_run(client)
-    monkeypatch.setattr(audit, "DECISIONS_PER_PAGE", 5)
-    monkeypatch.setattr(audit, "EVENTS_PER_PAGE", 2)
+    monkeypatch.setattr(record_pages, "DECISIONS_PER_PAGE", 5)
+    monkeypatch.setattr(record_pages, "EVENTS_PER_PAGE", 2)
     sessions = sessionmaker(create_engine(settings.db_url), expire_on_commit=False)
-    pages = list(audit.trace_record(sessions=sessions, run_id=run_id))
+    pages = list(trace_record(sessions=sessions, run_id=run_id))
     # run, events 1-2, event 3, decisions in 8 pages (5 x 7 + 1), end
     assert [len(p) for p in pages] == [1, 2, 1, *[5] * 7, 1, 1]
     decisions = [line["task_index"] for p in pages for line in p if line["type"] == "decision"]
     assert decisions == list(range(N_TASKS))
     assert _verify(client, run_id)["ok"] is True
-    assert audit.verify_trace(sessions=sessions, run_id=run_id).ok
+    assert verify_trace(sessions=sessions, run_id=run_id).ok
 
 
 def test_unknown_runs_and_formats_are_4xx_in_the_one_error_shape(client: TestClient) -> None:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.audit import record as audit
+from app.audit.verify import verify_trace
 from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
 from app.runs import records
@@ -187,6 +187,6 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
     with transaction(sessions) as session:
         repo.add_event(session=session, run_id="r1", kind="completed", detail={"decisions": 3})
 
-    report = audit.verify_trace(sessions=sessions, run_id="r1")
+    report = verify_trace(sessions=sessions, run_id="r1")
     assert report.ok, report.first_break
     assert (report.decisions.rows, report.events.rows, report.decisions.unchained) == (3, 2, 0)

@@ -41,7 +41,7 @@ from app.api.schemas.runs import (
     TraceOut,
     TraceVerifyOut,
 )
-from app.audit import record as audit
+from app.audit import verify
 from app.domain.models import Instance
 from app.domain.serialize import instance_to_dict
 from app.graph.recorder import DecisionRecord
@@ -391,7 +391,7 @@ def _decision_out(
 def verify_trace(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> TraceVerifyOut:
     """For supervisors: recompute the run's hash chains; ok, or the first broken link."""
     return verify_out(
-        audit.verify_trace(sessions=runs.sessions, run_id=run_id, keys=runs.worker.signing_keys)
+        verify.verify_trace(sessions=runs.sessions, run_id=run_id, keys=runs.worker.signing_keys)
     )
 
 

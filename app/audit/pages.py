@@ -1,0 +1,101 @@
+"""A run's audit record read in pages of bounded size, each in its own short session.
+
+A 10,000-task run's prompts and replies are hundreds of megabytes, and a read transaction
+held open for a slow download would keep SQLite's WAL from being checkpointed while runs
+write. Rows are only ever appended in key order (and a re-upsert rewrites the same
+content), so reading by key in pages sees a consistent prefix of a live run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import Any, Protocol, TypeVar
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.store import repository as repo
+from app.store.models import Attempt, Decision, Run, RunAnnotation, RunEvent
+from app.store.tombstones import missing_run
+
+DECISIONS_PER_PAGE = 100  # with their attempts' prompts: about 1-3 MB per page
+EVENTS_PER_PAGE = 1000
+
+
+def run_or_missing(session: Session, run_id: str) -> Run:
+    run = repo.get_run(session=session, run_id=run_id)
+    if run is None:
+        raise missing_run(session, run_id)
+    return run
+
+
+class _Sequenced(Protocol):
+    seq: Any
+
+
+Row = TypeVar("Row", bound=_Sequenced)
+
+
+def _seq_pages(
+    sessions: sessionmaker[Session], read: Callable[[Session, int], list[Row]]
+) -> Iterator[list[Row]]:
+    """Pages of rows keyed by `seq`, each read in its own short session after the last."""
+    after = 0
+    while True:
+        with sessions() as session:
+            page = read(session, after)
+        if not page:
+            return
+        yield page
+        after = page[-1].seq
+
+
+def event_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[RunEvent]]:
+    return _seq_pages(
+        sessions,
+        lambda session, after: repo.events_page(
+            session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
+        ),
+    )
+
+
+def annotation_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[RunAnnotation]]:
+    return _seq_pages(
+        sessions,
+        lambda session, after: repo.annotations_page(
+            session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
+        ),
+    )
+
+
+def chain_passes(revision_of: str | None) -> tuple[bool | None, ...]:
+    """How to read a run's decisions in the order they were chained: all of them in task
+    order, or a revision's pins first, then the rest (repo.revision_chain_order)."""
+    return (None,) if revision_of is None else (True, False)
+
+
+def decision_pages(
+    sessions: sessionmaker[Session],
+    run_id: str,
+    pinned: bool | None = None,
+) -> Iterator[list[tuple[Decision, list[Attempt]]]]:
+    after = -1
+    while True:
+        with sessions() as session:
+            page = repo.decisions_page(
+                session=session,
+                run_id=run_id,
+                after_task=after,
+                limit=DECISIONS_PER_PAGE,
+                pinned=pinned,
+            )
+            if not page:
+                return
+            attempts = repo.attempts_of_tasks(
+                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
+            )
+        yield [(d, attempts.get(d.task_index, [])) for d in page]
+        after = page[-1].task_index
+
+
+def columns(row: Any, fields: dict[str, Any]) -> dict[str, Any]:
+    return {name: getattr(row, name) for name in fields}
