@@ -30,8 +30,8 @@ from app.graph.memory_recorder import MemoryRecorder
 from app.graph.runner import run_graph
 from app.graph.usage import usage_from_attempts
 from app.reasoners.attribution import REASONER, RULES
-from app.reasoners.base import Reasoner
-from app.reasoners.factory import LLM_REASONERS, close_reasoner, make_reasoner
+from app.reasoners.base import Reasoner, close_reasoner
+from app.reasoners.factory import LLM_REASONERS, make_reasoner
 from app.reasoners.scope import LLMScope
 from app.solvers.ltaa import graph_context
 from benchmarks.common import DOCS, machine, table

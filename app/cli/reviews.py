@@ -7,11 +7,14 @@ supervisor key; omit it when the server runs without keys).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
 import httpx
+import typer
 from rich.console import Console
 from rich.table import Table
+
+from app.cli.root import _KEY, _URL, cli
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 
@@ -99,3 +102,59 @@ def print_reviews(reviews: list[dict[str, Any]], console: Console) -> None:
             r["requested_at"],
         )
     console.print(table)
+
+
+@cli.command()
+def reviews(url: _URL = "http://127.0.0.1:8000", key: _KEY = None) -> None:
+    """List the decisions waiting for a supervisor's review (GET /reviews)."""
+
+    try:
+        with make_client(url, key) as client:
+            found = pending(client)
+    except (ApiFailed, httpx.HTTPError) as exc:
+        Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    print_reviews(found, Console())
+
+
+@cli.command()
+def review(
+    run_id: Annotated[str, typer.Argument(help="The run (see `ltaa reviews`)")],
+    task_index: Annotated[int, typer.Argument(help="The task index waiting for review")],
+    approve: Annotated[bool, typer.Option("--approve", help="Approve the proposal")] = False,
+    override: Annotated[
+        str | None, typer.Option("--override", help="Use this robot instead", show_default=False)
+    ] = None,
+    reason: Annotated[
+        str | None, typer.Option("--reason", help="Why (required with --override)")
+    ] = None,
+    url: _URL = "http://127.0.0.1:8000",
+    key: _KEY = None,
+) -> None:
+    """Resolve a review: --approve, or --override ROBOT --reason TEXT."""
+
+    if approve == (override is not None):
+        raise typer.BadParameter("give exactly one of --approve and --override ROBOT")
+    if override is not None and not (reason or "").strip():
+        raise typer.BadParameter("--override needs --reason", param_hint="--reason")
+    try:
+        with make_client(url, key) as client:
+            done = resolve(client, run_id, task_index, override=override, reason=reason)
+    except (ApiFailed, httpx.HTTPError) as exc:
+        Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    what = f"overridden to {done['robot']}" if done["action"] == "override" else "approved"
+    typer.echo(
+        f"task {task_index} of run {run_id} {what} by {done['reviewer']}; the run is "
+        f"{done['status']} again"
+    )
+
+
+@cli.command("key-name")
+def key_name(
+    key: Annotated[str, typer.Argument(help="An API key of LTAA_API_KEYS (without :ROLE)")],
+) -> None:
+    """Print a key's fingerprint: its default name, and how LTAA_API_KEY_NAMES names it."""
+    from app.api.auth import key_fingerprint
+
+    typer.echo(key_fingerprint(key))

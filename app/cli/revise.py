@@ -4,11 +4,14 @@ diff against its parent with rich. Talks HTTP (the run lives in the server's sto
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Annotated, Any
 
 import httpx
+import typer
 from rich.console import Console
 from rich.table import Table
+
+from app.cli.root import cli
 
 
 class ReviseError(RuntimeError):
@@ -96,7 +99,7 @@ def _check(response: httpx.Response) -> dict[str, Any]:
     return dict(response.json())
 
 
-def revise(
+def post_revision(
     *,
     url: str,
     api_key: str | None,
@@ -175,3 +178,66 @@ def print_diff(created: dict[str, Any], diff: dict[str, Any] | None, console: Co
             pct(c["success_after"]),
         )
     console.print(moved)
+
+
+@cli.command()
+def revise(
+    run_id: Annotated[str, typer.Argument(help="The run to revise (the head of its lineage)")],
+    robot_unavailable: Annotated[
+        list[str] | None, typer.Option(help="Robot that takes no new task (repeatable)")
+    ] = None,
+    robot_available: Annotated[
+        list[str] | None, typer.Option(help="Robot back in service (repeatable)")
+    ] = None,
+    set_rate: Annotated[
+        list[str] | None, typer.Option(help="<robot>:<feature>=<rate>, e.g. light:heavy=0.9")
+    ] = None,
+    add_task_next: Annotated[
+        list[str] | None, typer.Option(help="<id>:<feature,...> placed right after the pins")
+    ] = None,
+    add_task: Annotated[
+        list[str] | None, typer.Option(help="<id>:<feature,...> placed at the end")
+    ] = None,
+    remove_task: Annotated[list[str] | None, typer.Option(help="Task id to drop")] = None,
+    mode: Annotated[str | None, typer.Option(help="New operational mode")] = None,
+    max_deviation: Annotated[float | None, typer.Option(help="New workload cap")] = None,
+    pin: Annotated[
+        str, typer.Option(help="reported | decided | through:<task index> | tasks:<id,...>")
+    ] = "reported",
+    reason: Annotated[str, typer.Option(help="Why the plan changes (kept in the record)")] = (
+        "site change"
+    ),
+    reasoner: Annotated[str | None, typer.Option(help="Override the inherited reasoner")] = None,
+    url: Annotated[str, typer.Option(help="The server", envvar="LTAA_URL")] = (
+        "http://127.0.0.1:8000"
+    ),
+    api_key: Annotated[
+        str | None, typer.Option(help="Client API key", envvar="LTAA_CLIENT_API_KEY")
+    ] = None,
+    wait: Annotated[bool, typer.Option(help="Wait for the revision and print the diff")] = True,
+) -> None:
+    """Revise a run on a server (SPEC 10) and print the diff against its parent."""
+
+    console = Console()
+    try:
+        body: dict[str, Any] = {
+            "changes": build_changes(
+                unavailable=robot_unavailable or [],
+                available=robot_available or [],
+                rates=set_rate or [],
+                add_next=add_task_next or [],
+                add_end=add_task or [],
+                remove=remove_task or [],
+                mode=mode,
+                max_deviation=max_deviation,
+            ),
+            "pin": parse_pin(pin),
+            "reason": reason,
+        }
+        if reasoner is not None:
+            body["reasoner"] = reasoner
+        created, diff = post_revision(url=url, api_key=api_key, run_id=run_id, body=body, wait=wait)
+    except ReviseError as exc:
+        Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    print_diff(created, diff, console)

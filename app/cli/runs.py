@@ -7,16 +7,22 @@ started here shows up in GET /runs of a server on the same data directory.
 from __future__ import annotations
 
 import time
+from typing import Annotated
 
+import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from app.config import Settings
+from app.api.errors import domain_error_body
+from app.cli.root import cli, fail
+from app.config import Settings, get_settings
 from app.domain.catalog import scenario as builtin_scenario
-from app.domain.lifecycle import ACTIVE
+from app.domain.errors import DomainError
+from app.domain.lifecycle import ACTIVE, RunStatus
 from app.domain.modes import Mode
 from app.domain.problem import Problem
+from app.reasoners.scope import LLMScope
 from app.runs import service
 from app.runs.factory import make_worker
 from app.runs.spec import RunSpec
@@ -103,3 +109,48 @@ def print_summary(view: service.RunView, console: Console) -> None:
     if view.run.error:
         table.add_row("error", view.run.error)
     console.print(table)
+
+
+@cli.command()
+def run(
+    scenario: Annotated[str, typer.Option(help="Built-in scenario")] = "baseline",
+    mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
+    reasoner: Annotated[
+        str, typer.Option(help="'rules' (offline), 'anthropic' or 'openai'")
+    ] = "rules",
+    max_deviation: Annotated[
+        float | None,
+        typer.Option(help="Workload cap, in tasks either side of the target (default: the mode's)"),
+    ] = None,
+    guidance: Annotated[
+        str | None,
+        typer.Option(help="'optimizer' to give the reasoner the optimal completion's choice"),
+    ] = None,
+    llm_scope: Annotated[
+        LLMScope,
+        typer.Option(help="'contested': ask an LLM reasoner only for contested decisions"),
+    ] = LLMScope.ALL,
+) -> None:
+    """Run the LTAA graph durably in the local data directory, with a progress bar."""
+    from app.store.lock import StoreInUseError
+
+    console = Console()
+    try:
+        view = run_locally(
+            get_settings(),
+            scenario=scenario,
+            mode=mode,
+            reasoner=reasoner,
+            max_deviation=max_deviation,
+            guidance=guidance,
+            console=console,
+            llm_scope=llm_scope.value,
+        )
+    except DomainError as exc:
+        fail(domain_error_body(exc), as_json=False)
+    except StoreInUseError as exc:  # a server (or another `ltaa run`) has the data directory
+        Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    print_summary(view, console)
+    if view.run.status != RunStatus.COMPLETED:
+        raise typer.Exit(1)

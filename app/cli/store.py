@@ -7,15 +7,20 @@ this process takes the lock, so none can start meanwhile, and copies the files d
 
 from __future__ import annotations
 
+import json
 import os
+import signal
 from collections.abc import Callable
-from datetime import datetime
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import httpx
+import typer
+from rich.console import Console
 
-from app.config import Settings
+from app.cli.root import cli
+from app.config import Settings, get_settings
 from app.operations import backup
 from app.store.lock import StoreInUseError, StoreLock
 
@@ -121,3 +126,99 @@ def run_archive(
         "archive_dir": str(dest),
         "lineages": [{"head": x.head, "runs": x.runs, "files": x.files} for x in done],
     }, "direct"
+
+
+@cli.command("backup")
+def backup_command(
+    dest: Annotated[Path, typer.Argument(help="A new or empty directory for the copy")],
+    url: Annotated[
+        str | None,
+        typer.Option(help="The server holding the store [default: http://LTAA_HOST:LTAA_PORT]"),
+    ] = None,
+    api_key: Annotated[
+        str | None, typer.Option(help="A supervisor key [default: LTAA_API_KEY]")
+    ] = None,
+) -> None:
+    """Back up the data directory's two SQLite files, consistent with each other, while the
+    server runs (it holds its runs at a node boundary meanwhile)."""
+    from app.operations.backup import BackupError
+
+    try:
+        manifest, how = run_backup(get_settings(), dest, url=url, api_key=api_key)
+    except (StoreCommandError, BackupError) as exc:
+        Console(stderr=True, soft_wrap=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    typer.echo(json.dumps({"taken_by": how, **manifest}, indent=2))
+
+
+@cli.command("restore")
+def restore_command(
+    source: Annotated[Path, typer.Argument(help="A directory written by `ltaa backup`")],
+) -> None:
+    """Fill an empty data directory (LTAA_DATA_DIR) from a backup; then start the server
+    there: runs that were running resume from the backup's point."""
+    from app.operations.backup import BackupError
+
+    try:
+        written = run_restore(get_settings(), source)
+    except (StoreCommandError, BackupError) as exc:
+        Console(stderr=True, soft_wrap=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    for path in written:
+        typer.echo(f"restored {path}")
+
+
+@cli.command("archive")
+def archive_command(
+    before: Annotated[
+        datetime,
+        typer.Option(
+            help="Archive lineages whose head completed or was cancelled before this date",
+            formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S"],
+        ),
+    ],
+    url: Annotated[str | None, typer.Option(help="The server holding the store")] = None,
+    api_key: Annotated[
+        str | None, typer.Option(help="A supervisor key [default: LTAA_API_KEY]")
+    ] = None,
+) -> None:
+    """Archive old runs: verified JSON-lines files in LTAA_ARCHIVE_DIR, their rows deleted,
+    tombstones left (lookups answer 410 naming the file), then VACUUM."""
+    from app.operations.backup import BackupError
+
+    when = before if before.tzinfo is not None else before.replace(tzinfo=UTC)
+    # Test seam: die (SIGKILL) after this many archive files are in place.
+    kill_after = int(os.environ.get("LTAA_TEST_ARCHIVE_KILL_AFTER", "0"))
+    written: list[str] = []
+
+    def after_file(run_id: str) -> None:
+        written.append(run_id)
+        if kill_after and len(written) >= kill_after:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    try:
+        result, how = run_archive(
+            get_settings(), when, url=url, api_key=api_key, after_file=after_file
+        )
+    except (StoreCommandError, BackupError) as exc:
+        Console(stderr=True, soft_wrap=True).print(f"[bold red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(code=1) from None
+    typer.echo(json.dumps({"done_by": how, **result}, indent=2))
+
+
+@cli.command("keygen")
+def keygen_command(
+    path: Annotated[Path, typer.Argument(help="Where to write the private key (PEM, 0600)")],
+) -> None:
+    """Write a new Ed25519 signing key for signed chain heads; point LTAA_SIGNING_KEY_FILE
+    at it. Keep the previous key's public half in LTAA_RETIRED_PUBLIC_KEYS_DIR."""
+    from app.audit.signing import generate_key_file
+
+    try:
+        kid = generate_key_file(path)
+    except FileExistsError:
+        Console(stderr=True, soft_wrap=True).print(
+            f"[bold red]error[/]: {path} exists; a key is never overwritten", highlight=False
+        )
+        raise typer.Exit(code=1) from None
+    typer.echo(f"wrote {path} (key id {kid})")

@@ -16,7 +16,7 @@ from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.graph.runner import INTERRUPT_KEY, run_graph
 from app.graph.state import GraphContext
-from app.reasoners.factory import close_reasoner
+from app.reasoners.base import close_reasoner
 
 
 @dataclass(frozen=True)

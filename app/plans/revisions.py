@@ -24,7 +24,8 @@ from app.domain.errors import DomainError, RunNotFoundError
 from app.domain.lifecycle import FINISHED
 from app.plans.reports import head_of
 from app.plans.revision_plan import ParentDecision, plan_revision
-from app.reasoners.factory import close_reasoner, make_reasoner
+from app.reasoners.base import close_reasoner
+from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus

@@ -35,3 +35,10 @@ class Reasoner(Protocol):
     name: str
 
     def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply: ...
+
+
+def close_reasoner(reasoner: Reasoner) -> None:
+    """Release what a reasoner holds (the anthropic SDK's connection pool); rules has none."""
+    close = getattr(reasoner, "close", None)
+    if callable(close):
+        close()

@@ -17,8 +17,7 @@ from typing import Any
 from app.domain.decision import DecisionContext
 from app.domain.lifecycle import EventKind
 from app.reasoners.attribution import Why, stood_in
-from app.reasoners.base import Reasoner, ReasonerReply
-from app.reasoners.factory import close_reasoner
+from app.reasoners.base import Reasoner, ReasonerReply, close_reasoner
 from app.reasoners.rules import RulesReasoner
 
 BUDGET_EXHAUSTED = EventKind.BUDGET_EXHAUSTED.value  # the run event recording the switch

@@ -12,6 +12,7 @@ from app.domain.errors import DomainError
 from app.reasoners.base import Reasoner
 from app.reasoners.replay import RecordedReply, ReplayReasoner, ReplyKey
 from app.reasoners.rules import RulesReasoner
+from app.reasoners.scope import DEFAULT_LLM_MARGIN, scoped
 
 REASONERS = ("rules", "anthropic", "openai", "replay")
 LLM_REASONERS = ("anthropic", "openai")  # the ones that call a model (and cost tokens)
@@ -45,13 +46,6 @@ def resolve_api_key(explicit: SecretStr | str | None, settings: Any = None) -> s
     if key:
         return key
     return next((os.environ[v] for v in API_KEY_VARS if os.environ.get(v)), None)
-
-
-def close_reasoner(reasoner: Reasoner) -> None:
-    """Release what a reasoner holds (the anthropic SDK's connection pool); rules has none."""
-    close = getattr(reasoner, "close", None)
-    if callable(close):
-        close()
 
 
 def make_reasoner(
@@ -89,7 +83,6 @@ def make_reasoner(
     )
     if name not in LLM_REASONERS:
         return reasoner
-    from app.reasoners.scope import DEFAULT_LLM_MARGIN, scoped
 
     return scoped(reasoner, llm_scope, DEFAULT_LLM_MARGIN if llm_margin is None else llm_margin)
 

@@ -19,8 +19,7 @@ from enum import StrEnum
 from app.domain.decision import DecisionContext
 from app.domain.tradeoff import rule_for
 from app.reasoners.attribution import Why, stood_in
-from app.reasoners.base import Reasoner, ReasonerReply
-from app.reasoners.factory import close_reasoner
+from app.reasoners.base import Reasoner, ReasonerReply, close_reasoner
 from app.reasoners.rules import RulesReasoner
 
 DEFAULT_LLM_MARGIN = 5.0  # points either side of the threshold

@@ -18,7 +18,8 @@ from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
-from app.reasoners.factory import close_reasoner, make_reasoner
+from app.reasoners.base import close_reasoner
+from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
