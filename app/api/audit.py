@@ -9,7 +9,7 @@ from typing import Any
 from fastapi.responses import StreamingResponse
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.schemas.runs import (
+from app.api.schemas.trace import (
     BrokenLinkOut,
     ChainHeadsOut,
     ParentLinkOut,

@@ -13,6 +13,7 @@ from typing import Any, Protocol, TypeVar
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, Run, RunAnnotation, RunEvent
 from app.store.tombstones import missing_run
@@ -81,7 +82,7 @@ def decision_pages(
     after = -1
     while True:
         with sessions() as session:
-            page = repo.decisions_page(
+            page = decision_repo.decisions_page(
                 session=session,
                 run_id=run_id,
                 after_task=after,
@@ -90,7 +91,7 @@ def decision_pages(
             )
             if not page:
                 return
-            attempts = repo.attempts_of_tasks(
+            attempts = decision_repo.attempts_of_tasks(
                 session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
             )
         yield [(d, attempts.get(d.task_index, [])) for d in page]

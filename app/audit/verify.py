@@ -22,6 +22,7 @@ from app.audit.signing import SignatureCheck, SigningKeys, check_signature
 from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import EventKind, RunStatus
 from app.store import chain
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, RunAnnotation, RunEvent
 
@@ -89,9 +90,9 @@ def verify_trace(
         order: list[int] | None = None
         if revision_of is not None:
             # Pins first, then the graph's decisions: the order they were chained in.
-            pins = repo.decided_indexes(session=session, run_id=run_id, pinned=True)
-            rest = repo.decided_indexes(session=session, run_id=run_id, pinned=False)
-            order = repo.revision_chain_order(pins, rest)
+            pins = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=True)
+            rest = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=False)
+            order = decision_repo.revision_chain_order(pins, rest)
 
     decisions = chain.ChainCheck(
         "decisions",
@@ -204,7 +205,7 @@ def check_parent_link(
         if parent.superseded_by != run_id:
             return bad(f"the parent names {parent.superseded_by!r} as its revision, not this run")
         heads = detail.get("parent_heads") or {}
-        parent_decisions = repo.decisions(session=session, run_id=parent_id)
+        parent_decisions = decision_repo.decisions(session=session, run_id=parent_id)
         head_now = parent_decisions[-1].chain_hash if parent_decisions else None
         if heads.get("decisions") != head_now:
             return bad("the parent's decision chain no longer ends at the head it was revised at")

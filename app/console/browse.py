@@ -20,6 +20,7 @@ from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.runs import records
 from app.runs.spec import RunSpec
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.models import Attempt, Run, RunEvent
 
@@ -63,8 +64,8 @@ def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:
 def overview(*, sessions: sessionmaker[Session], run_id: str) -> RunOverview:
     with sessions() as session:
         run = _require(session, run_id)
-        outline = repo.decision_outline(session=session, run_id=run_id)
-        usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
+        outline = decision_repo.decision_outline(session=session, run_id=run_id)
+        usage = records.usage_of(decision_repo.reply_costs(session=session, run_id=run_id))
         events = repo.events(session=session, run_id=run_id)
         signed = signoffs(session=session, run_id=run_id)
     spec = RunSpec.from_json(run.request)
@@ -102,9 +103,11 @@ def decision_page(
 ) -> DecisionPage:
     with sessions() as session:
         _require(session, run_id)
-        rows = repo.decisions_window(session=session, run_id=run_id, offset=offset, limit=limit)
+        rows = decision_repo.decisions_window(
+            session=session, run_id=run_id, offset=offset, limit=limit
+        )
         attempts = (
-            repo.attempt_summaries_of_tasks(
+            decision_repo.attempt_summaries_of_tasks(
                 session=session, run_id=run_id, first=rows[0].task_index, last=rows[-1].task_index
             )
             if rows
@@ -129,7 +132,7 @@ def attempt_detail(
     """One attempt with its prompts and reply."""
     with sessions() as session:
         _require(session, run_id)
-        row = repo.get_attempt(
+        row = decision_repo.get_attempt(
             session=session, run_id=run_id, task_index=task_index, attempt=attempt
         )
         if row is None:

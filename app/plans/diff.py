@@ -15,6 +15,7 @@ from app.graph.recorder import DecisionRecord
 from app.plans.revisions import RevisionConflictError
 from app.runs import records
 from app.runs.spec import RunSpec
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.models import Run
 
@@ -53,7 +54,9 @@ def _load(session: Session, run_id: str) -> tuple[Run, RunSpec, list[DecisionRec
     run = repo.get_run(session=session, run_id=run_id)
     if run is None:
         raise RunNotFoundError(run_id)
-    decisions = [records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)]
+    decisions = [
+        records.decision_record(d) for d in decision_repo.decisions(session=session, run_id=run_id)
+    ]
     return run, RunSpec.from_json(run.request), decisions
 
 

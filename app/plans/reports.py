@@ -25,6 +25,7 @@ from app.domain.lifecycle import FINISHED
 from app.runs import lifecycle
 from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import ExecutionReport, RequestKey, Run, as_utc, utcnow
@@ -125,7 +126,7 @@ def _report(
                 location="path",
             )
         tasks = repo.queue_task_ids(run)
-        decided = {d.task_id: d.task_index for d in repo.decided_task_ids(session, run_id)}
+        decided = {d.task_id: d.task_index for d in decision_repo.decided_task_ids(session, run_id)}
         stored = {r.task_id: r for r in repo.execution_reports(session=session, run_id=run_id)}
         changed: list[dict[str, Any]] = []
         pending: dict[str, ExecutionState] = {}

@@ -32,6 +32,7 @@ from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import chain
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import ExecutionReport, Run
@@ -88,7 +89,7 @@ def lineage_tokens(session: Session, run: Run) -> int:
     current: Run | None = run
     while current is not None and current.id not in seen:
         seen.add(current.id)
-        total += repo.tokens_spent(session=session, run_id=current.id)
+        total += decision_repo.tokens_spent(session=session, run_id=current.id)
         current = (
             repo.get_run(session=session, run_id=current.revision_of)
             if current.revision_of
@@ -149,7 +150,7 @@ def _create(
                 "awaiting review or completed run can be revised (start a new run instead)"
             )
         parent_spec = RunSpec.from_json(parent.request)
-        rows = repo.decisions(session=session, run_id=parent_id)
+        rows = decision_repo.decisions(session=session, run_id=parent_id)
         decided = {
             r.task_index: ParentDecision(records.decision_record(r), r.chain_hash) for r in rows
         }
@@ -221,7 +222,7 @@ def _create(
             created=detail,
         )
         for values in plan.pinned_rows:
-            repo.upsert_decision(session=session, run_id=run_id, values=values)
+            decision_repo.upsert_decision(session=session, run_id=run_id, values=values)
         _carry_execution(session, run_id, plan.pinned_rows, reports)
         parent.superseded_by = run_id
         active = status not in FINISHED

@@ -1,4 +1,5 @@
-"""The check made before a run resumes: is the stored record consistent with the checkpoint?"""
+"""The check made before a run resumes: is the stored record consistent with the checkpoint?
+If not, the run fails here, saying why, instead of resuming."""
 
 from __future__ import annotations
 
@@ -7,9 +8,17 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from langgraph.checkpoint.base import CheckpointTuple
+from sqlalchemy.orm import Session
+
 from app.domain.metrics import balance_score
 from app.domain.phases import detect_phase
 from app.graph.recorder import DecisionRecord
+from app.runs import lifecycle, records
+from app.runs.lifecycle import EventKind, RunStatus
+from app.runs.spec import RunSpec
+from app.store import decision_repository as decision_repo
+from app.store.models import Run
 
 
 @dataclass(frozen=True)
@@ -127,3 +136,54 @@ def check_integrity(
         problems=problems,
         pinned=len(pins),
     )
+
+
+def checked_for_resume(
+    session: Session,
+    run: Run,
+    spec: RunSpec,
+    checkpoint: CheckpointTuple | None,
+    detail: dict[str, Any],
+) -> IntegrityReport | None:
+    """The check made before a run resumes, on the stored decisions and the checkpoint.
+    If it fails, the run is failed here with an `integrity_failed` event saying why (None):
+    resuming would build on a record the checkpoint contradicts."""
+    run_id = run.id
+    instance = spec.problem.instance
+    stored = [
+        records.decision_record(d) for d in decision_repo.decisions(session=session, run_id=run_id)
+    ]
+    values = checkpoint.checkpoint["channel_values"] if checkpoint else None
+    problem = spec.problem
+    report = check_integrity(
+        decisions=stored,
+        n_tasks=instance.n_tasks,
+        n_robots=instance.n_robots,
+        checkpoint=values,
+        pinned=problem.pinned,
+        free_tasks=problem.free_tasks,
+        initial_loads=problem.initial_loads,
+        balance_robots=problem.available,
+        target=problem.target,
+    )
+    if not report.ok:
+        # Resuming would build on a record that the checkpoint contradicts, and its
+        # final allocation could not be trusted: stop here, say why.
+        lifecycle.record_event(
+            session,
+            run_id=run_id,
+            kind=EventKind.INTEGRITY_FAILED,
+            detail={"integrity": report.as_dict(), **detail},
+        )
+        lifecycle.move(
+            session,
+            run,
+            RunStatus.FAILED,
+            error="not resumed: the integrity check failed ("
+            + "; ".join(report.problems)
+            + "). The stored decisions and the "
+            "checkpoint disagree; inspect GET /runs/{id}/trace and /trace/verify, "
+            "then start a new run.",
+        )
+        return None
+    return report

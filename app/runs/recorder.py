@@ -12,6 +12,7 @@ from app.domain.usage import Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 from app.observability.logs import bind
 from app.runs import records
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 
@@ -112,7 +113,7 @@ class SqlRecorder:
         with transaction(self._sessions) as session:
             if self._fence is not None:
                 self._fence(session)
-            repo.upsert_attempt(
+            decision_repo.upsert_attempt(
                 session=session, run_id=self.run_id, values=records.attempt_values(record)
             )
         self._attempts[(record.task_index, record.attempt)] = record.copy()
@@ -126,11 +127,13 @@ class SqlRecorder:
             return cached.copy()
         if self._stored_through is None:
             with self._sessions() as session:
-                self._stored_through = repo.last_attempted_task(session=session, run_id=self.run_id)
+                self._stored_through = decision_repo.last_attempted_task(
+                    session=session, run_id=self.run_id
+                )
         if task_index > self._stored_through:
             return None
         with self._sessions() as session:
-            row = repo.get_attempt(
+            row = decision_repo.get_attempt(
                 session=session, run_id=self.run_id, task_index=task_index, attempt=attempt
             )
             return records.attempt_record(row) if row is not None else None
@@ -139,7 +142,7 @@ class SqlRecorder:
         with transaction(self._sessions) as session:
             if self._fence is not None:
                 self._fence(session)
-            repo.upsert_decision(
+            decision_repo.upsert_decision(
                 session=session, run_id=self.run_id, values=records.decision_values(record)
             )
         log.log(
@@ -157,9 +160,9 @@ class SqlRecorder:
         with self._sessions() as session:
             return [
                 records.decision_record(row)
-                for row in repo.decisions(session=session, run_id=self.run_id)
+                for row in decision_repo.decisions(session=session, run_id=self.run_id)
             ]
 
     def usage(self) -> Usage:
         with self._sessions() as session:
-            return records.usage_of(repo.reply_costs(session=session, run_id=self.run_id))
+            return records.usage_of(decision_repo.reply_costs(session=session, run_id=self.run_id))

@@ -20,6 +20,7 @@ from app.domain.errors import DomainError
 from app.domain.lifecycle import RunStatus
 from app.reasoners.replay import RecordedReply, ReplyKey
 from app.runs.spec import RunSpec
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.models import ArchivedRun
 
@@ -202,7 +203,7 @@ def recorded_replies(
 ) -> dict[ReplyKey, RecordedReply]:
     """The replies run `run_id` recorded, by (task_index, attempt), as plain data."""
     with sessions() as session:
-        rows = repo.attempt_replies(session=session, run_id=run_id)
+        rows = decision_repo.attempt_replies(session=session, run_id=run_id)
     return {
         (row.task_index, row.attempt): RecordedReply(
             text=row.reply_text,

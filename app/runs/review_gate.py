@@ -26,7 +26,7 @@ from app.domain.review import (
 )
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind, RunStatus
-from app.store import repository as repo
+from app.store import decision_repository as decision_repo
 from app.store.models import Decision, Review, Run, utcnow
 
 
@@ -95,7 +95,7 @@ def resolution_to_apply(session: Session, run_id: str) -> dict[str, Any] | None:
 def recorded_resolutions(*, session: Session, run_id: str) -> dict[int, Resolution]:
     """A finished run's applied reviews, by task index, as a replay re-applies them."""
     out: dict[int, Resolution] = {}
-    for d in repo.decisions(session=session, run_id=run_id):
+    for d in decision_repo.decisions(session=session, run_id=run_id):
         review = d.review
         if not review:
             continue

@@ -27,6 +27,7 @@ from app.runs.replay import validate_replay
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import chain
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.models import Attempt, ExecutionReport, Run, RunEvent
@@ -214,14 +215,14 @@ def run_view(
     with sessions() as session:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
-        outcomes = repo.decision_outcomes(session=session, run_id=run_id)
+        outcomes = decision_repo.decision_outcomes(session=session, run_id=run_id)
         decisions = [
             records.decision_record(d)
-            for d in repo.decisions_slice(
+            for d in decision_repo.decisions_slice(
                 session=session, run_id=run_id, offset=offset, limit=limit
             )
         ]
-        usage = records.usage_of(repo.reply_costs(session=session, run_id=run_id))
+        usage = records.usage_of(decision_repo.reply_costs(session=session, run_id=run_id))
         signed = signoffs(session=session, run_id=run_id)
         execution = {
             r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
@@ -291,9 +292,11 @@ def run_trace(
 ) -> Trace:
     with sessions() as session:
         run = _require(session, run_id)
-        page = repo.decisions_slice(session=session, run_id=run_id, offset=offset, limit=limit)
+        page = decision_repo.decisions_slice(
+            session=session, run_id=run_id, offset=offset, limit=limit
+        )
         attempts = (
-            repo.attempts_of_tasks(
+            decision_repo.attempts_of_tasks(
                 session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
             )
             if page
@@ -304,5 +307,5 @@ def run_trace(
             events=repo.events(session=session, run_id=run_id),
             decisions=[records.decision_record(d) for d in page],
             attempts=attempts,
-            total=repo.decision_count(session=session, run_id=run_id),
+            total=decision_repo.decision_count(session=session, run_id=run_id),
         )

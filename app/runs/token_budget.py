@@ -16,6 +16,7 @@ from app.reasoners.base import Reasoner
 from app.reasoners.budget import BUDGET_EXHAUSTED, BudgetExhausted, TokenBudgetReasoner
 from app.runs import lifecycle
 from app.runs.recorder import Fence
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 
@@ -36,7 +37,7 @@ def with_token_budget(
     if budget is None:
         return reasoner
     with sessions() as session:
-        spent = repo.tokens_spent(session=session, run_id=run_id)
+        spent = decision_repo.tokens_spent(session=session, run_id=run_id)
 
     def record(exhausted: BudgetExhausted) -> None:
         with transaction(sessions) as session:

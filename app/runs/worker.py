@@ -32,8 +32,8 @@ from app.graph.recorder import RunCancelled
 from app.graph.version import compatible, current_version, upgrade_blocked_message
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
-from app.runs import lifecycle, records, review_gate
-from app.runs.integrity import check_integrity
+from app.runs import lifecycle, review_gate
+from app.runs.integrity import checked_for_resume
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
 from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence
@@ -333,41 +333,8 @@ class RunWorker:
                 return None
             # A run from before versions were recorded goes on under this one, from now on.
             run.graph_version = version
-            stored = [
-                records.decision_record(d) for d in repo.decisions(session=session, run_id=run_id)
-            ]
-            values = checkpoint.checkpoint["channel_values"] if checkpoint else None
-            problem = spec.problem
-            report = check_integrity(
-                decisions=stored,
-                n_tasks=instance.n_tasks,
-                n_robots=instance.n_robots,
-                checkpoint=values,
-                pinned=problem.pinned,
-                free_tasks=problem.free_tasks,
-                initial_loads=problem.initial_loads,
-                balance_robots=problem.available,
-                target=problem.target,
-            )
-            if not report.ok:
-                # Resuming would build on a record that the checkpoint contradicts, and its
-                # final allocation could not be trusted: stop here, say why.
-                lifecycle.record_event(
-                    session,
-                    run_id=run_id,
-                    kind=EventKind.INTEGRITY_FAILED,
-                    detail={"integrity": report.as_dict(), **detail},
-                )
-                lifecycle.move(
-                    session,
-                    run,
-                    RunStatus.FAILED,
-                    error="not resumed: the integrity check failed ("
-                    + "; ".join(report.problems)
-                    + "). The stored decisions and the "
-                    "checkpoint disagree; inspect GET /runs/{id}/trace and /trace/verify, "
-                    "then start a new run.",
-                )
+            report = checked_for_resume(session, run, spec, checkpoint, detail)
+            if report is None:
                 return None
             run.resumes += 1
             lifecycle.move(

@@ -14,7 +14,7 @@ from app.domain.models import Instance, Robot, Task
 from app.graph.recorder import DecisionRecord
 from app.runs import records
 from app.runs.spec import RunSpec
-from app.store import repository as repo
+from app.store import decision_repository as decision_repo
 from app.store.db import make_engine, make_session_factory, transaction
 from tests.factories import run_row
 
@@ -78,7 +78,7 @@ def _stored_run(settings: Settings, run_id: str, n_tasks: int) -> sessionmaker[S
         )
     with transaction(sessions) as session:
         for t in range(n_tasks):
-            repo.upsert_decision(
+            decision_repo.upsert_decision(
                 session=session, run_id=run_id, values=records.decision_values(_decision(t))
             )
     return sessions

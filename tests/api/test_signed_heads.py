@@ -16,6 +16,7 @@ from app.audit.signing import generate_key_file
 from app.config import Settings
 from app.main import create_app
 from app.store import chain
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.models import Decision, Run, RunSignature
@@ -59,8 +60,10 @@ def _rechain_decisions(sessions: sessionmaker[Session], run_id: str) -> None:
             mode=run.mode,
             max_deviation=run.max_deviation,
         )
-        by_task = repo.attempts_of_tasks(session=session, run_id=run_id, first=0, last=10**6)
-        for d in repo.decisions(session=session, run_id=run_id):
+        by_task = decision_repo.attempts_of_tasks(
+            session=session, run_id=run_id, first=0, last=10**6
+        )
+        for d in decision_repo.decisions(session=session, run_id=run_id):
             attempts = [
                 {name: getattr(a, name) for name in chain.ATTEMPT_FIELDS}
                 for a in by_task.get(d.task_index, [])

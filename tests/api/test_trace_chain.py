@@ -24,7 +24,7 @@ from app.audit.verify import verify_trace
 from app.config import Settings
 from app.runs import records
 from app.store import chain
-from app.store import repository as repo
+from app.store import decision_repository as decision_repo
 from app.store.models import Attempt, Decision, RunEvent
 from tests.polling import eventually
 
@@ -238,16 +238,19 @@ def test_a_decision_upserted_again_with_the_same_content_keeps_its_hash(
     before = _verify(client, run_id)
     sessions = sessionmaker(create_engine(settings.db_url), expire_on_commit=False)
     with sessions() as session, session.begin():
-        rows = repo.decisions(session=session, run_id=run_id)
+        rows = decision_repo.decisions(session=session, run_id=run_id)
         stored = {d.task_index: d.chain_hash for d in rows}
         for row in (rows[0], rows[17], rows[-1]):
-            repo.upsert_decision(
+            decision_repo.upsert_decision(
                 session=session,
                 run_id=run_id,
                 values=records.decision_values(records.decision_record(row)),
             )
     with sessions() as session:
-        again = {d.task_index: d.chain_hash for d in repo.decisions(session=session, run_id=run_id)}
+        again = {
+            d.task_index: d.chain_hash
+            for d in decision_repo.decisions(session=session, run_id=run_id)
+        }
     assert again == stored
     assert _verify(client, run_id) == before
 

@@ -26,6 +26,7 @@ from app.runs.ownership import LeaseOwnership
 from app.runs.recorder import LeaseLost, RunStop, SqlRecorder
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
+from app.store import decision_repository as decision_repo
 from app.store import leases
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
@@ -104,7 +105,7 @@ def _kinds(sessions: sessionmaker[Session], run_id: str) -> list[str]:
 
 def _decisions(sessions: sessionmaker[Session], run_id: str) -> int:
     with sessions() as session:
-        return len(repo.decisions(session=session, run_id=run_id))
+        return len(decision_repo.decisions(session=session, run_id=run_id))
 
 
 def test_migrations_match_the_models_next_to_the_checkpointer_tables(postgres_url: str) -> None:

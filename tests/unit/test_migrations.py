@@ -13,7 +13,7 @@ from sqlalchemy.exc import IntegrityError
 
 from app.domain.models import MAX_NAME_CHARS
 from app.runs import records
-from app.store import repository as repo
+from app.store import decision_repository as decision_repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
 from tests.e2e.postgres import fresh_database
@@ -62,7 +62,7 @@ def test_the_longest_names_the_api_accepts_fit_the_columns(migrated_url: str) ->
         with transaction(sessions) as session:
             session.add(run_row("r1", "running"))
             session.flush()
-            repo.upsert_decision(
+            decision_repo.upsert_decision(
                 session=session,
                 run_id="r1",
                 values=records.decision_values(
@@ -72,7 +72,7 @@ def test_the_longest_names_the_api_accepts_fit_the_columns(migrated_url: str) ->
                 ),
             )
         with sessions() as session:
-            stored = repo.decisions(session=session, run_id="r1")[0]
+            stored = decision_repo.decisions(session=session, run_id="r1")[0]
             assert (stored.task_id, stored.robot_name) == (longest, longest)
     finally:
         engine.dispose()

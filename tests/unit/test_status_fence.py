@@ -10,6 +10,7 @@ import pytest
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.recorder import RunStop, RunSuperseded, SqlRecorder, status_fence
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
@@ -37,6 +38,6 @@ def test_a_superseded_run_stores_nothing_more(tmp_path: Path) -> None:
         recorder.save_decision(decision_record(1))
     assert stop.superseded.is_set()
     with sessions() as session:
-        assert [d.task_index for d in repo.decisions(session=session, run_id="r1")] == [0]
+        assert [d.task_index for d in decision_repo.decisions(session=session, run_id="r1")] == [0]
     with pytest.raises(RunSuperseded):
         recorder.check_cancelled()

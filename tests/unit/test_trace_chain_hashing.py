@@ -18,6 +18,7 @@ from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
 from app.runs import records
 from app.store import chain
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import make_engine, transaction
 from app.store.migrate import upgrade_head
@@ -152,7 +153,7 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
                 transport_retries=0,
                 extra={"stop_reason": "end_turn"},
             )
-            repo.upsert_attempt(
+            decision_repo.upsert_attempt(
                 session=session,
                 run_id="r1",
                 values=records.attempt_values(
@@ -170,7 +171,7 @@ def test_awkward_values_verify_after_a_round_trip_through_the_tables(
                     )
                 ),
             )
-            repo.upsert_decision(
+            decision_repo.upsert_decision(
                 session=session,
                 run_id="r1",
                 values=records.decision_values(

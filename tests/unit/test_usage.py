@@ -11,7 +11,7 @@ from app.graph.recorder import AttemptRecord
 from app.graph.usage import usage_from_attempts
 from app.reasoners.base import ReasonerReply
 from app.runs import records as row_records
-from app.store import repository as repo
+from app.store import decision_repository as decision_repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
 from tests.factories import run_row
@@ -58,13 +58,13 @@ def test_recorded_attempts_and_stored_rows_count_alike(tmp_path: Path) -> None:
             session.add(run)
             session.flush()  # the attempts' foreign key needs the run row first
             for record in records():
-                repo.upsert_attempt(
+                decision_repo.upsert_attempt(
                     session=session, run_id="r1", values=row_records.attempt_values(record)
                 )
         with sessions() as session:
-            stored = row_records.usage_of(repo.attempts(session=session, run_id="r1"))
-            costs = row_records.usage_of(repo.reply_costs(session=session, run_id="r1"))
-            spent = repo.tokens_spent(session=session, run_id="r1")
+            stored = row_records.usage_of(decision_repo.attempts(session=session, run_id="r1"))
+            costs = row_records.usage_of(decision_repo.reply_costs(session=session, run_id="r1"))
+            spent = decision_repo.tokens_spent(session=session, run_id="r1")
     finally:
         engine.dispose()
     assert stored == EXPECTED

@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from app.api.deps import RunsDep, SettingsDep, SupervisorDep
 from app.api.errors import ApiError
 from app.api.responses import BODY, SUPERVISOR, errors
-from app.api.schemas.runs import RequestTime
+from app.api.schemas.times import RequestTime
 from app.graph.gate import GateTimeoutError
 from app.operations import archive, backup
 from app.runs.factory import uses_leases

@@ -25,10 +25,7 @@ from app.api.schemas.examples import RUN_EXAMPLES
 from app.api.schemas.runs import (
     DEFAULT_PAGE,
     MAX_PAGE,
-    AttemptOut,
-    DecisionOut,
     DecisionReviewOut,
-    EventOut,
     ExecutionStateOut,
     Page,
     Progress,
@@ -38,9 +35,8 @@ from app.api.schemas.runs import (
     RunRequest,
     RunStatus,
     RunSummary,
-    TraceOut,
-    TraceVerifyOut,
 )
+from app.api.schemas.trace import AttemptOut, DecisionOut, EventOut, TraceOut, TraceVerifyOut
 from app.audit import verify
 from app.domain.models import Instance
 from app.domain.serialize import instance_to_dict

@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
 from app.api.schemas.allocation import Name, NoNul, Probability, RobotIn, TaskId, TaskIn
-from app.api.schemas.runs import RequestTime, Timestamp
+from app.api.schemas.times import RequestTime, Timestamp
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_ROBOTS, MAX_TASKS
 from app.domain.modes import Mode

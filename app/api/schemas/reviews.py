@@ -7,7 +7,7 @@ from typing import Annotated
 from pydantic import BaseModel, Field
 
 from app.api.schemas.allocation import Name, NoNul
-from app.api.schemas.runs import Timestamp
+from app.api.schemas.times import Timestamp
 from app.domain.lifecycle import RunStatus
 from app.domain.review import ReviewAction
 

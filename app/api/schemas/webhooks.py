@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal, get_args
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.api.schemas.allocation import NoNul
-from app.api.schemas.runs import Timestamp
+from app.api.schemas.times import Timestamp
 from app.store.webhook_models import WebhookAttempt, WebhookDelivery, WebhookSubscription
 from app.webhooks.events import ALL, WebhookEventType
 from app.webhooks.targets import MAX_URL_CHARS
