@@ -12,57 +12,25 @@ from app.api.schemas.allocation import (
     Assignment,
     InstanceRequest,
     MetricsOut,
-    RobotIn,
-    TaskIn,
     UsageOut,
 )
 from app.domain import catalog
 from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics
-from app.domain.models import Instance, Robot, Task
+from app.domain.models import Instance
 from app.domain.pins import resolve_pins
 from app.domain.problem import Problem
 from app.reasoners.factory import ReasonerSettings
 from app.solvers.base import Solution, Solver
 from app.solvers.registry import get_solver
 
-_FORMS = "send either a built-in 'scenario' (see GET /scenarios) or your own 'tasks' and 'robots'"
-
-
-def _task(t: TaskIn) -> Task:
-    return Task(
-        id=t.id,
-        name=t.name if t.name is not None else str(t.id),
-        type=t.type,
-        features=tuple(t.features),
-    )
-
-
-def _robot(r: RobotIn) -> Robot:
-    return Robot(name=r.name, label=r.label, description=r.description, success=dict(r.success))
-
 
 def resolve_instance(request: InstanceRequest) -> Instance:
     """The instance a request describes; DomainError naming the field if it describes none."""
-    custom = request.tasks is not None or request.robots is not None
-    if request.scenario is not None:
-        if custom:
-            raise DomainError(
-                "scenario",
-                f"'scenario' was sent together with 'tasks'/'robots'; {_FORMS}, not both",
-                code="conflicting_fields",
-            )
-        return catalog.scenario(request.scenario).instance
-    if request.tasks is None:
-        raise DomainError(
-            "tasks" if custom else "scenario",
-            f"{'tasks missing' if custom else 'no instance given'}; {_FORMS}",
-            code="missing",
-        )
-    if request.robots is None:
-        raise DomainError("robots", f"robots missing; {_FORMS}", code="missing")
-    return Instance(
-        tasks=tuple(map(_task, request.tasks)), robots=tuple(map(_robot, request.robots))
+    return catalog.instance_of(
+        request.scenario,
+        None if request.tasks is None else [t.to_domain() for t in request.tasks],
+        None if request.robots is None else [r.to_domain() for r in request.robots],
     )
 
 

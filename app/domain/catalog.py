@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
@@ -67,3 +68,33 @@ def scenario(name: str) -> Scenario:
             f"unknown scenario '{name}'; choose one of: {known}",
             code="unknown_scenario",
         ) from None
+
+
+_FORMS = "send either a built-in 'scenario' (see GET /scenarios) or your own 'tasks' and 'robots'"
+
+
+def instance_of(
+    scenario_name: str | None,
+    tasks: Sequence[Task] | None,
+    robots: Sequence[Robot] | None,
+) -> Instance:
+    """The instance a request describes, by a built-in scenario's name or by its own tasks
+    and robots; DomainError naming the field if it describes none, or both."""
+    custom = tasks is not None or robots is not None
+    if scenario_name is not None:
+        if custom:
+            raise DomainError(
+                "scenario",
+                f"'scenario' was sent together with 'tasks'/'robots'; {_FORMS}, not both",
+                code="conflicting_fields",
+            )
+        return scenario(scenario_name).instance
+    if tasks is None:
+        raise DomainError(
+            "tasks" if custom else "scenario",
+            f"{'tasks missing' if custom else 'no instance given'}; {_FORMS}",
+            code="missing",
+        )
+    if robots is None:
+        raise DomainError("robots", f"robots missing; {_FORMS}", code="missing")
+    return Instance(tasks=tuple(tasks), robots=tuple(robots))

@@ -12,10 +12,13 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.audit.signoffs import SignOff, signoffs
 from app.config import Settings
+from app.domain.catalog import instance_of
 from app.domain.errors import RunStateConflictError
 from app.domain.lifecycle import FINISHED
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
+from app.domain.problem import Problem
+from app.domain.serialize import instance_to_dict
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.reasoners.base import close_reasoner
@@ -23,8 +26,8 @@ from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
-from app.runs.replay import validate_replay
-from app.runs.spec import RunSpec
+from app.runs.replay import REPLAY, replay_spec, validate_replay
+from app.runs.spec import RunOrder, RunSpec
 from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import decision_repository as decision_repo
@@ -107,6 +110,100 @@ def create_or_replay_run(
         if earlier is None:
             raise  # the key was free: a different constraint failed
         return earlier, True
+
+
+def submit_run(
+    *,
+    sessions: sessionmaker[Session],
+    worker: RunWorker,
+    settings: Settings,
+    order: RunOrder,
+    idempotency: Idempotency | None,
+) -> tuple[Run, bool]:
+    """POST /runs: a request to a stored, queued run, in one call. (The run, whether an
+    earlier request with the same Idempotency-Key created it.) Everything is checked before
+    anything is written: the instance, the cap, a replay against its source, the reasoner,
+    the review policy."""
+    spec = spec_for(order, sessions=sessions, settings=settings)
+    return create_or_replay_run(
+        sessions=sessions, worker=worker, settings=settings, spec=spec, idempotency=idempotency
+    )
+
+
+def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Settings) -> RunSpec:
+    """What a run will do: a replay copies its source; any other run takes the order's
+    instance and parameters, with the server's defaults where the order left them out."""
+    reasoner = order.reasoner or settings.default_reasoner
+    if reasoner == REPLAY or order.replay_of is not None:
+        return replay_spec(
+            sessions=sessions,
+            reasoner=reasoner,
+            replay_of=order.replay_of,
+            sent=_sent_for_replay(order),
+        )
+    instance = instance_of(order.scenario, order.tasks, order.robots)
+    # An explicit `"max_deviation": null` means no cap; leaving it out means the mode's.
+    problem = Problem.build(
+        instance,
+        order.mode,
+        order.max_deviation,
+        uncapped="max_deviation" in order.sent and order.max_deviation is None,
+    )
+    scope: dict[str, Any] = {}
+    if order.llm_scope is not None:
+        scope["llm_scope"] = order.llm_scope
+    if order.llm_margin is not None:
+        scope["llm_margin"] = float(order.llm_margin)
+    return RunSpec.for_instance(
+        instance,
+        mode=problem.mode.value,
+        max_deviation=problem.cap.max_deviation,
+        cap_explicit="max_deviation" in order.sent,
+        seed=order.seed,
+        reasoner=reasoner,
+        quality_threshold=order.quality_threshold,
+        max_retries=order.max_retries,
+        model=order.model,
+        temperature=order.temperature,
+        guidance=order.guidance,
+        token_budget=order.token_budget
+        if order.token_budget is not None
+        else settings.run_token_budget,
+        review=review_gate.policy_for(order.review, instance),
+        **scope,
+    )
+
+
+# The fields a replay may repeat (each must equal its source's), as a run spec stores them.
+_REPEATABLE = (
+    "max_deviation",
+    "quality_threshold",
+    "max_retries",
+    "guidance",
+    "seed",
+    "model",
+    "temperature",
+    "token_budget",
+    "llm_scope",
+    "llm_margin",
+    "review",
+)
+
+
+def _sent_for_replay(order: RunOrder) -> dict[str, Any]:
+    """What a replay request sent explicitly (each must match the original run), keyed by
+    request field, valued as a run spec stores it; omitted fields are copied."""
+    values: dict[str, Any] = {}
+    named = [f for f in ("scenario", "tasks", "robots") if getattr(order, f) is not None]
+    if named:
+        instance = instance_of(order.scenario, order.tasks, order.robots)
+        values[named[0]] = instance_to_dict(instance)
+    if "mode" in order.sent:
+        values["mode"] = order.mode.value
+    for name in _REPEATABLE:
+        if name in order.sent:
+            values[name] = getattr(order, name)
+    return values
 
 
 def _require(session: Session, run_id: str, *, lock: bool = False) -> Run:

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from functools import cached_property
 from typing import Any
 
-from app.domain.models import Instance
+from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.domain.review import ReviewPolicy
@@ -79,3 +79,33 @@ class RunSpec:
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> RunSpec:
         return cls(**data)
+
+
+@dataclass(frozen=True)
+class RunOrder:
+    """What a POST /runs body asks for, nothing resolved yet: the instance as sent (a
+    built-in scenario's name, or tasks and robots), the run's parameters, and which fields
+    the request named. The run service turns it into a RunSpec (app.runs.service.submit_run):
+    the server's defaults, a replay's copy of its source, the LLM scope and the review
+    policy are resolved there."""
+
+    scenario: str | None = None
+    tasks: tuple[Task, ...] | None = None
+    robots: tuple[Robot, ...] | None = None
+    reasoner: str | None = None  # None: the server's default
+    replay_of: str | None = None
+    mode: Mode = Mode.BALANCED
+    max_deviation: float | None = None
+    seed: int = 0
+    quality_threshold: float = DEFAULT_QUALITY_THRESHOLD
+    max_retries: int = DEFAULT_MAX_RETRIES
+    model: str | None = None
+    temperature: float | None = None
+    guidance: str | None = None
+    token_budget: int | None = None  # None: the server's setting
+    llm_scope: str | None = None  # None: the paper's 'all'
+    llm_margin: float | None = None
+    review: dict[str, Any] | None = None  # as sent (app.domain.review.ReviewPolicy JSON)
+    # The fields the request named: an explicit null max_deviation means no cap, and a
+    # replay must repeat its source's value in every field it names.
+    sent: frozenset[str] = field(default_factory=frozenset)

@@ -7,7 +7,6 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Body, Query, Response, status
 from fastapi.responses import StreamingResponse
 
-from app.api.allocation import build_problem, resolve_instance
 from app.api.audit import JSONL_RESPONSE, jsonl_trace, verify_out
 from app.api.deps import (
     ClientDep,
@@ -39,11 +38,9 @@ from app.api.schemas.runs import (
 from app.api.schemas.trace import AttemptOut, DecisionOut, EventOut, TraceOut, TraceVerifyOut
 from app.audit import verify
 from app.domain.models import Instance
-from app.domain.serialize import instance_to_dict
 from app.graph.recorder import DecisionRecord
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
-from app.runs import review_gate, service
-from app.runs.replay import replay_spec
+from app.runs import service
 from app.runs.spec import RunSpec
 from app.store.models import Attempt, ExecutionReport, Run
 
@@ -69,42 +66,11 @@ def create_run(
     idempotency_key: IdempotencyKey,
 ) -> RunCreated:
     """Start an LTAA run in the background; poll the Location for progress."""
-    reasoner = body.reasoner or settings.default_reasoner
-    if reasoner == "replay" or body.replay_of is not None:
-        spec = replay_spec(
-            sessions=runs.sessions,
-            reasoner=reasoner,
-            replay_of=body.replay_of,
-            sent=_sent_for_replay(body),
-        )
-    else:
-        problem = build_problem(body)
-        spec = RunSpec.for_instance(
-            problem.instance,
-            mode=problem.mode.value,
-            max_deviation=problem.cap.max_deviation,
-            cap_explicit="max_deviation" in body.model_fields_set,
-            seed=body.seed,
-            reasoner=reasoner,
-            quality_threshold=body.quality_threshold,
-            max_retries=body.max_retries,
-            model=body.model,
-            temperature=body.temperature,
-            guidance=body.guidance,
-            token_budget=body.token_budget
-            if body.token_budget is not None
-            else settings.run_token_budget,
-            **scope_of(body),
-            review=review_gate.policy_for(
-                body.review.model_dump(mode="json") if body.review is not None else None,
-                problem.instance,
-            ),
-        )
-    run, replayed = service.create_or_replay_run(
+    run, replayed = service.submit_run(
         sessions=runs.sessions,
         worker=runs.worker,
         settings=settings,
-        spec=spec,
+        order=body.to_order(),
         idempotency=idempotency_of(idempotency_key, body),
     )
     response.headers["Location"] = f"/runs/{run.id}"
@@ -115,45 +81,6 @@ def create_run(
         status=RunStatus.QUEUED if replayed else RunStatus(run.status),
         location=f"/runs/{run.id}",
     )
-
-
-def scope_of(body: RunRequest) -> dict[str, Any]:
-    """The request's LLM scope as a run spec stores it (omitted: the defaults)."""
-    scope: dict[str, Any] = {}
-    if body.llm_scope is not None:
-        scope["llm_scope"] = body.llm_scope
-    if body.llm_margin is not None:
-        scope["llm_margin"] = float(body.llm_margin)
-    return scope
-
-
-def _sent_for_replay(body: RunRequest) -> dict[str, Any]:
-    """What a replay request sent explicitly (each must match the original run), keyed by
-    request field, valued as a run spec stores it; omitted fields are copied."""
-    sent = body.model_fields_set
-    values: dict[str, Any] = {}
-    named = [f for f in ("scenario", "tasks", "robots") if getattr(body, f) is not None]
-    if named:
-        values[named[0]] = instance_to_dict(resolve_instance(body))
-    if "mode" in sent:
-        values["mode"] = body.mode.value
-    for name in (
-        "max_deviation",
-        "quality_threshold",
-        "max_retries",
-        "guidance",
-        "seed",
-        "model",
-        "temperature",
-        "token_budget",
-        "llm_scope",
-        "llm_margin",
-    ):
-        if name in sent:
-            values[name] = getattr(body, name)
-    if "review" in sent:
-        values["review"] = None if body.review is None else body.review.model_dump(mode="json")
-    return values
 
 
 @router.get("", response_model=list[RunSummary], responses=errors(*CLIENT))

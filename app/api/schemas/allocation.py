@@ -17,7 +17,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from app.domain.metrics import Metrics
-from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS
+from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS, Robot, Task
 from app.domain.modes import Mode
 from app.domain.usage import Usage
 
@@ -88,6 +88,14 @@ class TaskIn(BaseModel):
         max_length=100, description="Features the task needs; every robot must rate each one"
     )
 
+    def to_domain(self) -> Task:
+        return Task(
+            id=self.id,
+            name=self.name if self.name is not None else str(self.id),
+            type=self.type,
+            features=tuple(self.features),
+        )
+
 
 class RobotIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -100,6 +108,14 @@ class RobotIn(BaseModel):
     success: dict[Name, Probability] = Field(
         description="Success probability per feature, each in [0, 1]"
     )
+
+    def to_domain(self) -> Robot:
+        return Robot(
+            name=self.name,
+            label=self.label,
+            description=self.description,
+            success=dict(self.success),
+        )
 
 
 def present(field: str) -> dict[str, Any]:

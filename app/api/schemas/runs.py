@@ -22,6 +22,7 @@ from app.api.schemas.allocation import (
 from app.api.schemas.times import Timestamp
 from app.domain.lifecycle import RunStatus
 from app.domain.review import ReviewAction, ReviewOn
+from app.runs.spec import RunOrder
 
 StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
@@ -174,6 +175,29 @@ class RunRequest(InstanceRequest):
         "not apply; review is refused (the replay re-applies the original's review "
         "settings and recorded resolutions). Unknown id: 422; a run not completed: 409",
     )
+
+    def to_order(self) -> RunOrder:
+        """The request as the run service takes it (app.runs.service.submit_run)."""
+        return RunOrder(
+            scenario=self.scenario,
+            tasks=None if self.tasks is None else tuple(t.to_domain() for t in self.tasks),
+            robots=None if self.robots is None else tuple(r.to_domain() for r in self.robots),
+            reasoner=self.reasoner,
+            replay_of=self.replay_of,
+            mode=self.mode,
+            max_deviation=self.max_deviation,
+            seed=self.seed,
+            quality_threshold=self.quality_threshold,
+            max_retries=self.max_retries,
+            model=self.model,
+            temperature=self.temperature,
+            guidance=self.guidance,
+            token_budget=self.token_budget,
+            llm_scope=self.llm_scope,
+            llm_margin=self.llm_margin,
+            review=None if self.review is None else self.review.model_dump(mode="json"),
+            sent=frozenset(self.model_fields_set),
+        )
 
 
 class RunCreated(BaseModel):
