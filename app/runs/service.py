@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import statistics
 import uuid
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -33,7 +34,7 @@ from app.store import chain
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Attempt, ExecutionReport, Run, RunEvent
+from app.store.models import Attempt, Decision, ExecutionReport, Run, RunEvent
 from app.store.tombstones import missing_run
 
 
@@ -294,7 +295,8 @@ class RunView:
     metrics: Metrics | None
     signoffs: list[SignOff] = field(default_factory=list)
     execution: dict[int, ExecutionReport] = field(default_factory=dict)
-    pinned: frozenset[int] = frozenset()
+    # Task index -> the parent decision's chain hash, for this page's pinned decisions.
+    pins: dict[int, str | None] = field(default_factory=dict)
 
     @property
     def progress(self) -> dict[str, Any]:
@@ -313,12 +315,11 @@ def run_view(
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
         outcomes = decision_repo.decision_outcomes(session=session, run_id=run_id)
-        decisions = [
-            records.decision_record(d)
-            for d in decision_repo.decisions_slice(
-                session=session, run_id=run_id, offset=offset, limit=limit
-            )
-        ]
+        rows = decision_repo.decisions_slice(
+            session=session, run_id=run_id, offset=offset, limit=limit
+        )
+        decisions = [records.decision_record(d) for d in rows]
+        pins = pins_of(rows)
         usage = records.usage_of(decision_repo.reply_costs(session=session, run_id=run_id))
         signed = signoffs(session=session, run_id=run_id)
         execution = {
@@ -356,7 +357,7 @@ def run_view(
         usage=usage,
         metrics=metrics,
         execution=execution,
-        pinned=frozenset(problem.pinned),
+        pins=pins,
         signoffs=signed,
     )
 
@@ -382,6 +383,9 @@ class Trace:
     decisions: list[DecisionRecord]
     attempts: dict[int, list[Attempt]]
     total: int
+    # A revision's decisions kept from its parent (SPEC 10): task index -> the parent
+    # decision's chain hash (`pinned_from`).
+    pins: dict[int, str | None] = field(default_factory=dict)
 
 
 def run_trace(
@@ -405,4 +409,11 @@ def run_trace(
             decisions=[records.decision_record(d) for d in page],
             attempts=attempts,
             total=decision_repo.decision_count(session=session, run_id=run_id),
+            pins=pins_of(page),
         )
+
+
+def pins_of(rows: Iterable[Decision]) -> dict[int, str | None]:
+    """Which of these decision rows a revision kept from its parent, with the parent
+    decision's chain hash."""
+    return {d.task_index: d.pinned_from for d in rows if d.pinned}

@@ -239,3 +239,37 @@ def test_a_pinned_decision_keeps_the_supervisors_override(client: TestClient) ->
     assert five["review"]["action"] == "override"
     assert five["review"]["reason"] == "crane access from the north"
     assert client.get(f"/runs/{created['id']}/trace/verify").json()["ok"] is True
+
+
+def test_the_trace_and_the_export_say_which_decisions_a_revision_kept(
+    client: TestClient,
+) -> None:
+    # A supervisor auditing a revision tells kept decisions from new ones: in the trace, in
+    # the assignments and in the JSON-lines export, each pin names the parent decision.
+    parent = completed_run(client)
+    pins = {"type": "robot_unavailable", "robot": "heavy"}
+    body = {"changes": [pins], "pin": {"task_ids": [2, 13, 300]}, "reason": "audit"}
+    created = revise(client, parent, body)
+    wait_status(client, created["id"], "completed")
+    parent_hashes = {
+        line["task_index"]: line["chain_hash"]
+        for line in map(json.loads, client.get(f"/runs/{parent}/trace?format=jsonl").iter_lines())
+        if line["type"] == "decision"
+    }
+    kept = {2: parent_hashes[2], 13: parent_hashes[13], 14: parent_hashes[14]}  # 300 is index 14
+    trace = client.get(f"/runs/{created['id']}/trace").json()
+    assert len(trace["decisions"]) == 36
+    assert {d["task_index"]: d["pinned_from"] for d in trace["decisions"] if d["pinned"]} == kept
+    assert all(d["pinned_from"] is None for d in trace["decisions"] if not d["pinned"])
+    run = client.get(f"/runs/{created['id']}").json()
+    assert {a["task_index"]: a["pinned_from"] for a in run["assignments"] if a["pinned"]} == kept
+    export = [
+        line
+        for line in map(
+            json.loads, client.get(f"/runs/{created['id']}/trace?format=jsonl").iter_lines()
+        )
+        if line["type"] == "decision"
+    ]
+    assert {d["task_index"]: d["pinned_from"] for d in export if d.get("pinned")} == kept
+    assert not any("pinned_from" in d for d in export if not d.get("pinned"))
+    assert client.get(f"/runs/{created['id']}/trace/verify").json()["ok"] is True

@@ -140,7 +140,8 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
                 success=d.expected_success,
                 fallback=d.fallback,
                 review=_review_out(d.review),
-                pinned=d.task_index in view.pinned,
+                pinned=d.task_index in view.pins,
+                pinned_from=view.pins.get(d.task_index),
                 execution=_execution_out(view.execution.get(d.task_index)),
             )
             for d in view.decisions
@@ -261,6 +262,7 @@ def get_trace(
                 names=names,
                 prompts=prompts,
                 run_reasoner=trace.run.reasoner,
+                pins=trace.pins,
             )
             for d in trace.decisions
         ],
@@ -276,6 +278,7 @@ def _decision_out(
     names: list[str],
     prompts: bool,
     run_reasoner: str,
+    pins: dict[int, str | None],
 ) -> DecisionOut:
     outs = [_attempt_out(a, prompts, run_reasoner) for a in attempts]
     accepted = next((a for a in reversed(outs) if a.accepted), None)
@@ -304,6 +307,8 @@ def _decision_out(
         reasoner=who.reasoner,
         why=who.why,  # type: ignore[arg-type]  # one of the StandIn values
         review=_review_out(d.review),
+        pinned=d.task_index in pins,
+        pinned_from=pins.get(d.task_index),
         attempts=outs,
     )
 

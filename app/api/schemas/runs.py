@@ -252,7 +252,12 @@ class RunAssignment(BaseModel):
     success: float
     fallback: bool
     review: DecisionReviewOut | None = None
-    pinned: bool = Field(False, description="Revisions: kept from the parent (SPEC 10)")
+    pinned: bool = Field(
+        False, description="Revisions: kept from the parent, not decided again (SPEC 10)"
+    )
+    pinned_from: str | None = Field(
+        None, description="Of a pinned decision: the parent decision's chain hash"
+    )
     execution: ExecutionStateOut | None = Field(
         None, description="The latest execution report on this task, if any"
     )

@@ -83,6 +83,12 @@ class DecisionOut(BaseModel):
         None, description="'fallback' when every attempt failed; else the accepted attempt's"
     )
     review: DecisionReviewOut | None = None
+    pinned: bool = Field(
+        False, description="Revisions: kept from the parent, not decided again (SPEC 10)"
+    )
+    pinned_from: str | None = Field(
+        None, description="Of a pinned decision: the parent decision's chain hash"
+    )
     attempts: list[AttemptOut]
 
 
