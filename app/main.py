@@ -42,6 +42,7 @@ from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollecto
 from app.runs.factory import make_worker
 from app.runs.worker import RunWorker
 from app.store.db import make_engine, make_session_factory
+from app.store.lock import listen_url
 from app.store.migrate import upgrade_head
 from app.webhooks.dispatcher import Dispatcher
 from app.webhooks.metrics import WebhookTablesCollector
@@ -80,7 +81,12 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.metrics.registry.register(collector)
         resources.callback(app.state.metrics.registry.unregister, collector)
         app.state.webhooks = _start_webhooks(settings, sessions, app.state.metrics, resources)
-        worker = await run_in_threadpool(make_worker, settings=settings, sessions=sessions)
+        worker = await run_in_threadpool(
+            make_worker,
+            settings=settings,
+            sessions=sessions,
+            serving=listen_url(settings.host, settings.port),
+        )
         # Drain on shutdown: runs stop at a node boundary and are marked interrupted.
         resources.push_async_callback(run_in_threadpool, worker.close)
         # ... starting as soon as the signal arrives, before uvicorn waits on open streams.

@@ -22,15 +22,20 @@ from rich.console import Console
 from app.cli.root import cli
 from app.config import Settings, get_settings
 from app.operations import backup
-from app.store.lock import StoreInUseError, StoreLock
+from app.store.lock import StoreInUseError, StoreLock, listen_url
 
 
 class StoreCommandError(RuntimeError):
     """A backup or restore that could not be made; the message says why and what to do."""
 
 
-def _server_backup(settings: Settings, dest: Path, url: str | None, api_key: str | None) -> Any:
-    base = url or f"http://{settings.host}:{settings.port}"
+def _server_url(settings: Settings, url: str | None, held: StoreInUseError) -> str:
+    """Where the server holding the store answers: --url, else the address its lock file
+    records, else the configured one."""
+    return url or held.holder.url or listen_url(settings.host, settings.port)
+
+
+def _server_backup(settings: Settings, dest: Path, base: str, api_key: str | None) -> Any:
     key = api_key or os.environ.get("LTAA_API_KEY")
     headers = {"Authorization": f"Bearer {key}"} if key else {}
     try:
@@ -55,8 +60,8 @@ def run_backup(
     lock = StoreLock(backup.database_file(settings))
     try:
         lock.acquire()
-    except StoreInUseError:
-        return _server_backup(settings, dest, url, api_key), "server"
+    except StoreInUseError as held:
+        return _server_backup(settings, dest, _server_url(settings, url, held), api_key), "server"
     try:
         report = backup.backup(settings=settings, dest=dest)
     finally:
@@ -92,8 +97,8 @@ def run_archive(
     lock = StoreLock(backup.database_file(settings))
     try:
         lock.acquire()
-    except StoreInUseError:
-        base = url or f"http://{settings.host}:{settings.port}"
+    except StoreInUseError as held:
+        base = _server_url(settings, url, held)
         key = api_key or os.environ.get("LTAA_API_KEY")
         headers = {"Authorization": f"Bearer {key}"} if key else {}
         answer = httpx.post(
@@ -133,7 +138,10 @@ def backup_command(
     dest: Annotated[Path, typer.Argument(help="A new or empty directory for the copy")],
     url: Annotated[
         str | None,
-        typer.Option(help="The server holding the store [default: http://LTAA_HOST:LTAA_PORT]"),
+        typer.Option(
+            help="The server holding the store [default: the address it recorded in the "
+            "store's lock file, else http://LTAA_HOST:LTAA_PORT]"
+        ),
     ] = None,
     api_key: Annotated[
         str | None, typer.Option(help="A supervisor key [default: LTAA_API_KEY]")

@@ -62,9 +62,14 @@ def pause_hook_from_settings(settings: Settings) -> NodeHook | None:
 
 
 def make_worker(
-    *, settings: Settings, sessions: sessionmaker[Session], node_hook: NodeHook | None = None
+    *,
+    settings: Settings,
+    sessions: sessionmaker[Session],
+    node_hook: NodeHook | None = None,
+    serving: str | None = None,
 ) -> RunWorker:
-    """`node_hook`: in-process tests pass a hook directly; otherwise LTAA_TEST_PAUSE's."""
+    """`node_hook`: in-process tests pass a hook directly; otherwise LTAA_TEST_PAUSE's.
+    `serving`: the URL the server answers on, recorded with the embedded store's lock."""
     if settings.test_graph_version is not None:
         log.warning(
             "LTAA_TEST_GRAPH_VERSION is set: this process claims graph version %s instead of "
@@ -79,7 +84,7 @@ def make_worker(
         open_checkpointer = postgres_checkpointer
     else:
         # Claims the store first: a second process must fail before it opens anything.
-        ownership = LocalOwnership(settings=settings, sessions=sessions)
+        ownership = LocalOwnership(settings=settings, sessions=sessions, serving=serving)
         open_checkpointer = sqlite_checkpointer
     try:
         checkpointer = open_checkpointer(settings)

@@ -102,10 +102,12 @@ class Ownership(Protocol):
 class LocalOwnership:
     """The single process on an embedded SQLite store."""
 
-    def __init__(self, *, settings: Settings, sessions: sessionmaker[Session]) -> None:
+    def __init__(
+        self, *, settings: Settings, sessions: sessionmaker[Session], serving: str | None = None
+    ) -> None:
         self._settings = settings
         self._sessions = sessions
-        self._release_store = _claim_store(settings.db_url)
+        self._release_store = _claim_store(settings.db_url, serving)
         self._slots: Slots | None = None
 
     def attach(self, slots: Slots) -> None:
@@ -172,15 +174,16 @@ class LocalOwnership:
         self._release_store()
 
 
-def _claim_store(database_url: str) -> Callable[[], None]:
-    """Make this the only process on the embedded store (StoreInUseError otherwise);
-    returns how to let go. An in-memory or non-SQLite database needs no lock."""
+def _claim_store(database_url: str, serving: str | None = None) -> Callable[[], None]:
+    """Make this the only process on the embedded store (StoreInUseError otherwise),
+    recording where it serves; returns how to let go. An in-memory or non-SQLite database
+    needs no lock."""
     url = make_url(database_url)
     database = url.database
     if url.get_backend_name() != "sqlite" or not database or database == ":memory:":
         return lambda: None
     lock = StoreLock(Path(database))
-    lock.acquire()
+    lock.acquire(serving)
     return lock.release
 
 

@@ -8,7 +8,7 @@ from fastapi.testclient import TestClient
 from app.config import Settings
 from app.graph.pause import PausePoint
 from app.main import create_app
-from app.store.lock import StoreInUseError
+from app.store.lock import Holder, StoreInUseError, listen_url
 from tests.polling import wait_logged, wait_until
 
 BASELINE = {"scenario": "baseline", "mode": "balanced"}
@@ -35,3 +35,15 @@ def test_a_second_server_on_the_same_store_refuses_to_start(
     # Once the first has stopped, the store is free again.
     with TestClient(create_app(settings)) as second:
         assert wait_until(second, run_id, ("completed",))["resumes"] == 1
+
+
+def test_the_lock_file_names_the_holder_and_where_it_serves(settings: Settings) -> None:
+    with TestClient(create_app(settings.model_copy(update={"port": 9123}))):
+        with pytest.raises(StoreInUseError) as refused:
+            TestClient(create_app(settings)).__enter__()
+    assert refused.value.holder.url == "http://127.0.0.1:9123"
+    assert "serving http://127.0.0.1:9123" in str(refused.value)
+    # A lock file written before the address was recorded held the pid alone.
+    assert Holder.parse("4242") == Holder(pid="4242", url=None)
+    assert listen_url("0.0.0.0", 9000) == "http://127.0.0.1:9000"
+    assert listen_url("::", 9000) == "http://[::1]:9000"

@@ -94,3 +94,21 @@ def test_backup_mid_run_restores_and_resumes_to_the_same_allocation(tmp_path: Pa
         assert _assignments(restored, run_id) == reference
     finally:
         restored.stop()
+
+
+def test_backup_finds_the_server_holding_the_store_wherever_it_listens(tmp_path: Path) -> None:
+    # `make run PORT=9000`, then `ltaa backup DEST` in another shell with no LTAA_PORT: the
+    # store's lock file names the server's address, so the command asks that server.
+    server = Server(tmp_path / "data").start(LTAA_BACKUP_DIR=str(tmp_path))
+    try:
+        with server.client() as c:
+            run_id = str(c.post("/runs", json={"scenario": "baseline"}).json()["id"])
+        _wait(server, run_id, lambda s: s["status"] == "completed")
+        assert server.port != 8000
+        taken = _ltaa(server.data_dir, "backup", str(tmp_path / "backup"))
+        assert taken.returncode == 0, taken.stderr
+        manifest = json.loads(taken.stdout)
+        assert manifest["taken_by"] == "server", manifest
+        assert manifest["dest"] == str((tmp_path / "backup").resolve()) and manifest["files"]
+    finally:
+        server.stop()

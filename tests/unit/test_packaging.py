@@ -30,3 +30,13 @@ def test_make_run_docker_and_compose_start_the_same_script() -> None:
     serve = (ROOT / "scripts" / "serve.sh").read_text()
     assert 'alembic" upgrade head' in serve and "app.main:create_app --factory" in serve
     assert "make run" in (ROOT / "README.md").read_text()
+
+
+def test_the_licence_is_an_spdx_expression_with_its_file() -> None:
+    # A table (`license = {text = ...}`) is deprecated by setuptools and refused from
+    # February 2027; the SPDX string and license-files are the maintained form.
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["license"] == "MIT"
+    assert all((ROOT / name).is_file() for name in project["license-files"])
