@@ -44,11 +44,21 @@ def pause_setting(point: PausePoint) -> str:
 
 class Server:
     def __init__(
-        self, data_dir: Path, env: dict[str, str] | None = None, port: int | None = None
+        self,
+        data_dir: Path,
+        env: dict[str, str] | None = None,
+        port: int | None = None,
+        *,
+        root: Path = ROOT,
     ) -> None:
+        """`root`: the source tree to serve; another than this checkout (an earlier release,
+        say) is put first on the server's path."""
         self.data_dir = data_dir
+        self.root = root
         self.port = port or free_port()
         self.env = {**os.environ, "LTAA_DATA_DIR": str(data_dir), **(env or {})}
+        if root != ROOT:
+            self.env["PYTHONPATH"] = str(root)
         # The developer's own LLM configuration stays out of the server under test.
         for key in (*LLM_ENVIRONMENT, *(k for k in os.environ if k.startswith("OPENAI_"))):
             if key not in (env or {}):
@@ -81,8 +91,8 @@ class Server:
             # The script `make run` and the Docker image use; it execs uvicorn, so this
             # process is the server and SIGKILL reaches it directly.
             self.proc = subprocess.Popen(
-                ["sh", str(ROOT / "scripts" / "serve.sh")],
-                cwd=ROOT,
+                ["sh", str(self.root / "scripts" / "serve.sh")],
+                cwd=self.root,
                 env=full_env,
                 stdout=log,
                 stderr=subprocess.STDOUT,
