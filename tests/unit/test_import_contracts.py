@@ -23,3 +23,35 @@ def test_the_import_contracts_are_kept() -> None:
     )
     assert result.returncode == 0, result.stdout + result.stderr
     assert "0 broken" in result.stdout
+
+
+def _acyclic_contract() -> str:
+    """This project's acyclic-siblings contract, as pyproject.toml states it."""
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
+    (contract,) = [c for c in config["contracts"] if c["type"] == "acyclic_siblings"]
+    assert contract["ancestors"] == ["app"]
+    return contract["name"]
+
+
+def test_a_new_import_cycle_breaks_the_contracts(tmp_path: Path) -> None:
+    # The contract is only as good as its power to fail: a copy of `app` with one new
+    # cycle (two sibling modules importing each other) is refused.
+    import shutil
+
+    shutil.copytree(ROOT / "app", tmp_path / "app", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    (tmp_path / "app" / "domain" / "cycle_a.py").write_text("from app.domain import cycle_b\n")
+    (tmp_path / "app" / "domain" / "cycle_b.py").write_text("from app.domain import cycle_a\n")
+    result = subprocess.run(
+        [sys.executable, "-c", LINT_IMPORTS, "--no-cache", "--no-logo"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tmp_path)},
+    )
+    assert result.returncode != 0
+    assert f"{_acyclic_contract()} BROKEN" in " ".join(result.stdout.split())
+    assert "cycle_a" in result.stdout and "cycle_b" in result.stdout
