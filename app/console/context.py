@@ -39,6 +39,22 @@ class Console:
         templates.env.filters.update(fmt.FILTERS)
         return cls(templates=templates, keyring=keyring, settings=settings)
 
+    def refused(
+        self,
+        request: Request,
+        *,
+        title: str,
+        message: str,
+        retry: str | None = None,
+        signed: SignedIn | None = None,
+        status_code: int,
+    ) -> HTMLResponse:
+        """The page that says what was refused and why, with a way back (`retry`)."""
+        context = {"title": title, "message": message}
+        if retry is not None:
+            context["retry"] = retry
+        return self.render(request, "refused.html", context, signed=signed, status_code=status_code)
+
     def render(
         self,
         request: Request,
@@ -111,11 +127,8 @@ def no_run(request: Request, run_id: str) -> PageNotFound:
 def on_page_not_found(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, PageNotFound)
     title = "Archived" if exc.gone else "Not found"
-    return console_of(request).render(
-        request,
-        "refused.html",
-        {"title": title, "message": exc.message},
-        status_code=410 if exc.gone else 404,
+    return console_of(request).refused(
+        request, title=title, message=exc.message, status_code=410 if exc.gone else 404
     )
 
 
@@ -202,15 +215,12 @@ def on_sign_in_required(request: Request, exc: Exception) -> Response:
 
 
 def on_csrf_refused(request: Request, exc: Exception) -> Response:
-    return console_of(request).render(
+    return console_of(request).refused(
         request,
-        "refused.html",
-        {
-            "title": "Form refused",
-            "message": "This form was sent without the security token of your session "
-            "(it may come from another site, or from a page opened before you signed in "
-            "again). Nothing was changed. Go back, reload the page and send it again.",
-        },
+        title="Form refused",
+        message="This form was sent without the security token of your session "
+        "(it may come from another site, or from a page opened before you signed in "
+        "again). Nothing was changed. Go back, reload the page and send it again.",
         status_code=403,
     )
 

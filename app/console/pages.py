@@ -266,14 +266,11 @@ async def _act(
     except RunNotFoundError:
         raise no_run(request, run_id) from None
     except RunStateConflictError as exc:
-        return console.render(
+        return console.refused(
             request,
-            "refused.html",
-            {
-                "title": f"Cannot {action}",
-                "message": exc.message,
-                "retry": f"/console/runs/{run_id}",
-            },
+            title=f"Cannot {action}",
+            message=exc.message,
+            retry=f"/console/runs/{run_id}",
             signed=signed,
             status_code=409,
         )
@@ -290,18 +287,19 @@ async def sign_off(
 ) -> Response:
     """The console's sign-off form: the same service as POST /runs/{id}/signoff, signed with
     the session key's name."""
-    if not statement.strip():
-        return console.render(
+
+    def refuse(message: str, status_code: int) -> Response:
+        return console.refused(
             request,
-            "refused.html",
-            {
-                "title": "Not signed off",
-                "message": "A sign-off needs a statement.",
-                "retry": f"/console/runs/{run_id}",
-            },
+            title="Not signed off",
+            message=message,
+            retry=f"/console/runs/{run_id}",
             signed=signed,
-            status_code=422,
+            status_code=status_code,
         )
+
+    if not statement.strip():
+        return refuse("A sign-off needs a statement.", 422)
     try:
         await run_in_threadpool(
             signoff.sign_off,
@@ -313,28 +311,12 @@ async def sign_off(
     except RunNotFoundError:
         raise no_run(request, run_id) from None
     except RunStateConflictError as exc:
-        return console.render(
-            request,
-            "refused.html",
-            {"title": "Not signed off", "message": exc.message, "retry": f"/console/runs/{run_id}"},
-            signed=signed,
-            status_code=409,
-        )
+        return refuse(exc.message, 409)
     except DomainError as exc:
         if exc.status_code != 422:
             raise
         # The statement itself (a NUL character): say so on a page, like a blank one.
-        return console.render(
-            request,
-            "refused.html",
-            {
-                "title": "Not signed off",
-                "message": f"The statement {exc.message}.",
-                "retry": f"/console/runs/{run_id}",
-            },
-            signed=signed,
-            status_code=422,
-        )
+        return refuse(f"The statement {exc.message}.", 422)
     return RedirectResponse(f"/console/runs/{run_id}#signoffs", status_code=303)
 
 

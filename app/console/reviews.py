@@ -65,10 +65,11 @@ async def resolve(
     except ValueError as exc:  # DomainError is a ValueError too: unknown action, robot...
         status = getattr(exc, "status_code", 422) if isinstance(exc, DomainError) else 422
         message = exc.message if isinstance(exc, DomainError) else f"unknown action '{action}'"
-        return console.render(
+        return console.refused(
             request,
-            "refused.html",
-            {"title": "Review not resolved", "message": message, "retry": "/console/reviews"},
+            title="Review not resolved",
+            message=message,
+            retry="/console/reviews",
             signed=signed,
             status_code=status,
         )

@@ -82,15 +82,12 @@ async def login(
 ) -> Response:
     expected = request.cookies.get(LOGIN_CSRF_COOKIE, "")
     if not csrf_token or not expected or not hmac.compare_digest(csrf_token, expected):
-        return console.render(
+        return console.refused(
             request,
-            "refused.html",
-            {
-                "title": "Form refused",
-                "message": "The sign-in form was sent without its security token (or from "
-                "another site). Open the sign-in page again and sign in from there.",
-                "retry": "/console/login",
-            },
+            title="Form refused",
+            message="The sign-in form was sent without its security token (or from "
+            "another site). Open the sign-in page again and sign in from there.",
+            retry="/console/login",
             status_code=403,
         )
     target = safe_next(next_)
@@ -111,16 +108,13 @@ async def login(
         )
     role, fingerprint = found
     if role is not Role.SUPERVISOR:
-        return console.render(
+        return console.refused(
             request,
-            "refused.html",
-            {
-                "title": "Client key refused",
-                "message": "This is a client key: it lets the site app allocate and "
-                "create runs, but the console is for supervisors. Sign in with a "
-                "supervisor key.",
-                "retry": "/console/login",
-            },
+            title="Client key refused",
+            message="This is a client key: it lets the site app allocate and "
+            "create runs, but the console is for supervisors. Sign in with a "
+            "supervisor key.",
+            retry="/console/login",
             status_code=403,
         )
     identified = console.keyring.identify_fingerprint(fingerprint)
