@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from app.store import chain
@@ -15,7 +15,7 @@ from app.store.models import Decision, Run, RunEvent
 @dataclass(frozen=True)
 class ChainHeads:
     decision_hash: str | None
-    decisions: int  # decisions chained so far (the last task index + 1)
+    decisions: int  # decisions chained so far
     event_hash: str | None
     events: int  # events so far (the last seq)
 
@@ -24,12 +24,19 @@ class ChainHeads:
 
 
 def chain_heads(session: Session, run_id: str) -> ChainHeads:
+    """The last link of each chain. A revision's decisions are chained pins first, then the
+    decisions it made (app.store.decision_repository.revision_chain_order), so its head is
+    the last decision it made, or its last pin while it has made none; a run without pins
+    is chained in task order."""
     last_decision = session.execute(
-        select(Decision.chain_hash, Decision.task_index)
+        select(Decision.chain_hash)
         .where(Decision.run_id == run_id)
-        .order_by(Decision.task_index.desc())
+        .order_by(Decision.pinned.is_(None).desc(), Decision.task_index.desc())
         .limit(1)
     ).first()
+    decisions = session.scalar(
+        select(func.count()).select_from(Decision).where(Decision.run_id == run_id)
+    )
     last_event = session.execute(
         select(RunEvent.chain_hash, RunEvent.seq)
         .where(RunEvent.run_id == run_id)
@@ -38,7 +45,7 @@ def chain_heads(session: Session, run_id: str) -> ChainHeads:
     ).first()
     return ChainHeads(
         decision_hash=last_decision.chain_hash if last_decision else None,
-        decisions=last_decision.task_index + 1 if last_decision else 0,
+        decisions=int(decisions or 0),
         event_hash=last_event.chain_hash if last_event else None,
         events=last_event.seq if last_event else 0,
     )

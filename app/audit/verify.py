@@ -9,6 +9,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.heads import chain_heads
 from app.audit.heads import geneses as chain_geneses
 from app.audit.pages import (
     annotation_pages,
@@ -206,8 +207,15 @@ def check_parent_link(
             return bad(f"the parent names {parent.superseded_by!r} as its revision, not this run")
         heads = detail.get("parent_heads") or {}
         parent_decisions = decision_repo.decisions(session=session, run_id=parent_id)
-        head_now = parent_decisions[-1].chain_hash if parent_decisions else None
-        if heads.get("decisions") != head_now:
+        # The head in chain order (a revised revision's pins first); revisions made before
+        # that was fixed recorded the parent's last decision in task order, which is the
+        # same link unless the parent's last task was pinned: both still prove the parent's
+        # chain holds what the revision started from.
+        heads_now = {
+            chain_heads(session, parent_id).decision_hash,
+            parent_decisions[-1].chain_hash if parent_decisions else None,
+        }
+        if heads.get("decisions") not in heads_now:
             return bad("the parent's decision chain no longer ends at the head it was revised at")
         if heads.get("events") is not None and not repo.has_event_hash(
             session=session, run_id=parent_id, chain_hash=heads["events"]

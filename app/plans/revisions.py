@@ -18,6 +18,7 @@ from sqlalchemy import update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.audit.heads import chain_heads
 from app.config import Settings
 from app.domain.annotations import AnnotationKind
 from app.domain.errors import DomainError, RunNotFoundError
@@ -172,10 +173,7 @@ def _create(
             parent_id=parent_id,
             token_budget=budget,
         )
-        heads = {
-            "decisions": rows[-1].chain_hash if rows else None,
-            "events": repo.last_event_hash(session=session, run_id=parent_id),
-        }
+        heads = chain_heads(session, parent_id).as_dict()
         run_id = uuid.uuid4().hex
         revision_no = parent.revision + 1
         link = {

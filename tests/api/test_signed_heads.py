@@ -22,6 +22,7 @@ from app.store.db import make_engine, make_session_factory, transaction
 from app.store.models import Decision, Run, RunSignature
 from tests.factories import run_row
 from tests.offline_check import check_offline
+from tests.polling import eventually
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -211,3 +212,45 @@ def test_a_sign_off_is_signed_too(settings: Settings, tmp_path: Path) -> None:
     header = json.loads(export.read_text().splitlines()[0])
     assert [s["reason"] for s in header["signatures"]] == ["completed", "signoff"]
     assert check_offline(export, pem).returncode == 0
+
+
+def test_a_revision_whose_last_task_is_pinned_is_signed_and_signed_off_at_its_real_heads(
+    settings: Settings, tmp_path: Path
+) -> None:
+    # A revision's decision chain runs through its pins first: when the queue's last task
+    # is pinned, the head is the last decision the revision made, not the last task index.
+    signed = _signed_settings(settings, tmp_path)
+    change = {"type": "robot_unavailable", "robot": "heavy"}
+    with TestClient(create_app(signed)) as client:
+        parent = _completed(client)
+        body = {"changes": [change], "pin": {"task_ids": [102]}, "reason": "last task kept"}
+        revision = client.post(f"/runs/{parent}/revisions", json=body).json()["id"]
+        eventually(
+            lambda: client.get(f"/runs/{revision}").json()["status"],
+            until=lambda status: status == "completed",
+            what="the revision completed",
+        )
+        completed = client.get(f"/runs/{revision}/trace/verify").json()
+        answer = client.post(f"/runs/{revision}/signoff", json={"statement": "checked"})
+        assert answer.status_code == 201, answer.text
+        verify = client.get(f"/runs/{revision}/trace/verify").json()
+        # A revision of it starts from those heads too.
+        again = client.post(
+            f"/runs/{revision}/revisions",
+            json={"changes": [{"type": "robot_available", "robot": "heavy"}], "reason": "back"},
+        ).json()["id"]
+        eventually(
+            lambda: client.get(f"/runs/{again}").json()["status"],
+            until=lambda status: status == "completed",
+            what="the second revision completed",
+        )
+        link = client.get(f"/runs/{again}/trace/verify").json()["parent"]
+        export = _export(client, revision, tmp_path / "revision.jsonl")
+        pem = _public_key_file(client, tmp_path / "public.pem")
+    assert completed["signature"]["valid"] is True, completed["signature"]
+    assert answer.json()["heads"] == completed["heads"]
+    assert verify["ok"] is True and verify["signoffs_ok"] is True
+    assert verify["signature"]["reason"] == "signoff" and verify["signature"]["valid"] is True
+    assert link["ok"] is True, link
+    checked = check_offline(export, pem)
+    assert checked.returncode == 0, checked.stdout + checked.stderr
