@@ -140,12 +140,12 @@ def test_serve_migrates_then_runs_the_factory(
 ) -> None:
     import uvicorn
 
-    from app import cli as cli_module
+    from app.cli import serve as serve_command
 
     migrated: list[str] = []
     served: dict[str, Any] = {}
     monkeypatch.setattr(
-        cli_module, "apply_migrations", lambda settings: migrated.append(settings.db_url)
+        serve_command, "apply_migrations", lambda settings: migrated.append(settings.db_url)
     )
     monkeypatch.setattr(uvicorn, "run", lambda app, **kw: served.update(app=app, **kw))
     result = runner.invoke(cli, ["serve", "--port", "8123"])
