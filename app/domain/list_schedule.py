@@ -27,7 +27,7 @@ from app.domain.time_model import TimeModel
 
 
 @dataclass
-class _Timeline:
+class Timeline:
     """One robot: when it is next free, where it is, and its fixed tasks still ahead."""
 
     free: float
@@ -76,7 +76,7 @@ def list_schedule(problem: Problem, assignment: Sequence[int]) -> Schedule:
     starts = [0.0] * n
     ends = [0.0] * n
     done = [False] * n
-    lines = [_Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
+    lines = [Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
     for t, start in sorted(problem.pinned_starts.items(), key=lambda item: item[1]):
         r = assignment[t]
         lines[r].fixed.append((start, start + tm.duration(t, r), t))

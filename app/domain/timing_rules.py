@@ -279,7 +279,22 @@ def _travel_matrix(
                     code="missing_travel",
                 )
             matrix[i][j] = pair
-    return tuple(tuple(row) for row in matrix)
+    return quickest_routes(matrix)
+
+
+def quickest_routes(matrix: list[list[float]]) -> tuple[tuple[float, ...], ...]:
+    """A robot takes the quickest way between two zones, through others if that is quicker
+    (Floyd-Warshall). So travel obeys the triangle inequality, which the exact scheduler's
+    pairwise travel constraints rely on: an entry that a detour beats is lowered to it."""
+    n = len(matrix)
+    best = [list(row) for row in matrix]
+    for k in range(n):
+        for i in range(n):
+            via = best[i][k]
+            for j in range(n):
+                if via + best[k][j] < best[i][j]:
+                    best[i][j] = via + best[k][j]
+    return tuple(tuple(row) for row in best)
 
 
 def _zone_users(

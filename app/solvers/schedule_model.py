@@ -1,0 +1,270 @@
+"""The CP-SAT model of a timed problem: a flexible job shop with travel and a load cap.
+
+Per task: a start and an end; per (task, robot that may take it) a presence literal and an
+optional fixed-size interval on the task's start; exactly one presence per task. Per robot
+a `NoOverlap` over its optional intervals, always: it is what makes CP-SAT fast. Travel
+between zones (`Travel.PAIRS`): for each two tasks in different zones that a robot may
+both take, an order literal; whichever goes first, the other starts no earlier than its
+end plus the travel between their zones (where precedence fixes the order, the one
+constraint without a literal). The first task starts no earlier than the shift start
+plus the travel from the robot's start zone. This is exact because travel obeys the
+triangle inequality (the domain takes the quickest route through the matrix), so the
+gaps between consecutive tasks imply every other pair's. On the 36-task timed instance it
+found and proved the optimum where successor literals with an `AddCircuit` per robot
+found no schedule in 15 s (docs/schedules.md has the measurements).
+
+Redundant, for the bound: per robot and per zone other than its start zone that it may
+visit, an optional block as long as the shortest way into that zone, present when the
+robot takes a task there, inside the robot's NoOverlap (it fits in the real gap before
+the robot's first entry there); and per robot, shift start + work + those entries <=
+makespan. Precedence, releases, deadlines, shifts, pins (robot, and start when fixed),
+`not_before` and the workload cap (load bounds on each available robot) always hold.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from enum import StrEnum
+
+from ortools.sat.python import cp_model
+
+from app.domain.problem import Problem
+from app.solvers.schedule_common import SuccessWeights
+from app.solvers.time_scale import TimeScale
+
+
+class Travel(StrEnum):
+    PAIRS = "pairs"  # order literals for tasks in different zones
+    NONE = "none"  # no two zones in use are apart
+
+
+class ScheduleModel:
+    def __init__(
+        self,
+        problem: Problem,
+        scale: TimeScale,
+        travel: Travel,
+        weights: SuccessWeights,
+        pairs: set[tuple[int, int]] | None = None,
+    ) -> None:
+        """`pairs`, when given, are the only (task, robot) pairs the model may use."""
+        self.problem, self.scale, self.travel = problem, scale, travel
+        self._pairs = pairs
+        tm = problem.instance.timing
+        self.tm = tm
+        self.model = cp_model.CpModel()
+        self.candidates = [self._candidates(t) for t in range(tm.n_tasks)]
+        self.horizon = self._horizon()
+        self.start: list[cp_model.IntVar] = []
+        self.end: list[cp_model.IntVar] = []
+        self.present: dict[tuple[int, int], cp_model.IntVar] = {}
+        self._intervals: list[list[cp_model.IntervalVar]] = [[] for _ in range(tm.n_robots)]
+        self._tasks_on: list[list[int]] = [[] for _ in range(tm.n_robots)]
+        self._ancestors = self._ancestor_masks() if travel is Travel.PAIRS else []
+        self._add_tasks()
+        self.makespan = self.model.new_int_var(self._makespan_floor(), self.horizon, "makespan")
+        for r in range(tm.n_robots):
+            if travel is Travel.PAIRS:
+                self._add_pairs(r)
+            # In the exact model the zone blocks are redundant (each fits in the real gap
+            # before the robot's first entry into its zone) and tighten the bound.
+            entries = self._add_zone_blocks(r) if travel is Travel.PAIRS else []
+            self.model.add_no_overlap(self._intervals[r])
+            self._add_energy(r, entries)
+        self._add_precedence()
+        self._add_cap()
+        for e in self.end:
+            self.model.add(self.makespan >= e)
+        keys = list(self.present)
+        self.es = cp_model.LinearExpr.weighted_sum(
+            [self.present[k] for k in keys], [weights[k] for k in keys]
+        )
+
+    # -- building --------------------------------------------------------------------------
+
+    def _candidates(self, t: int) -> list[int]:
+        pin = self.problem.pinned.get(t)
+        if pin is not None:
+            return [pin]
+        off, pairs = self.problem.unavailable, self._pairs
+        return [
+            r
+            for r in self.tm.eligible_robots(t)
+            if r not in off and (pairs is None or (t, r) in pairs)
+        ]
+
+    def _horizon(self) -> int:
+        """No schedule worth having ends later: everything one after another, from the
+        latest fixed time, with the longest travel before each task."""
+        tm, up = self.tm, self.scale.up
+        longest_travel = max((m for row in tm.travel_minutes for m in row), default=0.0)
+        anchor = max(
+            [*tm.release, self.problem.not_before, *(a for a, _ in tm.shifts)]
+            + [
+                s + tm.duration(t, self.problem.pinned[t])
+                for t, s in self.problem.pinned_starts.items()
+            ]
+        )
+        total = sum(max(tm.duration(t, r) for r in self.candidates[t]) for t in range(tm.n_tasks))
+        horizon = up(anchor) + up(total) + tm.n_tasks * up(longest_travel)
+        shift_ends = [b for _, b in tm.shifts]
+        if all(math.isfinite(b) for b in shift_ends):
+            horizon = min(horizon, max(self.scale.down(b) for b in shift_ends))
+        return max(horizon, 0)
+
+    def _add_tasks(self) -> None:
+        tm, m, up, down = self.tm, self.model, self.scale.up, self.scale.down
+        for t in range(tm.n_tasks):
+            fixed = self.problem.pinned_starts.get(t)
+            if fixed is not None:
+                lo = hi = round(fixed * self.scale.units_per_minute)
+            else:
+                lo = max(up(tm.release[t]), up(self.problem.not_before))
+                hi = self.horizon
+            end_hi = self.horizon if not math.isfinite(tm.deadline[t]) else down(tm.deadline[t])
+            if fixed is not None:
+                end_hi = max(end_hi, hi + max(up(tm.duration(t, r)) for r in self.candidates[t]))
+                self.horizon = max(self.horizon, end_hi)
+            start = m.new_int_var(lo, max(lo, hi), f"s{t}")
+            end = m.new_int_var(lo, max(lo, end_hi), f"e{t}")
+            lits, sizes = [], []
+            for r in self.candidates[t]:
+                d = up(tm.duration(t, r))
+                lit = m.new_bool_var(f"x{t}_{r}")
+                self.present[t, r] = lit
+                lits.append(lit)
+                sizes.append(d)
+                self._intervals[r].append(
+                    m.new_optional_fixed_size_interval_var(start, d, lit, f"i{t}_{r}")
+                )
+                self._tasks_on[r].append(t)
+                a, b = tm.shifts[r]
+                if fixed is None and up(a) > lo:
+                    m.add(start >= up(a)).only_enforce_if(lit)
+                if fixed is None and math.isfinite(b):
+                    m.add(end <= down(b)).only_enforce_if(lit)
+            m.add_exactly_one(lits)
+            m.add(end == start + cp_model.LinearExpr.weighted_sum(lits, sizes))
+            self.start.append(start)
+            self.end.append(end)
+
+    def _add_precedence(self) -> None:
+        for t, preds in enumerate(self.tm.predecessors):
+            if t in self.problem.pinned_starts:
+                continue  # a fact: what it waited for is the report's business
+            for p in preds:
+                self.model.add(self.start[t] >= self.end[p])
+
+    def _add_cap(self) -> None:
+        cap = self.problem.cap
+        for r in self.problem.available:
+            load = cp_model.LinearExpr.sum([self.present[t, r] for t in self._tasks_on[r]])
+            self.model.add_linear_constraint(load, cap.lower, cap.upper)
+
+    def _ancestor_masks(self) -> list[int]:
+        """Per task, a bitmask of the tasks that must end before it starts."""
+        tm = self.tm
+        masks = [0] * tm.n_tasks
+        for t in tm.order:
+            for p in tm.predecessors[t]:
+                masks[t] |= masks[p] | (1 << p)
+        return masks
+
+    def _add_energy(self, r: int, entries: list[tuple[int, cp_model.IntVar]]) -> None:
+        """Redundant: a robot's work and zone entries fit between its shift start and the
+        makespan (CP-SAT's default linear relaxation does not see this through NoOverlap)."""
+        mine = self._tasks_on[r]
+        if not mine:
+            return
+        up = self.scale.up
+        terms = [self.present[t, r] for t in mine] + [v for _, v in entries]
+        coeffs = [up(self.tm.duration(t, r)) for t in mine] + [size for size, _ in entries]
+        load = cp_model.LinearExpr.weighted_sum(terms, coeffs)
+        self.model.add(self.makespan >= up(self.tm.shifts[r][0]) + load)
+
+    def _add_pairs(self, r: int) -> None:
+        tm, m, up = self.tm, self.model, self.scale.up
+        mine = self._tasks_on[r]
+        ancestors = self._ancestors
+        for i, t in enumerate(mine):
+            a = up(tm.travel_to_task(tm.robot_zone[r], t))
+            if a:
+                m.add(self.start[t] >= up(tm.shifts[r][0]) + a).only_enforce_if(self.present[t, r])
+            for u in mine[i + 1 :]:
+                zt, zu = tm.task_zone[t], tm.task_zone[u]
+                if zt == zu:
+                    continue
+                both = [self.present[t, r], self.present[u, r]]
+                if ancestors[u] >> t & 1:
+                    m.add(self.start[u] >= self.end[t] + up(tm.travel(zt, zu))).only_enforce_if(
+                        both
+                    )
+                    continue
+                if ancestors[t] >> u & 1:
+                    m.add(self.start[t] >= self.end[u] + up(tm.travel(zu, zt))).only_enforce_if(
+                        both
+                    )
+                    continue
+                before = m.new_bool_var(f"b{r}_{t}_{u}")
+                m.add(self.start[u] >= self.end[t] + up(tm.travel(zt, zu))).only_enforce_if(
+                    [*both, before]
+                )
+                m.add(self.start[t] >= self.end[u] + up(tm.travel(zu, zt))).only_enforce_if(
+                    [*both, before.Not()]
+                )
+
+    def _add_zone_blocks(self, r: int) -> list[tuple[int, cp_model.IntVar]]:
+        """Per zone other than the start zone: (minutes into it, visited literal)."""
+        tm, m, up = self.tm, self.model, self.scale.up
+        home = tm.robot_zone[r]
+        if home is None or not tm.has_travel:
+            return []  # a robot that starts at its first task has no first entry to bound
+        by_zone: dict[int, list[int]] = {}
+        for t in self._tasks_on[r]:
+            z = tm.task_zone[t]
+            if z is not None and z != home:
+                by_zone.setdefault(z, []).append(t)
+        a, b = tm.shifts[r]
+        lo = up(a)
+        hi = self.horizon if not math.isfinite(b) else self.scale.down(b)
+        entries = []
+        for z, tasks in by_zone.items():
+            into = min(tm.travel_minutes[y][z] for y in range(len(tm.zones)) if y != z)
+            size = up(into)
+            if size <= 0:
+                continue
+            visit = m.new_bool_var(f"visit{r}_{z}")
+            for t in tasks:
+                m.add_implication(self.present[t, r], visit)
+            start = m.new_int_var(lo, max(lo, hi - size), f"enter{r}_{z}")
+            block = m.new_optional_fixed_size_interval_var(start, size, visit, f"travel{r}_{z}")
+            self._intervals[r].append(block)
+            entries.append((size, visit))
+        return entries
+
+    def _makespan_floor(self) -> int:
+        """Every task ends by the makespan; its chain of shortest durations says when."""
+        finish = self.tm.earliest_finish
+        return max(self.scale.down(f) for f in finish) if finish else 0
+
+    # -- hints and answers -----------------------------------------------------------------
+
+    def hint(self, robots: Sequence[int | None], starts: Sequence[float | None]) -> None:
+        self.model.clear_hints()
+        for t, r in enumerate(robots):
+            if r is None or (t, r) not in self.present:
+                continue
+            for q in self.candidates[t]:
+                self.model.add_hint(self.present[t, q], q == r)
+            s = starts[t]
+            if s is not None:
+                self.model.add_hint(self.start[t], round(s * self.scale.units_per_minute))
+
+    def read(self, solver: cp_model.CpSolver) -> tuple[list[int], list[float]]:
+        robots = [
+            next(r for r in self.candidates[t] if solver.boolean_value(self.present[t, r]))
+            for t in range(self.tm.n_tasks)
+        ]
+        starts = [self.scale.minutes(solver.value(s)) for s in self.start]
+        return robots, starts
