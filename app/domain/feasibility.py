@@ -4,6 +4,11 @@ It reads only the decision (robot, start, end per task) and recomputes everythin
 from the problem, so a schedule's own derived fields (travel, zone) cannot vouch for
 themselves. Every broken rule is reported, each as a Violation naming the rule, the task
 and the robot, with a sentence a supervisor can act on; an empty list means feasible.
+
+A task with a pinned start (reported started or done) is a fact: its own release,
+deadline, shift, predecessors and (as a robot's first task) the way from the start zone
+are not held against the plan; the plan must keep it at its start, on its robot, and fit
+everything else around it (overlap, travel to and from it, successors).
 """
 
 from __future__ import annotations
@@ -76,14 +81,15 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                 t,
                 r,
             )
-        if s.start < tm.release[t] - EPS:
+        fixed = problem.pinned_starts.get(t)  # a fact (see the module docstring)
+        if fixed is None and s.start < tm.release[t] - EPS:
             add(
                 Rule.RELEASE,
                 f"{task(t)} starts at {s.start:g}, before its release {tm.release[t]:g}",
                 t,
                 r,
             )
-        if s.end > tm.deadline[t] + EPS:
+        if fixed is None and s.end > tm.deadline[t] + EPS:
             add(
                 Rule.DEADLINE,
                 f"{task(t)} ends at {s.end:g}, after its deadline {tm.deadline[t]:g}",
@@ -91,7 +97,7 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                 r,
             )
         a, b = tm.shifts[r]
-        if s.start < a - EPS or s.end > b + EPS:
+        if fixed is None and (s.start < a - EPS or s.end > b + EPS):
             add(
                 Rule.SHIFT,
                 f"{task(t)} runs [{s.start:g}, {s.end:g}], outside the shift "
@@ -99,7 +105,6 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                 t,
                 r,
             )
-        fixed = problem.pinned_starts.get(t)
         if fixed is None and s.start < problem.not_before - EPS:
             add(
                 Rule.NOT_BEFORE,
@@ -119,7 +124,7 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
             )
         if pin is None and r in problem.unavailable:
             add(Rule.UNAVAILABLE, f"{task(t)} is a new task on unavailable robot '{name}'", t, r)
-        for p in tm.predecessors[t]:
+        for p in tm.predecessors[t] if fixed is None else ():
             if s.start < slots[p].end - EPS:
                 add(
                     Rule.PRECEDENCE,
@@ -157,7 +162,8 @@ def _check_robots(problem: Problem, schedule: Schedule) -> list[Violation]:
                 out.append(Violation(Rule.OVERLAP, message, t, r))
             else:
                 move = tm.travel_to_task(zone, t)
-                if move > 0 and s.start < free + move - EPS:
+                fact = previous is None and t in problem.pinned_starts  # it was there
+                if move > 0 and not fact and s.start < free + move - EPS:
                     where = "its start zone" if previous is None else f"task {tasks[previous].id!r}"
                     message = (
                         f"'{name}' starts {label} at {s.start:g}, but needs {move:g} min to "

@@ -18,6 +18,7 @@ from ortools.sat.python import cp_model
 
 from app.domain.problem import Problem
 from app.solvers.schedule_common import SuccessWeights
+from app.solvers.schedule_model import zones_to_enter
 from app.solvers.time_scale import TimeScale
 
 
@@ -34,6 +35,8 @@ class AssignmentModel:
         m = self.model = cp_model.CpModel()
         up = scale.up
         self.x: dict[tuple[int, int], cp_model.IntVar] = {}
+        self._visits: list[tuple[int, int, cp_model.IntVar]] = []  # (robot, zone, visit)
+        self._entry_size: dict[tuple[int, int], int] = {}
         on: list[list[int]] = [[] for _ in range(tm.n_robots)]
         for t, robots in enumerate(candidates):
             lits = []
@@ -74,11 +77,7 @@ class AssignmentModel:
         home = tm.robot_zone[r]
         if home is None or not tm.has_travel:
             return []
-        by_zone: dict[int, list[int]] = {}
-        for t in mine:
-            z = tm.task_zone[t]
-            if z is not None and z != home:
-                by_zone.setdefault(z, []).append(t)
+        by_zone = zones_to_enter(self.problem, r, mine)
         out = []
         for z, tasks in by_zone.items():
             size = self.scale.up(
@@ -87,15 +86,37 @@ class AssignmentModel:
             if size <= 0:
                 continue
             visit = self.model.new_bool_var(f"v{r}_{z}")
+            self._entry_size[r, z] = size
             for t in tasks:
                 self.model.add_implication(self.x[t, r], visit)
             out.append((size, visit))
+            self._visits.append((r, z, visit))
         return out
 
     def hint(self, robots: Sequence[int]) -> None:
-        self.model.clear_hints()
+        """An assignment as the whole hint: presences, zone visits and T."""
+        m, tm = self.model, self.problem.instance.timing
+        m.clear_hints()
+        if any((t, r) not in self.x for t, r in enumerate(robots)):
+            return
         for (t, r), lit in self.x.items():
-            self.model.add_hint(lit, robots[t] == r)
+            m.add_hint(lit, robots[t] == r)
+        visited = {(r, tm.task_zone[t]) for t, r in enumerate(robots)}
+        for r, z, visit in self._visits:
+            m.add_hint(visit, (r, z) in visited)
+        m.add_hint(self.makespan, self._load(robots))
+
+    def _load(self, robots: Sequence[int]) -> int:
+        """T for an assignment: the largest shift start + work + zone entries."""
+        tm, up = self.problem.instance.timing, self.scale.up
+        loads = [up(a) for a, _ in tm.shifts]
+        for t, r in enumerate(robots):
+            loads[r] += up(tm.duration(t, r))
+        visited = {(r, tm.task_zone[t]) for t, r in enumerate(robots)}
+        for key, size in self._entry_size.items():
+            if key in visited:
+                loads[key[0]] += size
+        return max(loads)
 
     def read(self, solver: cp_model.CpSolver) -> list[int]:
         return [

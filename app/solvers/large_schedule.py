@@ -6,9 +6,10 @@ without travel literals, found no schedule in 60 s, hint included; its bound sta
 half of what a load relaxation proves. What makes such plans long is load: the success
 objective pushes the best robots up to the cap. So the path decides in three steps:
 
-1. Assign: the `AssignmentModel` (ES held at its target, or above the floor; the cap;
-   per robot: shift start + work + one entry into each zone it visits <= T; minimise T).
-   Its proven bound on T is a lower bound on the makespan: the answer's `bound`.
+1. Bound and assign: the LP relaxation of the assignment (`load_bound`, HiGHS) and the
+   `AssignmentModel` (ES held at its target, or above the floor; the cap; per robot:
+   shift start + work + one entry into each zone it visits <= T; minimise T). Both bounds
+   on T are lower bounds on the makespan; the larger (or the chains') is the `bound`.
 2. Time: the assignment (and the time-free optimum, already in hand) by the list
    scheduler and by earliest-finish dispatch within its per-class quotas.
 3. Sequence, with time left (at least `SEQUENCING_MIN_S`): the exact model with pairwise
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 from app.domain.errors import DomainError
 from app.solvers.assignment_model import AssignmentModel
+from app.solvers.load_bound import load_lower_bound
 from app.solvers.schedule_common import assignment_schedules, makespan_floor, none_found
 from app.solvers.schedule_model import ScheduleModel, Travel
 from app.solvers.schedule_outcome import ScheduleOutcome, Setup, outcome
@@ -32,6 +34,8 @@ LARGE_MODEL = (
     "large-instance path: CP-SAT load-balancing assignment (travel as per-zone entries), "
     "list and earliest-finish schedules, then CP-SAT sequencing of the best assignment"
 )
+LP_MIN_S = 2.0  # below this the chains' bound has to do
+LP_SHARE = 0.25  # of the time left, at most, for the LP bound
 SEQUENCING_MIN_S = 3.0  # below this, building the sequencing model costs more than it gains
 ASSIGNMENT_SHARE = 0.4  # of the time left, when sequencing follows
 
@@ -52,6 +56,16 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
         feasible.keep(lambda es: es == target)
     tm = problem.instance.timing
     candidates = [_candidates(setup, t) for t in range(tm.n_tasks)]
+    lp_bound = 0.0
+    if search.remaining() >= LP_MIN_S:
+        lp_bound = load_lower_bound(
+            problem,
+            candidates,
+            setup.weights,
+            es_target=setup.es_target,
+            es_floor=setup.es_floor,
+            time_limit_s=search.remaining() * LP_SHARE,
+        )
     assign = AssignmentModel(problem, scale, candidates, setup.weights)
     if setup.es_target is not None:
         assign.model.add(assign.es == setup.es_target)
@@ -63,19 +77,19 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
         assign.hint(seed_plan.assignment)
     sequencing = search.remaining() >= SEQUENCING_MIN_S / ASSIGNMENT_SHARE
     share = search.remaining() * (ASSIGNMENT_SHARE if sequencing else 1.0)
-    solver, status = search.run(assign.model, "assignment", share)
+    solver, status = search.run(assign.model, "assignment", share, light_presolve=True)
     if status == "INFEASIBLE":
         raise DomainError(
             "max_deviation",
             "CP-SAT proved no assignment meets the workload cap at this expected success",
             code="no_schedule",
         )
-    load_bound = 0.0
+    load_bound = lp_bound
     if status in ("OPTIMAL", "FEASIBLE"):
         for schedule in assignment_schedules(problem, assign.read(solver)):
             feasible.offer(schedule)
     if scale.exact:
-        load_bound = scale.minutes(solver.best_objective_bound)
+        load_bound = max(load_bound, scale.minutes(solver.best_objective_bound))
     if sequencing and search.remaining() >= SEQUENCING_MIN_S:
         _sequence(setup)
     best = feasible.best()
@@ -111,6 +125,6 @@ def _sequence(setup: Setup) -> None:
     model.model.add(model.makespan <= setup.scale.up(best.makespan))
     model.model.minimize(model.makespan)
     model.hint(robots, [s.start for s in best.slots])
-    solver, status = search.run(model.model, "sequencing", search.remaining())
+    solver, status = search.run(model.model, "sequencing", search.remaining(), light_presolve=True)
     if status in ("OPTIMAL", "FEASIBLE"):
         feasible.offer_times(*model.read(solver))

@@ -30,13 +30,30 @@ from enum import StrEnum
 from ortools.sat.python import cp_model
 
 from app.domain.problem import Problem
-from app.solvers.schedule_common import SuccessWeights
+from app.solvers.schedule_common import SuccessWeights, makespan_floor
 from app.solvers.time_scale import TimeScale
 
 
 class Travel(StrEnum):
     PAIRS = "pairs"  # order literals for tasks in different zones
     NONE = "none"  # no two zones in use are apart
+
+
+def zones_to_enter(problem: Problem, r: int, tasks: Sequence[int]) -> dict[int, list[int]]:
+    """Per zone robot r must travel into if it takes any of `tasks` there: every zone but
+    its start zone and those where it may have a fixed task (a fact: it was there)."""
+    tm = problem.instance.timing
+    home = tm.robot_zone[r]
+    out: dict[int, list[int]] = {}
+    facts = set()
+    for t in tasks:
+        z = tm.task_zone[t]
+        if z is None or z == home:
+            continue
+        if t in problem.pinned_starts:
+            facts.add(z)
+        out.setdefault(z, []).append(t)
+    return {z: ts for z, ts in out.items() if z not in facts}
 
 
 class ScheduleModel:
@@ -61,6 +78,9 @@ class ScheduleModel:
         self.present: dict[tuple[int, int], cp_model.IntVar] = {}
         self._intervals: list[list[cp_model.IntervalVar]] = [[] for _ in range(tm.n_robots)]
         self._tasks_on: list[list[int]] = [[] for _ in range(tm.n_robots)]
+        # For complete hints: (robot, t, u, "t before u") and (robot, zone, visit, entry start).
+        self._orders: list[tuple[int, int, int, cp_model.IntVar]] = []
+        self._blocks: list[tuple[int, int, int, cp_model.IntVar, cp_model.IntVar, int]] = []
         self._ancestors = self._ancestor_masks() if travel is Travel.PAIRS else []
         self._add_tasks()
         self.makespan = self.model.new_int_var(self._makespan_floor(), self.horizon, "makespan")
@@ -189,7 +209,7 @@ class ScheduleModel:
         ancestors = self._ancestors
         for i, t in enumerate(mine):
             a = up(tm.travel_to_task(tm.robot_zone[r], t))
-            if a:
+            if a and t not in self.problem.pinned_starts:  # a fact needs no way there
                 m.add(self.start[t] >= up(tm.shifts[r][0]) + a).only_enforce_if(self.present[t, r])
             for u in mine[i + 1 :]:
                 zt, zu = tm.task_zone[t], tm.task_zone[u]
@@ -207,6 +227,7 @@ class ScheduleModel:
                     )
                     continue
                 before = m.new_bool_var(f"b{r}_{t}_{u}")
+                self._orders.append((r, t, u, before))
                 m.add(self.start[u] >= self.end[t] + up(tm.travel(zt, zu))).only_enforce_if(
                     [*both, before]
                 )
@@ -220,11 +241,7 @@ class ScheduleModel:
         home = tm.robot_zone[r]
         if home is None or not tm.has_travel:
             return []  # a robot that starts at its first task has no first entry to bound
-        by_zone: dict[int, list[int]] = {}
-        for t in self._tasks_on[r]:
-            z = tm.task_zone[t]
-            if z is not None and z != home:
-                by_zone.setdefault(z, []).append(t)
+        by_zone = zones_to_enter(self.problem, r, self._tasks_on[r])
         a, b = tm.shifts[r]
         lo = up(a)
         hi = self.horizon if not math.isfinite(b) else self.scale.down(b)
@@ -241,25 +258,37 @@ class ScheduleModel:
             block = m.new_optional_fixed_size_interval_var(start, size, visit, f"travel{r}_{z}")
             self._intervals[r].append(block)
             entries.append((size, visit))
+            self._blocks.append((r, z, size, visit, start, lo))
         return entries
 
     def _makespan_floor(self) -> int:
-        """Every task ends by the makespan; its chain of shortest durations says when."""
-        finish = self.tm.earliest_finish
-        return max(self.scale.down(f) for f in finish) if finish else 0
+        """Every schedule of this model lasts at least this (pinned starts are facts)."""
+        return self.scale.down(makespan_floor(self.problem, self._pairs))
 
     # -- hints and answers -----------------------------------------------------------------
 
-    def hint(self, robots: Sequence[int | None], starts: Sequence[float | None]) -> None:
-        self.model.clear_hints()
+    def hint(self, robots: Sequence[int], starts: Sequence[float]) -> None:
+        """A whole plan as the solution hint, every auxiliary literal included: CP-SAT
+        starts from it at once instead of completing tens of thousands of literals."""
+        m, tm, units = self.model, self.tm, self.scale.units_per_minute
+        m.clear_hints()
+        if any((t, r) not in self.present for t, r in enumerate(robots)):
+            return  # a plan this model cannot express (a pair it leaves out) hints nothing
+        at = [round(s * units) for s in starts]
+        ends = [at[t] + self.scale.up(tm.duration(t, robots[t])) for t in range(tm.n_tasks)]
         for t, r in enumerate(robots):
-            if r is None or (t, r) not in self.present:
-                continue
             for q in self.candidates[t]:
-                self.model.add_hint(self.present[t, q], q == r)
-            s = starts[t]
-            if s is not None:
-                self.model.add_hint(self.start[t], round(s * self.scale.units_per_minute))
+                m.add_hint(self.present[t, q], q == r)
+            m.add_hint(self.start[t], at[t])
+            m.add_hint(self.end[t], ends[t])
+        for _, t, u, before in self._orders:
+            m.add_hint(before, (at[t], t) < (at[u], u))
+        for r, z, size, visit, start, lo in self._blocks:
+            there = [at[t] for t in self._tasks_on[r] if robots[t] == r and tm.task_zone[t] == z]
+            m.add_hint(visit, bool(there))
+            # in the real gap before the robot's first entry into the zone
+            m.add_hint(start, max(lo, min(there) - size) if there else lo)
+        m.add_hint(self.makespan, max(ends, default=0))
 
     def read(self, solver: cp_model.CpSolver) -> tuple[list[int], list[float]]:
         robots = [
