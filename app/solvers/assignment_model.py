@@ -56,8 +56,10 @@ class AssignmentModel:
         for r in range(tm.n_robots):
             if not on[r]:
                 continue
-            terms = [self.x[t, r] for t in on[r]]
-            coeffs = [up(tm.duration(t, r)) for t in on[r]]
+            # Fixed tasks may lie before the shift start: only the others count.
+            free = [t for t in on[r] if t not in problem.pinned_starts]
+            terms = [self.x[t, r] for t in free]
+            coeffs = [up(tm.duration(t, r)) for t in free]
             for size, visit in self._entries(r, on[r]):
                 terms.append(visit)
                 coeffs.append(size)
@@ -111,7 +113,8 @@ class AssignmentModel:
         tm, up = self.problem.instance.timing, self.scale.up
         loads = [up(a) for a, _ in tm.shifts]
         for t, r in enumerate(robots):
-            loads[r] += up(tm.duration(t, r))
+            if t not in self.problem.pinned_starts:
+                loads[r] += up(tm.duration(t, r))
         visited = {(r, tm.task_zone[t]) for t, r in enumerate(robots)}
         for key, size in self._entry_size.items():
             if key in visited:

@@ -37,7 +37,8 @@ def load_lower_bound(
     col = np.arange(k)
     task_of = np.array([t for t, _ in pairs])
     robot_of = np.array([r for _, r in pairs])
-    work = np.array([tm.duration(t, r) for t, r in pairs])
+    # Fixed tasks may lie before the shift start: their work does not count.
+    work = np.array([0.0 if t in problem.pinned_starts else tm.duration(t, r) for t, r in pairs])
     es = np.array([weights[t, r] for t, r in pairs], dtype=float)
     # Columns: the k pair shares, then T.
     one_each = csr_matrix((np.ones(k), (task_of, col)), shape=(n, k + 1))

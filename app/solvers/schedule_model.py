@@ -183,10 +183,13 @@ class ScheduleModel:
             self.model.add_linear_constraint(load, cap.lower, cap.upper)
 
     def _ancestor_masks(self) -> list[int]:
-        """Per task, a bitmask of the tasks that must end before it starts."""
+        """Per task, a bitmask of the tasks that must end before it starts (a task with a
+        pinned start is a fact and waits for nothing, so no order passes through it)."""
         tm = self.tm
         masks = [0] * tm.n_tasks
         for t in tm.order:
+            if t in self.problem.pinned_starts:
+                continue
             for p in tm.predecessors[t]:
                 masks[t] |= masks[p] | (1 << p)
         return masks
@@ -194,7 +197,8 @@ class ScheduleModel:
     def _add_energy(self, r: int, entries: list[tuple[int, cp_model.IntVar]]) -> None:
         """Redundant: a robot's work and zone entries fit between its shift start and the
         makespan (CP-SAT's default linear relaxation does not see this through NoOverlap)."""
-        mine = self._tasks_on[r]
+        # Fixed tasks may lie before the shift start: only the others count.
+        mine = [t for t in self._tasks_on[r] if t not in self.problem.pinned_starts]
         if not mine:
             return
         up = self.scale.up
@@ -217,23 +221,27 @@ class ScheduleModel:
                     continue
                 both = [self.present[t, r], self.present[u, r]]
                 if ancestors[u] >> t & 1:
-                    m.add(self.start[u] >= self.end[t] + up(tm.travel(zt, zu))).only_enforce_if(
-                        both
-                    )
+                    m.add(self._after(r, t, u)).only_enforce_if(both)
                     continue
                 if ancestors[t] >> u & 1:
-                    m.add(self.start[t] >= self.end[u] + up(tm.travel(zu, zt))).only_enforce_if(
-                        both
-                    )
+                    m.add(self._after(r, u, t)).only_enforce_if(both)
                     continue
                 before = m.new_bool_var(f"b{r}_{t}_{u}")
                 self._orders.append((r, t, u, before))
-                m.add(self.start[u] >= self.end[t] + up(tm.travel(zt, zu))).only_enforce_if(
-                    [*both, before]
-                )
-                m.add(self.start[t] >= self.end[u] + up(tm.travel(zu, zt))).only_enforce_if(
-                    [*both, before.Not()]
-                )
+                m.add(self._after(r, t, u)).only_enforce_if([*both, before])
+                m.add(self._after(r, u, t)).only_enforce_if([*both, before.Not()])
+
+    def _after(self, r: int, t: int, u: int) -> cp_model.BoundedLinearExpression:
+        """u after t on robot r, with the travel between them. The robot travels within
+        its shift, so after a fixed task that ended before the shift started, the way
+        starts at the shift start."""
+        tm, up = self.tm, self.scale.up
+        move = up(tm.travel(tm.task_zone[t], tm.task_zone[u]))
+        fixed = self.problem.pinned_starts.get(t)
+        if fixed is None:
+            return self.start[u] >= self.end[t] + move
+        free = max(up(fixed + tm.duration(t, r)), up(tm.shifts[r][0]))
+        return self.start[u] >= free + move
 
     def _add_zone_blocks(self, r: int) -> list[tuple[int, cp_model.IntVar]]:
         """Per zone other than the start zone: (minutes into it, visited literal)."""
