@@ -221,17 +221,17 @@ class ScheduleModel:
                     continue
                 both = [self.present[t, r], self.present[u, r]]
                 if ancestors[u] >> t & 1:
-                    m.add(self._after(r, t, u)).only_enforce_if(both)
+                    self._add_after(r, t, u, both)
                     continue
                 if ancestors[t] >> u & 1:
-                    m.add(self._after(r, u, t)).only_enforce_if(both)
+                    self._add_after(r, u, t, both)
                     continue
                 before = m.new_bool_var(f"b{r}_{t}_{u}")
                 self._orders.append((r, t, u, before))
-                m.add(self._after(r, t, u)).only_enforce_if([*both, before])
-                m.add(self._after(r, u, t)).only_enforce_if([*both, before.Not()])
+                self._add_after(r, t, u, [*both, before])
+                self._add_after(r, u, t, [*both, before.Not()])
 
-    def _after(self, r: int, t: int, u: int) -> cp_model.BoundedLinearExpression:
+    def _add_after(self, r: int, t: int, u: int, when: list[cp_model.LiteralT]) -> None:
         """u after t on robot r, with the travel between them. The robot travels within
         its shift, so after a fixed task that ended before the shift started, the way
         starts at the shift start."""
@@ -239,9 +239,10 @@ class ScheduleModel:
         move = up(tm.travel(tm.task_zone[t], tm.task_zone[u]))
         fixed = self.problem.pinned_starts.get(t)
         if fixed is None:
-            return self.start[u] >= self.end[t] + move
+            self.model.add(self.start[u] >= self.end[t] + move).only_enforce_if(when)
+            return
         free = max(up(fixed + tm.duration(t, r)), up(tm.shifts[r][0]))
-        return self.start[u] >= free + move
+        self.model.add(self.start[u] >= free + move).only_enforce_if(when)
 
     def _add_zone_blocks(self, r: int) -> list[tuple[int, cp_model.IntVar]]:
         """Per zone other than the start zone: (minutes into it, visited literal)."""
