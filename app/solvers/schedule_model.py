@@ -231,7 +231,7 @@ class ScheduleModel:
                 self._add_after(r, t, u, [*both, before])
                 self._add_after(r, u, t, [*both, before.Not()])
 
-    def _add_after(self, r: int, t: int, u: int, when: list[cp_model.LiteralT]) -> None:
+    def _add_after(self, r: int, t: int, u: int, when: Sequence[cp_model.LiteralT]) -> None:
         """u after t on robot r, with the travel between them. The robot travels within
         its shift, so after a fixed task that ended before the shift started, the way
         starts at the shift start."""
