@@ -1,10 +1,13 @@
-"""The built-in data: the 36 TEACh actions and the four robot scenarios."""
+"""The built-in data: the 36 TEACh actions, the four robot scenarios, and the timed
+scenarios of SPEC 16 (kept apart: `scenarios()` lists exactly the four untimed ones that
+`GET /scenarios` serves; a later phase decides how the API offers the timed ones)."""
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from datetime import datetime
 from functools import cache
 from importlib import resources
 from typing import Any
@@ -66,6 +69,56 @@ def scenario(name: str) -> Scenario:
         raise DomainError(
             "scenario",
             f"unknown scenario '{name}'; choose one of: {known}",
+            code="unknown_scenario",
+        ) from None
+
+
+@cache
+def timed_scenarios() -> dict[str, Scenario]:
+    """The timed variants (`baseline_timed`): the 36 TEACh tasks with durations per robot,
+    zones, precedence, releases and deadlines, the robots with start zones and shifts.
+    Where each number comes from: docs/schedules.md."""
+    out: dict[str, Scenario] = {}
+    for sc in _load("timed_scenarios.json")["scenarios"]:
+        base = scenarios()[sc["success_from"]].instance
+        timing = {str(t["id"]): t for t in sc["tasks"]}
+        tasks = tuple(
+            replace(
+                task,
+                duration=dict(timing[str(task.id)]["duration"]),
+                zone=timing[str(task.id)]["zone"],
+                after=tuple(timing[str(task.id)].get("after", ())),
+                release=timing[str(task.id)].get("release"),
+                deadline=timing[str(task.id)].get("deadline"),
+            )
+            for task in base.tasks
+        )
+        robots = tuple(
+            replace(
+                robot,
+                zone=sc["robots"][robot.name]["zone"],
+                available=tuple(sc["robots"][robot.name]["available"]),
+            )
+            for robot in base.robots
+        )
+        instance = Instance(
+            tasks=tasks,
+            robots=robots,
+            travel=sc["travel"],
+            start=datetime.fromisoformat(sc["start"]),
+        )
+        out[sc["name"]] = Scenario(sc["name"], sc["description"], instance)
+    return out
+
+
+def timed_scenario(name: str) -> Scenario:
+    try:
+        return timed_scenarios()[name]
+    except KeyError:
+        known = ", ".join(timed_scenarios())
+        raise DomainError(
+            "scenario",
+            f"unknown timed scenario '{name}'; choose one of: {known}",
             code="unknown_scenario",
         ) from None
 

@@ -1,14 +1,25 @@
-"""Tasks, robots and the instance they form, with the success model S(r, t)."""
+"""Tasks, robots and the instance they form, with the success model S(r, t).
+
+The time fields (SPEC 16: durations, `after`, zones, releases, deadlines, shifts, travel,
+`start`) are optional and default to "absent": an instance without them is the untimed
+instance of SPEC 1, built and compared exactly as before. Their rules live in
+`app.domain.timing_rules`; their index view (what schedulers read) in
+`app.domain.time_model`.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from functools import cached_property
 
 import numpy as np
 
 from app.domain.errors import DomainError
+from app.domain.time_model import TimeModel
+from app.domain.timing_rules import check_timing, has_time_fields
 
 MAX_TASKS = 10_000
 MAX_ROBOTS = 100
@@ -17,6 +28,8 @@ MAX_ROBOTS = 100
 MAX_NAME_CHARS = 200
 
 TaskId = int | str
+# Minutes: one number for every robot, or a per-robot map (a robot it omits cannot take it).
+Duration = float | Mapping[str, float]
 
 
 @dataclass(frozen=True)
@@ -25,6 +38,12 @@ class Task:
     name: str
     features: tuple[str, ...]
     type: str = "Custom"
+    # SPEC 16, all optional. hash=False: a per-robot map is not hashable.
+    duration: Duration | None = dataclasses.field(default=None, hash=False)
+    after: tuple[TaskId, ...] = ()  # finish-to-start: starts once each of these has ended
+    zone: str | None = None
+    release: float | None = None  # earliest start, minutes from the plan's start
+    deadline: float | None = None  # latest end, minutes from the plan's start
 
 
 @dataclass(frozen=True)
@@ -33,6 +52,8 @@ class Robot:
     success: Mapping[str, float]
     label: str = ""
     description: str = ""
+    zone: str | None = None  # where it starts (SPEC 16)
+    available: tuple[float, float] | None = None  # its shift [start, end], minutes
 
     @property
     def display(self) -> str:
@@ -45,9 +66,43 @@ class Instance:
 
     tasks: tuple[Task, ...]
     robots: tuple[Robot, ...]
+    # SPEC 16: minutes between zones ({"A": {"B": 6}}, symmetric when one direction is
+    # given) and the wall-clock time of minute 0 (timezone-aware).
+    travel: Mapping[str, Mapping[str, float]] | None = dataclasses.field(default=None, hash=False)
+    start: datetime | None = None
+    # The checked index view of the time fields; None for an untimed instance.
+    _time_model: TimeModel | None = dataclasses.field(
+        default=None, init=False, repr=False, compare=False, hash=False
+    )
 
     def __post_init__(self) -> None:
         validate_instance(self.tasks, self.robots)
+        if has_time_fields(self.tasks, self.robots, self.travel, self.start):
+            model = check_timing(self.tasks, self.robots, self.travel, self.start)
+            object.__setattr__(self, "_time_model", model)
+
+    @property
+    def timed(self) -> bool:
+        """Does any task have a duration? (Then every task has one: SPEC 16.)"""
+        return self._time_model is not None
+
+    @property
+    def timing(self) -> TimeModel:
+        """The time fields as indexes and numbers; only for a timed instance."""
+        if self._time_model is None:
+            raise ValueError("an untimed instance has no time model; check `timed` first")
+        return self._time_model
+
+    @cached_property
+    def eligible(self) -> np.ndarray:
+        """E[t, r]: may robot r take task t? Always true untimed; a per-robot duration map
+        that omits r makes (t, r) ineligible."""
+        if self._time_model is None:
+            mask = np.ones((self.n_tasks, self.n_robots), dtype=bool)
+        else:
+            mask = self._time_model.eligibility()
+        mask.setflags(write=False)
+        return mask
 
     @property
     def n_tasks(self) -> int:

@@ -5,6 +5,11 @@ are unavailable (they keep their pins, take no new task and stand outside the ba
 Then W = (free tasks + tasks pinned on available robots) / available robots, loads start
 from the pins on available robots, and the cap's bounds apply to available robots only.
 Tasks pinned on an unavailable robot count for expected success, not for loads.
+
+On a timed instance (SPEC 16) a problem also carries its objective (see
+`app.domain.objective` for why it lives here), the fixed starts of pinned tasks (tasks
+reported started or done), and `not_before`: no task without a fixed start begins before
+it (a revision's `now`). An untimed problem has none of these and is built as before.
 """
 
 from __future__ import annotations
@@ -18,12 +23,15 @@ from functools import cached_property
 from types import MappingProxyType
 
 from app.domain.cap import WorkloadCap
+from app.domain.eligibility import check_time_arguments
 from app.domain.errors import DomainError, InfeasibleCapError
 from app.domain.metrics import BalanceScope
 from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
+from app.domain.objective import Objective
 
 _NO_PINS: Mapping[int, int] = MappingProxyType({})
+_NO_STARTS: Mapping[int, float] = MappingProxyType({})
 
 
 @dataclass(frozen=True)
@@ -34,6 +42,10 @@ class Problem:
     # task index -> robot index, in task order; hash=False: a mapping is not hashable.
     pinned: Mapping[int, int] = field(default_factory=lambda: _NO_PINS, hash=False)
     unavailable: frozenset[int] = frozenset()
+    objective: Objective = field(default_factory=Objective)
+    # task index -> fixed start minute, for pinned tasks that started (timed only)
+    pinned_starts: Mapping[int, float] = field(default_factory=lambda: _NO_STARTS, hash=False)
+    not_before: float = 0.0  # minutes; no task without a fixed start begins earlier
 
     @classmethod
     def build(
@@ -45,12 +57,20 @@ class Problem:
         uncapped: bool = False,
         pinned: Mapping[int, int] | None = None,
         unavailable: Iterable[int] = (),
+        objective: Objective | None = None,
+        pinned_starts: Mapping[int, float] | None = None,
+        not_before: float = 0.0,
     ) -> Problem:
         """Apply the mode's default cap (for the W of the available fleet) unless
         `max_deviation` overrides it (or `uncapped` asks for no cap at all); reject
-        infeasible caps, including caps the pins already break."""
+        infeasible caps, including caps the pins already break. The time arguments are for
+        timed instances only."""
         pins = _checked_pins(instance, pinned or {})
         off = _checked_unavailable(instance, unavailable)
+        objective = objective or Objective()
+        starts = check_time_arguments(
+            instance, pins, off, objective, dict(pinned_starts or {}), not_before
+        )
         n_available = instance.n_robots - len(off)
         balance_tasks = sum(1 for r in pins.values() if r not in off)
         balance_tasks += instance.n_tasks - len(pins)
@@ -62,7 +82,14 @@ class Problem:
             raise DomainError("max_deviation", f"must be >= 0 tasks, got {max_deviation:g}")
         cap = WorkloadCap(balance_tasks, n_available, max_deviation, off)
         problem = cls(
-            instance=instance, mode=mode, cap=cap, pinned=MappingProxyType(pins), unavailable=off
+            instance=instance,
+            mode=mode,
+            cap=cap,
+            pinned=MappingProxyType(pins),
+            unavailable=off,
+            objective=objective,
+            pinned_starts=MappingProxyType(starts),
+            not_before=float(not_before),
         )
         if pins or off:
             problem._ensure_completable()

@@ -1,31 +1,67 @@
-"""Plain-JSON form of an instance, so a stored run can be rebuilt exactly on resume."""
+"""Plain-JSON form of an instance, so a stored run can be rebuilt exactly on resume.
+
+The time fields of SPEC 16 appear only when set, so an untimed instance's form (and every
+hash computed over it) is exactly what it was before time existed.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from datetime import datetime
 from typing import Any
 
 from app.domain.models import Instance, Robot, Task
 
+_TASK_TIME = ("duration", "after", "zone", "release", "deadline")
+
+
+def _task_dict(t: Task) -> dict[str, Any]:
+    out: dict[str, Any] = {"id": t.id, "name": t.name, "type": t.type, "features": list(t.features)}
+    for key in _TASK_TIME:
+        value = getattr(t, key)
+        if value is None or value == ():
+            continue
+        if isinstance(value, Mapping):
+            value = dict(value)
+        elif isinstance(value, tuple):
+            value = list(value)
+        out[key] = value
+    return out
+
+
+def _robot_dict(r: Robot) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "name": r.name,
+        "label": r.label,
+        "description": r.description,
+        "success": dict(r.success),
+    }
+    if r.zone is not None:
+        out["zone"] = r.zone
+    if r.available is not None:
+        out["available"] = list(r.available)
+    return out
+
 
 def instance_to_dict(instance: Instance) -> dict[str, Any]:
-    return {
-        "tasks": [
-            {"id": t.id, "name": t.name, "type": t.type, "features": list(t.features)}
-            for t in instance.tasks
-        ],
-        "robots": [
-            {
-                "name": r.name,
-                "label": r.label,
-                "description": r.description,
-                "success": dict(r.success),
-            }
-            for r in instance.robots
-        ],
+    out: dict[str, Any] = {
+        "tasks": [_task_dict(t) for t in instance.tasks],
+        "robots": [_robot_dict(r) for r in instance.robots],
     }
+    if instance.travel is not None:
+        out["travel"] = {a: dict(row) for a, row in instance.travel.items()}
+    if instance.start is not None:
+        out["start"] = instance.start.isoformat()
+    return out
+
+
+def _duration(value: Any) -> Any:
+    return dict(value) if isinstance(value, Mapping) else value
 
 
 def instance_from_dict(data: dict[str, Any]) -> Instance:
+    start = data.get("start")
+    available = [r.get("available") for r in data["robots"]]
     return Instance(
         tasks=tuple(
             Task(
@@ -33,6 +69,11 @@ def instance_from_dict(data: dict[str, Any]) -> Instance:
                 name=t["name"],
                 type=t.get("type", "Custom"),
                 features=tuple(t["features"]),
+                duration=_duration(t.get("duration")),
+                after=tuple(t.get("after", ())),
+                zone=t.get("zone"),
+                release=t.get("release"),
+                deadline=t.get("deadline"),
             )
             for t in data["tasks"]
         ),
@@ -42,7 +83,11 @@ def instance_from_dict(data: dict[str, Any]) -> Instance:
                 label=r.get("label", ""),
                 description=r.get("description", ""),
                 success=dict(r["success"]),
+                zone=r.get("zone"),
+                available=None if shift is None else (shift[0], shift[1]),
             )
-            for r in data["robots"]
+            for r, shift in zip(data["robots"], available, strict=True)
         ),
+        travel=data.get("travel"),
+        start=None if start is None else datetime.fromisoformat(start),
     )

@@ -13,6 +13,7 @@ from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.domain.usage import Usage
 from app.reasoners.factory import ReasonerSettings
+from app.solvers.timed import attach_schedule
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,10 @@ class Solver(ABC):
     def solve(
         self, problem: Problem, *, seed: int = 0, options: Mapping[str, Any] | None = None
     ) -> Solution:
-        return self._solve(problem, seed=seed, options=self.parse_options(options))
+        solution = self._solve(problem, seed=seed, options=self.parse_options(options))
+        if problem.instance.timed:  # untimed answers are exactly what they always were
+            attach_schedule(problem, solution.assignment, solution.details)
+        return solution
 
     @abstractmethod
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution: ...

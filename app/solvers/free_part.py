@@ -38,6 +38,17 @@ class FreePart:
         return cls(problem, sub, replace(problem.cap, unavailable=frozenset()), loads)
 
     @property
+    def eligible(self) -> np.ndarray:
+        """E[free task, available robot]; all true unless a timed task's duration map
+        leaves robots out (SPEC 16)."""
+        e = self.problem.instance.eligible
+        if not self.problem.pinned and not self.problem.unavailable:
+            return e
+        rows = np.asarray(self.problem.free_tasks, dtype=np.int64)
+        cols = np.asarray(self.problem.available, dtype=np.int64)
+        return e[np.ix_(rows, cols)]
+
+    @property
     def n_tasks(self) -> int:
         return int(self.success.shape[0])
 

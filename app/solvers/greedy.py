@@ -25,8 +25,11 @@ class GreedySolver(Solver):
         part = FreePart.of(problem)  # pinned tasks stay put; unavailable robots are not columns
         s = part.success
         tracker = CapTracker(part.cap, part.initial_loads)
-        # Robots by descending S per task (stable sort keeps robot order among ties).
-        ranked = np.argsort(-s, axis=1, kind="stable").tolist()
+        # Robots by descending S per task (stable sort keeps robot order among ties); on a
+        # timed instance, robots a task's duration map leaves out rank last (SPEC 16).
+        eligible = part.eligible
+        key = s if eligible.all() else np.where(eligible, s, -1.0)
+        ranked = np.argsort(-key, axis=1, kind="stable").tolist()
         choices: list[int] = []
         for t in range(s.shape[0]):
             choice = next(i for i in ranked[t] if tracker.allows(i))

@@ -6,6 +6,10 @@ become node demand plus arc capacity. OR-Tools' min-cost flow returns an integra
 optimum. Costs are integers: S scaled to an integer (1e-9 resolution on small
 instances), multiplied by a factor larger than any deviation difference, plus the
 deviation term R*|L - W| — so one solve gives "max success, then least deviation".
+
+On a timed instance a robot that a task's duration map omits cannot take it (SPEC 16):
+`eligible` then removes those arcs, and tasks group by success row and eligibility row.
+Without such pairs (every untimed instance) nothing changes.
 """
 
 from __future__ import annotations
@@ -46,8 +50,9 @@ class TaskClasses:
     of_task: np.ndarray  # class index of each task
 
     @classmethod
-    def of(cls, success: np.ndarray) -> TaskClasses:
-        _, first, inverse = np.unique(success, axis=0, return_index=True, return_inverse=True)
+    def of(cls, success: np.ndarray, eligible: np.ndarray | None = None) -> TaskClasses:
+        key = success if eligible is None else np.hstack([success, ~eligible])
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
         order = np.argsort(first)  # first-appearance order, for a stable tie-break
         rank = np.empty_like(order)
         rank[order] = np.arange(order.size)
@@ -58,7 +63,11 @@ class TaskClasses:
 
 
 def class_allocation(
-    rows: np.ndarray, counts: np.ndarray, cap: WorkloadCap, initial_loads: Sequence[int]
+    rows: np.ndarray,
+    counts: np.ndarray,
+    cap: WorkloadCap,
+    initial_loads: Sequence[int],
+    allowed: np.ndarray | None = None,
 ) -> np.ndarray:
     """x[c, r]: how many tasks of class c robot r takes in an optimal completion.
 
@@ -90,6 +99,8 @@ def class_allocation(
     tails, heads, caps, costs = [], [], [], []
     for c in range(n_classes):
         for i in range(r):
+            if allowed is not None and not allowed[c, i]:
+                continue  # zero capacity: the robot cannot take this class
             tails.append(c)
             heads.append(robot0 + i)
             caps.append(int(counts[c]))
@@ -113,26 +124,38 @@ def class_allocation(
             f"the min-cost flow found no allocation within [{lo}, {hi}] tasks per robot "
             f"(solver status {status})"
         )
-    return np.asarray(flow.flows(arcs[: n_classes * r])).reshape(n_classes, r)
+    if allowed is None:
+        return np.asarray(flow.flows(arcs[: n_classes * r])).reshape(n_classes, r)
+    x = np.zeros((n_classes, r), dtype=np.int64)
+    x[allowed] = flow.flows(arcs[: int(allowed.sum())])
+    return x
 
 
 def best_completion(
     success: np.ndarray,
     cap: WorkloadCap,
     initial_loads: Sequence[int] | None = None,
+    eligible: np.ndarray | None = None,
 ) -> tuple[list[int], float]:
     """Optimal robots for the rows of `success`, given loads already placed.
 
     Returns (assignment, sum of S over these rows). `cap` is the whole run's cap, so its
-    target and bounds refer to the final loads (initial + new).
+    target and bounds refer to the final loads (initial + new). `eligible` (same shape,
+    optional) marks the pairs allowed; None or all true allows every pair.
     """
+    if eligible is not None and eligible.all():
+        eligible = None
     m, r = success.shape
     init = list(initial_loads) if initial_loads is not None else [0] * r
     if m == 0:
         class_allocation(np.zeros((0, r)), np.zeros(0, dtype=np.int64), cap, init)
         return [], 0.0
-    classes = TaskClasses.of(success)
-    x = class_allocation(classes.rows, classes.counts(), cap, init)
+    classes = TaskClasses.of(success, eligible)
+    allowed = None
+    if eligible is not None:
+        first = [int(np.argmax(classes.of_task == c)) for c in range(len(classes.rows))]
+        allowed = eligible[first]
+    x = class_allocation(classes.rows, classes.counts(), cap, init, allowed)
     # Within a class, earlier tasks get lower-numbered robots: the robot-order tie-break.
     queues = [[i for i in range(r) for _ in range(int(x[c, i]))] for c in range(len(x))]
     cursor = [0] * len(x)
@@ -155,5 +178,5 @@ class OptimalSolver(Solver):
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         part = FreePart.of(problem)  # the free tasks on the available robots, from the pins
-        choices, _ = best_completion(part.success, part.cap, part.initial_loads)
+        choices, _ = best_completion(part.success, part.cap, part.initial_loads, part.eligible)
         return Solution(part.assignment(choices))

@@ -13,6 +13,7 @@ _SOLVERS: dict[str, str] = {
     "brute_force": "app.solvers.brute_force:BruteForceSolver",
     "dp": "app.solvers.dp:DynamicProgrammingSolver",
     "optimal": "app.solvers.optimal:OptimalSolver",
+    "schedule": "app.solvers.schedule:ScheduleSolver",
     "q_learning": "app.solvers.q_learning:QLearningSolver",
     "dqn": "app.solvers.dqn:DQNSolver",
     "ltaa": "app.solvers.ltaa:LTAASolver",

@@ -38,9 +38,11 @@ def test_a_second_server_on_the_same_store_refuses_to_start(
 
 
 def test_the_lock_file_names_the_holder_and_where_it_serves(settings: Settings) -> None:
-    with TestClient(create_app(settings.model_copy(update={"port": 9123}))):
-        with pytest.raises(StoreInUseError) as refused:
-            TestClient(create_app(settings)).__enter__()
+    with (
+        TestClient(create_app(settings.model_copy(update={"port": 9123}))),
+        pytest.raises(StoreInUseError) as refused,
+    ):
+        TestClient(create_app(settings)).__enter__()
     assert refused.value.holder.url == "http://127.0.0.1:9123"
     assert "serving http://127.0.0.1:9123" in str(refused.value)
     # A lock file written before the address was recorded held the pid alone.

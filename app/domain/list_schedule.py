@@ -1,0 +1,156 @@
+"""The shared serial list scheduler (SPEC 16): any assignment -> a schedule.
+
+Every method that decides only *who* (greedy, the exact allocation solvers, the learners,
+LTAA) gets its *when* here, so all methods have a makespan on the same terms. Serial
+schedule generation: among the tasks whose predecessors are placed, the one that can
+start earliest (ties: queue order) goes next, appended to its robot's timeline at the
+earliest time its predecessors have ended, its robot is free and has travelled, its
+release and `not_before` allow. Tasks with a pinned start are facts (reported started or
+done): they sit at their times from the outset and the others are placed around them.
+
+Nothing is hidden: with a given assignment the scheduler may end a task after its
+deadline or its robot's shift (waiting cannot help an append-only timeline); the schedule
+says so through `check_schedule`. `sequence_schedule` re-times fixed per-robot orders the
+same way: how an exact solver's answer is compacted and how a relaxed one is repaired.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from app.domain.errors import DomainError
+from app.domain.problem import Problem
+from app.domain.schedule import EPS, Schedule, build_schedule
+from app.domain.time_model import TimeModel
+
+
+@dataclass
+class Timeline:
+    """One robot: when it is next free, where it is, and its fixed tasks still ahead."""
+
+    free: float
+    zone: int | None
+    fixed: list[tuple[float, float, int]] = field(default_factory=list)  # (start, end, task)
+
+    def earliest(self, tm: TimeModel, task: int, robot: int, ready: float) -> float:
+        """Earliest start >= ready, appended after the fixed tasks it cannot fit before."""
+        free, zone = self.free, self.zone
+        d = tm.duration(task, robot)
+        for start, end, other in self.fixed:
+            s = max(ready, free + tm.travel_to_task(zone, task))
+            if s + d + tm.travel(tm.task_zone[task], tm.task_zone[other]) <= start + EPS:
+                return s
+            free, zone = max(free, end), tm.task_zone[other]
+        return max(ready, free + tm.travel_to_task(zone, task))
+
+    def place(self, tm: TimeModel, task: int, robot: int, start: float) -> None:
+        while self.fixed and self.fixed[0][0] < start + tm.duration(task, robot) - EPS:
+            _, end, other = self.fixed.pop(0)
+            self.free, self.zone = max(self.free, end), tm.task_zone[other]
+        self.free, self.zone = start + tm.duration(task, robot), tm.task_zone[task]
+
+
+def _check_assignment(problem: Problem, assignment: Sequence[int]) -> TimeModel:
+    instance = problem.instance
+    tm = instance.timing
+    if len(assignment) != tm.n_tasks:
+        raise ValueError(f"{len(assignment)} robots for {tm.n_tasks} tasks; one each")
+    for t, r in enumerate(assignment):
+        if tm.durations[t][r] is None:
+            raise DomainError(
+                f"assignment.{t}",
+                f"robot '{instance.robots[r].name}' cannot take task {instance.tasks[t].id!r} "
+                f"({instance.tasks[t].name}): its duration map does not name that robot, so "
+                "there is no schedule for this assignment",
+                code="ineligible",
+            )
+    return tm
+
+
+def list_schedule(problem: Problem, assignment: Sequence[int]) -> Schedule:
+    """Earliest-start serial list schedule of an assignment (robot index per task)."""
+    tm = _check_assignment(problem, assignment)
+    n = tm.n_tasks
+    starts = [0.0] * n
+    ends = [0.0] * n
+    done = [False] * n
+    lines = [Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
+    for t, start in sorted(problem.pinned_starts.items(), key=lambda item: item[1]):
+        r = assignment[t]
+        lines[r].fixed.append((start, start + tm.duration(t, r), t))
+        starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
+    waiting = [sum(1 for p in tm.predecessors[t] if not done[p]) for t in range(n)]
+
+    def ready_time(t: int) -> float:
+        ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
+        return max(ready, tm.release[t], problem.not_before)
+
+    def estimate(t: int) -> float:
+        return lines[assignment[t]].earliest(tm, t, assignment[t], ready_time(t))
+
+    heap = [(estimate(t), t) for t in range(n) if not done[t] and waiting[t] == 0]
+    heapq.heapify(heap)
+    placed = sum(done)
+    while heap:
+        est, t = heapq.heappop(heap)
+        now = estimate(t)
+        if now > est + EPS:  # its robot filled up since: estimates only grow
+            heapq.heappush(heap, (now, t))
+            continue
+        lines[assignment[t]].place(tm, t, assignment[t], now)
+        starts[t], ends[t], done[t] = now, now + tm.duration(t, assignment[t]), True
+        placed += 1
+        for s in tm.successors[t]:
+            waiting[s] -= 1
+            if waiting[s] == 0 and not done[s]:
+                heapq.heappush(heap, (estimate(s), s))
+    if placed != n:  # only a fixed task can release a successor that was never queued
+        for t in range(n):
+            if not done[t]:
+                raise ValueError(f"task {t} was never ready; the precedence graph is broken")
+    return build_schedule(problem, list(assignment), starts, ends)
+
+
+def sequence_schedule(problem: Problem, sequences: Sequence[Sequence[int]]) -> Schedule:
+    """Earliest times for fixed per-robot task orders (every task once, in some robot's
+    order). A task with a pinned start keeps it. ValueError if the orders contradict
+    the precedence (no order of placing them works)."""
+    tm = problem.instance.timing
+    n = tm.n_tasks
+    assignment = [-1] * n
+    for r, seq in enumerate(sequences):
+        for t in seq:
+            assignment[t] = r
+    if -1 in assignment:
+        raise ValueError(f"task {assignment.index(-1)} is in no robot's sequence")
+    _check_assignment(problem, assignment)
+    starts = [0.0] * n
+    ends = [0.0] * n
+    done = [False] * n
+    cursor = [0] * len(sequences)
+    free = [a for a, _ in tm.shifts]
+    zone = list(tm.robot_zone)
+    progress = True
+    while progress:
+        progress = False
+        for r, seq in enumerate(sequences):
+            while cursor[r] < len(seq):
+                t = seq[cursor[r]]
+                fixed = problem.pinned_starts.get(t)  # a fact: it waits for nothing
+                if fixed is None and not all(done[p] for p in tm.predecessors[t]):
+                    break
+                if fixed is None:
+                    ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
+                    ready = max(ready, tm.release[t], problem.not_before)
+                    start = max(ready, free[r] + tm.travel_to_task(zone[r], t))
+                else:
+                    start = fixed
+                starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
+                free[r], zone[r] = max(free[r], ends[t]), tm.task_zone[t]
+                cursor[r] += 1
+                progress = True
+    if not all(done):
+        raise ValueError("the robot orders contradict the precedence: no task can go next")
+    return build_schedule(problem, assignment, starts, ends)

@@ -1,0 +1,255 @@
+"""A plan in time (SPEC 16 "A schedule"): when each task runs, on which robot, where.
+
+`build_schedule` is the one constructor: a robot and a start per task are the decision;
+everything else (ends, zones, travel before each task, the makespan, per-robot
+busy/idle/travel minutes and the critical path) is derived from the instance, so two
+solvers that make the same decision report the same schedule.
+
+Per robot, `idle` counts the minutes of its shift up to the makespan that it spends
+neither working nor travelling (a robot whose shift starts after the makespan has none).
+The critical path is the chain of tasks, travels and waits, from minute 0 to the
+makespan, that fixes the makespan: walking back from the task that ends last, each task
+started when its predecessor ended (precedence), when its robot had finished its previous
+task and travelled (robot), or when a release, a shift start, `not_before` or a pinned
+start allowed it (a wait).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+from enum import StrEnum
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from app.domain.problem import Problem
+
+EPS = 1e-6  # minutes: equal within this, as solver times come back as scaled integers
+
+
+@dataclass(frozen=True)
+class Slot:
+    task: int
+    robot: int
+    start: float
+    end: float
+    zone: str | None
+    travel: float  # minutes the robot moved just before this task
+
+
+@dataclass(frozen=True)
+class RobotTime:
+    busy: float
+    idle: float
+    travel: float
+
+
+class StepKind(StrEnum):
+    TASK = "task"
+    TRAVEL = "travel"
+    WAIT = "wait"
+
+
+@dataclass(frozen=True)
+class Step:
+    kind: StepKind
+    start: float
+    end: float
+    task: int | None  # the task worked, travelled to or waited for
+    robot: int | None
+    cause: str  # why the next step could not start earlier
+
+
+@dataclass(frozen=True)
+class Schedule:
+    slots: tuple[Slot, ...]  # one per task, in queue order
+    makespan: float
+    robot_time: tuple[RobotTime, ...]
+    critical_path: tuple[Step, ...]
+    start: datetime | None  # wall-clock time of minute 0
+
+    @property
+    def assignment(self) -> list[int]:
+        return [s.robot for s in self.slots]
+
+    def sequences(self, n_robots: int) -> list[list[int]]:
+        """Per robot, its tasks in time order."""
+        out: list[list[int]] = [[] for _ in range(n_robots)]
+        for slot in sorted(self.slots, key=lambda s: (s.start, s.end, s.task)):
+            out[slot.robot].append(slot.task)
+        return out
+
+    def wall_clock(self, minute: float) -> str | None:
+        """RFC 3339 time of a minute of the plan, in `start`'s offset; None without start."""
+        if self.start is None:
+            return None
+        return (self.start + timedelta(minutes=minute)).isoformat()
+
+    def to_dict(self, problem: Problem) -> dict[str, Any]:
+        """Plain JSON: task ids and robot names instead of indexes."""
+        tasks, robots = problem.instance.tasks, problem.instance.robots
+
+        def name(r: int | None) -> str | None:
+            return None if r is None else robots[r].name
+
+        return {
+            "start": None if self.start is None else self.start.isoformat(),
+            "makespan": self.makespan,
+            "tasks": [
+                {
+                    "task_id": tasks[s.task].id,
+                    "robot": robots[s.robot].name,
+                    "start": s.start,
+                    "end": s.end,
+                    "start_at": self.wall_clock(s.start),
+                    "end_at": self.wall_clock(s.end),
+                    "zone": s.zone,
+                    "travel": s.travel,
+                }
+                for s in self.slots
+            ],
+            "robots": {
+                robots[r].name: {"busy": t.busy, "idle": t.idle, "travel": t.travel}
+                for r, t in enumerate(self.robot_time)
+            },
+            "critical_path": [
+                {
+                    "kind": step.kind.value,
+                    "task_id": None if step.task is None else tasks[step.task].id,
+                    "robot": name(step.robot),
+                    "start": step.start,
+                    "end": step.end,
+                    "cause": step.cause,
+                }
+                for step in self.critical_path
+            ],
+        }
+
+
+def build_schedule(
+    problem: Problem,
+    robots: Sequence[int],
+    starts: Sequence[float],
+    ends: Sequence[float] | None = None,
+) -> Schedule:
+    """The schedule of one robot and one start per task (queue order). Ends default to
+    start + the robot's duration; pass them for a plan made elsewhere (e.g. a reply)."""
+    tm = problem.instance.timing
+    n = tm.n_tasks
+    if len(robots) != n or len(starts) != n:
+        raise ValueError(f"a schedule needs one robot and one start for each of the {n} tasks")
+    if ends is None:
+        ends = [starts[t] + tm.duration(t, robots[t]) for t in range(n)]
+    travel = [0.0] * n
+    previous: list[int | None] = [None] * n
+    order = sorted(range(n), key=lambda t: (starts[t], ends[t], t))
+    last: dict[int, int] = {}
+    for t in order:
+        r = robots[t]
+        q = last.get(r)
+        zone_from = tm.robot_zone[r] if q is None else tm.task_zone[q]
+        travel[t] = tm.travel_to_task(zone_from, t)
+        previous[t] = q
+        last[r] = t
+    slots = tuple(
+        Slot(
+            task=t,
+            robot=robots[t],
+            start=float(starts[t]),
+            end=float(ends[t]),
+            zone=None if tm.task_zone[t] is None else tm.zones[tm.task_zone[t]],  # type: ignore[index]
+            travel=travel[t],
+        )
+        for t in range(n)
+    )
+    makespan = max((s.end for s in slots), default=0.0)
+    return Schedule(
+        slots=slots,
+        makespan=makespan,
+        robot_time=_robot_time(problem, slots, makespan),
+        critical_path=_critical_path(problem, slots, previous),
+        start=tm.start,
+    )
+
+
+def _robot_time(problem: Problem, slots: Sequence[Slot], makespan: float) -> tuple[RobotTime, ...]:
+    tm = problem.instance.timing
+    busy = [0.0] * tm.n_robots
+    moved = [0.0] * tm.n_robots
+    for s in slots:
+        busy[s.robot] += s.end - s.start
+        moved[s.robot] += s.travel
+    out = []
+    for r, (a, b) in enumerate(tm.shifts):
+        window = max(0.0, min(b, makespan) - a)
+        out.append(RobotTime(busy[r], max(0.0, window - busy[r] - moved[r]), moved[r]))
+    return tuple(out)
+
+
+def _critical_path(
+    problem: Problem, slots: Sequence[Slot], previous: Sequence[int | None]
+) -> tuple[Step, ...]:
+    if not slots:
+        return ()
+    steps: list[Step] = []
+    t: int | None = max(range(len(slots)), key=lambda k: (slots[k].end, -k))
+    while t is not None:
+        s = slots[t]
+        steps.append(Step(StepKind.TASK, s.start, s.end, t, s.robot, "works"))
+        t = _explain_start(problem, slots, previous, t, steps)
+    steps.reverse()
+    if steps and steps[0].start > EPS:
+        steps.insert(0, Step(StepKind.WAIT, 0.0, steps[0].start, steps[0].task, None, "plan start"))
+    return tuple(steps)
+
+
+def _explain_start(
+    problem: Problem,
+    slots: Sequence[Slot],
+    previous: Sequence[int | None],
+    t: int,
+    steps: list[Step],
+) -> int | None:
+    """Append the steps before task t's start (in reverse) and return the task the chain
+    continues from, or None where it starts at a fixed time."""
+    tm = problem.instance.timing
+    s = slots[t]
+    if t in problem.pinned_starts:
+        steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, "pinned start"))
+        return None
+    for p in tm.predecessors[t]:
+        if abs(slots[p].end - s.start) <= EPS:
+            return p
+    q = previous[t]
+    ready = (slots[q].end if q is not None else tm.shifts[s.robot][0]) + s.travel
+    if abs(ready - s.start) <= EPS:
+        if s.travel > 0:
+            steps.append(Step(StepKind.TRAVEL, s.start - s.travel, s.start, t, s.robot, "travel"))
+        if q is not None:
+            return q
+        shift_start = tm.shifts[s.robot][0]
+        if shift_start > EPS:
+            steps.append(Step(StepKind.WAIT, 0.0, shift_start, t, s.robot, "shift start"))
+        return None
+    # A wait: the latest of release and not_before, else slack left by the solver.
+    bounds = [
+        (tm.release[t], "release"),
+        (problem.not_before, "not before"),
+    ]
+    limit, cause = max(bounds, key=lambda b: b[0])
+    if abs(limit - s.start) <= EPS:
+        steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, cause))
+        return None
+    # Nothing binds: the solver left slack. The latest of the other causes explains the rest.
+    ends = [(slots[p].end, p) for p in tm.predecessors[t]]
+    if q is not None:
+        ends.append((slots[q].end + s.travel, q))
+    if not ends or max(ends)[0] < limit:
+        steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, "slack"))
+        return None
+    when, via = max(ends)
+    steps.append(Step(StepKind.WAIT, when, s.start, t, s.robot, "slack"))
+    if via == q and s.travel > 0:
+        steps.append(Step(StepKind.TRAVEL, when - s.travel, when, t, s.robot, "travel"))
+    return via
