@@ -15,13 +15,13 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.domain.errors import DomainError
-from app.domain.list_schedule import sequence_schedule
 from app.domain.models import Instance
 from app.domain.problem import Problem
-from app.domain.schedule import Schedule
+from app.domain.scheduling.list_schedule import sequence_schedule
+from app.domain.scheduling.schedule import Schedule
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
+from app.solvers.cpsat.search import solve_schedule
 from app.solvers.optimal import OptimalSolver
-from app.solvers.schedule_search import solve_schedule
 
 
 class HintEntry(BaseModel):

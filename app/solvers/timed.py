@@ -16,9 +16,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from app.domain.errors import DomainError
-from app.domain.feasibility import check_schedule
-from app.domain.list_schedule import list_schedule
 from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.list_schedule import list_schedule
 
 LIST_SCHEDULER = "list scheduler (earliest start, precedence order) on the method's assignment"
 

@@ -19,11 +19,11 @@ from hypothesis import HealthCheck, assume, given, note, settings
 from hypothesis import strategies as st
 
 from app.domain.errors import DomainError
-from app.domain.feasibility import check_schedule
 from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
 from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
 from app.solvers.registry import get_solver
 
 ZONES = ("A", "B")

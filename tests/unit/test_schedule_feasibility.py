@@ -13,11 +13,11 @@ from typing import Any
 
 import pytest
 
-from app.domain.feasibility import Rule, check_schedule
 from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.problem import Problem
-from app.domain.schedule import Schedule, StepKind, build_schedule
+from app.domain.scheduling.feasibility import Rule, check_schedule
+from app.domain.scheduling.schedule import Schedule, StepKind, build_schedule
 from tests.unit.timed_support import robot, task
 
 START = datetime(2026, 3, 2, 7, 0, tzinfo=UTC)

@@ -8,16 +8,16 @@ from collections import Counter
 import pytest
 
 from app.domain.catalog import scenario, timed_scenario
-from app.domain.dispatch import dispatch_schedule, quotas_of
 from app.domain.errors import DomainError
-from app.domain.feasibility import Rule, check_schedule
-from app.domain.list_schedule import list_schedule, sequence_schedule
 from app.domain.metrics import expected_success
 from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.problem import Problem
+from app.domain.scheduling.dispatch import dispatch_schedule, quotas_of
+from app.domain.scheduling.feasibility import Rule, check_schedule
+from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
+from app.solvers.cpsat.common import task_classes, time_free_optimum
 from app.solvers.registry import get_solver
-from app.solvers.schedule_common import task_classes, time_free_optimum
 from benchmarks.timed_instances import construction_site
 from tests.unit.timed_support import robot, task, two_zone_site
 

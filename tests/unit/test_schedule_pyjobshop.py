@@ -17,12 +17,12 @@ import math
 import pytest
 from pyjobshop import Model
 
-from app.domain.feasibility import check_schedule
 from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
-from app.solvers.schedule_search import solve_schedule
+from app.domain.scheduling.feasibility import check_schedule
+from app.solvers.cpsat.search import solve_schedule
 from benchmarks.timed_instances import construction_site
 
 LIMIT_S = 20

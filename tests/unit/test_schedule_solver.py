@@ -9,14 +9,14 @@ import pytest
 
 from app.domain.catalog import scenario, timed_scenario
 from app.domain.errors import DomainError
-from app.domain.feasibility import check_schedule
 from app.domain.metrics import expected_success
 from app.domain.models import Instance
 from app.domain.modes import Mode
 from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
+from app.solvers.cpsat.search import solve_schedule
 from app.solvers.registry import get_solver, solver_names
-from app.solvers.schedule_search import solve_schedule
 from benchmarks.timed_instances import construction_site
 from tests.unit.timed_support import robot, task, two_zone_site
 

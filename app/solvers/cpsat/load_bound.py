@@ -18,7 +18,7 @@ from scipy.optimize import linprog
 from scipy.sparse import csr_matrix, vstack
 
 from app.domain.problem import Problem
-from app.solvers.schedule_common import SuccessWeights
+from app.solvers.cpsat.common import SuccessWeights
 
 
 def load_lower_bound(

@@ -17,9 +17,9 @@ from collections.abc import Sequence
 from ortools.sat.python import cp_model
 
 from app.domain.problem import Problem
-from app.solvers.schedule_common import SuccessWeights
-from app.solvers.schedule_model import zones_to_enter
-from app.solvers.time_scale import TimeScale
+from app.solvers.cpsat.common import SuccessWeights
+from app.solvers.cpsat.model import zones_to_enter
+from app.solvers.cpsat.time_scale import TimeScale
 
 
 class AssignmentModel:

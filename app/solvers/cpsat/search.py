@@ -20,9 +20,8 @@ from __future__ import annotations
 from app.domain.errors import DomainError
 from app.domain.objective import ObjectiveKind
 from app.domain.problem import Problem
-from app.domain.schedule import EPS, Schedule
-from app.solvers.large_schedule import solve_large
-from app.solvers.schedule_common import (
+from app.domain.scheduling.schedule import EPS, Schedule
+from app.solvers.cpsat.common import (
     Candidates,
     Search,
     SuccessWeights,
@@ -32,10 +31,11 @@ from app.solvers.schedule_common import (
     proved_none,
     time_free_optimum,
 )
-from app.solvers.schedule_model import ScheduleModel, Travel
-from app.solvers.schedule_outcome import ScheduleOutcome, Setup, outcome
-from app.solvers.success_pairs import success_optimal_pairs
-from app.solvers.time_scale import TimeScale
+from app.solvers.cpsat.large import solve_large
+from app.solvers.cpsat.model import ScheduleModel, Travel
+from app.solvers.cpsat.outcome import ScheduleOutcome, Setup, outcome
+from app.solvers.cpsat.success_pairs import success_optimal_pairs
+from app.solvers.cpsat.time_scale import TimeScale
 
 # robots x tasks^2 up to which the exact model runs (36 tasks x 3 robots: 3,888; 100 x 4:
 # 40,000). Past it the pairwise travel literals alone run into the millions at 1,000 x 20,

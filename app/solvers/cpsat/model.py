@@ -30,8 +30,8 @@ from enum import StrEnum
 from ortools.sat.python import cp_model
 
 from app.domain.problem import Problem
-from app.solvers.schedule_common import SuccessWeights, makespan_floor
-from app.solvers.time_scale import TimeScale
+from app.solvers.cpsat.common import SuccessWeights, makespan_floor
+from app.solvers.cpsat.time_scale import TimeScale
 
 
 class Travel(StrEnum):

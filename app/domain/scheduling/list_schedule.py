@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
-from app.domain.schedule import EPS, Schedule, build_schedule
+from app.domain.scheduling.schedule import EPS, Schedule, build_schedule
 from app.domain.time_model import TimeModel
 
 

@@ -24,11 +24,11 @@ path does not search below the best ES.
 from __future__ import annotations
 
 from app.domain.errors import DomainError
-from app.solvers.assignment_model import AssignmentModel
-from app.solvers.load_bound import load_lower_bound
-from app.solvers.schedule_common import assignment_schedules, makespan_floor, none_found
-from app.solvers.schedule_model import ScheduleModel, Travel
-from app.solvers.schedule_outcome import ScheduleOutcome, Setup, outcome
+from app.solvers.cpsat.assignment_model import AssignmentModel
+from app.solvers.cpsat.common import assignment_schedules, makespan_floor, none_found
+from app.solvers.cpsat.load_bound import load_lower_bound
+from app.solvers.cpsat.model import ScheduleModel, Travel
+from app.solvers.cpsat.outcome import ScheduleOutcome, Setup, outcome
 
 LARGE_MODEL = (
     "large-instance path: CP-SAT load-balancing assignment (travel as per-zone entries), "

@@ -7,9 +7,9 @@ from typing import Any
 
 from app.domain.objective import ObjectiveKind
 from app.domain.problem import Problem
-from app.domain.schedule import Schedule
-from app.solvers.schedule_common import Candidates, Search, SuccessWeights
-from app.solvers.time_scale import TimeScale
+from app.domain.scheduling.schedule import Schedule
+from app.solvers.cpsat.common import Candidates, Search, SuccessWeights
+from app.solvers.cpsat.time_scale import TimeScale
 
 
 @dataclass

@@ -18,7 +18,7 @@ from enum import StrEnum
 
 from app.domain.metrics import workload
 from app.domain.problem import Problem
-from app.domain.schedule import EPS, Schedule
+from app.domain.scheduling.schedule import EPS, Schedule
 
 
 class Rule(StrEnum):

@@ -16,9 +16,9 @@ from __future__ import annotations
 import heapq
 from collections.abc import Mapping, Sequence
 
-from app.domain.list_schedule import Timeline
 from app.domain.problem import Problem
-from app.domain.schedule import EPS, Schedule, build_schedule
+from app.domain.scheduling.list_schedule import Timeline
+from app.domain.scheduling.schedule import EPS, Schedule, build_schedule
 
 
 def quotas_of(assignment: Sequence[int], classes: Sequence[int]) -> dict[tuple[int, int], int]:

@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 from ortools.sat.python import cp_model
 
-from app.domain.dispatch import dispatch_schedule, quotas_of
 from app.domain.errors import DomainError
-from app.domain.feasibility import check_schedule
-from app.domain.list_schedule import list_schedule, sequence_schedule
 from app.domain.problem import Problem
-from app.domain.schedule import Schedule
+from app.domain.scheduling.dispatch import dispatch_schedule, quotas_of
+from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
+from app.domain.scheduling.schedule import Schedule
 from app.solvers.free_part import FreePart
 from app.solvers.optimal import best_completion
 from app.solvers.tiebreak import integer_weights, weight_scale
