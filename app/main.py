@@ -32,6 +32,7 @@ from app.api.routes import (
     revisions,
     runs,
     signoffs,
+    sites,
     webhooks,
 )
 from app.api.routes.webhooks import WebhooksContext
@@ -178,6 +179,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         events,
         metrics,
         webhooks,
+        sites,
         admin,
         audit_keys,
     ):

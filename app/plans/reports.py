@@ -27,6 +27,7 @@ from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
+from app.store import site_repository as site_repo
 from app.store.db import transaction
 from app.store.models import ExecutionReport, RequestKey, Run, as_utc, utcnow
 
@@ -129,6 +130,7 @@ def _report(
         decided = {d.task_id: d.task_index for d in decision_repo.decided_task_ids(session, run_id)}
         stored = {r.task_id: r for r in repo.execution_reports(session=session, run_id=run_id)}
         changed: list[dict[str, Any]] = []
+        outcomes: list[site_repo.Reported] = []
         pending: dict[str, ExecutionState] = {}
         for i, update in enumerate(updates):
             field = f"updates.{i}.task_id"
@@ -190,15 +192,27 @@ def _report(
                 row.started_at = at
             else:
                 row.ended_at = at
+                outcomes.append(
+                    site_repo.Reported(
+                        row.task_index, update.task_id, update.state.value, at, row.started_at
+                    )
+                )
         if changed:
             detail = {"updates": changed}
             if run.status in FINISHED:
-                lifecycle.record_annotation(
+                record: Any = lifecycle.record_annotation(
                     session, run_id=run_id, kind=AnnotationKind.EXECUTION_REPORTED, detail=detail
                 )
             else:
-                lifecycle.record_event(
+                record = lifecycle.record_event(
                     session, run_id=run_id, kind=EventKind.EXECUTION_REPORTED, detail=detail
+                )
+            if outcomes:
+                # The site's outcome rows (SPEC 17), received when the record says: the
+                # rebuild from the record reads the same time.
+                session.flush()
+                site_repo.record_outcomes(
+                    session=session, run=run, reported=outcomes, received_at=record.created_at
                 )
         if idempotency is not None:
             session.add(

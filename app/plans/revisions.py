@@ -22,9 +22,11 @@ from app.audit.heads import chain_heads
 from app.config import Settings
 from app.domain.annotations import AnnotationKind
 from app.domain.errors import DomainError, RunNotFoundError
+from app.domain.estimates import DurationSource, RateSource
 from app.domain.lifecycle import FINISHED
 from app.plans.reports import head_of
 from app.plans.revision_plan import ParentDecision, plan_revision
+from app.plans.revision_rates import revision_spec
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
@@ -64,6 +66,9 @@ class RevisionRequest:
     reason: str
     reasoner: str | None = None
     model: str | None = None
+    # SPEC 17: None inherits the parent's.
+    rates: RateSource | None = None
+    durations: DurationSource | None = None
 
 
 def _lock(session: Session, run_id: str) -> Run:
@@ -115,7 +120,9 @@ def create_revision(
         if earlier is not None:
             return earlier, True
     try:
-        run, parent_was_active = _create(sessions, parent_id, request, idempotency)
+        run, parent_was_active = _create(
+            sessions, parent_id, request, idempotency, settings.prior_strength
+        )
     except IntegrityError:
         if idempotency is None:
             raise
@@ -134,6 +141,7 @@ def _create(
     parent_id: str,
     request: RevisionRequest,
     idempotency: Idempotency | None,
+    prior_strength: float,
 ) -> tuple[Run, bool]:
     with transaction(sessions) as session:
         parent = _lock(session, parent_id)
@@ -173,6 +181,14 @@ def _create(
             parent_id=parent_id,
             token_budget=budget,
         )
+        spec, learned = revision_spec(
+            session=session,
+            spec=plan.spec,
+            changes=request.changes,
+            rates=request.rates,
+            durations=request.durations,
+            strength=prior_strength,
+        )
         heads = chain_heads(session, parent_id).as_dict()
         run_id = uuid.uuid4().hex
         revision_no = parent.revision + 1
@@ -192,19 +208,20 @@ def _create(
             "execution": _carried(plan.pinned_rows, reports),
             "added_tasks": plan.added_tasks,
             "removed_tasks": plan.removed_tasks,
-            "fleet_changes": plan.fleet_changes,
-            "reasoner": plan.spec.reasoner,
-            "mode": plan.spec.mode,
+            "fleet_changes": plan.fleet_changes + learned,
+            "reasoner": spec.reasoner,
+            "mode": spec.mode,
             "tasks": plan.problem.instance.n_tasks,
             "robots": plan.problem.instance.n_robots,
             "max_deviation": plan.problem.cap.max_deviation,
+            **spec.site_detail(),
         }
         run = lifecycle.new_run(
             session,
             run_id=run_id,
-            request=plan.spec.to_json(),
-            reasoner=plan.spec.reasoner,
-            mode=plan.spec.mode,
+            request=spec.to_json(),
+            reasoner=spec.reasoner,
+            mode=spec.mode,
             max_deviation=plan.problem.cap.max_deviation,
             n_tasks=plan.problem.instance.n_tasks,
             n_robots=plan.problem.instance.n_robots,
@@ -216,6 +233,7 @@ def _create(
             revision=revision_no,
             chain_anchor=chain.revision_anchor(chain.revision_link(link)),
             chain_scheme=chain.SCHEME_V2,
+            site=spec.site,
             first_event=EventKind.REVISED,
             created=detail,
         )

@@ -15,6 +15,7 @@ from app.audit.signoffs import SignOff, signoffs
 from app.config import Settings
 from app.domain.catalog import instance_of
 from app.domain.errors import RunStateConflictError
+from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
@@ -33,8 +34,9 @@ from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
+from app.store import site_repository as site_repo
 from app.store.db import transaction
-from app.store.models import Attempt, Decision, ExecutionReport, Run, RunEvent
+from app.store.models import Attempt, Decision, ExecutionReport, Run, RunEvent, utcnow
 from app.store.tombstones import missing_run
 
 
@@ -73,6 +75,7 @@ def create_run(
             idempotency_key=idempotency.key if idempotency else None,
             chain_scheme=chain.SCHEME_V2,
             request_digest=idempotency.digest if idempotency else None,
+            site=spec.site,
             created={
                 "reasoner": spec.reasoner,
                 "mode": spec.mode,
@@ -80,6 +83,7 @@ def create_run(
                 "robots": problem.instance.n_robots,
                 "max_deviation": problem.cap.max_deviation,
                 **({"replay_of": spec.replay_of} if spec.replay_of else {}),
+                **spec.site_detail(),
             },
         )
     worker.submit(run_id)
@@ -155,7 +159,7 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         scope["llm_scope"] = order.llm_scope
     if order.llm_margin is not None:
         scope["llm_margin"] = float(order.llm_margin)
-    return RunSpec.for_instance(
+    spec = RunSpec.for_instance(
         instance,
         mode=problem.mode.value,
         max_deviation=problem.cap.max_deviation,
@@ -171,7 +175,31 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         if order.token_budget is not None
         else settings.run_token_budget,
         review=review_gate.policy_for(order.review, instance),
+        site=order.site,
+        rates=order.rates.value,
+        durations=order.durations.value,
         **scope,
+    )
+    return learned_spec(spec, sessions=sessions, settings=settings)
+
+
+def learned_spec(
+    spec: RunSpec,
+    *,
+    sessions: sessionmaker[Session],
+    settings: Settings,
+    source: RateSource | None = None,
+    only: list[str] | None = None,
+) -> RunSpec:
+    """SPEC 17: a run asking for learned (or sampled) rates or durations plans with the
+    site's estimates now, its own configured rates the priors; nothing to do otherwise."""
+    if (source or spec.rates) == RateSource.CONFIGURED and spec.durations == "configured":
+        return spec
+    as_of = utcnow().isoformat()  # taken before the read: an as_of read later sees as much
+    with sessions() as session:
+        counts = site_repo.site_counts(session=session, site=spec.site)
+    return spec.with_site_estimates(
+        counts, strength=settings.prior_strength, as_of=as_of, source=source, only=only
     )
 
 
@@ -188,6 +216,9 @@ _REPEATABLE = (
     "llm_scope",
     "llm_margin",
     "review",
+    "site",
+    "rates",
+    "durations",
 )
 
 
@@ -368,10 +399,10 @@ def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:
 
 
 def list_run_rows(
-    *, sessions: sessionmaker[Session], status: str | None, limit: int, offset: int
+    *, sessions: sessionmaker[Session], status: str | None, limit: int, offset: int, **where: str
 ) -> list[Run]:
     with sessions() as session:
-        return repo.list_runs(session=session, status=status, limit=limit, offset=offset)
+        return repo.list_runs(session=session, status=status, limit=limit, offset=offset, **where)
 
 
 @dataclass

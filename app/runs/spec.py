@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from collections.abc import Collection, Mapping
+from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
+import numpy as np
+
+from app.domain import estimates
+from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
 from app.domain.problem import Problem
@@ -49,6 +54,13 @@ class RunSpec:
     revision_of: str | None = None
     # app.domain.review.ReviewPolicy as JSON; None: no review.
     review: dict[str, Any] | None = None
+    # Learning from the site (SPEC 17): the site, which rates and durations the run plans
+    # with, and what learning put into instance_data (app.domain.estimates.rates_record:
+    # every number, with the configured rate and the reports behind it; None: configured).
+    site: str = DEFAULT_SITE
+    rates: str = RateSource.CONFIGURED.value
+    durations: str = DurationSource.CONFIGURED.value
+    learned: dict[str, Any] | None = None
 
     @property
     def review_policy(self) -> ReviewPolicy | None:
@@ -72,6 +84,63 @@ class RunSpec:
             pinned={int(t): r for t, r in (self.pinned or {}).items()},
             unavailable=self.unavailable or (),
         )
+
+    def with_site_estimates(
+        self,
+        totals: estimates.SiteCounts,
+        *,
+        strength: float,
+        as_of: str,
+        source: RateSource | None = None,
+        only: Collection[str] | None = None,
+    ) -> RunSpec:
+        """This run planning with the site's estimates (SPEC 17) as its `rates` and
+        `durations` ask (or `source` for the robots in `only`): the numbers go into the
+        instance, the configured rates and the counts behind each number into `learned`."""
+        source = source or RateSource(self.rates)
+        robots = estimates.configured_rates(self.instance_data["robots"], self.learned)
+        rng = (
+            np.random.default_rng(estimates.sampling_seed(self.seed, totals.reports))
+            if source == RateSource.SAMPLED
+            else None
+        )
+        planned = estimates.plan_rates(
+            robots, totals.outcomes, source=source, strength=strength, only=only, rng=rng
+        )
+        tasks = self.instance_data["tasks"]
+        record = estimates.rates_record(
+            planned,
+            source=source,
+            site=self.site,
+            as_of=as_of,
+            strength=strength,
+            needed={f for t in tasks for f in t["features"]},
+        )
+        record["reports"] = totals.reports
+        if self.durations == DurationSource.LEARNED:
+            names = [str(r["name"]) for r in robots]
+            tasks, record["durations"] = estimates.plan_durations(
+                tasks, names, totals.durations, strength=strength
+            )
+        data = {
+            **self.instance_data,
+            "tasks": tasks,
+            "robots": estimates.with_rates(robots, planned),
+        }
+        return replace(self, instance_data=data, learned=record)
+
+    def site_detail(self) -> dict[str, Any]:
+        """What a run's first event says of its site and the learned numbers it plans with."""
+        detail: dict[str, Any] = {"site": self.site}
+        if self.learned is not None:
+            detail |= {"rates": self.rates, "durations": self.durations, "learned": self.learned}
+        return detail
+
+    @property
+    def rate_notes(self) -> Mapping[str, Mapping[str, tuple[str, int]]]:
+        """Robot -> feature -> (basis, reports) of the rates that are not the configured
+        ones, for the prompt (app.graph.prompts)."""
+        return estimates.rate_notes(self.learned)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -106,6 +175,9 @@ class RunOrder:
     llm_scope: str | None = None  # None: the paper's 'all'
     llm_margin: float | None = None
     review: dict[str, Any] | None = None  # as sent (app.domain.review.ReviewPolicy JSON)
+    site: str = DEFAULT_SITE
+    rates: RateSource = RateSource.CONFIGURED
+    durations: DurationSource = DurationSource.CONFIGURED
     # The fields the request named: an explicit null max_deviation means no cap, and a
     # replay must repeat its source's value in every field it names.
     sent: frozenset[str] = field(default_factory=frozenset)

@@ -88,6 +88,11 @@ class Run(Base):
     graph_version: Mapped[str | None] = mapped_column(String(64), nullable=True)
     # How its hash chains are built (app.store.chain.SCHEMES); null: v1, from before.
     chain_scheme: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    # The site it plans for (SPEC 17): its robots are (site, name); its execution reports
+    # feed that site's estimates (app.store.site_models).
+    site: Mapped[str] = mapped_column(
+        String(MAX_NAME_CHARS), default="default", server_default="default", index=True
+    )
 
 
 class RunSignature(Base):

@@ -41,10 +41,14 @@ def get_run(*, session: Session, run_id: str, for_update: bool = False) -> Run |
     )
 
 
-def list_runs(*, session: Session, status: str | None, limit: int, offset: int) -> list[Run]:
+def list_runs(
+    *, session: Session, status: str | None, limit: int, offset: int, site: str | None = None
+) -> list[Run]:
     query = select(Run).order_by(Run.created_at.desc(), Run.id)
     if status:
         query = query.where(Run.status == status)
+    if site is not None:
+        query = query.where(Run.site == site)
     return list(session.scalars(query.limit(limit).offset(offset)))
 
 

@@ -95,6 +95,8 @@ def create_revision(
             reason=body.reason,
             reasoner=body.reasoner,
             model=body.model,
+            rates=body.rates,
+            durations=body.durations,
         ),
         idempotency=_idempotency(idempotency_key, run_id, sent),
     )

@@ -35,8 +35,10 @@ from app.api.schemas.runs import (
     RunStatus,
     RunSummary,
 )
+from app.api.schemas.sites import SiteName
 from app.api.schemas.trace import AttemptOut, DecisionOut, EventOut, TraceOut, TraceVerifyOut
 from app.audit import verify
+from app.domain.estimates import DurationSource, RateSource
 from app.domain.models import Instance
 from app.graph.recorder import DecisionRecord
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
@@ -90,9 +92,13 @@ def list_runs(
     status_: Annotated[RunStatus | None, Query(alias="status")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
+    site: Annotated[SiteName | None, Query(description="Only this site's runs")] = None,
 ) -> list[RunSummary]:
-    """List runs, newest first, optionally only those with one status."""
-    rows = service.list_run_rows(sessions=runs.sessions, status=status_, limit=limit, offset=offset)
+    """List runs, newest first, optionally only those with one status or on one site."""
+    where = {} if site is None else {"site": site}
+    rows = service.list_run_rows(
+        sessions=runs.sessions, status=status_, limit=limit, offset=offset, **where
+    )
     return [_summary(r) for r in rows]
 
 
@@ -112,6 +118,7 @@ def _summary(r: Run) -> RunSummary:
         n_robots=r.n_robots,
         resumes=r.resumes,
         created_at=r.created_at,
+        site=r.site,
     )
 
 
@@ -160,6 +167,9 @@ def _run_out(view: service.RunView, limit: int) -> RunOut:
         updated_at=run.updated_at,
         finished_at=run.finished_at,
         signoffs=[signoff_out(s) for s in view.signoffs],
+        site=run.site,
+        rates=RateSource(spec.rates),
+        durations=DurationSource(spec.durations),
     )
 
 

@@ -8,6 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
 from app.api.schemas.allocation import Name, NoNul, Probability, RobotIn, TaskId, TaskIn
 from app.api.schemas.times import RequestTime, Timestamp
+from app.domain.estimates import DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_ROBOTS, MAX_TASKS
 from app.domain.modes import Mode
@@ -79,8 +80,23 @@ class SetMode(_Strict):
     )
 
 
+class UseLearned(_Strict):
+    """SPEC 17: these robots (default: every robot) plan with the site's learned rates now,
+    their configured rates the priors."""
+
+    type: Literal["use_learned"]
+    robots: list[Name] | None = Field(None, min_length=1, max_length=MAX_ROBOTS)
+
+
 Change = Annotated[
-    RobotUnavailable | RobotAvailable | SetRates | AddRobot | AddTasks | RemoveTasks | SetMode,
+    RobotUnavailable
+    | RobotAvailable
+    | SetRates
+    | AddRobot
+    | AddTasks
+    | RemoveTasks
+    | SetMode
+    | UseLearned,
     Field(discriminator="type"),
 ]
 
@@ -105,6 +121,14 @@ class RevisionRequestIn(_Strict):
     reason: Annotated[StrictStr, NoNul] = Field(min_length=1, max_length=2000)
     reasoner: Name | None = Field(None, description="Override the inherited reasoner")
     model: Name | None = Field(None, description="Override the inherited model")
+    rates: RateSource | None = Field(
+        None,
+        description="SPEC 17: 'configured', 'learned' or 'sampled' (default: the parent's). "
+        "Learned and sampled rates are the site's estimates when the revision is made",
+    )
+    durations: DurationSource | None = Field(
+        None, description="'configured' or 'learned' (default: the parent's)"
+    )
 
 
 class RevisionCreated(BaseModel):

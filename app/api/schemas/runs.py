@@ -20,6 +20,7 @@ from app.api.schemas.allocation import (
     present,
 )
 from app.api.schemas.times import Timestamp
+from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
 from app.domain.review import ReviewAction, ReviewOn
 from app.runs.spec import RunOrder
@@ -162,6 +163,22 @@ class RunRequest(InstanceRequest):
     review: ReviewPolicyIn | None = Field(
         None, description="Supervisor review of decisions (default: none); see GET /reviews"
     )
+    site: Name = Field(
+        DEFAULT_SITE,
+        description="The site the run plans for (SPEC 17): its robots are (site, name), its "
+        "execution reports feed the site's estimates (GET /sites/{site}/estimates)",
+    )
+    rates: RateSource = Field(
+        RateSource.CONFIGURED,
+        description="'configured' (default: the rates sent), 'learned' (the site's posterior "
+        "means, the rates sent as priors) or 'sampled' (one draw from each posterior: "
+        "explores). The numbers planned with are in the run's first event",
+    )
+    durations: DurationSource = Field(
+        DurationSource.CONFIGURED,
+        description="'configured' (default) or 'learned' (the site's observed durations, "
+        "the tasks' configured ones as priors; only timed instances have any)",
+    )
     replay_of: str | None = Field(
         None,
         min_length=1,
@@ -196,6 +213,9 @@ class RunRequest(InstanceRequest):
             llm_scope=self.llm_scope,
             llm_margin=self.llm_margin,
             review=None if self.review is None else self.review.model_dump(mode="json"),
+            site=self.site,
+            rates=self.rates,
+            durations=self.durations,
             sent=frozenset(self.model_fields_set),
         )
 
@@ -311,6 +331,11 @@ class RunOut(BaseModel):
     signoffs: list[SignOffOut] = Field(
         default_factory=list, description="Sign-offs of the completed run, oldest first"
     )
+    site: str = Field(DEFAULT_SITE, description="The site the run plans for (SPEC 17)")
+    rates: RateSource = Field(
+        RateSource.CONFIGURED, description="Which success rates it plans with (SPEC 17)"
+    )
+    durations: DurationSource = DurationSource.CONFIGURED
 
 
 class RunSummary(BaseModel):
@@ -322,3 +347,4 @@ class RunSummary(BaseModel):
     n_robots: int
     resumes: int
     created_at: Timestamp
+    site: str = DEFAULT_SITE

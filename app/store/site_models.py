@@ -1,0 +1,64 @@
+"""The site's outcomes (SPEC 17): one row per task reported done or failed, written in the
+same transaction as the report, so the estimates of a site with 100,000 reports are one
+indexed aggregate rather than a walk over every run's record.
+
+The row is derived, never the record: `ltaa rebuild-estimates` recomputes the table from the
+execution-report events and annotations (app.sites.rebuild), and a test proves both agree.
+A report is counted on the run it was sent to; the copies a revision carries of its pinned
+tasks' reports are no reports and write no row (the unique key would refuse a second row
+for the same run and task anyway).
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from sqlalchemy import (
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import Mapped, mapped_column
+
+from app.domain.models import MAX_NAME_CHARS
+from app.store.models import Base
+
+
+class SiteReport(Base):
+    __tablename__ = "site_reports"
+    __table_args__ = (
+        UniqueConstraint("run_id", "task_index", name="uq_site_reports_run_task"),
+        # The estimates read one site up to a time: this index serves both.
+        Index("ix_site_reports_site_received", "site", "received_at"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    site: Mapped[str] = mapped_column(String(MAX_NAME_CHARS))
+    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"))
+    task_index: Mapped[int] = mapped_column(Integer)
+    task_id: Mapped[str] = mapped_column(String(MAX_NAME_CHARS))
+    robot: Mapped[str] = mapped_column(String(MAX_NAME_CHARS))
+    task_type: Mapped[str] = mapped_column(String(MAX_NAME_CHARS))
+    # The task's features as a JSON list, sorted: a text column groups on every database
+    # (PostgreSQL's json type has no equality).
+    features: Mapped[str] = mapped_column(Text)
+    success: Mapped[bool] = mapped_column(Boolean)
+    # The success the plan expected of this task (its decision's S), for the reliability
+    # plot; and its tenth (0..9), to group by without arithmetic that databases round apart.
+    predicted: Mapped[float] = mapped_column(Float)
+    predicted_bin: Mapped[int] = mapped_column(Integer)
+    # When the site says it ended (the report's `at`), and when the server recorded it (the
+    # report's event or annotation): `as_of` reads the latter.
+    reported_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    received_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    # started -> done with both times: the observed minutes (and their log); the planned
+    # minutes when the run's instance gave the task a duration (SPEC 16).
+    minutes: Mapped[float | None] = mapped_column(Float, nullable=True)
+    log_minutes: Mapped[float | None] = mapped_column(Float, nullable=True)
+    planned_minutes: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -1,0 +1,274 @@
+"""Keyword-only data access for the site estimates (SPEC 17): the outcome rows written with
+each report, the aggregates the estimates are computed from, and the configured rates that
+serve as priors.
+
+One derivation turns a reported task into its row (`outcome_row`), used both when a report
+arrives and when the table is rebuilt from the record, so the two cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import Select, delete, func, select
+from sqlalchemy.orm import Session
+
+from app.domain.estimates import Counts, LogStats, SiteCounts, configured_rates
+from app.store.models import Decision, Run, as_utc
+from app.store.site_models import SiteReport
+
+FINAL_STATES = ("done", "failed")
+BINS = 10
+
+
+@dataclass(frozen=True)
+class Reported:
+    """A task reported done or failed on a run: what its outcome row is made of."""
+
+    task_index: int
+    task_id: str
+    state: str
+    at: datetime  # when the site says it ended
+    started_at: datetime | None
+
+
+def _task_facts(request: Mapping[str, Any], task_index: int) -> Mapping[str, Any]:
+    tasks = request["instance_data"]["tasks"]
+    return tasks[task_index] if 0 <= task_index < len(tasks) else {}
+
+
+def planned_minutes(task: Mapping[str, Any], robot: str) -> float | None:
+    """The task's configured duration on this robot (SPEC 16: minutes, or minutes by
+    robot); None for an untimed task."""
+    duration = task.get("duration")
+    if isinstance(duration, Mapping):
+        duration = duration.get(robot)
+    if isinstance(duration, int | float) and not isinstance(duration, bool) and duration > 0:
+        return float(duration)
+    return None
+
+
+def outcome_row(
+    *,
+    run: Run,
+    reported: Reported,
+    decision: Decision,
+    received_at: datetime,
+) -> dict[str, Any]:
+    task = _task_facts(run.request, reported.task_index)
+    ended, started = as_utc(reported.at), reported.started_at
+    minutes = None
+    if started is not None:
+        span = (ended - as_utc(started)).total_seconds() / 60.0
+        minutes = span if span > 0 else None  # a zero-length task says nothing of duration
+    predicted = float(decision.expected_success)
+    return {
+        "site": run.site,
+        "run_id": run.id,
+        "task_index": reported.task_index,
+        "task_id": reported.task_id,
+        "robot": decision.robot_name,
+        "task_type": str(task.get("type") or "Custom"),
+        "features": json.dumps(sorted(task.get("features", []))),
+        "success": reported.state == "done",
+        "predicted": predicted,
+        "predicted_bin": min(BINS - 1, max(0, int(predicted * BINS))),
+        "reported_at": ended,
+        "received_at": as_utc(received_at),
+        "minutes": minutes,
+        "log_minutes": None if minutes is None else math.log(minutes),
+        "planned_minutes": planned_minutes(task, decision.robot_name),
+    }
+
+
+def _decisions(session: Session, run_id: str, indexes: Iterable[int]) -> dict[int, Decision]:
+    wanted = sorted(set(indexes))
+    if not wanted:
+        return {}
+    rows = session.scalars(
+        select(Decision).where(Decision.run_id == run_id, Decision.task_index.in_(wanted))
+    )
+    return {d.task_index: d for d in rows}
+
+
+def record_outcomes(
+    *, session: Session, run: Run, reported: Sequence[Reported], received_at: datetime
+) -> int:
+    """Write the outcome rows of the tasks just reported done or failed, in the report's
+    transaction; returns how many."""
+    final = [r for r in reported if r.state in FINAL_STATES]
+    decided = _decisions(session, run.id, (r.task_index for r in final))
+    rows = [
+        outcome_row(run=run, reported=r, decision=decided[r.task_index], received_at=received_at)
+        for r in final
+        if r.task_index in decided
+    ]
+    for values in rows:
+        session.add(SiteReport(**values))
+    return len(rows)
+
+
+# -- reading ----------------------------------------------------------------------------
+
+
+@dataclass
+class SiteTotals:
+    """Everything the estimates of one site need, from one pass over its rows."""
+
+    outcomes: dict[tuple[str, str], Counts] = field(default_factory=dict)  # (robot, feature)
+    durations: dict[tuple[str, str], LogStats] = field(default_factory=dict)  # (robot, type)
+    planned: dict[tuple[str, str], tuple[float, int]] = field(default_factory=dict)  # sum, n
+    reliability: dict[int, tuple[int, int, float]] = field(default_factory=dict)  # bin: n, ok, Σp
+    robot_reports: dict[str, int] = field(default_factory=dict)
+    reports: int = 0
+
+
+def _until(query: Select[Any], as_of: datetime | None) -> Select[Any]:
+    return query if as_of is None else query.where(SiteReport.received_at <= as_utc(as_of))
+
+
+_GROUP = (
+    SiteReport.robot,
+    SiteReport.features,
+    SiteReport.task_type,
+    SiteReport.predicted_bin,
+    SiteReport.success,
+)
+
+
+def site_totals(*, session: Session, site: str, as_of: datetime | None = None) -> SiteTotals:
+    """One grouped scan of the site's rows received up to `as_of` (None: all)."""
+    query: Any = select(
+        *_GROUP,
+        func.count(),
+        func.count(SiteReport.log_minutes),
+        func.sum(SiteReport.log_minutes),
+        func.sum(SiteReport.log_minutes * SiteReport.log_minutes),
+        func.sum(SiteReport.planned_minutes),
+        func.count(SiteReport.planned_minutes),
+        func.sum(SiteReport.predicted),
+    ).where(SiteReport.site == site)
+    query = _until(query, as_of).group_by(*_GROUP)
+    totals = SiteTotals()
+    row: Any
+    for row in session.execute(query):
+        robot, features, task_type, bin_, ok, n, n_dur, s1, s2, planned, n_planned, p = row
+        totals.reports += n
+        totals.robot_reports[robot] = totals.robot_reports.get(robot, 0) + n
+        one: Counts = Counts(n, 0) if ok else Counts(0, n)
+        for feature in json.loads(features):
+            key = (robot, feature)
+            totals.outcomes[key] = totals.outcomes.get(key, Counts()) + one
+        kind = (robot, task_type)
+        if n_dur:
+            totals.durations[kind] = totals.durations.get(kind, LogStats()) + LogStats(
+                n_dur, float(s1 or 0.0), float(s2 or 0.0)
+            )
+        if n_planned:
+            total, count = totals.planned.get(kind, (0.0, 0))
+            totals.planned[kind] = (total + float(planned), count + n_planned)
+        seen, good, mass = totals.reliability.get(bin_, (0, 0, 0.0))
+        totals.reliability[bin_] = (seen + n, good + (n if ok else 0), mass + float(p or 0.0))
+    return totals
+
+
+def site_counts(*, session: Session, site: str) -> SiteCounts:
+    """What a run asking for learned rates or durations plans with: every report of the
+    site so far."""
+    totals = site_totals(session=session, site=site)
+    return SiteCounts(totals.outcomes, totals.durations, totals.reports)
+
+
+@dataclass(frozen=True)
+class SiteSummary:
+    site: str
+    runs: int
+    reports: int
+    last_run_at: datetime | None
+
+
+def sites(*, session: Session) -> list[SiteSummary]:
+    runs = session.execute(
+        select(Run.site, func.count(), func.max(Run.created_at)).group_by(Run.site)
+    ).all()
+    reports = dict(
+        session.execute(select(SiteReport.site, func.count()).group_by(SiteReport.site)).all()
+    )
+    return sorted(
+        (SiteSummary(s, n, int(reports.get(s, 0)), last) for s, n, last in runs),
+        key=lambda x: x.site,
+    )
+
+
+def site_has_runs(*, session: Session, site: str, as_of: datetime | None = None) -> bool:
+    query = select(Run.id).where(Run.site == site)
+    if as_of is not None:
+        query = query.where(Run.created_at <= as_utc(as_of))
+    return session.execute(query.limit(1)).first() is not None
+
+
+def configured_priors(
+    *, session: Session, site: str, as_of: datetime | None, robots: Iterable[str] = ()
+) -> tuple[dict[str, dict[str, float]], dict[str, str]]:
+    """The prior of each robot: the configured rates of the most recent run on the site
+    (created up to `as_of`) that names it, for every robot of the newest run and those in
+    `robots`. Returns (robot -> feature -> rate, robot -> the run id it comes from). Runs
+    are read newest first and only until every robot asked for is found."""
+    query = select(Run.id).where(Run.site == site).order_by(Run.created_at.desc(), Run.id)
+    if as_of is not None:
+        query = query.where(Run.created_at <= as_utc(as_of))
+    wanted = set(robots)
+    priors: dict[str, dict[str, float]] = {}
+    source: dict[str, str] = {}
+    first = True
+    for (run_id,) in session.execute(query):
+        run = session.get(Run, run_id)
+        assert run is not None
+        request = run.request
+        fleet = configured_rates(request["instance_data"]["robots"], request.get("learned"))
+        for robot in fleet:
+            name = str(robot["name"])
+            if first:
+                wanted.add(name)
+            if name in wanted and name not in priors:
+                priors[name] = {f: float(v) for f, v in robot["success"].items()}
+                source[name] = run.id
+        first = False
+        session.expunge(run)  # a long walk must not keep every request in memory
+        if wanted <= set(priors):
+            break
+    return priors, source
+
+
+# -- rebuilding ---------------------------------------------------------------------------
+
+
+def replace_all(*, session: Session, rows: Iterable[Mapping[str, Any]]) -> int:
+    """Empty the table and write these rows (app.sites.rebuild), in the caller's
+    transaction; on PostgreSQL the table is locked first, so a report arriving meanwhile
+    waits and then adds its row to the rebuilt table rather than to the old one."""
+    if session.get_bind().dialect.name == "postgresql":
+        session.connection().exec_driver_sql("LOCK TABLE site_reports IN EXCLUSIVE MODE")
+    session.execute(delete(SiteReport))
+    count = 0
+    for values in rows:
+        session.add(SiteReport(**values))
+        count += 1
+    return count
+
+
+def stored_rows(*, session: Session) -> list[dict[str, Any]]:
+    """Every outcome row as plain values (without the surrogate id), for comparisons."""
+    columns = [c for c in SiteReport.__table__.columns if c.name != "id"]
+    out = []
+    for row in session.execute(select(*columns).order_by(SiteReport.run_id, SiteReport.task_index)):
+        values = dict(row._mapping)
+        for key in ("reported_at", "received_at"):
+            values[key] = as_utc(values[key]).astimezone(UTC)
+        out.append(values)
+    return out
