@@ -34,6 +34,9 @@ class DecisionContext:
     # 1-based attempt at this task (tiers stop at 3; attempts do not): the key, with
     # task_index, of a recorded reply, for reasoners that replay a run's record.
     attempt: int = 1
+    # SPEC 17: per robot, what its rates for this task rest on when they are not the
+    # configured ones ("dexterous learned on 37 reports"); empty: configured.
+    rate_notes: tuple[str, ...] = ()
 
     @property
     def labels(self) -> tuple[str, ...]:

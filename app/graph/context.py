@@ -10,9 +10,29 @@ from app.domain.modes import strategic_weights
 from app.domain.phases import Phase
 from app.domain.problem import Problem
 
+# robot -> feature -> (basis, reports): app.domain.estimates.rate_notes
+RateNotes = Mapping[str, Mapping[str, tuple[str, int]]]
+
+
+def _rate_note(notes: Mapping[str, tuple[str, int]], features: tuple[str, ...]) -> str:
+    parts = []
+    for feature in features:
+        if feature in notes:
+            basis, reports = notes[feature]
+            parts.append(
+                f"{feature} configured, no reports yet"
+                if basis == "prior"
+                else f"{feature} {basis} on {reports} reports"
+            )
+    return "; ".join(parts)
+
 
 def decision_context(
-    problem: Problem, state: Mapping[str, Any], *, tier: int = 0
+    problem: Problem,
+    state: Mapping[str, Any],
+    *,
+    tier: int = 0,
+    rate_notes: RateNotes | None = None,
 ) -> DecisionContext:
     inst, cap = problem.instance, problem.cap
     t = state["task_index"]
@@ -41,4 +61,7 @@ def decision_context(
         task_type=task.type,
         load_bounds=bounds,
         attempt=state.get("attempt") or 1,
+        rate_notes=tuple(_rate_note(rate_notes.get(r.name, {}), task.features) for r in inst.robots)
+        if rate_notes
+        else (),
     )

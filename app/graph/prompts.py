@@ -44,9 +44,12 @@ def _facts(ctx: DecisionContext) -> str:
     labels = ctx.labels
     allocated = sum(ctx.loads)
     task_type = f" ({ctx.task_type})" if ctx.task_type else ""
+    notes = ctx.rate_notes or ("",) * len(labels)
     rows = [
-        f"- {labels[r]} [{ctx.robot_names[r]}]: S {percent(ctx.success[r])}, load {ctx.loads[r]} "
-        f"(dev {ctx.loads[r] - ctx.target:+.1f})" + ("" if r in ctx.feasible else ", NOT allowed")
+        f"- {labels[r]} [{ctx.robot_names[r]}]: S {percent(ctx.success[r])}"
+        + (f" ({notes[r]})" if notes[r] else "")
+        + f", load {ctx.loads[r]} (dev {ctx.loads[r] - ctx.target:+.1f})"
+        + ("" if r in ctx.feasible else ", NOT allowed")
         for r in range(len(labels))
     ]
     if ctx.load_bounds is None:
@@ -59,6 +62,11 @@ def _facts(ctx: DecisionContext) -> str:
             f"features: {', '.join(ctx.features)}",
             "Robots (S = mean success over the task's features; load = tasks so far):",
             *rows,
+            *(
+                ["Learned rates are posterior means from this site's reports."]
+                if any(notes)
+                else []
+            ),
             f"Target load W = {ctx.target:.1f}; allocated {allocated}/{ctx.total_tasks}; {cap}.",
         ]
     )

@@ -10,7 +10,7 @@ derived together share one channel (`view`).
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypedDict
 
@@ -77,6 +77,9 @@ class GraphContext:
     # The run's review policy (SPEC 11), or a replay's recorded resolutions; None: no review.
     review: ReviewGate | None = None
     verdicts: VerdictCache = field(default_factory=VerdictCache)
+    # SPEC 17: robot -> feature -> (basis, reports) of rates learned from the site (the
+    # prompt says so); empty: every rate is the configured one.
+    rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] = field(default_factory=dict)
 
     @property
     def max_attempts(self) -> int:

@@ -234,6 +234,7 @@ class RunWorker:
                 review=spec.review_policy if recorded is None else None,
                 recorded_reviews=recorded,
                 resume_with=admission.resume_with,
+                rate_notes=spec.rate_notes,
             )
         except RunCancelled:
             self._end_stopped(run_id, stop)

@@ -58,6 +58,7 @@ def graph_context(
     guidance: str | None,
     review: ReviewPolicy | None = None,
     recorded_reviews: Mapping[int, Resolution] | None = None,
+    rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] | None = None,
 ) -> GraphContext:
     """The LTAA graph's run context, with exact regret always, guidance on request, and the
     review gate when the run has a review policy (or replays recorded resolutions)."""
@@ -82,6 +83,7 @@ def graph_context(
         guidance=oracle.guidance if guidance == "optimizer" else None,
         regret=oracle.regret,
         review=gate,
+        rate_notes=rate_notes or {},
     )
 
 
@@ -99,6 +101,7 @@ def execute_ltaa(
     review: ReviewPolicy | None = None,
     recorded_reviews: Mapping[int, Resolution] | None = None,
     resume_with: Any = None,
+    rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] | None = None,
 ) -> Execution:
     """The one execution path of an LTAA problem (durable runs, `ltaa run` and the
     synchronous solver): its context with exact regret (and guidance on request), then
@@ -113,6 +116,7 @@ def execute_ltaa(
         guidance=guidance,
         review=review,
         recorded_reviews=recorded_reviews,
+        rate_notes=rate_notes,
     )
     return execute(graph, context, thread_id, resume=resume, resume_with=resume_with)
 

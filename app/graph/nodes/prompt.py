@@ -15,7 +15,7 @@ from app.graph.state import GraphContext, LTAAState
 @cancellable
 def build_prompt(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
-    dctx = decision_context(ctx.problem, state, tier=0)
+    dctx = decision_context(ctx.problem, state, tier=0, rate_notes=ctx.rate_notes)
     save_prompt(ctx.recorder, state["task_index"], 1, 0, user_prompt(dctx))
     # A task's flags are reset where the task starts, not where the previous one ended:
     # fewer writes per task (each is a checkpoint row).

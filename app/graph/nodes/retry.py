@@ -24,7 +24,7 @@ def retry(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     previous = require_attempt(rec, t, a)
     attempt = a + 1
     tier = min(attempt - 1, MAX_TIER)
-    dctx = decision_context(ctx.problem, state, tier=tier)
+    dctx = decision_context(ctx.problem, state, tier=tier, rate_notes=ctx.rate_notes)
     user = retry_prompt(
         dctx, tier, previous.feedback or "", previous.quality, ctx.quality_threshold
     )
