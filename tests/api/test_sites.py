@@ -210,3 +210,18 @@ def test_bad_site_input_is_refused_and_nothing_is_stored(client: TestClient) -> 
         answer = client.get("/sites/s1/estimates", params={"as_of": bad})
         assert answer.status_code == 422, (bad, answer.text)
         assert answer.json()["detail"][0]["loc"] == ["query", "as_of"]
+
+
+def test_the_console_site_page_marks_the_rates_far_from_configured(client: TestClient) -> None:
+    run_id = completed_run(client, S1)
+    robots = {str(a["task_id"]): a["robot"] for a in assignments(client, run_id)}
+    heavy_tasks = [t for t, r in robots.items() if r == "heavy"]
+    outcomes(client, run_id, dict.fromkeys(heavy_tasks, "failed"))
+    runs = client.get("/console")
+    assert 'href="/console/sites/s1"' in runs.text
+    page = client.get("/console/sites/s1")
+    assert page.status_code == 200
+    assert 'id="chart-rates"' in page.text and 'id="chart-reliability"' in page.text
+    assert 'id="far-from-configured"' in page.text and "heavy · heavy" in page.text
+    assert client.get("/console/sites").status_code == 200
+    assert client.get("/console/sites/nowhere").status_code == 404
