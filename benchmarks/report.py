@@ -19,6 +19,7 @@ SECTIONS = [
     "benchmarks.load",
     "benchmarks.llm_scope",
     "benchmarks.adaptation",
+    "benchmarks.site_learning",
 ]
 
 

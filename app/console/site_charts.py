@@ -44,8 +44,9 @@ def rates_chart(rows: Sequence[RateRow]) -> Markup:
         y = top + i * row + row / 2
         colour = ACCENT if r.marked else BAR
         body.append(_text(left - 8, y + 4, r.label[:30], "end"))
+        span = max(1.0, x(r.high) - x(r.low))
         body.append(
-            f'<rect x="{x(r.low):.1f}" y="{y - 5:.1f}" width="{max(1.0, x(r.high) - x(r.low)):.1f}" '
+            f'<rect x="{x(r.low):.1f}" y="{y - 5:.1f}" width="{span:.1f}" '
             f'height="10" fill="{BAND}" stroke="{colour}" stroke-width="1"/>'
         )
         body.append(

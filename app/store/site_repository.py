@@ -8,6 +8,7 @@ arrives and when the table is rebuilt from the record, so the two cannot drift a
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
@@ -67,6 +68,7 @@ def outcome_row(
         span = (ended - as_utc(started)).total_seconds() / 60.0
         minutes = span if span > 0 else None  # a zero-length task says nothing of duration
     predicted = float(decision.expected_success)
+    features = json.dumps(sorted(task.get("features", [])))
     return {
         "site": run.site,
         "run_id": run.id,
@@ -74,7 +76,8 @@ def outcome_row(
         "task_id": reported.task_id,
         "robot": decision.robot_name,
         "task_type": str(task.get("type") or "Custom"),
-        "features": json.dumps(sorted(task.get("features", []))),
+        "features": features,
+        "feature_set": hashlib.sha256(features.encode()).hexdigest(),
         "success": reported.state == "done",
         "predicted": predicted,
         "predicted_bin": min(BINS - 1, max(0, int(predicted * BINS))),
@@ -134,7 +137,7 @@ def _until(query: Select[Any], as_of: datetime | None) -> Select[Any]:
 
 _GROUP = (
     SiteReport.robot,
-    SiteReport.features,
+    SiteReport.feature_set,
     SiteReport.task_type,
     SiteReport.predicted_bin,
     SiteReport.success,
@@ -152,12 +155,27 @@ def site_totals(*, session: Session, site: str, as_of: datetime | None = None) -
         func.sum(SiteReport.planned_minutes),
         func.count(SiteReport.planned_minutes),
         func.sum(SiteReport.predicted),
+        func.min(SiteReport.id),  # a row naming the feature set (SQLite: the index has it)
     ).where(SiteReport.site == site)
     query = _until(query, as_of).group_by(*_GROUP)
     totals = SiteTotals()
+    groups = list(session.execute(query))
+    example = {row[-1] for row in groups}
+    named = (
+        dict(
+            session.execute(
+                select(SiteReport.feature_set, SiteReport.features).where(
+                    SiteReport.id.in_(example)
+                )
+            ).all()
+        )
+        if example
+        else {}
+    )
     row: Any
-    for row in session.execute(query):
-        robot, features, task_type, bin_, ok, n, n_dur, s1, s2, planned, n_planned, p = row
+    for row in groups:
+        robot, feature_set, task_type, bin_, ok, n, n_dur, s1, s2, planned, n_planned, p, _ = row
+        features = named[feature_set]
         totals.reports += n
         totals.robot_reports[robot] = totals.robot_reports.get(robot, 0) + n
         one: Counts = Counts(n, 0) if ok else Counts(0, n)
