@@ -98,6 +98,20 @@ check "d['ok'] is True and d['parent']['run_id'] == '$run_id' and d['parent']['o
 [ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "parent verify"
 check 'd["ok"] is True' "completed parent still verifies after reports and a revision"
 echo "smoke: living plans ok (execution reports, revision $revision_id, diff, verify)"
+# Sites (SPEC 17): the report above taught the default site; a learned run records its numbers.
+[ "$(call GET /sites '' "${CLIENT[@]}")" = 200 ] || fail "GET /sites"
+check 'any(s["site"] == "default" and s["reports"] >= 1 for s in d)' "the default site counts the report"
+[ "$(call GET /sites/default/estimates '' "${CLIENT[@]}")" = 200 ] || fail "GET /sites/default/estimates"
+check 'd["reports"] >= 1 and all(f["interval"][0] <= f["posterior_mean"] <= f["interval"][1] for r in d["robots"] for f in r["features"])' "estimates with intervals"
+[ "$(call GET /sites/no-such-site/estimates '' "${CLIENT[@]}")" = 404 ] || fail "an unknown site should be 404"
+[ "$(call GET '/sites/default/estimates?as_of=2026-12-01T09:30:00' '' "${CLIENT[@]}")" = 422 ] || fail "as_of without an offset should be 422"
+[ "$(call POST /runs '{"scenario":"baseline","rates":"guessed"}' "${CLIENT[@]}")" = 422 ] || fail "rates not configured|learned|sampled should be 422"
+code=$(call POST /runs '{"scenario":"baseline","reasoner":"rules","rates":"learned"}' "${CLIENT[@]}")
+[ "$code" = 202 ] || fail "POST /runs rates learned -> $code $(head -c 300 "$TMP/out")"
+learned_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
+[ "$(call GET "/runs/$learned_id/trace" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace of the learned run"
+check 'd["events"][0]["detail"]["learned"]["source"] == "learned" and d["events"][0]["detail"]["learned"]["reports"] >= 1' "the learned run's first event records its numbers"
+echo "smoke: sites ok (estimates, 404, 422s, a learned run $learned_id)"
 # Webhooks: create (secret shown once), list, refuse a private target, delete. The event
 # subscribed to is never emitted by a smoke run, so nothing is sent anywhere.
 hook_url="https://hooks.example.com/ltaa-smoke-$$"
