@@ -146,3 +146,27 @@ def test_bad_input_is_refused_and_stores_nothing(server: Server) -> None:
         assert bad_time.json()["detail"][0]["loc"] == ["query", "as_of"]
         assert len(c.get("/runs", params={"limit": 500}).json()) == runs_before
         assert "nowhere" not in {s["site"] for s in c.get("/sites").json()}
+
+
+def test_the_cli_shows_a_sites_estimates_from_a_real_server(server: Server) -> None:
+    from typer.testing import CliRunner
+
+    from app.cli import cli
+
+    with server.client() as c:
+        done = run(server, c, site="cli-site")
+        report(c, done["id"], {"0": "failed", "1": "done"})
+    runner = CliRunner()
+    env = {"COLUMNS": "240"}
+    listed = runner.invoke(cli, ["estimates", "--url", server.url], env=env)
+    assert listed.exit_code == 0, listed.output
+    assert "cli-site" in listed.output
+    shown = runner.invoke(cli, ["estimates", "cli-site", "--url", server.url], env=env)
+    assert shown.exit_code == 0, shown.output
+    assert "Site cli-site: 2 report(s)" in shown.output and "dexterous" in shown.output
+    missing = runner.invoke(cli, ["estimates", "elsewhere", "--url", server.url], env=env)
+    assert missing.exit_code == 1 and "404" in missing.output
+    bad = runner.invoke(
+        cli, ["estimates", "cli-site", "--as-of", "yesterday", "--url", server.url], env=env
+    )
+    assert bad.exit_code == 1 and "422" in bad.output
