@@ -143,3 +143,13 @@ def test_adaptation_cases_and_figure(tmp_path: Path) -> None:
     assert results[1].es <= results[1].optimum + 1e-9
     adaptation.figure(results, "adaptation-test.png", tmp_path)
     assert (tmp_path / "adaptation-test.png").stat().st_size > 0
+
+
+def test_site_learning_cases_differ_where_the_benchmark_says() -> None:
+    from benchmarks import site_learning as sl
+
+    assert sl.CONFIGURED["heavy"]["dexterous"] == 0.65 and sl.TRUE_RATES["heavy"]["dexterous"] == 0.3
+    assert sl.HARD_TRUE["heavy"]["careful"] > sl.HARD_CONFIGURED["heavy"]["careful"]
+    instance = sl.instance_with(sl.TRUE_RATES)
+    assert instance.n_tasks == 36
+    assert sl.success(sl.TRUE_RATES, "heavy", ["heavy", "dexterous"]) == (0.9 + 0.3) / 2
