@@ -83,15 +83,18 @@ class SiteEstimates:
     robots: list[RobotEstimates]
     reliability: list[ReliabilityBin]
 
-    def largest_shifts(self, n: int = 3, at_least: float = 0.05) -> set[tuple[str, str]]:
-        """The (robot, feature) pairs whose learned rate is farthest from the configured
-        one (at least `at_least` apart), the `n` largest: what the console marks."""
+    def largest_shifts(self, n: int = 3) -> set[tuple[str, str]]:
+        """What the console marks: of the (robot, feature) pairs whose reports put the
+        configured rate outside the 90% interval (the evidence contradicts it, not mere
+        noise), the `n` whose learned rate moved farthest from it."""
         shifts = sorted(
             (
                 (abs(f.shift), r.robot, f.feature)
                 for r in self.robots
                 for f in r.features
-                if f.posterior.reports and abs(f.shift) >= at_least
+                if f.posterior.reports
+                and f.configured is not None
+                and not f.posterior.interval[0] <= f.configured <= f.posterior.interval[1]
             ),
             reverse=True,
         )

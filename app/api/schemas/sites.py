@@ -36,8 +36,8 @@ class FeatureEstimateOut(BaseModel):
     interval: tuple[float, float] = Field(description="Central 90% credible interval")
     shift: float = Field(description="posterior_mean - prior")
     marked: bool = Field(
-        description="Among the learned rates farthest from the configured ones (the console "
-        "marks these)"
+        description="The reports put the configured rate outside the 90% interval, and the "
+        "learned rate is among the three farthest from it (the console marks these)"
     )
 
 
