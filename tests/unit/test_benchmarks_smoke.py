@@ -148,7 +148,8 @@ def test_adaptation_cases_and_figure(tmp_path: Path) -> None:
 def test_site_learning_cases_differ_where_the_benchmark_says() -> None:
     from benchmarks import site_learning as sl
 
-    assert sl.CONFIGURED["heavy"]["dexterous"] == 0.65 and sl.TRUE_RATES["heavy"]["dexterous"] == 0.3
+    assert sl.CONFIGURED["heavy"]["dexterous"] == 0.65
+    assert sl.TRUE_RATES["heavy"]["dexterous"] == 0.3
     assert sl.HARD_TRUE["heavy"]["careful"] > sl.HARD_CONFIGURED["heavy"]["careful"]
     instance = sl.instance_with(sl.TRUE_RATES)
     assert instance.n_tasks == 36
