@@ -36,6 +36,8 @@ CLIENT_ENDPOINTS = [
     ("POST", "/runs/{id}/revisions"),
     ("GET", "/runs/{id}/revisions"),
     ("GET", "/runs/{id}/diff"),
+    ("GET", "/sites"),
+    ("GET", "/sites/{site}/estimates"),
 ]
 SUPERVISOR_ENDPOINTS = [
     ("GET", "/runs/{id}/trace"),
