@@ -331,7 +331,15 @@ def _report(
         "*Underrated* (the harder case): configured = the paper's rates but the heavy robot's "
         "careful at 0.3; its careful work really succeeds 0.9 of the time.\n\n"
         + table(
-            ["case", "rates", "day 1", "day 5", "day 10", "day 30", "tasks on the watched pair"],
+            [
+                "case",
+                "rates",
+                "day 1",
+                "day 5",
+                "day 10",
+                "day 30",
+                "tasks on the watched pair, per seed",
+            ],
             rows,
         )
         + f"\n\n![Regret per day]({regret_image})\n\n"
