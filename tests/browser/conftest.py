@@ -92,7 +92,10 @@ def page(context: BrowserContext) -> Page:
 def sign_in(page: Page, server: Server, key: str = SUPERVISOR_KEY, then: str = "/console") -> None:
     page.goto(f"{server.url}/console/login?next={then}")
     page.get_by_label("Supervisor API key").fill(key)
-    page.get_by_role("button", name="Sign in").click()
+    # Until the page the form leads to has loaded: a check run at once (axe, a locator on
+    # the old page) would race the navigation on a busy machine.
+    with page.expect_navigation():
+        page.get_by_role("button", name="Sign in").click()
 
 
 def start_run(server: Server, **body: object) -> str:
