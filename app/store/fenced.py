@@ -26,7 +26,7 @@ from datetime import timedelta
 from functools import cache
 from typing import Any, cast
 
-from sqlalchemy import Connection, Table, bindparam, exists, func, select, update
+from sqlalchemy import Connection, Interval, Table, bindparam, exists, func, select, update
 from sqlalchemy import cast as sql_cast
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
@@ -38,6 +38,9 @@ from app.store.models import Base, Run
 _RUN = "fence_run_id"
 _OWNER = "fence_lease_owner"
 _LEASE = "fence_lease"
+# Values are bound under prefixed names: a parameter named like a column is taken by
+# SQLAlchemy as a SET value of the DML statement, the fence's UPDATE of runs included.
+_VALUE = "v_"
 
 
 @dataclass(frozen=True)
@@ -96,9 +99,10 @@ def _statement(
     running, leased = shape
     if dialect == "postgresql":
         runs = cast(Table, Run.__table__)
+        # Every column set explicitly: a Python-side onupdate has no place in a CTE.
         values: dict[str, Any] = {"updated_at": runs.c.updated_at}
         if leased:
-            values = {"lease_expires_at": func.now() + bindparam(_LEASE)}
+            values["lease_expires_at"] = func.now() + bindparam(_LEASE, type_=Interval())
         fence = (
             update(runs)
             .where(*_run_conditions(running, leased))
@@ -107,8 +111,13 @@ def _statement(
             .cte("fence")
         )
         # Typed: PostgreSQL types a bare parameter in a select list as text.
-        rows = select(*(sql_cast(bindparam(c.name), c.type) for c in columns)).select_from(fence)
-        pg = postgresql_insert(table).from_select([c.name for c in columns], rows)
+        rows = select(
+            *(sql_cast(bindparam(_VALUE + c.name, type_=c.type), c.type) for c in columns)
+        )
+        rows = rows.select_from(fence)
+        pg = postgresql_insert(table).from_select(
+            [c.name for c in columns], rows, include_defaults=False
+        )
         pg = pg.on_conflict_do_update(
             index_elements=list(keys),
             set_={c.name: pg.excluded[c.name] for c in columns if c.name not in keys},
@@ -116,10 +125,10 @@ def _statement(
         return pg.add_cte(fence).returning(select(fence.c.cancel_requested).scalar_subquery())
     if dialect != "sqlite":
         raise NotImplementedError(f"fenced writes on {dialect!r}")
-    rows = select(*(bindparam(c.name, type_=c.type) for c in columns)).where(
+    rows = select(*(bindparam(_VALUE + c.name, type_=c.type) for c in columns)).where(
         exists().where(*_run_conditions(running, leased))
     )
-    lite = sqlite_insert(table).from_select([c.name for c in columns], rows)
+    lite = sqlite_insert(table).from_select([c.name for c in columns], rows, include_defaults=False)
     return lite.on_conflict_do_update(
         index_elements=list(keys),
         set_={c.name: lite.excluded[c.name] for c in columns if c.name not in keys},
@@ -136,7 +145,8 @@ def fenced_upsert(
     """INSERT ... ON CONFLICT (keys) DO UPDATE of one row, only while `guard` holds."""
     dialect = connection.dialect.name
     stmt = _statement(dialect, model, tuple(values), keys, guard.shape)
-    result = connection.execute(stmt, {**values, **guard.params()})
+    params = {_VALUE + name: value for name, value in values.items()}
+    result = connection.execute(stmt, {**params, **guard.params()})
     if dialect == "sqlite":
         return Written(ok=result.rowcount == 1)
     row = result.first()

@@ -146,7 +146,9 @@ def test_links_computed_from_the_writes_equal_the_links_read_from_the_table(
         with sessions() as session:
             stored = decision_repo.decisions(session=session, run_id="r1")[-1]
             prev = (
-                decision_repo.decisions(session=session, run_id="r1")[-2].chain_hash
+                chain.next_prev(
+                    decision_repo.decisions(session=session, run_id="r1")[-2].chain_hash
+                )
                 if t
                 else repo.chain_genesis(session=session, table="decisions", run_id="r1")
             )
