@@ -90,3 +90,16 @@ def usage_of(rows: Iterable[Any]) -> Usage:
         )
         for r in rows
     )
+
+
+def usage_of_totals(rows: Iterable[Any]) -> Usage:
+    """Usage from app.store.run_totals.reply_totals rows (one per reply model, summed): the
+    rule of app.domain.usage, applied to sums: replies that name a model are the calls."""
+    billed = [r for r in rows if r[0] is not None]
+    return Usage(
+        llm_calls=sum(int(r[1]) for r in billed),
+        input_tokens=sum(int(r[2]) for r in billed),
+        output_tokens=sum(int(r[3]) for r in billed),
+        transport_retries=sum(int(r[4]) for r in billed),
+        latency_ms=sum((float(r[5]) for r in billed), 0.0),
+    )

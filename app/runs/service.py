@@ -30,11 +30,11 @@ from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import REPLAY, replay_spec, validate_replay
 from app.runs.spec import RunOrder, RunSpec
 from app.runs.worker import RunWorker
-from app.store import chain
+from app.store import chain, run_totals
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import Attempt, Decision, ExecutionReport, Run, RunEvent
+from app.store.models import Attempt, ExecutionReport, Run, RunEvent
 from app.store.tombstones import missing_run
 
 
@@ -314,26 +314,27 @@ def run_view(
     with sessions() as session:
         run = _require(session, run_id)
         spec = RunSpec.from_json(run.request)
-        outcomes = decision_repo.decision_outcomes(session=session, run_id=run_id)
-        rows = decision_repo.decisions_slice(
-            session=session, run_id=run_id, offset=offset, limit=limit
-        )
+        totals = run_totals.decision_totals(session=session, run_id=run_id)
+        rows = run_totals.decision_page(session=session, run_id=run_id, offset=offset, limit=limit)
         decisions = [records.decision_record(d) for d in rows]
         pins = pins_of(rows)
-        usage = records.usage_of(decision_repo.reply_costs(session=session, run_id=run_id))
+        usage = records.usage_of_totals(run_totals.reply_totals(session=session, run_id=run_id))
         signed = signoffs(session=session, run_id=run_id)
         execution = {
             r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
         }
+        completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
+        # Every decision's robot only once the run is complete, for its metrics.
+        outcomes = (
+            decision_repo.decision_outcomes(session=session, run_id=run_id) if completed else []
+        )
     names = [r["name"] for r in spec.instance_data["robots"]]
     workload = dict.fromkeys(names, 0)
-    for o in outcomes:
-        workload[names[o.robot]] += 1
-    regrets = [o.regret for o in outcomes]
-    regret = None if any(v is None for v in regrets) else float(sum(regrets))
+    for robot, n in sorted(totals.by_robot.items()):
+        workload[names[robot]] += n
     metrics = None
-    problem = spec.problem
-    if run.status == RunStatus.COMPLETED and len(outcomes) == run.n_tasks:
+    if completed:
+        problem = spec.problem
         metrics = compute_metrics(
             problem.instance,
             [o.robot for o in outcomes],
@@ -351,9 +352,9 @@ def run_view(
         spec=spec,
         decisions=decisions,
         offset=offset,
-        allocated=len(outcomes),
+        allocated=totals.allocated,
         workload=workload,
-        regret=regret,
+        regret=totals.regret,
         usage=usage,
         metrics=metrics,
         execution=execution,
@@ -413,7 +414,7 @@ def run_trace(
         )
 
 
-def pins_of(rows: Iterable[Decision]) -> dict[int, str | None]:
+def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
     """Which of these decision rows a revision kept from its parent, with the parent
     decision's chain hash."""
     return {d.task_index: d.pinned_from for d in rows if d.pinned}
