@@ -83,7 +83,8 @@ def test_a_crash_at_any_node_resumes_at_its_task_and_changes_nothing(
     tmp_path: Path, node: str, after: bool
 ) -> None:
     robots, calls = reference()
-    rec, scripted, fired = MemoryRecorder(), reasoner(), []
+    rec, scripted = MemoryRecorder(), reasoner()
+    fired: list[bool] = []
     ctx = GraphContext(problem=PROBLEM, reasoner=scripted, recorder=rec)
     first = saver(tmp_path / "cp.sqlite")
     with pytest.raises(Crash):
