@@ -189,8 +189,10 @@ def report(after: list[SizeResult], before: list[SizeResult] | None) -> str:
     if before:
         b_small, b_large = before[0], before[-1]
         before_text += (
-            f" Before: {b_small.ratio:.2f}× and {b_large.ratio:.2f}×, the 10,000-task run "
-            f"{b_large.durable.cpu / b_small.durable.cpu:.1f}× the 1,000-task one."
+            f" Before: {b_small.ratio:.2f}× and {b_large.ratio:.2f}×, the {b_large.n_tasks:,}-task "
+            f"durable run {b_large.durable.cpu / b_small.durable.cpu:.1f}× the CPU of the "
+            f"{b_small.n_tasks:,}-task one ({b_large.durable.wall / b_small.durable.wall:.1f}× "
+            "its wall time)."
         )
     return (
         "A `rules` run of a synthetic instance (seed 0, 4 robots, `balanced`) at each size, in "

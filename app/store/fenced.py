@@ -135,6 +135,11 @@ def _statement(
     )
 
 
+@cache
+def _bound_names(names: tuple[str, ...]) -> tuple[str, ...]:
+    return tuple(_VALUE + name for name in names)
+
+
 def fenced_upsert(
     connection: Connection,
     model: type[Base],
@@ -145,7 +150,7 @@ def fenced_upsert(
     """INSERT ... ON CONFLICT (keys) DO UPDATE of one row, only while `guard` holds."""
     dialect = connection.dialect.name
     stmt = _statement(dialect, model, tuple(values), keys, guard.shape)
-    params = {_VALUE + name: value for name, value in values.items()}
+    params = dict(zip(_bound_names(tuple(values)), values.values(), strict=True))
     result = connection.execute(stmt, {**params, **guard.params()})
     if dialect == "sqlite":
         return Written(ok=result.rowcount == 1)
