@@ -8,8 +8,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.orm import Session, defer, sessionmaker
 
 from app.audit.signoffs import SignOff, signoffs
 from app.config import Settings
@@ -28,7 +29,7 @@ from app.runs import lifecycle, records, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import REPLAY, replay_spec, validate_replay
-from app.runs.spec import RunOrder, RunSpec
+from app.runs.spec import LruCache, RunOrder, RunSpec
 from app.runs.worker import RunWorker
 from app.store import chain, run_totals
 from app.store import decision_repository as decision_repo
@@ -307,13 +308,23 @@ class RunView:
         }
 
 
+_SPECS: LruCache[RunSpec] = LruCache(64)
+_METRICS: LruCache[Metrics] = LruCache(256)
+
+
 def run_view(
     *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
 ) -> RunView:
     """The run with its decisions from the offset-th, at most limit of them (None: all)."""
     with sessions() as session:
-        run = _require(session, run_id)
-        spec = RunSpec.from_json(run.request)
+        # The request (a 10,000-task instance is a megabyte of JSON) is read and parsed once
+        # per run: it never changes, and a poll every 0.5 s parsed it every time.
+        run = session.scalar(select(Run).options(defer(Run.request)).where(Run.id == run_id))
+        if run is None:
+            raise missing_run(session, run_id)
+        spec = _SPECS.get_or_load(
+            run_id, lambda: RunSpec.from_json(_require(session, run_id).request)
+        )
         totals = run_totals.decision_totals(session=session, run_id=run_id)
         rows = run_totals.decision_page(session=session, run_id=run_id, offset=offset, limit=limit)
         decisions = [records.decision_record(d) for d in rows]
@@ -326,14 +337,16 @@ def run_view(
         completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
         # Every decision's robot only once the run is complete, for its metrics.
         outcomes = (
-            decision_repo.decision_outcomes(session=session, run_id=run_id) if completed else []
+            decision_repo.decision_outcomes(session=session, run_id=run_id)
+            if completed and _METRICS.get(run_id) is None
+            else []
         )
     names = [r["name"] for r in spec.instance_data["robots"]]
     workload = dict.fromkeys(names, 0)
     for robot, n in sorted(totals.by_robot.items()):
         workload[names[robot]] += n
-    metrics = None
-    if completed:
+    metrics = _METRICS.get(run_id) if completed else None
+    if completed and metrics is None:
         problem = spec.problem
         metrics = compute_metrics(
             problem.instance,
@@ -347,6 +360,7 @@ def run_view(
                 metrics,
                 expected_success=statistics.fmean(o.expected_success for o in outcomes),
             )
+        _METRICS.put(run_id, metrics)  # a completed run's decisions never change
     return RunView(
         run=run,
         spec=spec,
