@@ -34,10 +34,16 @@ ROBOTS = 4
 POLL_S = 0.5
 TARGET_RATIO, TARGET_SCALING = 1.5, 10.0
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-# Measured on 2026-12-02 on this machine, before issue 21's changes, in one server each
-# (the issue's own figures): the durable run's CPU over the in-memory one's, and the
-# 10,000-task durable run's time over the 1,000-task one's.
-RECORDED_BEFORE = "durable/in-memory CPU 2.3-2.4 at 1,000 tasks; 10,000 tasks 473 s vs 18.3 s (26x)"
+# The code before issue 21 (a811c7e), measured by this script on 2026-12-02 in one run
+# (LTAA_BENCH_BEFORE), on this machine under a load average of 12-17: shown when the
+# "before" code is not measured again.
+RECORDED_BEFORE = (
+    "measured on 2026-12-02 by this script, before issue 21 (a811c7e), in one run: 1,000 "
+    "tasks: in memory 4.48 s CPU, durable polled 20.18 s CPU (48.9 s wall), **4.50×** "
+    "(2.85× with the polls left out); 10,000 tasks: in memory 47.11 s, durable 373.12 s CPU "
+    "(1,388 s wall, 570 polls), **7.92×**; the 10,000-task durable run 18.5× the CPU of the "
+    "1,000-task one (28.4× its wall time)"
+)
 
 
 def server_cpu(pid: int) -> float:
@@ -184,7 +190,7 @@ def report(after: list[SizeResult], before: list[SizeResult] | None) -> str:
         'The "before" rows are the code before issue 21, measured by the same script in '
         "the same run (its own server)."
         if before
-        else f"Before issue 21 (measured {RECORDED_BEFORE})."
+        else f"Before issue 21 ({RECORDED_BEFORE})."
     )
     if before:
         b_small, b_large = before[0], before[-1]
