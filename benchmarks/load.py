@@ -212,6 +212,16 @@ def _free_port() -> int:
 def served(data_dir: Path, env: dict[str, str]) -> Iterator[tuple[str, Path]]:
     """The server as `make run` starts it (scripts/serve.sh), on a free loopback port, with
     no API keys; yields its URL and log file, and stops it with SIGTERM."""
+    with serve_process(data_dir, env) as (url, log, _pid):
+        yield url, log
+
+
+@contextmanager
+def serve_process(
+    data_dir: Path, env: dict[str, str], cwd: Path = ROOT
+) -> Iterator[tuple[str, Path, int]]:
+    """As `served`, started in `cwd` (a worktree of other code: its sources come first on
+    the path), yielding the server process's id too (serve.sh execs uvicorn)."""
     port = _free_port()
     log = data_dir / "server.log"
     full_env = {
@@ -229,8 +239,8 @@ def served(data_dir: Path, env: dict[str, str]) -> Iterator[tuple[str, Path]]:
     url = f"http://127.0.0.1:{port}"
     with log.open("ab") as out:
         proc = subprocess.Popen(
-            ["sh", str(ROOT / "scripts" / "serve.sh")],
-            cwd=ROOT,
+            ["sh", str(cwd / "scripts" / "serve.sh")],
+            cwd=cwd,
             env=full_env,
             stdout=out,
             stderr=subprocess.STDOUT,
@@ -245,7 +255,7 @@ def served(data_dir: Path, env: dict[str, str]) -> Iterator[tuple[str, Path]]:
                     break
             except httpx.HTTPError:
                 time.sleep(0.1)
-        yield url, log
+        yield url, log, proc.pid
     finally:
         proc.send_signal(signal.SIGTERM)
         try:

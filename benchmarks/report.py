@@ -13,6 +13,7 @@ from benchmarks.common import DOCS, IMG, Section, machine
 SECTIONS = [
     "benchmarks.solvers",
     "benchmarks.ltaa_runs",
+    "benchmarks.durable_cost",
     "benchmarks.storage",
     "benchmarks.learners",
     "benchmarks.paper",

@@ -21,6 +21,10 @@ from app.graph import nodes
 from app.graph.pause import NodeHook
 from app.graph.state import GraphContext, LTAAState, Node
 
+# The node every task begins with: where a durable run's checkpoints are written
+# (app.graph.checkpoint_sparse), so a resume starts the task it was killed in again.
+TASK_START = "detect_phase"
+
 NODES: dict[str, Node] = {
     "detect_phase": nodes.detect_phase,
     "build_prompt": nodes.build_prompt,

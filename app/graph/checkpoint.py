@@ -14,12 +14,14 @@ still be resumed by this one.
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from langgraph.checkpoint.sqlite import SqliteSaver
 
 from app.graph.checkpoint_pruning import KEEP_LATEST, PRUNE_EVERY, PruneSchedule, PruningPutMixin
+from app.graph.checkpoint_sparse import TaskBoundaryMixin
 
 # The WAL is truncated back to this after each checkpoint of it; without a limit SQLite
 # keeps the file at its high-water mark (169 MB after a 10,000-task run).
@@ -83,21 +85,37 @@ class CompactSqliteSaver(PruningPutMixin, SqliteSaver):
             cur.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchall()
 
 
+class TaskBoundarySqliteSaver(TaskBoundaryMixin, CompactSqliteSaver):
+    """The compact saver, writing a thread's checkpoints only where a task begins (and
+    where the graph pauses or ends): app.graph.checkpoint_sparse."""
+
+    def __init__(self, conn: sqlite3.Connection, *, boundary: Sequence[str]) -> None:
+        super().__init__(conn)
+        self._init_boundary(boundary)
+
+
 def open_sqlite_saver(
     path: str | Path,
     *,
     compact: bool = True,
     synchronous: str | None = None,
     busy_timeout_s: float = 30.0,
+    boundary: Sequence[str] | None = None,
 ) -> SqliteSaver:
     """A saver over its own connection (check_same_thread=False, as SqliteSaver requires).
 
     `synchronous="NORMAL"` (WAL) skips the fsync at every commit: a process crash (kill -9)
     still loses nothing committed, a power loss may lose the last steps. setup() leaves
     SQLite's default FULL, which fsyncs twice per super-step.
+    `boundary`: the node(s) a task begins with; the saver then writes checkpoints only
+    there (TaskBoundarySqliteSaver; implies compact).
     """
     conn = sqlite3.connect(str(path), check_same_thread=False, timeout=busy_timeout_s)
-    saver: SqliteSaver = CompactSqliteSaver(conn) if compact else SqliteSaver(conn)
+    saver: SqliteSaver
+    if boundary is not None:
+        saver = TaskBoundarySqliteSaver(conn, boundary=boundary)
+    else:
+        saver = CompactSqliteSaver(conn) if compact else SqliteSaver(conn)
     saver.setup()
     conn.execute(f"PRAGMA journal_size_limit={WAL_SIZE_LIMIT}")
     if synchronous is not None:

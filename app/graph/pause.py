@@ -1,11 +1,12 @@
 """Test-only crash points: hold a run at one node of one task, so an end-to-end test can
 SIGKILL (or SIGTERM) the server at a known place anywhere in the graph.
 
-`<node>:before` holds the node before its body runs: the previous step's checkpoint is
-written and this node has done nothing. `<node>:after` holds it once its body has run and
-its side effects are recorded, but before LangGraph writes the step's checkpoint: the
-window in which a crash makes LangGraph re-run the node from its top, which is where a
-non-idempotent side effect would show.
+`<node>:before` holds the node before its body runs: this node has done nothing.
+`<node>:after` holds it once its body has run and its side effects are recorded, but
+before LangGraph takes the step's checkpoint: the window in which a crash makes the node
+run again from its top, which is where a non-idempotent side effect would show. (The
+worker's saver writes a checkpoint where each task begins, so a crash at either point
+re-runs the task's nodes from its start: app.graph.checkpoint_sparse.)
 
 A held run waits, polling `Recorder.check_cancelled`, until the process dies or the run is
 stopped (a cancel or the server draining raises RunCancelled out of the hold).

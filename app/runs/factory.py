@@ -13,7 +13,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
-from app.graph.builder import NODES
+from app.graph.builder import NODES, TASK_START
 from app.graph.checkpoint import open_sqlite_saver
 from app.graph.pause import NodeHook, PausePoint, pause_hook
 from app.runs.ownership import LocalOwnership, Ownership
@@ -34,8 +34,11 @@ def sqlite_checkpointer(settings: Settings) -> Checkpointer:
     # One connection for the process (SqliteSaver serialises on its own lock), a generous
     # busy timeout instead of "database is locked" under load, integer channel versions
     # (half the bytes per checkpoint) and synchronous=NORMAL: in WAL mode a kill -9 loses
-    # nothing committed; only an OS crash could lose the last steps.
-    saver = open_sqlite_saver(path, compact=True, synchronous="NORMAL")
+    # nothing committed; only an OS crash could lose the last steps. Checkpoints are
+    # written where a task begins (and where the graph pauses or ends), not at each of its
+    # 7+ super-steps: a resume decides the killed task again from its start, every node's
+    # side effects being idempotent and every LLM reply recorded (checkpoint_sparse).
+    saver = open_sqlite_saver(path, compact=True, synchronous="NORMAL", boundary=(TASK_START,))
     return saver, saver.conn.close
 
 

@@ -43,7 +43,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind, RunStatus
-from app.runs.recorder import Fence, LeaseLost, RunStop
+from app.runs.recorder import Fence, RunStop, lease_fence
 from app.store import leases
 from app.store import repository as repo
 from app.store.db import transaction
@@ -295,17 +295,7 @@ class LeaseOwnership:
         return run if run is not None and run.lease_owner == self.owner else None
 
     def fence(self, run_id: str, stop: RunStop) -> Fence:
-        def fence(session: Session) -> None:
-            alive = leases.renew(
-                session=session, owner=self.owner, run_ids=[run_id], lease_s=self._lease_s
-            )
-            if run_id not in alive:
-                stop.lease_lost.set()
-                raise LeaseLost(run_id)
-            if alive[run_id]:
-                stop.cancelled.set()
-
-        return fence
+        return lease_fence(run_id, stop, owner=self.owner, lease_s=self._lease_s)
 
     def event_detail(self) -> dict[str, Any]:
         return {"worker": self.owner}

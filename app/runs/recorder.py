@@ -5,20 +5,21 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
+from typing import Any, NoReturn
 
+from sqlalchemy import Connection
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.usage import Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 from app.observability.logs import bind
 from app.runs import records
+from app.store import chain, fenced, leases
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
-from app.store.db import transaction
+from app.store.db import engine_of
+from app.store.fenced import WriteGuard, Written
 
-# Called inside each write's transaction; raises LeaseLost when this process no longer
-# holds the run (PostgreSQL scale-out), so the write is rolled back.
-Fence = Callable[[Session], None]
 log = logging.getLogger("ltaa.runs")
 
 
@@ -49,31 +50,79 @@ class RunStop:
         )
 
 
+class Fence:
+    """What every write of a run must find true in its own transaction: the run is still
+    `running` (the status fence: a revision supersedes the parent in one transaction that
+    writes its row first, so a racing write commits before it, and is pinned, or rolls
+    back) and, in scale-out, this process still holds its lease (the lease fence).
+
+    The recorder's writes carry the fence inside their one statement (app.store.fenced);
+    calling the fence runs it as statements of its own, for the rare writes that are not
+    a fenced upsert (an event)."""
+
+    def __init__(self, guard: WriteGuard, stop: RunStop) -> None:
+        self.guard = guard
+        self.stop = stop
+
+    def __call__(self, session: Session) -> None:
+        run_id = self.guard.run_id
+        if self.guard.lease_owner is not None:
+            # The lease first: a process that lost the run to another is told so before
+            # the state check, which also fails once the new owner moved the run.
+            alive = leases.renew(
+                session=session,
+                owner=self.guard.lease_owner,
+                run_ids=[run_id],
+                lease_s=self.guard.lease_s,
+            )
+            if run_id not in alive:
+                self._lost("lease")
+            if alive[run_id]:
+                self.stop.cancelled.set()
+        if self.guard.running and not repo.still_running(session=session, run_id=run_id):
+            self._lost("status")
+
+    def written(self, connection: Connection, written: Written) -> None:
+        """After a fenced write: raise (rolling its transaction back) if the fence refused it;
+        note a cancel requested through the lease."""
+        if not written.ok:
+            self._lost(fenced.why_refused(connection, self.guard))
+        if written.cancel_requested:
+            self.stop.cancelled.set()
+
+    def _lost(self, which: str) -> NoReturn:
+        if which == "lease":
+            self.stop.lease_lost.set()
+            raise LeaseLost(self.guard.run_id)
+        self.stop.superseded.set()
+        raise RunSuperseded(self.guard.run_id)
+
+
 def status_fence(run_id: str, stop: RunStop) -> Fence:
-    """Every write of a run is fenced by its state: one conditional UPDATE of its row
-    `WHERE status = 'running'` in the write's own transaction. A revision supersedes the
-    parent in one transaction that writes that row first, so a write racing it either
-    commits before (and is pinned) or finds the run superseded and rolls back."""
+    """The run's writes fenced by its state: status `running`."""
+    return Fence(WriteGuard(run_id=run_id, running=True), stop)
 
-    def fence(session: Session) -> None:
-        if not repo.still_running(session=session, run_id=run_id):
-            stop.superseded.set()
-            raise RunSuperseded(run_id)
 
-    return fence
+def lease_fence(run_id: str, stop: RunStop, *, owner: str, lease_s: float) -> Fence:
+    """The run's writes fenced by this process's lease (renewed by each write)."""
+    return Fence(WriteGuard(run_id=run_id, running=False, lease_owner=owner, lease_s=lease_s), stop)
 
 
 def fences(*parts: Fence | None) -> Fence | None:
-    """One fence that runs each given part in order."""
+    """One fence requiring all of the given ones (of one run, and one stop)."""
     given = [f for f in parts if f is not None]
     if not given:
         return None
-
-    def fence(session: Session) -> None:
-        for part in given:
-            part(session)
-
-    return fence
+    if len({f.guard.run_id for f in given}) != 1 or len({id(f.stop) for f in given}) != 1:
+        raise ValueError("fences of different runs (or stops) cannot be combined")
+    leased = [f.guard for f in given if f.guard.lease_owner is not None]
+    guard = WriteGuard(
+        run_id=given[0].guard.run_id,
+        running=any(f.guard.running for f in given),
+        lease_owner=leased[0].lease_owner if leased else None,
+        lease_s=leased[0].lease_s if leased else 0.0,
+    )
+    return Fence(guard, given[0].stop)
 
 
 class SqlRecorder:
@@ -87,6 +136,7 @@ class SqlRecorder:
     ) -> None:
         self.run_id = run_id
         self._sessions = sessions
+        self._engine = engine_of(sessions)
         self._stop = stop
         self._fence = fence
         # Write-through cache: this process wrote these rows, so reads need no query.
@@ -96,6 +146,9 @@ class SqlRecorder:
         # have only the attempts this recorder wrote: one writer per run (the lease fence
         # stops this one if another process takes the run), so a miss there needs no query.
         self._stored_through: int | None = None
+        # (task index, chain hash) of the last decision this recorder wrote: the next
+        # decision's link hangs off it, with no read.
+        self._tip: tuple[int, str] | None = None
 
     def check_cancelled(self) -> None:
         if self._stop.lease_lost.is_set():
@@ -109,28 +162,39 @@ class SqlRecorder:
         # Reasoner (and SDK) logs during this node's call name the run and task.
         bind(run_id=self.run_id, task_index=task_index)
 
-    def save_attempt(self, record: AttemptRecord) -> None:
-        with transaction(self._sessions) as session:
+    def _write(self, write: Callable[[Connection, WriteGuard | None], Written]) -> None:
+        """One write, in one transaction of one statement that carries the fence."""
+        guard = self._fence.guard if self._fence is not None else None
+        with self._engine.begin() as connection:
+            written = write(connection, guard)
             if self._fence is not None:
-                self._fence(session)
-            decision_repo.upsert_attempt(
-                session=session, run_id=self.run_id, values=records.attempt_values(record)
+                self._fence.written(connection, written)
+
+    def save_attempt(self, record: AttemptRecord) -> None:
+        values = records.attempt_values(record)
+        self._write(
+            lambda connection, guard: decision_repo.write_attempt(
+                connection=connection, run_id=self.run_id, values=values, guard=guard
             )
+        )
         self._attempts[(record.task_index, record.attempt)] = record.copy()
         # Only the current task's attempts are ever read back.
         for key in [k for k in self._attempts if k[0] < record.task_index]:
             del self._attempts[key]
 
-    def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None:
-        cached = self._attempts.get((task_index, attempt))
-        if cached is not None:
-            return cached.copy()
+    def _stored_through_task(self) -> int:
         if self._stored_through is None:
             with self._sessions() as session:
                 self._stored_through = decision_repo.last_attempted_task(
                     session=session, run_id=self.run_id
                 )
-        if task_index > self._stored_through:
+        return self._stored_through
+
+    def attempt(self, task_index: int, attempt: int) -> AttemptRecord | None:
+        cached = self._attempts.get((task_index, attempt))
+        if cached is not None:
+            return cached.copy()
+        if task_index > self._stored_through_task():
             return None
         with self._sessions() as session:
             row = decision_repo.get_attempt(
@@ -138,13 +202,39 @@ class SqlRecorder:
             )
             return records.attempt_record(row) if row is not None else None
 
-    def save_decision(self, record: DecisionRecord) -> None:
-        with transaction(self._sessions) as session:
-            if self._fence is not None:
-                self._fence(session)
-            decision_repo.upsert_decision(
-                session=session, run_id=self.run_id, values=records.decision_values(record)
+    def _chain_hash(self, record: DecisionRecord, values: dict[str, Any]) -> str:
+        """The decision's link. From what this recorder wrote when it wrote the previous
+        decision and every attempt of this task (the table holds nothing else: one writer
+        per run); else read from the table, as after a restart."""
+        t = record.task_index
+        cached = [self._attempts.get((t, k)) for k in range(1, record.attempts + 1)]
+        if (
+            self._tip is not None
+            and self._tip[0] < t
+            and t > self._stored_through_task()
+            and sum(1 for key in self._attempts if key[0] == t) == len(cached)
+            and all(a is not None for a in cached)
+        ):
+            digest = chain.attempts_digest(records.attempt_values(a) for a in cached if a)
+            return chain.decision_link(self._tip[1], values, digest)
+        with self._sessions() as session:
+            return decision_repo.decision_chain_hash(
+                session=session, run_id=self.run_id, values=values
             )
+
+    def save_decision(self, record: DecisionRecord) -> None:
+        values = records.decision_values(record)
+        link = self._chain_hash(record, values)
+        self._write(
+            lambda connection, guard: decision_repo.write_decision(
+                connection=connection,
+                run_id=self.run_id,
+                values=values,
+                chain_hash=link,
+                guard=guard,
+            )
+        )
+        self._tip = (record.task_index, link)
         log.log(
             logging.WARNING if record.fallback else logging.INFO,
             "task %d -> %s (Q %.2f, %d attempt(s)%s)",

@@ -7,7 +7,7 @@ the reasoners; this module is the one place that knows how a record maps to its 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import asdict
+from dataclasses import fields
 from typing import Any
 
 from app.domain.usage import ReplyUsage, Usage
@@ -15,10 +15,15 @@ from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
 from app.store.models import Attempt, Decision
 
+_DECISION_FIELDS = tuple(f.name for f in fields(DecisionRecord))
+
 
 def decision_values(record: DecisionRecord) -> dict[str, Any]:
-    """A decision's column values, without run_id, chain_hash and created_at (the store's)."""
-    values = asdict(record)
+    """A decision's column values, without run_id, chain_hash and created_at (the store's).
+    Shallow (lists copied): dataclasses.asdict's deep copy was a tenth of a recorder write."""
+    values = {name: getattr(record, name) for name in _DECISION_FIELDS}
+    for name in ("failure_log", "loads_before", "loads_after"):
+        values[name] = list(values[name])
     values["task_id"] = str(record.task_id)
     return values
 
@@ -89,4 +94,17 @@ def usage_of(rows: Iterable[Any]) -> Usage:
             r.reply_model, r.input_tokens, r.output_tokens, r.transport_retries, r.latency_ms
         )
         for r in rows
+    )
+
+
+def usage_of_totals(rows: Iterable[Any]) -> Usage:
+    """Usage from app.store.run_totals.reply_totals rows (one per reply model, summed): the
+    rule of app.domain.usage, applied to sums: replies that name a model are the calls."""
+    billed = [r for r in rows if r[0] is not None]
+    return Usage(
+        llm_calls=sum(int(r[1]) for r in billed),
+        input_tokens=sum(int(r[2]) for r in billed),
+        output_tokens=sum(int(r[3]) for r in billed),
+        transport_retries=sum(int(r[4]) for r in billed),
+        latency_ms=sum((float(r[5]) for r in billed), 0.0),
     )

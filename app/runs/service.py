@@ -8,8 +8,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.orm import Session, defer, sessionmaker
 
 from app.audit.signoffs import SignOff, signoffs
 from app.config import Settings
@@ -29,14 +30,14 @@ from app.runs import lifecycle, records, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import REPLAY, replay_spec, validate_replay
-from app.runs.spec import RunOrder, RunSpec
+from app.runs.spec import LruCache, RunOrder, RunSpec
 from app.runs.worker import RunWorker
-from app.store import chain
+from app.store import chain, run_totals
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store import site_repository as site_repo
 from app.store.db import transaction
-from app.store.models import Attempt, Decision, ExecutionReport, Run, RunEvent, utcnow
+from app.store.models import Attempt, ExecutionReport, Run, RunEvent, utcnow
 from app.store.tombstones import missing_run
 
 
@@ -338,33 +339,46 @@ class RunView:
         }
 
 
+_SPECS: LruCache[RunSpec] = LruCache(64)
+_METRICS: LruCache[Metrics] = LruCache(256)
+
+
 def run_view(
     *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
 ) -> RunView:
     """The run with its decisions from the offset-th, at most limit of them (None: all)."""
     with sessions() as session:
-        run = _require(session, run_id)
-        spec = RunSpec.from_json(run.request)
-        outcomes = decision_repo.decision_outcomes(session=session, run_id=run_id)
-        rows = decision_repo.decisions_slice(
-            session=session, run_id=run_id, offset=offset, limit=limit
+        # The request (a 10,000-task instance is a megabyte of JSON) is read and parsed once
+        # per run: it never changes, and a poll every 0.5 s parsed it every time.
+        run = session.scalar(select(Run).options(defer(Run.request)).where(Run.id == run_id))
+        if run is None:
+            raise missing_run(session, run_id)
+        spec = _SPECS.get_or_load(
+            run_id, lambda: RunSpec.from_json(_require(session, run_id).request)
         )
+        totals = run_totals.decision_totals(session=session, run_id=run_id)
+        rows = run_totals.decision_page(session=session, run_id=run_id, offset=offset, limit=limit)
         decisions = [records.decision_record(d) for d in rows]
         pins = pins_of(rows)
-        usage = records.usage_of(decision_repo.reply_costs(session=session, run_id=run_id))
+        usage = records.usage_of_totals(run_totals.reply_totals(session=session, run_id=run_id))
         signed = signoffs(session=session, run_id=run_id)
         execution = {
             r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
         }
+        completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
+        # Every decision's robot only once the run is complete, for its metrics.
+        outcomes = (
+            decision_repo.decision_outcomes(session=session, run_id=run_id)
+            if completed and _METRICS.get(run_id) is None
+            else []
+        )
     names = [r["name"] for r in spec.instance_data["robots"]]
     workload = dict.fromkeys(names, 0)
-    for o in outcomes:
-        workload[names[o.robot]] += 1
-    regrets = [o.regret for o in outcomes]
-    regret = None if any(v is None for v in regrets) else float(sum(regrets))
-    metrics = None
-    problem = spec.problem
-    if run.status == RunStatus.COMPLETED and len(outcomes) == run.n_tasks:
+    for robot, n in sorted(totals.by_robot.items()):
+        workload[names[robot]] += n
+    metrics = _METRICS.get(run_id) if completed else None
+    if completed and metrics is None:
+        problem = spec.problem
         metrics = compute_metrics(
             problem.instance,
             [o.robot for o in outcomes],
@@ -377,14 +391,15 @@ def run_view(
                 metrics,
                 expected_success=statistics.fmean(o.expected_success for o in outcomes),
             )
+        _METRICS.put(run_id, metrics)  # a completed run's decisions never change
     return RunView(
         run=run,
         spec=spec,
         decisions=decisions,
         offset=offset,
-        allocated=len(outcomes),
+        allocated=totals.allocated,
         workload=workload,
-        regret=regret,
+        regret=totals.regret,
         usage=usage,
         metrics=metrics,
         execution=execution,
@@ -444,7 +459,7 @@ def run_trace(
         )
 
 
-def pins_of(rows: Iterable[Decision]) -> dict[int, str | None]:
+def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
     """Which of these decision rows a revision kept from its parent, with the parent
     decision's chain hash."""
     return {d.task_index: d.pinned_from for d in rows if d.pinned}

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -181,3 +183,38 @@ class RunOrder:
     # The fields the request named: an explicit null max_deviation means no cap, and a
     # replay must repeat its source's value in every field it names.
     sent: frozenset[str] = field(default_factory=frozenset)
+
+
+T = TypeVar("T")
+
+
+class LruCache(Generic[T]):
+    """A small thread-safe LRU of what never changes once a run has it (its parsed
+    request; a completed run's metrics), keyed by run id: run ids are never reused."""
+
+    def __init__(self, size: int) -> None:
+        self._size = size
+        self._items: OrderedDict[str, T] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, key: str) -> T | None:
+        with self._lock:
+            if key in self._items:
+                self._items.move_to_end(key)
+                return self._items[key]
+        return None
+
+    def get_or_load(self, key: str, load: Callable[[], T]) -> T:
+        cached = self.get(key)
+        if cached is not None:
+            return cached
+        value = load()
+        self.put(key, value)
+        return value
+
+    def put(self, key: str, value: T) -> None:
+        with self._lock:
+            self._items[key] = value
+            self._items.move_to_end(key)
+            while len(self._items) > self._size:
+                self._items.popitem(last=False)

@@ -8,6 +8,7 @@ crash switches at the same task and its trace tells the switch once.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -15,7 +16,6 @@ from app.domain.lifecycle import EventKind
 from app.reasoners.base import Reasoner
 from app.reasoners.budget import BUDGET_EXHAUSTED, BudgetExhausted, TokenBudgetReasoner
 from app.runs import lifecycle
-from app.runs.recorder import Fence
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
@@ -29,7 +29,7 @@ def with_token_budget(
     run_id: str,
     budget: int | None,
     sessions: sessionmaker[Session],
-    fence: Fence | None = None,
+    fence: Callable[[Session], None] | None = None,
 ) -> Reasoner:
     """`reasoner` limited to `budget` tokens for the run; unchanged without a budget.
     `fence` is the recorder's write check (PostgreSQL scale-out): a process that lost the

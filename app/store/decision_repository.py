@@ -10,6 +10,7 @@ from typing import Any, cast
 
 from sqlalchemy import (
     BindParameter,
+    Connection,
     Integer,
     String,
     Table,
@@ -25,6 +26,7 @@ from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session, defer
 
 from app.store import chain
+from app.store.fenced import WriteGuard, Written, fenced_upsert
 from app.store.models import (
     Attempt,
     Base,
@@ -242,6 +244,51 @@ def upsert_decision(*, session: Session, run_id: str, values: Mapping[str, Any])
         {"run_id": run_id, **row, "created_at": utcnow()},
         ("run_id", "task_index"),
     )
+
+
+def decision_chain_hash(*, session: Session, run_id: str, values: Mapping[str, Any]) -> str:
+    """The link a decision with these `values` gets when written now (read from the table:
+    the previous link and its task's stored attempts)."""
+    return _decision_chain_hash(session, run_id, dict(values))
+
+
+DECISION_KEYS = ("run_id", "task_index")
+ATTEMPT_KEYS = ("run_id", "task_index", "attempt")
+
+
+def _write(
+    connection: Connection,
+    model: type[Base],
+    row: dict[str, Any],
+    keys: tuple[str, ...],
+    guard: WriteGuard | None,
+) -> Written:
+    if guard is not None:
+        return fenced_upsert(connection, model, row, keys, guard)
+    connection.execute(_upsert_statement(connection.dialect.name, model, keys), row)
+    return Written(ok=True)
+
+
+def write_decision(
+    *,
+    connection: Connection,
+    run_id: str,
+    values: Mapping[str, Any],
+    chain_hash: str,
+    guard: WriteGuard | None,
+) -> Written:
+    """Upsert a decision with its (already computed) chain link, in one statement that is
+    fenced by `guard` (nothing is written if the run no longer holds)."""
+    row = {"run_id": run_id, **values, "chain_hash": chain_hash, "created_at": utcnow()}
+    return _write(connection, Decision, row, DECISION_KEYS, guard)
+
+
+def write_attempt(
+    *, connection: Connection, run_id: str, values: Mapping[str, Any], guard: WriteGuard | None
+) -> Written:
+    """Upsert an attempt (as upsert_attempt) in one statement fenced by `guard`."""
+    row = {"run_id": run_id, **values, "created_at": utcnow()}
+    return _write(connection, Attempt, row, ATTEMPT_KEYS, guard)
 
 
 def upsert_attempt(*, session: Session, run_id: str, values: Mapping[str, Any]) -> None:

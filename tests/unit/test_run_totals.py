@@ -1,0 +1,56 @@
+"""A poll's totals aggregated in SQL (app.store.run_totals) equal the row-by-row ones they
+replaced: workload, regret (None when any decision has none) and LLM usage."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from app.reasoners.base import ReasonerReply
+from app.runs import records
+from app.runs.lifecycle import RunStatus
+from app.runs.recorder import RunStop, SqlRecorder
+from app.store import decision_repository as decision_repo
+from app.store import run_totals
+from app.store.db import make_engine, make_session_factory, transaction
+from app.store.migrate import upgrade_head
+from tests.factories import decision_record, run_row
+from tests.unit.test_fenced_writes import _attempt
+
+
+def test_sql_totals_equal_the_row_by_row_ones(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'app.db'}"
+    upgrade_head(url)
+    sessions = make_session_factory(make_engine(url))
+    with transaction(sessions) as session:
+        session.add(run_row("r1", RunStatus.RUNNING.value, n_tasks=6))
+    recorder = SqlRecorder(run_id="r1", sessions=sessions, stop=RunStop())
+    for t in range(6):
+        attempt = _attempt(t)
+        model = None if t % 3 == 0 else f"model-{t % 2}"  # the rules reasoner names none
+        attempt.reply = ReasonerReply(
+            text="x", input_tokens=10 * t, output_tokens=t, latency_ms=0.5 * t, model=model
+        )
+        recorder.save_attempt(attempt)
+        recorder.save_decision(decision_record(t, robot=t % 2, regret=0.01 * t))
+
+    with sessions() as session:
+        totals = run_totals.decision_totals(session=session, run_id="r1")
+        outcomes = decision_repo.decision_outcomes(session=session, run_id="r1")
+        by_rows = records.usage_of(decision_repo.reply_costs(session=session, run_id="r1"))
+        by_sums = records.usage_of_totals(run_totals.reply_totals(session=session, run_id="r1"))
+        page = run_totals.decision_page(session=session, run_id="r1", offset=2, limit=3)
+    assert totals.allocated == len(outcomes) == 6
+    assert totals.by_robot == {0: 3, 1: 3}
+    assert totals.regret is not None
+    assert abs(totals.regret - sum(o.regret for o in outcomes)) < 1e-12
+    assert by_sums.llm_calls == by_rows.llm_calls == 4
+    assert (by_sums.input_tokens, by_sums.output_tokens) == (
+        by_rows.input_tokens,
+        by_rows.output_tokens,
+    )
+    assert abs(by_sums.latency_ms - by_rows.latency_ms) < 1e-9
+    assert [records.decision_record(d).task_index for d in page] == [2, 3, 4]
+
+    recorder.save_decision(decision_record(5, robot=1, regret=None))
+    with sessions() as session:
+        assert run_totals.decision_totals(session=session, run_id="r1").regret is None
