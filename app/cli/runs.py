@@ -23,7 +23,7 @@ from app.domain.lifecycle import ACTIVE, RunStatus
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.reasoners.scope import LLMScope
-from app.runs import service
+from app.runs import service, views
 from app.runs.factory import make_worker
 from app.runs.spec import RunSpec
 from app.store.db import make_engine, make_session_factory
@@ -40,7 +40,7 @@ def run_locally(
     guidance: str | None,
     console: Console,
     llm_scope: str = "all",
-) -> service.RunView:
+) -> views.RunView:
     problem = Problem.build(builtin_scenario(scenario).instance, mode, max_deviation)
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     upgrade_head(settings.db_url)
@@ -68,7 +68,7 @@ def run_locally(
         with Progress(*columns, console=console) as bar:
             task = bar.add_task(f"run {run.id[:8]}", total=problem.instance.n_tasks, phase="early")
             while True:
-                view = service.run_view(sessions=sessions, run_id=run.id)
+                view = views.run_view(sessions=sessions, run_id=run.id)
                 bar.update(task, completed=view.progress["allocated"], phase=view.progress["phase"])
                 if view.run.status not in ACTIVE:
                     break
@@ -79,7 +79,7 @@ def run_locally(
         engine.dispose()
 
 
-def print_summary(view: service.RunView, console: Console) -> None:
+def print_summary(view: views.RunView, console: Console) -> None:
     table = Table(title=f"Run {view.run.id}: {view.run.status}")
     table.add_column("metric")
     table.add_column("value", justify="right")

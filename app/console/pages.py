@@ -29,6 +29,7 @@ from app.domain.lifecycle import ACTIVE, FINISHED, RunStatus
 from app.plans.revisions import RevisionConflictError
 from app.reviews import signoff
 from app.runs import service
+from app.runs import views as run_views
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 RUNS_PER_PAGE = 50
@@ -44,7 +45,7 @@ def _status_filter(raw: str | None) -> RunStatus | None:
 def _runs_context(request: Request, status: str | None, page: int) -> dict[str, object]:
     chosen = _status_filter(status)
     page = max(1, page)
-    rows = service.list_run_rows(
+    rows = run_views.list_run_rows(
         sessions=sessions_of(request),
         status=chosen,
         limit=RUNS_PER_PAGE + 1,  # one more: is there an older page?

@@ -2,43 +2,32 @@
 
 from __future__ import annotations
 
-import statistics
 import uuid
-from collections.abc import Iterable
-from dataclasses import dataclass, field, replace
 from typing import Any
 
-from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session, defer, sessionmaker
+from sqlalchemy.orm import Session, sessionmaker
 
-from app.audit.signoffs import SignOff, signoffs
 from app.config import Settings
 from app.domain.catalog import instance_of
 from app.domain.errors import RunStateConflictError
 from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
-from app.domain.metrics import Metrics, compute_metrics
-from app.domain.phases import detect_phase
 from app.domain.problem import Problem
 from app.domain.serialize import instance_to_dict
-from app.domain.usage import Usage
-from app.graph.recorder import DecisionRecord
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
-from app.runs import lifecycle, records, review_gate
+from app.runs import lifecycle, review_gate
 from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import REPLAY, replay_spec, validate_replay
-from app.runs.spec import LruCache, RunOrder, RunSpec
+from app.runs.spec import RunOrder, RunSpec
+from app.runs.views import require_run
 from app.runs.worker import RunWorker
-from app.store import chain, run_totals
-from app.store import decision_repository as decision_repo
-from app.store import repository as repo
+from app.store import chain
 from app.store import site_repository as site_repo
 from app.store.db import transaction
-from app.store.models import Attempt, ExecutionReport, Run, RunEvent, utcnow
-from app.store.tombstones import missing_run
+from app.store.models import Run, utcnow
 
 
 def create_run(
@@ -239,16 +228,9 @@ def _sent_for_replay(order: RunOrder) -> dict[str, Any]:
     return values
 
 
-def _require(session: Session, run_id: str, *, lock: bool = False) -> Run:
-    run = repo.get_run(session=session, run_id=run_id, for_update=lock)
-    if run is None:
-        raise missing_run(session, run_id)
-    return run
-
-
 def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: str) -> Run:
     with transaction(sessions) as session:
-        run = _require(session, run_id)
+        run = require_run(session, run_id)
         if run.status == RunStatus.COMPLETED:
             raise RunStateConflictError(
                 run_id, run.status, "resume", "A completed run has nothing left to do."
@@ -278,13 +260,13 @@ def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
             lifecycle.move(session, run, RunStatus.INTERRUPTED, error=run.error)
     worker.submit(run_id)
     with sessions() as session:
-        return _require(session, run_id)
+        return require_run(session, run_id)
 
 
 def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: str) -> Run:
     with transaction(sessions) as session:
         # Locked: with several processes, none may claim the run while this decides.
-        run = _require(session, run_id, lock=True)
+        run = require_run(session, run_id, lock=True)
         if run.status in FINISHED:
             raise RunStateConflictError(run_id, run.status, "cancel", "It has already ended.")
         run.cancel_requested = True
@@ -308,158 +290,4 @@ def cancel_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: st
             )
     worker.cancel(run_id)
     with sessions() as session:
-        return _require(session, run_id)
-
-
-@dataclass
-class RunView:
-    """A run with one page of its decisions; the totals (progress, workload, regret, metrics)
-    cover every decision, so a long run answers a poll without sending them all."""
-
-    run: Run
-    spec: RunSpec
-    decisions: list[DecisionRecord]
-    offset: int
-    allocated: int
-    workload: dict[str, int]
-    regret: float | None
-    usage: Usage
-    metrics: Metrics | None
-    signoffs: list[SignOff] = field(default_factory=list)
-    execution: dict[int, ExecutionReport] = field(default_factory=dict)
-    # Task index -> the parent decision's chain hash, for this page's pinned decisions.
-    pins: dict[int, str | None] = field(default_factory=dict)
-
-    @property
-    def progress(self) -> dict[str, Any]:
-        return {
-            "allocated": self.allocated,
-            "total": self.run.n_tasks,
-            "phase": detect_phase(min(self.allocated, self.run.n_tasks), self.run.n_tasks).value,
-        }
-
-
-_SPECS: LruCache[RunSpec] = LruCache(64)
-_METRICS: LruCache[Metrics] = LruCache(256)
-
-
-def run_view(
-    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
-) -> RunView:
-    """The run with its decisions from the offset-th, at most limit of them (None: all)."""
-    with sessions() as session:
-        # The request (a 10,000-task instance is a megabyte of JSON) is read and parsed once
-        # per run: it never changes, and a poll every 0.5 s parsed it every time.
-        run = session.scalar(select(Run).options(defer(Run.request)).where(Run.id == run_id))
-        if run is None:
-            raise missing_run(session, run_id)
-        spec = _SPECS.get_or_load(
-            run_id, lambda: RunSpec.from_json(_require(session, run_id).request)
-        )
-        totals = run_totals.decision_totals(session=session, run_id=run_id)
-        rows = run_totals.decision_page(session=session, run_id=run_id, offset=offset, limit=limit)
-        decisions = [records.decision_record(d) for d in rows]
-        pins = pins_of(rows)
-        usage = records.usage_of_totals(run_totals.reply_totals(session=session, run_id=run_id))
-        signed = signoffs(session=session, run_id=run_id)
-        execution = {
-            r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
-        }
-        completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
-        # Every decision's robot only once the run is complete, for its metrics.
-        outcomes = (
-            decision_repo.decision_outcomes(session=session, run_id=run_id)
-            if completed and _METRICS.get(run_id) is None
-            else []
-        )
-    names = [r["name"] for r in spec.instance_data["robots"]]
-    workload = dict.fromkeys(names, 0)
-    for robot, n in sorted(totals.by_robot.items()):
-        workload[names[robot]] += n
-    metrics = _METRICS.get(run_id) if completed else None
-    if completed and metrics is None:
-        problem = spec.problem
-        metrics = compute_metrics(
-            problem.instance,
-            [o.robot for o in outcomes],
-            seed=spec.seed,
-            scope=problem.balance_scope,
-        )
-        if problem.pinned:
-            # A pin keeps the success it was decided with, whatever set_rates changed.
-            metrics = replace(
-                metrics,
-                expected_success=statistics.fmean(o.expected_success for o in outcomes),
-            )
-        _METRICS.put(run_id, metrics)  # a completed run's decisions never change
-    return RunView(
-        run=run,
-        spec=spec,
-        decisions=decisions,
-        offset=offset,
-        allocated=totals.allocated,
-        workload=workload,
-        regret=totals.regret,
-        usage=usage,
-        metrics=metrics,
-        execution=execution,
-        pins=pins,
-        signoffs=signed,
-    )
-
-
-def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:
-    with sessions() as session:
-        return _require(session, run_id)
-
-
-def list_run_rows(
-    *, sessions: sessionmaker[Session], status: str | None, limit: int, offset: int, **where: str
-) -> list[Run]:
-    with sessions() as session:
-        return repo.list_runs(session=session, status=status, limit=limit, offset=offset, **where)
-
-
-@dataclass
-class Trace:
-    """A run's events with one page of its decisions (and their attempts)."""
-
-    run: Run
-    events: list[RunEvent]
-    decisions: list[DecisionRecord]
-    attempts: dict[int, list[Attempt]]
-    total: int
-    # A revision's decisions kept from its parent (SPEC 10): task index -> the parent
-    # decision's chain hash (`pinned_from`).
-    pins: dict[int, str | None] = field(default_factory=dict)
-
-
-def run_trace(
-    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
-) -> Trace:
-    with sessions() as session:
-        run = _require(session, run_id)
-        page = decision_repo.decisions_slice(
-            session=session, run_id=run_id, offset=offset, limit=limit
-        )
-        attempts = (
-            decision_repo.attempts_of_tasks(
-                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
-            )
-            if page
-            else {}
-        )
-        return Trace(
-            run=run,
-            events=repo.events(session=session, run_id=run_id),
-            decisions=[records.decision_record(d) for d in page],
-            attempts=attempts,
-            total=decision_repo.decision_count(session=session, run_id=run_id),
-            pins=pins_of(page),
-        )
-
-
-def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
-    """Which of these decision rows a revision kept from its parent, with the parent
-    decision's chain hash."""
-    return {d.task_index: d.pinned_from for d in rows if d.pinned}
+        return require_run(session, run_id)

@@ -36,10 +36,9 @@ from app.runs import lifecycle, review_gate
 from app.runs.integrity import checked_for_resume
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
-from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence
+from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence, with_token_budget
 from app.runs.replay import recorded_replies
 from app.runs.spec import RunSpec
-from app.runs.token_budget import with_token_budget
 from app.solvers.ltaa import execute_ltaa
 from app.store import repository as repo
 from app.store.db import transaction

@@ -22,8 +22,7 @@ from app.config import Settings
 from app.main import create_app
 from app.reasoners.base import ReasonerError
 from app.reasoners.budget import BUDGET_EXHAUSTED, BudgetExhausted, TokenBudgetReasoner
-from app.runs.recorder import LeaseLost
-from app.runs.token_budget import with_token_budget
+from app.runs.recorder import LeaseLost, with_token_budget
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head

@@ -42,7 +42,7 @@ from app.domain.estimates import DurationSource, RateSource
 from app.domain.models import Instance
 from app.graph.recorder import DecisionRecord
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
-from app.runs import service
+from app.runs import service, views
 from app.runs.spec import RunSpec
 from app.store.models import Attempt, ExecutionReport, Run
 
@@ -96,7 +96,7 @@ def list_runs(
 ) -> list[RunSummary]:
     """List runs, newest first, optionally only those with one status or on one site."""
     where = {} if site is None else {"site": site}
-    rows = service.list_run_rows(
+    rows = views.list_run_rows(
         sessions=runs.sessions, status=status_, limit=limit, offset=offset, **where
     )
     return [_summary(r) for r in rows]
@@ -126,7 +126,7 @@ def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
     return None if review is None else DecisionReviewOut.model_validate(review)
 
 
-def _run_out(view: service.RunView, limit: int) -> RunOut:
+def _run_out(view: views.RunView, limit: int) -> RunOut:
     run, spec = view.run, view.spec
     instance = spec.problem.instance
     names = [r.name for r in instance.robots]
@@ -196,7 +196,7 @@ def get_run(
 
 
 def _page_out(runs: RunsContext, run_id: str, offset: int, limit: int) -> RunOut:
-    view = service.run_view(sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit)
+    view = views.run_view(sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit)
     return _run_out(view, limit)
 
 
@@ -249,7 +249,7 @@ def get_trace(
     """For supervisors: run events and every decision with its validated attempts."""
     if format_ == "jsonl":
         return jsonl_trace(sessions=runs.sessions, run_id=run_id)
-    trace = service.run_trace(sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit)
+    trace = views.run_trace(sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit)
     spec = RunSpec.from_json(trace.run.request)
     instance = spec.problem.instance
     names = [r.name for r in instance.robots]

@@ -1,0 +1,189 @@
+"""A run read back for clients and supervisors: its status with one page of its decisions (the
+totals cover every decision, so a long run answers a poll without sending them all), its
+trace, and the listings. Read-only: the commands that change a run are app.runs.service."""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session, defer, sessionmaker
+
+from app.audit.signoffs import SignOff, signoffs
+from app.domain.metrics import Metrics, compute_metrics
+from app.domain.phases import detect_phase
+from app.domain.usage import Usage
+from app.graph.recorder import DecisionRecord
+from app.runs import records
+from app.runs.lifecycle import RunStatus
+from app.runs.spec import LruCache, RunSpec
+from app.store import decision_repository as decision_repo
+from app.store import repository as repo
+from app.store import run_totals
+from app.store.models import Attempt, ExecutionReport, Run, RunEvent
+from app.store.tombstones import missing_run
+
+# Parsed once per process: a poll of a 10,000-task run re-parsed its 1 MB request each time.
+_SPECS: LruCache[RunSpec] = LruCache(64)
+_METRICS: LruCache[Metrics] = LruCache(256)
+
+
+def require_run(session: Session, run_id: str, *, lock: bool = False) -> Run:
+    """The run, or the error a missing id answers (410 for an archived one, else 404)."""
+    run = repo.get_run(session=session, run_id=run_id, for_update=lock)
+    if run is None:
+        raise missing_run(session, run_id)
+    return run
+
+
+@dataclass
+class RunView:
+    """A run with one page of its decisions; the totals (progress, workload, regret, metrics)
+    cover every decision, so a long run answers a poll without sending them all."""
+
+    run: Run
+    spec: RunSpec
+    decisions: list[DecisionRecord]
+    offset: int
+    allocated: int
+    workload: dict[str, int]
+    regret: float | None
+    usage: Usage
+    metrics: Metrics | None
+    signoffs: list[SignOff] = field(default_factory=list)
+    execution: dict[int, ExecutionReport] = field(default_factory=dict)
+    # Task index -> the parent decision's chain hash, for this page's pinned decisions.
+    pins: dict[int, str | None] = field(default_factory=dict)
+
+    @property
+    def progress(self) -> dict[str, Any]:
+        return {
+            "allocated": self.allocated,
+            "total": self.run.n_tasks,
+            "phase": detect_phase(min(self.allocated, self.run.n_tasks), self.run.n_tasks).value,
+        }
+
+
+def run_view(
+    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
+) -> RunView:
+    """The run with its decisions from the offset-th, at most limit of them (None: all)."""
+    with sessions() as session:
+        # The request (a 10,000-task instance is a megabyte of JSON) is read and parsed once
+        # per run: it never changes, and a poll every 0.5 s parsed it every time.
+        run = session.scalar(select(Run).options(defer(Run.request)).where(Run.id == run_id))
+        if run is None:
+            raise missing_run(session, run_id)
+        spec = _SPECS.get_or_load(
+            run_id, lambda: RunSpec.from_json(require_run(session, run_id).request)
+        )
+        totals = run_totals.decision_totals(session=session, run_id=run_id)
+        rows = run_totals.decision_page(session=session, run_id=run_id, offset=offset, limit=limit)
+        decisions = [records.decision_record(d) for d in rows]
+        pins = pins_of(rows)
+        usage = records.usage_of_totals(run_totals.reply_totals(session=session, run_id=run_id))
+        signed = signoffs(session=session, run_id=run_id)
+        execution = {
+            r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
+        }
+        completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
+        # Every decision's robot only once the run is complete, for its metrics.
+        outcomes = (
+            decision_repo.decision_outcomes(session=session, run_id=run_id)
+            if completed and _METRICS.get(run_id) is None
+            else []
+        )
+    names = [r["name"] for r in spec.instance_data["robots"]]
+    workload = dict.fromkeys(names, 0)
+    for robot, n in sorted(totals.by_robot.items()):
+        workload[names[robot]] += n
+    metrics = _METRICS.get(run_id) if completed else None
+    if completed and metrics is None:
+        problem = spec.problem
+        metrics = compute_metrics(
+            problem.instance,
+            [o.robot for o in outcomes],
+            seed=spec.seed,
+            scope=problem.balance_scope,
+        )
+        if problem.pinned:
+            # A pin keeps the success it was decided with, whatever set_rates changed.
+            metrics = replace(
+                metrics,
+                expected_success=statistics.fmean(o.expected_success for o in outcomes),
+            )
+        _METRICS.put(run_id, metrics)  # a completed run's decisions never change
+    return RunView(
+        run=run,
+        spec=spec,
+        decisions=decisions,
+        offset=offset,
+        allocated=totals.allocated,
+        workload=workload,
+        regret=totals.regret,
+        usage=usage,
+        metrics=metrics,
+        execution=execution,
+        pins=pins,
+        signoffs=signed,
+    )
+
+
+def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:
+    with sessions() as session:
+        return require_run(session, run_id)
+
+
+def list_run_rows(
+    *, sessions: sessionmaker[Session], status: str | None, limit: int, offset: int, **where: str
+) -> list[Run]:
+    with sessions() as session:
+        return repo.list_runs(session=session, status=status, limit=limit, offset=offset, **where)
+
+
+@dataclass
+class Trace:
+    """A run's events with one page of its decisions (and their attempts)."""
+
+    run: Run
+    events: list[RunEvent]
+    decisions: list[DecisionRecord]
+    attempts: dict[int, list[Attempt]]
+    total: int
+    # A revision's decisions kept from its parent (SPEC 10): task index -> the parent
+    # decision's chain hash (`pinned_from`).
+    pins: dict[int, str | None] = field(default_factory=dict)
+
+
+def run_trace(
+    *, sessions: sessionmaker[Session], run_id: str, offset: int = 0, limit: int | None = None
+) -> Trace:
+    with sessions() as session:
+        run = require_run(session, run_id)
+        page = decision_repo.decisions_slice(
+            session=session, run_id=run_id, offset=offset, limit=limit
+        )
+        attempts = (
+            decision_repo.attempts_of_tasks(
+                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
+            )
+            if page
+            else {}
+        )
+        return Trace(
+            run=run,
+            events=repo.events(session=session, run_id=run_id),
+            decisions=[records.decision_record(d) for d in page],
+            attempts=attempts,
+            total=decision_repo.decision_count(session=session, run_id=run_id),
+            pins=pins_of(page),
+        )
+
+
+def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
+    """Which of these decision rows a revision kept from its parent, with the parent
+    decision's chain hash."""
+    return {d.task_index: d.pinned_from for d in rows if d.pinned}
