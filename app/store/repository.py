@@ -3,7 +3,7 @@ keys, so a node that LangGraph re-executes after a crash rewrites, never duplica
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from sqlalchemy import (
@@ -90,19 +90,31 @@ def latest_signature(*, session: Session, run_id: str) -> RunSignature | None:
     ).first()
 
 
-def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:
-    # One indexed lookup gives both the next seq and the link the new row hangs off.
+def _append_point(
+    session: Session,
+    model: type[RunEvent] | type[RunAnnotation],
+    run_id: str,
+    first_prev: Callable[[], str],
+) -> tuple[int, str]:
+    """Where a run's event or annotation chain goes on: the next seq and the link the new row
+    hangs off, from one indexed lookup (the chain's genesis before the first row)."""
     last = session.execute(
-        select(RunEvent.seq, RunEvent.chain_hash)
-        .where(RunEvent.run_id == run_id)
-        .order_by(RunEvent.seq.desc())
+        select(model.seq, model.chain_hash)
+        .where(model.run_id == run_id)
+        .order_by(model.seq.desc())
         .limit(1)
     ).first()
-    seq = last.seq + 1 if last is not None else 1
-    prev = (
-        chain.next_prev(last.chain_hash)
-        if last is not None
-        else chain_genesis(session=session, table="events", run_id=run_id)
+    if last is None:
+        return 1, first_prev()
+    return last.seq + 1, chain.next_prev(last.chain_hash)
+
+
+def add_event(*, session: Session, run_id: str, kind: str, detail: dict[str, Any]) -> RunEvent:
+    seq, prev = _append_point(
+        session,
+        RunEvent,
+        run_id,
+        lambda: chain_genesis(session=session, table="events", run_id=run_id),
     )
     link = chain.event_link(prev, {"seq": seq, "kind": kind, "detail": detail})
     event = RunEvent(run_id=run_id, seq=seq, kind=kind, detail=detail, chain_hash=link)
@@ -121,17 +133,8 @@ def add_annotation(
 ) -> RunAnnotation:
     """Append to the run's annotation chain. Two writers at once collide on (run_id, seq)
     and one rolls back: lock the run row first where that matters."""
-    last = session.execute(
-        select(RunAnnotation.seq, RunAnnotation.chain_hash)
-        .where(RunAnnotation.run_id == run_id)
-        .order_by(RunAnnotation.seq.desc())
-        .limit(1)
-    ).first()
-    seq = last.seq + 1 if last is not None else 1
-    prev = (
-        chain.next_prev(last.chain_hash)
-        if last is not None
-        else chain.genesis("annotations", run_id)
+    seq, prev = _append_point(
+        session, RunAnnotation, run_id, lambda: chain.genesis("annotations", run_id)
     )
     link = chain.annotation_link(prev, {"seq": seq, "kind": kind, "detail": detail})
     row = RunAnnotation(
