@@ -36,8 +36,17 @@ lint: install
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 
+# The suite runs in parallel (pytest-xdist, options in pyproject.toml): each test owns its
+# server, port, data directory and database (docs/development.md, "Tests and CI time").
+# Four workers on two cores: most tests spend their time waiting on a server subprocess,
+# a SIGKILLed process's restart or a webhook receiver's outage. WORKERS=0: one process.
+WORKERS ?= 4
+
+# The suite's processes (pytest's workers, the servers they start, the CLI subprocesses)
+# keep the bytecode they compile instead of compiling app/ and tests/ again in each of them
+# (a shell with PYTHONDONTWRITEBYTECODE=1 set would otherwise do that).
 test: lint
-	$(BIN)/python -m pytest -q
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -q --numprocesses=$(WORKERS)
 
 bench: install
 	$(BIN)/ltaa bench
