@@ -203,11 +203,15 @@ class Server:
         timeout: float = 120.0,
         *,
         headers: dict[str, str] | None = None,
+        page: int | None = None,
     ) -> dict[str, Any]:
-        """The run's state (GET /runs/{id}) once `predicate` holds for it."""
+        """The run's state (GET /runs/{id}) once `predicate` holds for it. `page`: at most
+        that many assignments per poll (the `limit` query parameter); polling a run of
+        hundreds of tasks for its progress need not serialise all of them 20 times a second."""
+        params = {} if page is None else {"limit": page}
         with self.client() as c:
             state: dict[str, Any] = eventually(
-                lambda: c.get(f"/runs/{run_id}", headers=headers).json(),
+                lambda: c.get(f"/runs/{run_id}", headers=headers, params=params).json(),
                 until=predicate,
                 timeout=timeout,
                 interval=0.05,
