@@ -20,7 +20,8 @@ from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_p
 from tests.fakes.llm_providers import Provider
 from tests.fakes.scripted_reasoner import GARBAGE
 
-pytestmark = pytest.mark.e2e
+# Eleven server starts: minutes when the suite's other workers share the two cores.
+pytestmark = [pytest.mark.e2e, pytest.mark.timeout(900)]
 
 N_TASKS = 36  # the baseline scenario
 RETRY_MARK = "Your previous answer"  # only retry prompts quote the rejected answer

@@ -92,6 +92,7 @@ def test_killed_after_completion_before_delivery_delivers_after_restart(tmp_path
     assert {b["type"] for b in bodies} == {"run.created", "run.completed"}
 
 
+@pytest.mark.timeout(900)  # eleven server starts, beside the suite's other workers
 def test_ten_kills_at_random_points_lose_no_webhook(tmp_path: Path) -> None:
     """Runs paused at a different task each start, a new run each time, and a SIGKILL at a
     random moment (recovering, dispatching, running): after the last restart the
