@@ -107,7 +107,7 @@ class Server:
         return f"http://127.0.0.1:{self.port}"
 
     def start(
-        self, timeout: float = 60.0, *, pause: PausePoint | None = None, **env: str
+        self, timeout: float = 120.0, *, pause: PausePoint | None = None, **env: str
     ) -> Server:
         """Start the server and wait until it listens on its port and /health answers;
         `pause` holds its runs there (LTAA_TEST_PAUSE): wait for
@@ -149,13 +149,17 @@ class Server:
                 stdout=log,
                 stderr=subprocess.STDOUT,
             )
-        eventually(
-            self._healthy,
-            timeout=timeout,
-            interval=0.1,
-            what=f"the server on port {self.port} answering GET /health",
-            context=self._log_tail,
-        )
+        try:
+            eventually(
+                self._healthy,
+                timeout=timeout,
+                interval=0.1,
+                what=f"the server on port {self.port} answering GET /health",
+                context=self._log_tail,
+            )
+        except BaseException:
+            self.kill()  # a server that did not come up in time is not left running
+            raise
         return self
 
     def _healthy(self) -> bool:
