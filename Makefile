@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 export LTAA_DATA_DIR ?= ./data
 
-.PHONY: run test lint bench bench-llm screenshots bench-console migrate install clean
+.PHONY: run test lint lint-quick bench bench-llm screenshots bench-console migrate install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -30,14 +30,41 @@ run: install
 
 # The static checks, in order; make stops at the first that fails. mypy and lint-imports
 # read their configuration (and what to check) from pyproject.toml.
-lint: install
+lint: lint-quick
+	$(BIN)/mypy
+
+# The static checks that take seconds.
+lint-quick: install
 	$(BIN)/ruff format --check app tests benchmarks
 	$(BIN)/ruff check app tests benchmarks
-	$(BIN)/mypy
 	$(BIN)/lint-imports
 
-test: lint
-	$(BIN)/python -m pytest -q
+# The suite runs in parallel (pytest-xdist, options in pyproject.toml): each test owns its
+# server, port, data directory and database (docs/development.md, "Tests and CI time").
+# Four workers on two cores: most tests spend their time waiting on a server subprocess,
+# a SIGKILLed process's restart or a webhook receiver's outage. WORKERS=0: one process.
+# PYTEST_ARGS: a selection, e.g. make test PYTEST_ARGS=tests/unit (the checks run whole).
+WORKERS ?= 4
+PYTEST_ARGS ?=
+
+# Temporary directories (every test's data directory, SQLite files and server logs) on a
+# RAM disk where there is one: four workers' SQLite commits otherwise queue on one disk's
+# fsyncs (on a busy shared disk, two servers' start-ups waited there past their 60 s).
+TEST_TMPDIR ?= $(shell test -d /dev/shm && test -w /dev/shm && echo /dev/shm)
+
+# The quick checks first (a failure stops make before any test runs); then mypy, minutes on
+# a clean clone with no cache, checks beside the suite, in the cores the suite leaves idle
+# while its tests wait; its report follows the suite's, and either failing fails the target.
+# The suite's processes (pytest's workers, the servers they start, the CLI subprocesses)
+# keep the bytecode they compile instead of compiling app/ and tests/ again in each of them
+# (a shell with PYTHONDONTWRITEBYTECODE=1 set would otherwise do that).
+test: lint-quick
+	@report=$$(mktemp); $(BIN)/mypy > $$report 2>&1 & types=$$!; \
+	echo "$(BIN)/mypy (beside the tests; its report follows theirs)"; \
+	env -u PYTHONDONTWRITEBYTECODE $(if $(TEST_TMPDIR),TMPDIR=$(TEST_TMPDIR)) \
+		$(BIN)/python -m pytest -q --numprocesses=$(WORKERS) $(PYTEST_ARGS); tests=$$?; \
+	wait $$types; typed=$$?; echo "$(BIN)/mypy"; cat $$report; rm -f $$report; \
+	[ $$tests -eq 0 ] && [ $$typed -eq 0 ]
 
 bench: install
 	$(BIN)/ltaa bench

@@ -12,6 +12,7 @@ so the whole module stays well under a minute and a half.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -119,13 +120,35 @@ def app_under_test(app_settings: Settings) -> Iterator[FastAPI]:
         APP.app = None
 
 
-@pytest.fixture
-def stored_run(app_settings: Settings) -> str:
-    """A completed run in the data directory the app under test will open."""
-    with TestClient(create_app(app_settings)) as client:
+@pytest.fixture(scope="module")
+def completed_store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """A data directory holding one completed baseline run, made once per module (in each
+    pytest-xdist worker that runs these tests) and never opened again: tests get copies."""
+    data = tmp_path_factory.mktemp("completed-store") / "data"
+    made = Settings(
+        data_dir=data,
+        api_keys=KEYS,
+        anthropic_api_key=None,
+        anthropic_base_url=None,
+        openai_base_url=None,
+        openai_api_key=None,
+        openai_model=None,
+        max_concurrent_runs=1,
+    )
+    with TestClient(create_app(made)) as client:
         body = {"scenario": "baseline", "reasoner": "rules"}
         run_id = str(client.post("/runs", json=body, headers=AUTH).json()["id"])
         wait_until(client, run_id, ("completed",), timeout=30, headers=AUTH)
+    return data, run_id
+
+
+@pytest.fixture
+def stored_run(app_settings: Settings, completed_store: tuple[Path, str]) -> str:
+    """A completed run in the data directory the app under test will open: a copy of the
+    module's completed store (the requests may change it), the same store each test made
+    for itself before, without running the same 36 tasks again for every operation."""
+    data, run_id = completed_store
+    shutil.copytree(data, app_settings.data_dir, ignore=shutil.ignore_patterns("*.lock"))
     return run_id
 
 

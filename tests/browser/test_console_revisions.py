@@ -107,12 +107,14 @@ def test_a_revision_page_shows_the_lineage_and_the_diff_the_api_states(
     assert _serious_violations(page) == []
 
 
+@pytest.mark.timeout(900)
 def test_a_large_revisions_diff_is_fetched_after_the_page_and_a_plain_run_has_none(
     page: Page, server: Server
 ) -> None:
     body = tasks(1001)  # past the page's inline limit (app.console.views.INLINE_TASKS)
     parent = start_run(server, **body)
-    wait_status(server, parent, timeout=120)
+    # 1,001 durable tasks: 120 s was not enough beside three busy workers on a loaded machine.
+    wait_status(server, parent, timeout=300)
     revision = _revise(
         server,
         parent,

@@ -4,6 +4,7 @@ subprocess on a free loopback port, exactly as `make run` starts it; stoppable w
 from __future__ import annotations
 
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -29,10 +30,39 @@ LLM_ENVIRONMENT = (
 )
 
 
+# Ports below the kernel's ephemeral range: bind(("127.0.0.1", 0)) and every outgoing
+# connection take theirs from that range, so a port drawn here is not handed to a client
+# socket while it waits to be listened on. Drawn at random (SystemRandom: a test seeding
+# `random` cannot make the pytest-xdist workers draw the same ports), so two workers rarely
+# draw the same one; when they do, Server.start takes another.
+_PORTS = range(10_000, 32_768)
+
+
+def _ephemeral_low() -> int:
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return _PORTS.stop
+
+
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A loopback port nothing is bound to at the moment of asking."""
+    draw = random.SystemRandom()
+    ports = range(_PORTS.start, min(_PORTS.stop, _ephemeral_low()))
+    for _ in range(200):
+        port = draw.choice(ports)
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError(f"no free loopback port in {ports} after 200 draws")
+
+
+# What uvicorn logs once it listens, and what it logs when another process holds the port.
+LISTENING = "Uvicorn running on http://127.0.0.1:{port} "
+PORT_TAKEN = "address already in use"
 
 
 def pause_setting(point: PausePoint) -> str:
@@ -40,6 +70,10 @@ def pause_setting(point: PausePoint) -> str:
     setting = f"{point.task_index}:{point.node}:{'after' if point.after else 'before'}"
     assert PausePoint.from_setting(setting) == point  # the server reads back this point
     return setting
+
+
+class PortTaken(Exception):
+    """Another process bound the server's port between free_port() and the server's bind."""
 
 
 class Server:
@@ -55,6 +89,7 @@ class Server:
         say) is put first on the server's path."""
         self.data_dir = data_dir
         self.root = root
+        self.fixed_port = port is not None  # a port the test chose is never replaced
         self.port = port or free_port()
         self.env = {**os.environ, "LTAA_DATA_DIR": str(data_dir), **(env or {})}
         if root != ROOT:
@@ -72,13 +107,30 @@ class Server:
         return f"http://127.0.0.1:{self.port}"
 
     def start(
-        self, timeout: float = 60.0, *, pause: PausePoint | None = None, **env: str
+        self, timeout: float = 120.0, *, pause: PausePoint | None = None, **env: str
     ) -> Server:
-        """Start the server and wait until /health answers; `pause` holds its runs there
-        (LTAA_TEST_PAUSE): wait for `wait_for_log(pause.message())` before acting on it."""
+        """Start the server and wait until it listens on its port and /health answers;
+        `pause` holds its runs there (LTAA_TEST_PAUSE): wait for
+        `wait_for_log(pause.message())` before acting on it.
+
+        Tests run in parallel (pytest-xdist), and a port found free may be taken before the
+        server binds it: the server then exits saying so, and is started again on another
+        port (`port` and `url` name the one it listens on)."""
         self.data_dir.mkdir(parents=True, exist_ok=True)
         if pause is not None:
             env["LTAA_TEST_PAUSE"] = pause_setting(pause)
+        for _ in range(5):
+            try:
+                return self._start(timeout, env)
+            except PortTaken:
+                if self.fixed_port:
+                    raise
+                self.port = free_port()
+        raise RuntimeError(
+            f"five ports in a row were taken before the server bound them:\n{self._log_tail()}"
+        )
+
+    def _start(self, timeout: float, env: dict[str, str]) -> Server:
         full_env = {
             **self.env,
             **env,
@@ -97,19 +149,28 @@ class Server:
                 stdout=log,
                 stderr=subprocess.STDOUT,
             )
-        eventually(
-            self._healthy,
-            timeout=timeout,
-            interval=0.1,
-            what=f"the server on port {self.port} answering GET /health",
-            context=self._log_tail,
-        )
+        try:
+            eventually(
+                self._healthy,
+                timeout=timeout,
+                interval=0.1,
+                what=f"the server on port {self.port} answering GET /health",
+                context=self._log_tail,
+            )
+        except BaseException:
+            self.kill()  # a server that did not come up in time is not left running
+            raise
         return self
 
     def _healthy(self) -> bool:
         assert self.proc is not None
         if self.proc.poll() is not None:
+            if PORT_TAKEN in self.logged():
+                raise PortTaken(self.port)
             raise RuntimeError(f"server exited early:\n{self._log_tail()}")
+        # Until this process says it listens, whatever answers on the port is another's.
+        if LISTENING.format(port=self.port) not in self.logged():
+            return False
         try:
             return httpx.get(f"{self.url}/health", timeout=1).status_code == 200
         except httpx.HTTPError:
@@ -146,11 +207,15 @@ class Server:
         timeout: float = 120.0,
         *,
         headers: dict[str, str] | None = None,
+        page: int | None = None,
     ) -> dict[str, Any]:
-        """The run's state (GET /runs/{id}) once `predicate` holds for it."""
+        """The run's state (GET /runs/{id}) once `predicate` holds for it. `page`: at most
+        that many assignments per poll (the `limit` query parameter); polling a run of
+        hundreds of tasks for its progress need not serialise all of them 20 times a second."""
+        params = {} if page is None else {"limit": page}
         with self.client() as c:
             state: dict[str, Any] = eventually(
-                lambda: c.get(f"/runs/{run_id}", headers=headers).json(),
+                lambda: c.get(f"/runs/{run_id}", headers=headers, params=params).json(),
                 until=predicate,
                 timeout=timeout,
                 interval=0.05,

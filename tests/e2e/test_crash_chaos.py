@@ -20,7 +20,8 @@ from tests.fakes.fake_messages_api import FakeMessagesAPI, Reply, context_from_p
 from tests.fakes.llm_providers import Provider
 from tests.fakes.scripted_reasoner import GARBAGE
 
-pytestmark = pytest.mark.e2e
+# Eleven server starts: minutes when the suite's other workers share the two cores.
+pytestmark = [pytest.mark.e2e, pytest.mark.timeout(900)]
 
 N_TASKS = 36  # the baseline scenario
 RETRY_MARK = "Your previous answer"  # only retry prompts quote the rejected answer
@@ -82,16 +83,19 @@ def test_ten_sigkills_at_every_kind_of_node_change_nothing(
     with provider.fake(default=rejecting_first_tries(retry_tasks)) as api:
         env = provider.env(api)
         server = Server(data, env=env)
-        for n, point in enumerate(points):
-            server.start(pause=point)
-            if n == 0:
-                with server.client() as c:
-                    created = c.post("/runs", json=body)
-                assert created.status_code == 202, created.text
-                run_id = created.json()["id"]
-            server.wait_for_log(point.message())
-            server.kill()
-            server = Server(data, env=env)
+        try:
+            for n, point in enumerate(points):
+                server.start(pause=point)
+                if n == 0:
+                    with server.client() as c:
+                        created = c.post("/runs", json=body)
+                    assert created.status_code == 202, created.text
+                    run_id = created.json()["id"]
+                server.wait_for_log(point.message())
+                server.kill()
+                server = Server(data, env=env)
+        finally:
+            server.kill()  # a failure while held must not leave the server running
 
         server.start()
         try:

@@ -4,6 +4,7 @@ receiver on loopback: durable across SIGKILL, resumed after an outage."""
 from __future__ import annotations
 
 import random
+import socket
 import sqlite3
 import time
 from pathlib import Path
@@ -91,6 +92,7 @@ def test_killed_after_completion_before_delivery_delivers_after_restart(tmp_path
     assert {b["type"] for b in bodies} == {"run.created", "run.completed"}
 
 
+@pytest.mark.timeout(900)  # eleven server starts, beside the suite's other workers
 def test_ten_kills_at_random_points_lose_no_webhook(tmp_path: Path) -> None:
     """Runs paused at a different task each start, a new run each time, and a SIGKILL at a
     random moment (recovering, dispatching, running): after the last restart the
@@ -126,9 +128,13 @@ def test_ten_kills_at_random_points_lose_no_webhook(tmp_path: Path) -> None:
 
 def test_deliveries_resume_after_the_receiver_was_down_30_s(tmp_path: Path) -> None:
     data = tmp_path / "data"
-    port = free_port()
     schedule = {**FAST, "LTAA_WEBHOOK_RETRY_DELAYS_S": "1,2,4,4,4,4,4,4,4,4,4,4"}
     server = Server(data, env=schedule).start()
+    # The receiver's port, bound but not listening through the outage (a connection to it
+    # is refused, as to a receiver that is down): no other test's socket can take it.
+    held = socket.socket()
+    held.bind(("127.0.0.1", free_port()))
+    port = int(held.getsockname()[1])
     try:
         hook = subscribe(server, f"http://127.0.0.1:{port}/hooks")
         run_id = start_run(server)
@@ -140,10 +146,12 @@ def test_deliveries_resume_after_the_receiver_was_down_30_s(tmp_path: Path) -> N
         assert len(log) == 2 and all(d["status"] == "pending" for d in log)
         assert all(d["attempts"] >= 4 for d in log)
         assert {a["outcome"] for d in log for a in d["attempt_log"]} == {"network_error"}
+        held.close()
         with running_receiver(port=port) as receiver:
             receiver.wait_for(lambda got: len(got) >= 2, what="both deliveries", timeout=15)
             rows = wait_all_delivered(data, timeout=15)
             assert {r[0] for r in rows} == receiver.ids()
             receiver.verified(hook["secret"])
     finally:
+        held.close()
         server.stop()
