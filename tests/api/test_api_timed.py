@@ -176,3 +176,16 @@ def test_1000_tasks_answer_feasible_with_a_bound_within_the_limit(client: TestCl
     # docs/schedules.md measured 1.6 s at load 15; the model's build and the answer's
     # validation come on top of the limit, on two shared cores.
     assert wall < 1 + 9, wall
+
+
+@pytest.mark.parametrize("minutes", [0.0001, 0.0004])
+def test_durations_finer_than_the_solvers_unit_are_scheduled_not_refused(
+    client: TestClient, minutes: float
+) -> None:
+    # Rounded up to CP-SAT's unit one by one; the horizon once rounded their sum, which
+    # made a feasible instance "proved" infeasible (a 422).
+    robots = [{"name": "a", "success": {"heavy": 0.9}}, {"name": "b", "success": {"heavy": 0.5}}]
+    tasks = [{"id": i, "features": ["heavy"], "duration": minutes} for i in range(10)]
+    answer = checked(client, {"solver": "schedule", "tasks": tasks, "robots": robots})
+    assert answer["status"] == "feasible"  # never "optimal" once values were rounded
+    assert answer["bound"] <= answer["schedule"]["makespan"]
