@@ -126,18 +126,18 @@ def earliest_makespan(site: Site, robots: Sequence[int], orders: Sequence[Sequen
     order (a semi-active schedule: for fixed orders, starting earlier never hurts), or inf
     when the orders contradict precedence or a deadline or shift cannot be met."""
     n = len(robots)
-    previous: list[int | None] = [None] * n
+    previous: dict[int, int] = {}
     for order in orders:
         for q, t in itertools.pairwise(order):
             previous[t] = q
-    end: list[float | None] = [None] * n
-    left = set(range(n))
-    while left:
+    end: dict[int, float] = {}
+    while len(end) < n:
         ready = [
             t
-            for t in left
-            if all(end[p] is not None for p in site.preds[t])
-            and (previous[t] is None or end[previous[t]] is not None)  # type: ignore[index]
+            for t in range(n)
+            if t not in end
+            and all(p in end for p in site.preds[t])
+            and (t not in previous or previous[t] in end)
         ]
         if not ready:
             return math.inf  # a robot's order waits on a task that waits on it
@@ -147,19 +147,16 @@ def earliest_makespan(site: Site, robots: Sequence[int], orders: Sequence[Sequen
             if d is None:
                 return math.inf
             a, b = site.shift(r)
-            q = previous[t]
-            if q is None:
-                here = site.robots[r].get("zone") or zone
-                start = a + site.moves(here, zone)
+            if t in previous:
+                q = previous[t]
+                start = end[q] + site.moves(site.tasks[q].get("zone"), zone)
             else:
-                start = end[q] + site.moves(site.tasks[q].get("zone"), zone)  # type: ignore[operator]
-            start = max([start, site.release(t), *(end[p] for p in site.preds[t])])  # type: ignore[list-item]
-            finish = start + d
-            if finish > min(site.deadline(t), b) + EPS:
+                start = a + site.moves(site.robots[r].get("zone") or zone, zone)
+            start = max([start, site.release(t), *(end[p] for p in site.preds[t])])
+            if start + d > min(site.deadline(t), b) + EPS:
                 return math.inf
-            end[t] = finish
-            left.discard(t)
-    return max(e for e in end if e is not None)
+            end[t] = start + d
+    return max(end.values())
 
 
 def _orders(robots: Sequence[int], n_robots: int) -> Iterator[list[list[int]]]:

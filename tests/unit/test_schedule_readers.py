@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 from functools import cache
 
@@ -71,7 +72,10 @@ def awkward() -> tuple[Problem, Schedule]:
     return problem, list_schedule(problem, [0, 0, 0])
 
 
-CASES = {"baseline": baseline, "awkward": awkward}
+CASES: dict[str, Callable[[], tuple[Problem, Schedule]]] = {
+    "baseline": baseline,
+    "awkward": awkward,
+}
 
 
 # -- lanes and JSON -------------------------------------------------------------------------
