@@ -17,6 +17,7 @@ from typing import Annotated, Any
 import typer
 from pydantic import ValidationError
 from rich.console import Console
+from rich.markup import escape
 
 from app.api.allocation import build_problem, load_solver
 from app.api.errors import domain_error_body, validation_error_body
@@ -164,7 +165,10 @@ def _warn_violations(problem: Problem, planned: Schedule) -> None:
     stderr so that stdout stays the schedule alone."""
     err = Console(stderr=True)
     for violation in check_schedule(problem, planned):
-        err.print(f"[bold yellow]breaks[/] {violation.rule.value}: {violation.message}")
+        err.print(
+            f"[bold yellow]breaks[/] {violation.rule.value}: {escape(violation.message)}",
+            highlight=False,
+        )
 
 
 def _print_header(

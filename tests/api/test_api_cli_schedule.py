@@ -119,3 +119,26 @@ def test_an_untimed_instance_has_nothing_to_schedule(runner: CliRunner, tmp_path
     )  # fmt: skip
     result = runner.invoke(cli, ["schedule", str(path)])
     assert result.exit_code == 1 and "untimed" in result.output
+
+
+def test_names_in_messages_print_as_text(runner: CliRunner, tmp_path: Path) -> None:
+    # A zone named like a rich closing tag, in an error and in a violation's message.
+    body = timed()
+    for task in body["tasks"]:
+        task["zone"] = "[/z]" if task["zone"] == "C" else task["zone"]
+    body["travel"] = {"A": {"B": 3}}  # nothing to or from "[/z]"
+    path = tmp_path / "zones.json"
+    path.write_text(json.dumps(body))
+    result = runner.invoke(cli, ["schedule", str(path)])
+    assert result.exit_code == 1 and "'[/z]'" in result.output, result.output
+    tasks = [
+        {"id": 1, "features": ["heavy"], "duration": 10, "zone": "[/z]"},
+        {"id": 2, "features": ["heavy"], "duration": 10, "zone": "[/z]", "deadline": 15},
+    ]
+    robots = [{"name": "a", "success": {"heavy": 0.9}}, {"name": "b", "success": {"heavy": 0.5}}]
+    path.write_text(json.dumps({"tasks": tasks, "robots": robots}))
+    result = runner.invoke(
+        cli, ["schedule", str(path), "--method", "greedy", "--mode", "success_focused"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "breaks deadline" in result.output and "[/z]" in result.output

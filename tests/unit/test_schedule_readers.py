@@ -62,11 +62,14 @@ def awkward() -> tuple[Problem, Schedule]:
             zone="Z",
             after=("a,1",),
         ),
-        Task(id="=SUM(A1)", name="[bold]x[/bold]", features=("heavy",), duration=5, zone="Z"),
+        Task(id="=SUM(A1)", name="[bold]x[/bold]", features=("heavy",), duration=5, zone="[/z]"),
     )
     robots = (Robot(name="crane, north", success={"heavy": 0.9}, zone="Z"),)
     instance = Instance(
-        tasks=tasks, robots=robots, start=datetime.fromisoformat("2026-03-02T07:00:00+01:00")
+        tasks=tasks,
+        robots=robots,
+        travel={"Z": {"[/z]": 2}},
+        start=datetime.fromisoformat("2026-03-02T07:00:00+01:00"),
     )
     problem = Problem.build(instance, Mode.SUCCESS_FOCUSED)
     return problem, list_schedule(problem, [0, 0, 0])
@@ -267,5 +270,7 @@ def test_timeline_prints_each_robot_and_each_task(case: str) -> None:
     for robot in problem.instance.robots:
         assert robot.name in text
     for task in problem.instance.tasks:
-        assert str(task.id) in text
+        assert str(task.id) in text and task.name.split("\n")[0] in text
+    for slot in schedule.slots:
+        assert slot.zone is None or slot.zone in text  # as written, not read as markup
     assert f"makespan {schedule.makespan:g} min" in text
