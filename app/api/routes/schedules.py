@@ -9,7 +9,7 @@ decided every task: its schedule is not whole.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response
 
@@ -24,7 +24,7 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 
 CALENDAR_TYPE = "text/calendar; charset=utf-8"
 CSV_TYPE = "text/csv; charset=utf-8"
-FORMATS = {
+FORMATS: dict[int | str, dict[str, Any]] = {
     200: {
         "content": {
             CSV_TYPE: {"schema": {"type": "string"}},
