@@ -46,7 +46,12 @@ def test_a_timed_runs_page_shows_its_gantt_chart_and_an_untimed_one_does_not(
     expect(lanes).to_have_count(3)
     tasks = page.locator("figure.gantt-chart g.robot .task")
     expect(tasks).to_have_count(36)
-    assert page.locator("figure.gantt-chart g.robot .task.critical").count() >= 1
+    critical = page.locator("figure.gantt-chart g.robot .task.critical")
+    assert critical.count() >= 1
+    # Drawn in colour: the page's CSP refuses the chart's inline <style>, console.css styles it.
+    fill = critical.first.evaluate("e => getComputedStyle(e).fill")
+    assert fill == "rgb(214, 39, 40)", fill
+    assert "makespan of" in (page.locator("figure.gantt-chart figcaption").text_content() or "")
     assert _serious(page) == []
 
     page.goto(f"{server.url}/console/runs/{untimed}")
