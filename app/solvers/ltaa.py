@@ -23,13 +23,14 @@ from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import Recorder
 from app.graph.review import ReviewGate
-from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
+from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext, Guidance
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
 from app.reasoners.scope import DEFAULT_LLM_MARGIN
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
+from app.solvers.timed_guidance import ScheduleGuidance
 
 
 class LTAAOptions(SolverOptions):
@@ -74,13 +75,18 @@ def graph_context(
         if review is not None or recorded_reviews is not None
         else None
     )
+    guide: Guidance | None = None
+    if guidance == "optimizer":
+        # In time, the `schedule` solver's plan of the remaining tasks (SPEC 16).
+        timed = problem.instance.timed
+        guide = ScheduleGuidance(problem, recorder) if timed else oracle.guidance
     return GraphContext(
         problem=problem,
         reasoner=reasoner,
         recorder=recorder,
         quality_threshold=quality_threshold,
         max_retries=max_retries,
-        guidance=oracle.guidance if guidance == "optimizer" else None,
+        guidance=guide,
         # The oracle's regret counts the tasks after this one in queue order; a timed run
         # decides in time order, so its decisions record no regret.
         regret=None if problem.instance.timed else oracle.regret,
