@@ -61,7 +61,7 @@ class ScheduleGuidance:
                 objective=problem.objective,
                 pinned_starts={
                     **problem.pinned_starts,
-                    **{t: float(d.start) for t, d in decided.items()},
+                    **{t: d.start for t, d in decided.items() if d.start is not None},
                 },
                 not_before=problem.not_before,
             )
