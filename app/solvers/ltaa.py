@@ -17,10 +17,10 @@ from pydantic import Field
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
+from app.domain.review import Resolution, ReviewPolicy
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.progress import TimedProgress
 from app.domain.scheduling.schedule import build_schedule
-from app.domain.review import Resolution, ReviewPolicy
 from app.graph.builder import build_graph
 from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
