@@ -97,6 +97,7 @@ def create_revision(
             model=body.model,
             rates=body.rates,
             durations=body.durations,
+            now=body.now,
         ),
         idempotency=_idempotency(idempotency_key, run_id, sent),
     )

@@ -88,6 +88,14 @@ class UseLearned(_Strict):
     robots: list[Name] | None = Field(None, min_length=1, max_length=MAX_ROBOTS)
 
 
+class Delay(_Strict):
+    """SPEC 16: the task takes this many minutes longer, on every robot (timed runs only)."""
+
+    type: Literal["delay"]
+    task_id: TaskId
+    minutes: float = Field(gt=0, le=525_600, allow_inf_nan=False, description="Minutes added")
+
+
 Change = Annotated[
     RobotUnavailable
     | RobotAvailable
@@ -96,7 +104,8 @@ Change = Annotated[
     | AddTasks
     | RemoveTasks
     | SetMode
-    | UseLearned,
+    | UseLearned
+    | Delay,
     Field(discriminator="type"),
 ]
 
@@ -128,6 +137,12 @@ class RevisionRequestIn(_Strict):
     )
     durations: DurationSource | None = Field(
         None, description="'configured' or 'learned' (default: the parent's)"
+    )
+    now: RequestTime | None = Field(
+        None,
+        description="SPEC 16, timed runs: the time the revision plans from (RFC 3339 with an "
+        "offset; default: the request's arrival). Nothing unstarted is planned earlier; it may "
+        "not be before the plan's start",
     )
 
 
