@@ -182,6 +182,37 @@ class SideMetrics(BaseModel):
     total: int
 
 
+class PlanMinute(BaseModel):
+    minutes: float = Field(description="Minutes from the plan's start")
+    at: str | None = Field(description="RFC 3339, in the plan's offset")
+
+
+class TaskMove(BaseModel):
+    task_id: int | str
+    task_name: str
+    robot_before: str
+    robot_after: str
+    start_before: float
+    start_after: float
+    end_before: float
+    end_after: float
+    start_before_at: str | None
+    start_after_at: str | None
+    end_before_at: str | None
+    end_after_at: str | None
+    start_moved: float = Field(description="Minutes later (negative: earlier)")
+    end_moved: float
+
+
+class ScheduleDiff(BaseModel):
+    """SPEC 16: the parent's current schedule (its decisions re-timed by its execution
+    reports) against the revision's."""
+
+    moves: list[TaskMove] = Field(description="Tasks whose start or end moved, queue order")
+    makespan_before: PlanMinute
+    makespan_after: PlanMinute
+
+
 class DiffOut(BaseModel):
     run_id: str
     parent: str
@@ -191,6 +222,9 @@ class DiffOut(BaseModel):
     fleet_changes: list[dict[str, object]]
     before: SideMetrics
     after: SideMetrics
+    schedule: ScheduleDiff | None = Field(
+        None, description="Timed runs only (SPEC 16): start/end moves and the makespans"
+    )
 
 
 __all__ = ["MAX_ROBOTS"]
