@@ -3,8 +3,8 @@ diff against its parent with rich. Talks HTTP (the run lives in the server's sto
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 import time
+from collections.abc import Sequence
 from typing import Annotated, Any
 
 import httpx
