@@ -8,12 +8,19 @@ times count (every report has one: `at`, or its arrival).
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable
+
+from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.problem import Problem
 from app.domain.scheduling.reported import Reported, minutes_since, retime
 from app.domain.scheduling.schedule import Schedule
+from app.runs import views
+from app.store import repository as repo
 from app.store.models import ExecutionReport, as_utc
+
+log = logging.getLogger("ltaa.plans")
 
 
 def reported_minutes(problem: Problem, rows: Iterable[ExecutionReport]) -> dict[int, Reported]:
@@ -37,4 +44,24 @@ def with_reports(problem: Problem, planned: Schedule, rows: Iterable[ExecutionRe
     reported = reported_minutes(problem, rows)
     if not reported:
         return planned
-    return retime(problem, planned, reported)
+    try:
+        return retime(problem, planned, reported)
+    except ValueError as exc:
+        # Only a plan whose robot orders contradict its precedence, which no solver or
+        # graph decision stores; the plan as decided is still the truest answer there is.
+        log.warning("the reports could not re-time the plan: %s", exc)
+        return planned
+
+
+def current_schedule(
+    *, sessions: sessionmaker[Session], run_id: str
+) -> tuple[Problem, Schedule] | None:
+    """A timed run's schedule as its decisions and its reports make it (None: untimed).
+    StateConflictError (409) until the run has decided every task (`run_schedule`)."""
+    planned = views.run_schedule(sessions=sessions, run_id=run_id)
+    if planned is None:
+        return None
+    problem, schedule = planned
+    with sessions() as session:
+        rows = repo.execution_reports(session=session, run_id=run_id)
+    return problem, with_reports(problem, schedule, rows)

@@ -19,7 +19,10 @@ class ParentDecision:
 
 
 def pinned_rows(
-    problem: Problem, origin: Sequence[int | None], decided: Mapping[int, ParentDecision]
+    problem: Problem,
+    origin: Sequence[int | None],
+    decided: Mapping[int, ParentDecision],
+    facts: Mapping[int, tuple[float, float]] | None = None,
 ) -> list[dict[str, Any]]:
     """The revision's own decision rows for its pins, in task order: the parent's robot,
     success and reasoning; loads and balance counted in the revision's terms (pins on
@@ -63,6 +66,16 @@ def pinned_rows(
                 "review": d.review,
                 "pinned": True,
                 "pinned_from": parent.chain_hash,
+                **_times(problem, index, (facts or {}).get(index)),
             }
         )
     return rows
+
+
+def _times(problem: Problem, index: int, fact: tuple[float, float] | None) -> dict[str, Any]:
+    """SPEC 16: a pin the site reported keeps its reported times (and its zone). A pin
+    without a report gets its time when the revision's graph places it, so its row has
+    none (app.runs.views.run_schedule places it the same way)."""
+    if fact is None:
+        return {}
+    return {"start": fact[0], "end": fact[1], "zone": problem.instance.tasks[index].zone}

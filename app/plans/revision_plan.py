@@ -405,7 +405,7 @@ def plan_revision(
     return RevisionPlan(
         spec=spec,
         problem=problem,
-        pinned_rows=pinned_rows(problem, origin, decided),
+        pinned_rows=pinned_rows(problem, origin, decided, times.facts),
         pinned_task_ids=[str(queue[i]["id"]) for i in sorted(pinned)],
         added_tasks=[str(t["id"]) for t in added_next + added_end],
         removed_tasks=removed,

@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.api.test_revisions import completed_run
+from tests.api.test_revisions import completed_run, wait_status
 
 UNTIMED = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
 
@@ -67,8 +67,6 @@ def test_now_on_an_untimed_run_changes_nothing(client: TestClient) -> None:
         json={**body, "pin": "decided", "now": "2026-12-01T09:30:00Z"},
     )
     assert timed.status_code == 202, timed.text
-    from tests.api.test_revisions import wait_status
-
     a = wait_status(client, plain.json()["id"], "completed")
     b = wait_status(client, timed.json()["id"], "completed")
     assert [(x["task_id"], x["robot"]) for x in a["assignments"]] == [
