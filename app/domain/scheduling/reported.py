@@ -7,8 +7,8 @@ schedule view changes only in time: the reported tasks sit at their reported tim
 every robot keeps its other tasks in the order it was given, each as early as its
 predecessors, its robot (plus travel), its release allow. An unreported task planned
 before a reported one stays before it where it fits in the time before it (the site may
-not have reported it yet), else it goes after it: the list scheduler's rule for fixed
-tasks (`list_schedule.Timeline`), in the planned order instead of the earliest-first one.
+not have reported it yet), else it goes after it (the list scheduler's rule for fixed
+tasks, `list_schedule.Timeline`); a task planned after a reported one stays after it.
 
 The view depends on the decisions and the reports only, never on the clock: an unstarted
 task may still show a start in the past (nothing reported it late yet). A revision is
@@ -24,6 +24,7 @@ from datetime import datetime
 from app.domain.problem import Problem
 from app.domain.scheduling.list_schedule import Timeline
 from app.domain.scheduling.schedule import Schedule, build_schedule
+from app.domain.time_model import TimeModel
 
 # A task reported done at the very instant it was reported started ran for no measurable
 # time; a duration is positive (SPEC 16), so it counts as one second.
@@ -83,7 +84,9 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
     for t, (start, end) in sorted(fixed.items(), key=lambda item: item[1]):
         lines[robots[t]].fixed.append((start, end, t))
         starts[t], ends[t], done[t] = start, end, True
-    queues = [[t for t in seq if t not in fixed] for seq in planned.sequences(tm.n_robots)]
+    orders = planned.sequences(tm.n_robots)
+    position = {t: k for seq in orders for k, t in enumerate(seq)}
+    queues = [[t for t in seq if t not in fixed] for seq in orders]
     cursor = [0] * len(queues)
     progress = True
     while progress:
@@ -95,6 +98,7 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
                     break
                 ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
                 ready = max(ready, tm.release[t], problem.not_before)
+                _pass_earlier_facts(tm, lines[r], position, t)
                 start = lines[r].earliest(tm, t, r, ready)
                 lines[r].place(tm, t, r, start)
                 starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
@@ -104,3 +108,12 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
         # Only when the planned orders contradict the precedence: facts wait for nothing.
         raise ValueError("the robot orders contradict the precedence: no task can go next")
     return build_schedule(problem, robots, starts, ends)
+
+
+def _pass_earlier_facts(tm: TimeModel, line: Timeline, position: Mapping[int, int], t: int) -> None:
+    """The robot's reported tasks planned before `t` come before it, whenever they ran: a
+    task planned after one does not slip into a gap before it (the order is kept)."""
+    ahead = sorted((f for f in line.fixed if position[f[2]] < position[t]), key=lambda f: f[1])
+    for fact in ahead:
+        line.fixed.remove(fact)
+        line.free, line.zone = max(line.free, fact[1]), tm.task_zone[fact[2]]
