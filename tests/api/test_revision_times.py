@@ -155,11 +155,12 @@ def test_a_timed_revision_at_now_keeps_reports_delays_and_the_diff_shows_it(
     }
     runs_before = len(client.get("/runs").json())
     done = next(t for t, r in history.reports.items() if r.state == "done")
-    for bad, loc in [
+    refusals: list[tuple[dict[str, Any], str]] = [
         ({"changes": [{"type": "delay", "task_id": "nope", "minutes": 5}]}, "changes.0.task_id"),
         ({"changes": [{"type": "delay", "task_id": int(done), "minutes": 5}]}, "changes.0.task_id"),
         ({"now": at(-1)}, "now"),
-    ]:
+    ]
+    for bad, loc in refusals:
         refused = client.post(f"/runs/{parent}/revisions", json={**body, **bad})
         assert refused.status_code == 422, refused.text
         (detail,) = refused.json()["detail"]
