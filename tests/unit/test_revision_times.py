@@ -383,3 +383,39 @@ def test_time_moves_list_what_moved_with_wall_clock_times_and_the_makespans() ->
     assert moves["makespan_after"]["minutes"] == view.makespan
     same = time_moves(Timed(problem, planned), Timed(problem, planned))
     assert same["moves"] == []
+
+
+def test_the_rules_checker_catches_each_broken_rule() -> None:
+    """tests/time_rules.py is what the API and e2e tests trust: shown able to fail."""
+    tasks = [
+        {"id": "a", "duration": 10},
+        {"id": "b", "duration": {"r": 5, "s": 8}, "after": ["a"]},
+        {"id": "c", "duration": 4},
+    ]
+    rules = TimeRules(
+        parent_tasks=tasks,
+        reports={"a": Report("done", 0, 12)},
+        now=20,
+        delays={"c": 2},
+        unavailable={"s"},
+        parent_robots={"a": "r"},
+    )
+    good = {"a": ("r", 0.0, 12.0), "b": ("r", 20.0, 25.0), "c": ("r", 25.0, 31.0)}
+    assert rules.broken(good) == []
+    bad = {
+        "reported start moved": {**good, "a": ("r", 1.0, 12.0)},
+        "reported end moved": {**good, "a": ("r", 0.0, 10.0)},
+        "reported robot changed": {**good, "a": ("t", 0.0, 12.0)},
+        "before now": {**good, "b": ("r", 19.0, 24.0)},
+        "unavailable robot": {**good, "b": ("s", 20.0, 28.0)},
+        "delay ignored": {**good, "c": ("r", 25.0, 29.0)},
+        "overlap": {**good, "c": ("r", 22.0, 28.0)},
+    }
+    for what, slots in bad.items():
+        assert rules.broken(slots), what
+    # b starts before a (its `after`) has ended.
+    fresh = TimeRules(parent_tasks=tasks, reports={}, now=0)
+    assert fresh.broken({"a": ("r", 0, 10), "b": ("s", 9, 17), "c": ("t", 0, 4)})
+    assert fresh.broken({"a": ("r", 0, 10), "b": ("s", 10, 18), "c": ("t", 0, 4)}) == []
+    started = TimeRules(parent_tasks=tasks, reports={"a": Report("started", 0)}, now=20)
+    assert started.broken({"a": ("r", 0, 10), "b": ("r", 20, 25), "c": ("r", 25, 29)})
