@@ -387,7 +387,7 @@ def test_time_moves_list_what_moved_with_wall_clock_times_and_the_makespans() ->
 
 def test_the_rules_checker_catches_each_broken_rule() -> None:
     """tests/time_rules.py is what the API and e2e tests trust: shown able to fail."""
-    tasks = [
+    tasks: list[dict[str, Any]] = [
         {"id": "a", "duration": 10},
         {"id": "b", "duration": {"r": 5, "s": 8}, "after": ["a"]},
         {"id": "c", "duration": 4},
