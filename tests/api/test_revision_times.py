@@ -130,6 +130,11 @@ def test_a_late_report_moves_the_successors_in_the_runs_schedule(client: TestCli
     # The CSV reads the same times.
     csv = client.get(f"/runs/{run_id}/schedule", params={"format": "csv"}).text
     assert at(late_end) in csv
+    # So does the console's Gantt chart: the makespan it names is the current one.
+    page = client.get(f"/console/runs/{run_id}")
+    assert page.status_code == 200
+    assert now["makespan"] > planned["makespan"]  # here the delay reaches the last task
+    assert f"makespan of {now['makespan']:,.0f} min" in page.text
 
 
 def test_a_timed_revision_at_now_keeps_reports_delays_and_the_diff_shows_it(
