@@ -195,7 +195,8 @@ def _create(
             token_budget=budget,
             reports=times,
             now=request.now,
-            arrival=utcnow(),
+            # Whole seconds, as a run's default start: minutes read cleanly.
+            arrival=utcnow().replace(microsecond=0),
         )
         spec, learned = revision_spec(
             session=session,
