@@ -17,6 +17,7 @@ from app.store.migrate import upgrade_head
 from tests.api.conftest import ClientFactory
 from tests.api.test_revisions import completed_run, wait_status
 from tests.e2e.postgres import fresh_database
+from tests.polling import eventually
 from tests.time_rules import TimeRules, site_history, slots_of
 
 UNTIMED = {"scenario": "baseline", "mode": "balanced", "reasoner": "rules"}
@@ -248,4 +249,46 @@ def test_a_timed_revision_at_now_keeps_reports_delays_and_the_diff_shows_it(
     assert datetime.fromisoformat(first["now"]) == datetime.fromisoformat(at(now))
     assert first["not_before"] == now
     assert set(first["pinned_times"]) == set(kept)
+    assert client.get(f"/runs/{revision}/trace/verify").json()["ok"] is True
+
+
+def test_a_running_timed_parent_revised_pins_its_reported_times(
+    make_client: ClientFactory,
+) -> None:
+    """Revised while it holds before its last task in time order (Beep, queue position
+    35): the pins the site reported carry their reported times in the revision's own
+    decision rows, and the diff has no schedule block until both plans are whole."""
+    client = make_client(test_pause="35:reason:before")
+    parent = str(client.post("/runs", json=TIMED).json()["id"])
+    eventually(
+        lambda: client.get(f"/runs/{parent}").json()["progress"]["allocated"],
+        until=lambda allocated: allocated >= 35,
+        what="the parent decided every task but Beep",
+    )
+    decided = {
+        str(a["task_id"]): a
+        for a in client.get(f"/runs/{parent}", params={"limit": 1000}).json()["assignments"]
+    }
+    first = str(INSTANCE.tasks[0].id)
+    begin, end = decided[first]["start"], decided[first]["end"] + LATE_BY
+    updates = [
+        {"task_id": INSTANCE.tasks[0].id, "state": "started", "at": at(begin)},
+        {"task_id": INSTANCE.tasks[0].id, "state": "done", "at": at(end)},
+    ]
+    assert client.post(f"/runs/{parent}/execution", json={"updates": updates}).is_success
+    created = client.post(
+        f"/runs/{parent}/revisions", json={"reason": "late start", "now": at(end + 1)}
+    )
+    assert created.status_code == 202, created.text
+    revision = created.json()["id"]
+    assert client.get(f"/runs/{parent}").json()["status"] == "superseded"
+    pins = [
+        a
+        for a in client.get(f"/runs/{revision}", params={"limit": 1000}).json()["assignments"]
+        if a["pinned"]
+    ]
+    assert [(str(a["task_id"]), a["robot"]) for a in pins] == [(first, decided[first]["robot"])]
+    assert (pins[0]["start"], pins[0]["end"]) == (begin, end)
+    assert pins[0]["start_at"] == at(begin) and pins[0]["end_at"] == at(end)
+    assert client.get(f"/runs/{revision}/diff").json()["schedule"] is None
     assert client.get(f"/runs/{revision}/trace/verify").json()["ok"] is True
