@@ -107,7 +107,10 @@ def diff(*, sessions: sessionmaker[Session], run_id: str) -> Diff:
         fleet_changes=list(detail.get("fleet_changes", [])),
         before=side(parent, parent_spec, before),
         after=side(run, spec, after),
-        schedule=_schedule_moves(sessions, parent.id, run_id),
+        # An untimed revision reads no schedule (nor its decisions a second time).
+        schedule=_schedule_moves(sessions, parent.id, run_id)
+        if spec.problem.instance.timed
+        else None,
     )
 
 
