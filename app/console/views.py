@@ -14,9 +14,8 @@ from app.console.frontier import FrontierPoint, cached_frontier, frontier
 from app.domain.errors import RunNotFoundError, StateConflictError
 from app.domain.models import TaskId
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
+from app.plans import current, revisions
 from app.plans import diff as diffs
-from app.plans import revisions
-from app.runs import views as run_views
 from app.schedules import gantt_svg
 from app.store.models import Attempt
 
@@ -206,11 +205,12 @@ def run_page(
 
 def gantt(*, sessions: sessionmaker[Session], run_id: str, timed: bool) -> dict[str, Any]:
     """A timed run's Gantt chart (server-rendered by app.schedules, the critical path
-    marked), once its schedule is whole; nothing for an untimed run."""
+    marked), once its schedule is whole; nothing for an untimed run. Its current
+    schedule: the decisions re-timed by the site's execution reports (app.plans.current)."""
     if not timed:
         return {}
     try:
-        planned = run_views.run_schedule(sessions=sessions, run_id=run_id)
+        planned = current.current_schedule(sessions=sessions, run_id=run_id)
     except StateConflictError:  # not every task decided yet
         planned = None
     if planned is None:

@@ -56,6 +56,11 @@ class RunSpec:
     pinned: dict[str, int] | None = None
     unavailable: list[int] | None = None
     revision_of: str | None = None
+    # Time in a revision (SPEC 16): task index (as text) -> the fixed start minute of a
+    # pinned task reported started or done, and the revision's `now` in minutes (nothing
+    # else starts earlier). None on every untimed run and every run that is not a revision.
+    pinned_starts: dict[str, float] | None = None
+    not_before: float | None = None
     # app.domain.review.ReviewPolicy as JSON; None: no review.
     review: dict[str, Any] | None = None
     # Learning from the site (SPEC 17): the site, which rates and durations the run plans
@@ -92,6 +97,8 @@ class RunSpec:
             pinned={int(t): r for t, r in (self.pinned or {}).items()},
             unavailable=self.unavailable or (),
             objective=self.objective_of(),
+            pinned_starts={int(t): m for t, m in (self.pinned_starts or {}).items()},
+            not_before=self.not_before or 0.0,
         )
 
     def objective_of(self) -> Objective:

@@ -1,6 +1,7 @@
 """GET /runs/{id}/schedule (SPEC 16 "Reading a schedule"): a timed run's plan in time, as
 the schedule JSON block, CSV (one row per task) or iCalendar (one VEVENT per task), read
-by app.schedules from the schedule rebuilt from the run's stored decisions.
+by app.schedules from the schedule rebuilt from the run's stored decisions and re-timed
+by its execution reports (app.plans.current).
 
 An untimed run has no times: 409, saying so (the run exists, it is the request that
 cannot be served for it; 404 would read as "no such run"). So is a run that has not yet
@@ -17,7 +18,7 @@ from app.api.deps import ClientDep, RunIdPath, RunsDep
 from app.api.responses import CLIENT, errors
 from app.api.schemas.schedule import ScheduleOut
 from app.domain.errors import StateConflictError
-from app.runs import views
+from app.plans import current
 from app.schedules import schedule_csv, schedule_ics, schedule_json
 
 router = APIRouter(prefix="/runs", tags=["runs"])
@@ -53,8 +54,11 @@ def get_schedule(
         ),
     ] = "json",
 ) -> ScheduleOut | Response:
-    """A timed run's schedule, once every task is decided (409 for an untimed run)."""
-    planned = views.run_schedule(sessions=runs.sessions, run_id=run_id)
+    """A timed run's schedule, once every task is decided (409 for an untimed run): its
+    decisions, with the tasks the site reported at their reported times and what waits
+    for them moved (docs/living-plans.md)."""
+    # SPEC 16: the decisions re-timed by the site's execution reports (living plans).
+    planned = current.current_schedule(sessions=runs.sessions, run_id=run_id)
     if planned is None:
         raise StateConflictError(
             "run_id",
