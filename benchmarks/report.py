@@ -21,6 +21,7 @@ SECTIONS = [
     "benchmarks.llm_scope",
     "benchmarks.adaptation",
     "benchmarks.site_learning",
+    "benchmarks.timed_schedules",
 ]
 
 

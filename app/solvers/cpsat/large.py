@@ -26,14 +26,18 @@ from __future__ import annotations
 from app.domain.errors import DomainError
 from app.solvers.cpsat.assignment_model import AssignmentModel
 from app.solvers.cpsat.common import assignment_schedules, makespan_floor, none_found
+from app.solvers.cpsat.lns import improve
 from app.solvers.cpsat.load_bound import load_lower_bound
 from app.solvers.cpsat.model import ScheduleModel, Travel
 from app.solvers.cpsat.outcome import ScheduleOutcome, Setup, outcome
 
 LARGE_MODEL = (
     "large-instance path: CP-SAT load-balancing assignment (travel as per-zone entries), "
-    "list and earliest-finish schedules, then CP-SAT sequencing of the best assignment"
+    "list and earliest-finish schedules"
 )
+SEQUENCING_MODEL = ", CP-SAT sequencing of the best assignment"
+LNS_MODEL = ", LNS over the exact model"
+SEQUENCING_SHARE = 0.3  # of the time left; the LNS gets the rest
 LP_MIN_S = 2.0  # below this the chains' bound has to do
 LP_SHARE = 0.25  # of the time left, at most, for the LP bound
 SEQUENCING_MIN_S = 3.0  # below this, building the sequencing model costs more than it gains
@@ -90,13 +94,18 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
             feasible.offer(schedule)
     if scale.exact:
         load_bound = max(load_bound, scale.minutes(solver.best_objective_bound))
+    ran = LARGE_MODEL
     if sequencing and search.remaining() >= SEQUENCING_MIN_S:
-        _sequence(setup)
+        _sequence(setup, search.remaining() * SEQUENCING_SHARE)
+        ran += SEQUENCING_MODEL
+    report = improve(setup, candidates)
+    if report is not None:
+        ran += f"{LNS_MODEL} ({report.neighbourhoods} neighbourhoods, {report.improved} improved)"
     best = feasible.best()
     if best is None:
-        raise none_found(search.time_limit_s, LARGE_MODEL)
+        raise none_found(search.time_limit_s, ran)
     bound = min(best.makespan, max(makespan_floor(problem, setup.pairs), load_bound))
-    return outcome(setup, best, "feasible", LARGE_MODEL, bound)
+    return outcome(setup, best, "feasible", ran, bound)
 
 
 def _candidates(setup: Setup, t: int) -> list[int]:
@@ -112,7 +121,7 @@ def _candidates(setup: Setup, t: int) -> list[int]:
     ]
 
 
-def _sequence(setup: Setup) -> None:
+def _sequence(setup: Setup, seconds: float) -> None:
     """Step 3: better orders and times for the best assignment so far."""
     problem, search, feasible = setup.problem, setup.search, setup.feasible
     best = feasible.best()
@@ -125,6 +134,6 @@ def _sequence(setup: Setup) -> None:
     model.model.add(model.makespan <= setup.scale.up(best.makespan))
     model.model.minimize(model.makespan)
     model.hint(robots, [s.start for s in best.slots])
-    solver, status = search.run(model.model, "sequencing", search.remaining(), light_presolve=True)
+    solver, status = search.run(model.model, "sequencing", seconds, light_presolve=True)
     if status in ("OPTIMAL", "FEASIBLE"):
         feasible.offer_times(*model.read(solver))
