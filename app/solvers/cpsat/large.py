@@ -37,11 +37,12 @@ LARGE_MODEL = (
 )
 SEQUENCING_MODEL = ", CP-SAT sequencing of the best assignment"
 LNS_MODEL = ", LNS over the exact model"
-SEQUENCING_SHARE = 0.3  # of the time left; the LNS gets the rest
+SEQUENCING_SHARE = 0.2  # of the time left; the LNS gets the rest
 LP_MIN_S = 2.0  # below this the chains' bound has to do
 LP_SHARE = 0.25  # of the time left, at most, for the LP bound
 SEQUENCING_MIN_S = 3.0  # below this, building the sequencing model costs more than it gains
-ASSIGNMENT_SHARE = 0.4  # of the time left, when sequencing follows
+FOLLOW_MIN_S = 2.0  # below this the assignment takes all the time left
+ASSIGNMENT_SHARE = 0.25  # of the time left, when the LNS (and sequencing) follow
 
 
 def solve_large(setup: Setup) -> ScheduleOutcome:
@@ -79,8 +80,8 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     seed_plan = feasible.best()
     if seed_plan is not None:
         assign.hint(seed_plan.assignment)
-    sequencing = search.remaining() >= SEQUENCING_MIN_S / ASSIGNMENT_SHARE
-    share = search.remaining() * (ASSIGNMENT_SHARE if sequencing else 1.0)
+    follow = search.remaining() >= FOLLOW_MIN_S
+    share = search.remaining() * (ASSIGNMENT_SHARE if follow else 1.0)
     solver, status = search.run(assign.model, "assignment", share, light_presolve=True)
     if status == "INFEASIBLE":
         raise DomainError(
@@ -95,7 +96,7 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     if scale.exact:
         load_bound = max(load_bound, scale.minutes(solver.best_objective_bound))
     ran = LARGE_MODEL
-    if sequencing and search.remaining() >= SEQUENCING_MIN_S:
+    if follow and search.remaining() * SEQUENCING_SHARE >= SEQUENCING_MIN_S:
         _sequence(setup, search.remaining() * SEQUENCING_SHARE)
         ran += SEQUENCING_MODEL
     report = improve(setup, candidates)

@@ -37,6 +37,7 @@ class Neighbourhood:
         free: Collection[int],
         candidates: Sequence[Sequence[int]],
         ancestors: Sequence[int],
+        float_tail: bool = False,
     ) -> None:
         problem, scale = setup.problem, setup.scale
         self.problem, self.scale, self.setup = problem, scale, setup
@@ -59,7 +60,11 @@ class Neighbourhood:
         hi = max(current.slots[f].end for f in self.free)
         # Tasks that end before the window depend on nothing in it: the current schedule
         # has them at their earliest times, and every free task goes after them.
-        self.frozen = {s.task for s in current.slots if s.end <= lo and s.task not in is_free}
+        self.frozen = {
+            s.task
+            for s in current.slots
+            if s.task not in is_free and (s.end <= lo or not float_tail)
+        }
         self._add_times()
         sequences = current.sequences(tm.n_robots)
         for r in range(tm.n_robots):
@@ -112,9 +117,9 @@ class Neighbourhood:
                 lits.append(lit)
                 sizes.append(up(tm.duration(t, r)))
                 a, b = tm.shifts[r]
-                if up(a) > lo:
+                if fixed is None and up(a) > lo:  # a pinned start is a fact: no shift on it
                     m.add(start >= up(a)).only_enforce_if(lit)
-                if math.isfinite(b):
+                if fixed is None and math.isfinite(b):
                     m.add(end <= down(b)).only_enforce_if(lit)
             m.add_exactly_one(lits)
             m.add(end == start + cp_model.LinearExpr.weighted_sum(lits, sizes))
@@ -159,7 +164,7 @@ class Neighbourhood:
             )
             if before:
                 self._add_after(r, before[-1], f, [x])
-            else:
+            elif f not in self.problem.pinned_starts:  # a fact needs no way there
                 way = up(tm.travel_to_task(tm.robot_zone[r], f))
                 m.add(self.start[f] >= up(tm.shifts[r][0]) + way).only_enforce_if(x)
             if after:
@@ -200,10 +205,11 @@ class Neighbourhood:
 
     def _add_precedence(self) -> None:
         for t, preds in enumerate(self.tm.predecessors):
-            if t in self.problem.pinned_starts or t in self.frozen:
+            if t in self.problem.pinned_starts:
                 continue
             for p in preds:
-                self.model.add(self.start[t] >= self.end[p])
+                if t not in self.frozen or p not in self.frozen:
+                    self.model.add(self.start[t] >= self.end[p])
 
     def _add_cap(self, current: Schedule) -> None:
         cap, m = self.problem.cap, self.model
