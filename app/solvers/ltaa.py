@@ -81,7 +81,9 @@ def graph_context(
         quality_threshold=quality_threshold,
         max_retries=max_retries,
         guidance=oracle.guidance if guidance == "optimizer" else None,
-        regret=oracle.regret,
+        # The oracle's regret counts the tasks after this one in queue order; a timed run
+        # decides in time order, so its decisions record no regret.
+        regret=None if problem.instance.timed else oracle.regret,
         review=gate,
         rate_notes=rate_notes or {},
     )

@@ -21,6 +21,7 @@ from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.routes.signoffs import signoff_out
 from app.api.schemas.allocation import MetricsOut, UsageOut
 from app.api.schemas.examples import RUN_EXAMPLES
+from app.api.schemas.run_times import decision_times
 from app.api.schemas.runs import (
     DEFAULT_PAGE,
     MAX_PAGE,
@@ -150,6 +151,7 @@ def _run_out(view: views.RunView, limit: int) -> RunOut:
                 pinned=d.task_index in view.pins,
                 pinned_from=view.pins.get(d.task_index),
                 execution=_execution_out(view.execution.get(d.task_index)),
+                **decision_times(instance, d),
             )
             for d in view.decisions
         ],
@@ -320,6 +322,7 @@ def _decision_out(
         pinned=d.task_index in pins,
         pinned_from=pins.get(d.task_index),
         attempts=outs,
+        **decision_times(instance, d),
     )
 
 
