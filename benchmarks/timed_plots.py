@@ -31,7 +31,9 @@ def makespan_figure(
         names = ["CP-SAT"] + [m for (lab, m) in methods if lab == label]
         values = [makespan] + [v for (lab, _), v in methods.items() if lab == label]
         ratios = [v / bound for v in values]
-        ax.bar(range(len(names)), ratios, color=[PALETTE[i % len(PALETTE)] for i in range(len(names))])
+        ax.bar(
+            range(len(names)), ratios, color=[PALETTE[i % len(PALETTE)] for i in range(len(names))]
+        )
         ax.axhline(1.0, color="black", linewidth=0.8, linestyle="--")
         ax.set_xticks(range(len(names)), names, rotation=45, ha="right", fontsize=8)
         ax.set_title(label.replace("`", ""), fontsize=9)

@@ -87,9 +87,7 @@ def instances() -> list[tuple[str, Problem, float]]:
 def run_cpsat(label: str, problem: Problem, limit: float) -> tuple[CpSatRow, Any]:
     load = os.getloadavg()[0]
     wall, cpu = time.perf_counter(), time.process_time()
-    solution = get_solver("schedule").solve(
-        problem, options={"time_limit_s": limit, "workers": 2}
-    )
+    solution = get_solver("schedule").solve(problem, options={"time_limit_s": limit, "workers": 2})
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     d = solution.details
     assert check_schedule(problem, d["schedule"]) == []

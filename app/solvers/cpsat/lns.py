@@ -97,7 +97,9 @@ def improve(
         if robots is not None:  # an exchange among these robots only
             allowed = [[r for r in c if r in robots] for c in candidates]
         hood = Neighbourhood(setup, current, free, allowed, ancestors, kind == "window")
-        status, solver = _solve(hood.model, setup, min(SLICE_S, search.remaining() - until - 0.1), rng)
+        status, solver = _solve(
+            hood.model, setup, min(SLICE_S, search.remaining() - until - 0.1), rng
+        )
         report.neighbourhoods += 1
 
         if status == "OPTIMAL" and solver.wall_time < FAST_S:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Sequence
+from itertools import pairwise
 
 from ortools.sat.python import cp_model
 
@@ -75,8 +76,8 @@ class Neighbourhood:
             self._add_chain(r, chain)
             self._add_free_on(r, before, inside, after)
         self._add_precedence()
-        self._add_cap(current)
-        self._add_success(current)
+        self._add_cap()
+        self._add_success()
         self.makespan = m.new_int_var(0, self.horizon, "makespan")
         for t, e in enumerate(self.end):
             if t not in self.frozen:
@@ -142,7 +143,7 @@ class Neighbourhood:
         if chain and chain[0] not in self.problem.pinned_starts and chain[0] not in self.frozen:
             way = up(tm.travel_to_task(tm.robot_zone[r], chain[0]))
             m.add(self.start[chain[0]] >= up(a) + way)
-        for t, u in zip(chain, chain[1:], strict=False):
+        for t, u in pairwise(chain):
             if u not in self.frozen:
                 self._add_after(r, t, u, [])
 
@@ -211,7 +212,7 @@ class Neighbourhood:
                 if t not in self.frozen or p not in self.frozen:
                     self.model.add(self.start[t] >= self.end[p])
 
-    def _add_cap(self, current: Schedule) -> None:
+    def _add_cap(self) -> None:
         cap, m = self.problem.cap, self.model
         fixed_load = [0] * self.tm.n_robots
         is_free = set(self.free)
@@ -225,7 +226,7 @@ class Neighbourhood:
                     cp_model.LinearExpr.sum(lits) + fixed_load[r], cap.lower, cap.upper
                 )
 
-    def _add_success(self, current: Schedule) -> None:
+    def _add_success(self) -> None:
         """The free tasks' ES share: equal to theirs now under `success_then_makespan` (ES
         stays at its proven optimum), at least what the floor leaves under `makespan`."""
         setup, weights = self.setup, self.setup.weights
@@ -258,5 +259,7 @@ class Neighbourhood:
     def read(self, solver: cp_model.CpSolver) -> tuple[list[int], list[float]]:
         robots = list(self.robots)
         for f in self.free:
-            robots[f] = next(r for r in self._candidates[f] if solver.boolean_value(self.present[f, r]))
+            robots[f] = next(
+                r for r in self._candidates[f] if solver.boolean_value(self.present[f, r])
+            )
         return robots, [self.scale.minutes(solver.value(s)) for s in self.start]
