@@ -92,7 +92,7 @@ def improve(
     size = {kind: float(n) for kind, n in START_SIZE.items()}
     while search.remaining() - until >= MIN_SLICE_S and movable:
         kind = "robots" if rng.random() < ROBOTS_SHARE else "window"
-        free, robots = _choose(rng, current, movable, int(size[kind]), kind)
+        free, robots = _choose(rng, current, movable, int(size[kind]), kind, candidates)
         allowed = candidates
         if robots is not None:  # an exchange among these robots only
             allowed = [[r for r in c if r in robots] for c in candidates]
@@ -123,10 +123,15 @@ def improve(
 
 
 def _choose(
-    rng: random.Random, current: Schedule, movable: list[int], size: int, kind: str
+    rng: random.Random,
+    current: Schedule,
+    movable: list[int],
+    size: int,
+    kind: str,
+    candidates: Sequence[Sequence[int]],
 ) -> tuple[list[int], set[int] | None]:
     """`size` movable tasks close in time to a centre: a task on the critical path, a random
-    minute, or (robots) the tasks of the robot that ends last and two to four others."""
+    minute, or (robots) the tasks of a robot that ends last and of two to four others."""
     slots = current.slots
     pool, chosen = movable, None
     if kind == "window" and rng.random() < 0.6:
@@ -137,14 +142,22 @@ def _choose(
     elif kind == "window":
         centre = rng.uniform(0, current.makespan)
     else:
-        # The robot that ends last is where the makespan is: its tasks around a random one
-        # of them, with those of a few other robots it could hand work to.
-        last = max(slots, key=lambda s: s.end).robot
-        others = sorted({s.robot for s in slots} - {last})
-        chosen = {last, *rng.sample(others, min(len(others), rng.randint(2, 4)))}
-        pool = [t for t in movable if slots[t].robot in chosen]
-        mine = [t for t in pool if slots[t].robot == last]
+        # Where the makespan is: one of the three robots that end last, its tasks around a
+        # random one of them, with two to four robots that could take some of those tasks
+        # (the earliest to finish first: they have room), all in the same time window.
+        ends: dict[int, float] = {}
+        for s in slots:
+            ends[s.robot] = max(ends.get(s.robot, 0.0), s.end)
+        late = sorted(ends, key=lambda r: -ends[r])[:3]
+        last = rng.choice(late)
+        mine = [t for t in movable if slots[t].robot == last]
         centre = slots[rng.choice(mine)].start if mine else rng.uniform(0, current.makespan)
+        near = sorted(mine, key=lambda t: abs(slots[t].start - centre))[: max(1, size // 4)]
+        partners = sorted({r for t in near for r in candidates[t]} - {last}, key=lambda r: ends[r])
+        if not partners:
+            partners = sorted(set(ends) - {last}, key=lambda r: ends[r])
+        chosen = {last, *rng.sample(partners[:6], min(len(partners[:6]), rng.randint(2, 4)))}
+        pool = [t for t in movable if slots[t].robot in chosen]
     return sorted(pool, key=lambda t: (abs(slots[t].start - centre), t))[:size], chosen
 
 
