@@ -39,6 +39,11 @@ def test_regrets_are_against_cp_sat_and_its_bound(tmp_path: Path) -> None:
         ["site"], {"site": (100.0, 80.0)}, {("site", "greedy"): 120.0}, "t.png", tmp_path
     )
     text = body([cp], [(cp, worse)], {0.5: (0.4, "answer: feasible")}, image)
+    assert (
+        "- `/allocate` with `schedule` on 36 tasks under 1 s: 0.40 s at the shorter limit (met)"
+        in text
+    )
+    assert "not proven, 1.5 s CPU at load 3.0 (**missed**)" in text
     assert "| site | greedy | 0.7500 | +0.0500 | 120 | 20.0% | 50.0% | 0 |" in text
     assert "0.40 s (answer: feasible), which meets the 1 s target" in text
     assert (tmp_path / "t.png").stat().st_size > 0
