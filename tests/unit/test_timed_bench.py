@@ -39,6 +39,7 @@ def test_regrets_are_against_cp_sat_and_its_bound(tmp_path: Path) -> None:
         ["site"], {"site": (100.0, 80.0)}, {("site", "greedy"): 120.0}, "t.png", tmp_path
     )
     text = body([cp], [(cp, worse)], {0.5: (0.4, "answer: feasible")}, image)
+    assert "| site | 10 s | feasible | 100 | - | 80 | 20.0% |" in text
     assert (
         "- `/allocate` with `schedule` on 36 tasks under 1 s: 0.40 s at the shorter limit (met)"
         in text
