@@ -26,7 +26,7 @@ _TICK_STEPS = (5, 10, 15, 30, 60, 120, 240, 480, 720, 1440, 2880, 10080, 20160, 
 
 STYLE = (
     ".lane{fill:#f4f5f7}.shift{fill:#e3e7ee}.task{fill:#4c78a8;stroke:#fff;stroke-width:.5}"
-    ".task.critical{fill:#d62728}.travel{fill:#f2b447}.idle{fill:#c9ced6;opacity:.6}"
+    ".task.critical{fill:#d62728}.travel{fill:#f2b447}.idle{fill:url(#idle-hatch)}"
     ".axis{stroke:#aab;stroke-width:.5}.end{stroke:#d62728;stroke-dasharray:4 3}"
     "text{font:11px sans-serif;fill:#222}.bar-label{fill:#fff;font-size:9px}"
 )
@@ -71,10 +71,16 @@ def gantt_svg(problem: Problem, schedule: Schedule) -> str:
         f'aria-label="Gantt chart: {instance.n_tasks} tasks on {instance.n_robots} robots, '
         f'makespan {schedule.makespan:g} min">',
         f"<style>{STYLE}</style>",
+        # Idle is hatched, so it reads apart from the shift behind it in any palette.
+        '<defs><pattern id="idle-hatch" width="6" height="6" patternUnits="userSpaceOnUse" '
+        'patternTransform="rotate(45)"><rect width="6" height="6" fill="#e3e7ee"/>'
+        '<line x1="0" y1="0" x2="0" y2="6" stroke="#9aa3b0" stroke-width="2"/></pattern></defs>',
     ]
     step = _tick_step(span)
     for k in range(int(span // step) + 1):
         x = GUTTER + k * step * scale
+        if x > WIDTH - 40:  # no room for its label
+            break
         out.append(
             f'<line class="axis" x1="{_n(x)}" y1="{TOP - 6}" x2="{_n(x)}" '
             f'y2="{TOP + LANE * instance.n_robots}"/>'

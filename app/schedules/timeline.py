@@ -53,7 +53,7 @@ def render_timeline(problem: Problem, schedule: Schedule, console: Console) -> N
                 f"{item.end - item.start:g}",
                 _clock(schedule, item.start),
                 what,
-                zone,
+                Text(zone),  # a zone is any name: never read as markup
                 style=_STYLE[item.kind],
             )
         if not lane:

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from langgraph.checkpoint.memory import InMemorySaver
 from langgraph.checkpoint.sqlite import SqliteSaver
 
 from app.domain.catalog import timed_scenario
@@ -24,6 +25,9 @@ from app.graph.prompts import TARGET_USER_PROMPT_CHARS
 from app.graph.recorder import DecisionRecord
 from app.graph.runner import run_graph
 from app.graph.state import GraphContext
+from app.reasoners.rules import RulesReasoner
+from app.solvers.ltaa import execute_ltaa
+from app.solvers.registry import get_solver
 from tests.fakes.scripted_reasoner import ScriptedReasoner
 from tests.unit.ltaa_support import problem as untimed_problem
 from tests.unit.ltaa_support import run
@@ -217,3 +221,28 @@ def test_resume_at_decision_18_gives_the_same_schedule(tmp_path: Path, new_proce
         == schedule_of(BASELINE, reference.decisions()).makespan
     )
     assert not math.isinf(schedule_of(BASELINE, rec.decisions()).makespan)
+
+
+def test_guidance_in_time_is_the_schedule_solvers_plan_of_the_remaining_tasks() -> None:
+    rec = MemoryRecorder()
+    execute_ltaa(
+        BASELINE,
+        graph=build_graph(InMemorySaver()),
+        thread_id="guided",
+        reasoner=RulesReasoner(),
+        recorder=rec,
+        quality_threshold=0.6,
+        max_retries=3,
+        guidance="optimizer",
+    )
+    decisions = rec.decisions()
+    prompts = [a.user_prompt for a in rec.attempts() if a.tier == 0]
+    assert all("Optimizer guidance: " in p for p in prompts)
+    # The plan keeps the best expected success under the cap (the schedule solver's first
+    # objective), and the rules reasoner follows it wherever the deadline and shift allow.
+    best = get_solver("optimal").solve(BASELINE, seed=0).assignment
+    success = BASELINE.instance.success
+    optimum = sum(success[t, r] for t, r in enumerate(best)) / len(best)
+    mean = sum(d.expected_success for d in decisions) / len(decisions)
+    assert mean == pytest.approx(optimum, abs=1e-9)
+    assert check_schedule(BASELINE, schedule_of(BASELINE, decisions)) == []

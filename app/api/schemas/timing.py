@@ -64,11 +64,15 @@ def _duration(value: object) -> float | int | dict[str, float | int]:
     return out
 
 
+RobotKey = Annotated[str, Field(min_length=1, max_length=MAX_NAME_CHARS)]
+
+# int beside float: a duration is kept as sent (20 stays 20 in what a run stores), and the
+# serializer then finds the member a value is.
 Duration = Annotated[
-    float | dict[str, float],
+    int | float | dict[str, int | float],
     PlainValidator(
         _duration,
-        json_schema_input_type=PositiveMinutes | dict[str, PositiveMinutes],
+        json_schema_input_type=PositiveMinutes | dict[RobotKey, PositiveMinutes],
     ),
     Field(
         description="Minutes: one number for every robot, or a map {robot: minutes} naming "
