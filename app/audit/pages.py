@@ -37,34 +37,45 @@ Row = TypeVar("Row", bound=_Sequenced)
 
 
 def _seq_pages(
-    sessions: sessionmaker[Session], read: Callable[[Session, int], list[Row]]
+    sessions: sessionmaker[Session],
+    read: Callable[[Session, int], list[Row]],
+    last: int | None = None,
 ) -> Iterator[list[Row]]:
-    """Pages of rows keyed by `seq`, each read in its own short session after the last."""
+    """Pages of rows keyed by `seq`, each read in its own short session after the last;
+    with `last`, only rows up to that seq (the prefix a snapshot saw: app.audit.snapshot)."""
     after = 0
     while True:
         with sessions() as session:
             page = read(session, after)
+        if last is not None:
+            page = [row for row in page if row.seq <= last]
         if not page:
             return
         yield page
         after = page[-1].seq
 
 
-def event_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[RunEvent]]:
+def event_pages(
+    sessions: sessionmaker[Session], run_id: str, last: int | None = None
+) -> Iterator[list[RunEvent]]:
     return _seq_pages(
         sessions,
         lambda session, after: repo.events_page(
             session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
         ),
+        last,
     )
 
 
-def annotation_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[list[RunAnnotation]]:
+def annotation_pages(
+    sessions: sessionmaker[Session], run_id: str, last: int | None = None
+) -> Iterator[list[RunAnnotation]]:
     return _seq_pages(
         sessions,
         lambda session, after: repo.annotations_page(
             session=session, run_id=run_id, after_seq=after, limit=EVENTS_PER_PAGE
         ),
+        last,
     )
 
 
@@ -85,7 +96,14 @@ def decision_pages(
     run_id: str,
     pinned: bool | None = None,
     by_seq: bool = False,
+    last: int | None = None,
 ) -> Iterator[list[tuple[Decision, list[Attempt]]]]:
+    """`last`: only decisions up to that key (a seq when `by_seq`, else a task index), the
+    prefix a snapshot saw (app.audit.snapshot); None: all, as many as there are by then."""
+
+    def key(d: Decision) -> int:
+        return (d.seq or 0) if by_seq else d.task_index
+
     after = -1
     while True:
         with sessions() as session:
@@ -97,6 +115,8 @@ def decision_pages(
                 pinned=pinned,
                 by_seq=by_seq,
             )
+            if last is not None:
+                page = [d for d in page if key(d) <= last]
             if not page:
                 return
             tasks = [d.task_index for d in page]
@@ -104,7 +124,7 @@ def decision_pages(
                 session=session, run_id=run_id, first=min(tasks), last=max(tasks)
             )
         yield [(d, attempts.get(d.task_index, [])) for d in page]
-        after = (page[-1].seq or 0) if by_seq else page[-1].task_index
+        after = key(page[-1])
 
 
 def columns(row: Any, fields: dict[str, Any]) -> dict[str, Any]:

@@ -13,13 +13,13 @@ from app.audit.heads import chain_heads
 from app.audit.heads import geneses as chain_geneses
 from app.audit.pages import (
     annotation_pages,
-    chain_passes,
     columns,
     decision_pages,
     event_pages,
     run_or_missing,
 )
 from app.audit.signing import SignatureCheck, SigningKeys, check_signature
+from app.audit.snapshot import snapshot
 from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import EventKind, RunStatus
 from app.store import chain
@@ -88,16 +88,10 @@ def verify_trace(
         scheme = run.chain_scheme or chain.SCHEME
         signature_row = repo.latest_signature(session=session, run_id=run_id)
         revision_of = run.revision_of
-        order: list[int] | None = None
-        if revision_of is not None:
-            # Pins first, then the graph's decisions: the order they were chained in.
-            pins = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=True)
-            rest = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=False)
-            order = decision_repo.revision_chain_order(pins, rest)
-        sequenced = decision_repo.sequenced_order(session=session, run_id=run_id)
-        if sequenced is not None:  # a timed run: chained in the order the graph decided
-            pins = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=True)
-            order = pins + sequenced
+        # Everything below is judged as of this one moment, read after the status (so a
+        # completed run's rows are all in it): a live run appends while the pages are read.
+        seen = snapshot(session, run_id, revision_of)
+        order = seen.order
 
     decisions = chain.ChainCheck(
         "decisions",
@@ -107,8 +101,11 @@ def verify_trace(
         order=order,
         genesis_link=geneses["decisions"],
     )
-    for pinned, by_seq in chain_passes(revision_of, sequenced is not None):
-        for page in decision_pages(sessions, run_id, pinned, by_seq):
+    for chain_pass in seen.passes:
+        pages = decision_pages(
+            sessions, run_id, chain_pass.pinned, chain_pass.by_seq, last=chain_pass.last
+        )
+        for page in pages:
             for d, attempts in page:
 
                 def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:
@@ -123,7 +120,7 @@ def verify_trace(
         "events", run_id, first_key=1, anchor=anchor, genesis_link=geneses["events"]
     )
     last_kind = None
-    for event_page in event_pages(sessions, run_id):
+    for event_page in event_pages(sessions, run_id, last=seen.last_event):
         for e in event_page:
 
             def event_link(prev: str, e: RunEvent = e) -> str:
@@ -150,7 +147,7 @@ def verify_trace(
         )
     annotations = chain.ChainCheck("annotations", run_id, first_key=1)
     signed: list[Any] = []
-    for annotation_page in annotation_pages(sessions, run_id):
+    for annotation_page in annotation_pages(sessions, run_id, last=seen.last_annotation):
         for a in annotation_page:
             if a.kind == AnnotationKind.SIGNOFF:
                 signed.append((a.detail or {}).get("heads"))

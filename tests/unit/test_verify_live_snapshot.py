@@ -1,0 +1,100 @@
+"""trace/verify on a run that is still writing judges one moment of it.
+
+Verify reads a run's record in pages, each in its own short session, while a live run
+keeps appending (a timed run still deciding, or a paused one whose in-flight decision
+lands). A timed run's decisions are chained in decision order (`seq`), whose task indexes
+are not consecutive: a decision appended between verify's first read and its pages was
+reported as missing rows ("task_index 15 to 26 is missing"). Here the append happens
+exactly between those reads, through the real store functions, on SQLite and PostgreSQL.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
+
+import pytest
+from sqlalchemy import event
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.audit.heads import chain_heads
+from app.audit.verify import verify_trace
+from app.runs import records
+from app.store import decision_repository as decision_repo
+from app.store import repository as repo
+from app.store.db import make_engine, transaction
+from app.store.migrate import upgrade_head
+from tests.e2e.postgres import fresh_database
+from tests.factories import decision_record, run_row
+
+RUN = "timed"
+# The order the graph decided in (seq 0, 1, ...): not task order, as on a timed run.
+DECIDED = (2, 0, 3, 1, 5, 4)
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def sessions(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[sessionmaker[Session]]:
+    """A real database file / server: the race is between transactions, not in memory."""
+    with ExitStack() as stack:
+        url = (
+            f"sqlite:///{tmp_path / 'ltaa.db'}"
+            if request.param == "sqlite"
+            else stack.enter_context(fresh_database())
+        )
+        upgrade_head(url)
+        engine = make_engine(url)
+        stack.callback(engine.dispose)
+        yield sessionmaker(engine, expire_on_commit=False)
+
+
+def _decide(sessions: sessionmaker[Session], seq: int) -> None:
+    """The graph's seq-th decision with its event, written as a run writes them."""
+    task = DECIDED[seq]
+    record = decision_record(task, seq=seq, start=10.0 * seq, end=10.0 * seq + 5, zone="A")
+    with transaction(sessions) as session:
+        decision_repo.upsert_decision(
+            session=session, run_id=RUN, values=records.decision_values(record)
+        )
+        repo.add_event(session=session, run_id=RUN, kind="decided", detail={"task": task})
+
+
+def _append_between_reads(sessions: sessionmaker[Session], seq: int) -> None:
+    """Write decision `seq` when verify opens its second session: after it has read what to
+    verify, before it reads the decision pages (once: later sessions write nothing)."""
+    opened = 0
+
+    def after_begin(session: Session, *_: Any) -> None:
+        nonlocal opened
+        opened += 1
+        if opened == 2:
+            _decide(sessions, seq)
+
+    event.listen(sessions, "after_begin", after_begin)
+
+
+def test_a_decision_appended_while_verifying_a_live_timed_run_is_not_a_gap(
+    sessions: sessionmaker[Session],
+) -> None:
+    with transaction(sessions) as session:
+        session.add(run_row(RUN, "running", mode="m", n_tasks=len(DECIDED), n_robots=1))
+    for seq in range(3):
+        _decide(sessions, seq)
+    with sessions() as session:
+        before = chain_heads(session, RUN)
+
+    _append_between_reads(sessions, seq=3)
+    report = verify_trace(sessions=sessions, run_id=RUN)
+
+    assert report.first_break is None, report.first_break
+    assert report.ok
+    # The moment verify judged: the three decisions and their events, not the fourth.
+    assert (report.decisions.rows, report.events.rows) == (3, 3)
+    assert report.decisions.head == before.decision_hash
+    assert report.events.head == before.event_hash
+
+    # The hook wrote once; the next verify judges the later moment, and it verifies too.
+    later = verify_trace(sessions=sessions, run_id=RUN)
+    assert later.ok, later.first_break
+    assert (later.decisions.rows, later.events.rows) == (4, 4)
