@@ -50,9 +50,7 @@ def snapshot(session: Session, run_id: str, revision_of: str | None) -> Snapshot
     ).all()
     pins = [r.task_index for r in rows if r.pinned]
     # As decision_repository.sequenced_order, NULLs first (SQLite's order) on both back-ends.
-    made = sorted(
-        (r for r in rows if not r.pinned), key=lambda r: (r.seq is not None, r.seq or 0)
-    )
+    made = sorted((r for r in rows if not r.pinned), key=lambda r: (r.seq is not None, r.seq or 0))
     sequenced = bool(made) and made[0].seq is not None
     order: list[int] | None = None
     if sequenced:  # a timed run: chained in the order the graph decided, after any pins

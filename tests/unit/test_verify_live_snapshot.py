@@ -10,7 +10,7 @@ exactly between those reads, through the real store functions, on SQLite and Pos
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
@@ -49,27 +49,29 @@ def sessions(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[session
         yield sessionmaker(engine, expire_on_commit=False)
 
 
-def _decide(sessions: sessionmaker[Session], seq: int) -> None:
-    """The graph's seq-th decision with its event, written as a run writes them."""
-    task = DECIDED[seq]
-    record = decision_record(task, seq=seq, start=10.0 * seq, end=10.0 * seq + 5, zone="A")
+def _write(sessions: sessionmaker[Session], task: int, **columns: Any) -> None:
+    """A decision with its event, written as a run writes them (chained by the store)."""
+    values = records.decision_values(decision_record(task)) | columns
     with transaction(sessions) as session:
-        decision_repo.upsert_decision(
-            session=session, run_id=RUN, values=records.decision_values(record)
-        )
+        decision_repo.upsert_decision(session=session, run_id=RUN, values=values)
         repo.add_event(session=session, run_id=RUN, kind="decided", detail={"task": task})
 
 
-def _append_between_reads(sessions: sessionmaker[Session], seq: int) -> None:
-    """Write decision `seq` when verify opens its second session: after it has read what to
-    verify, before it reads the decision pages (once: later sessions write nothing)."""
+def _decide(sessions: sessionmaker[Session], seq: int) -> None:
+    """The timed graph's seq-th decision."""
+    _write(sessions, DECIDED[seq], seq=seq, start=10.0 * seq, end=10.0 * seq + 5, zone="A")
+
+
+def _between_reads(write: Callable[[], None], sessions: sessionmaker[Session]) -> None:
+    """`write` when verify opens its second session: after it has read what to verify,
+    before it reads the decision pages (once: later sessions write nothing)."""
     opened = 0
 
     def after_begin(session: Session, *_: Any) -> None:
         nonlocal opened
         opened += 1
         if opened == 2:
-            _decide(sessions, seq)
+            write()
 
     event.listen(sessions, "after_begin", after_begin)
 
@@ -84,7 +86,7 @@ def test_a_decision_appended_while_verifying_a_live_timed_run_is_not_a_gap(
     with sessions() as session:
         before = chain_heads(session, RUN)
 
-    _append_between_reads(sessions, seq=3)
+    _between_reads(lambda: _decide(sessions, 3), sessions)
     report = verify_trace(sessions=sessions, run_id=RUN)
 
     assert report.first_break is None, report.first_break
@@ -98,3 +100,31 @@ def test_a_decision_appended_while_verifying_a_live_timed_run_is_not_a_gap(
     later = verify_trace(sessions=sessions, run_id=RUN)
     assert later.ok, later.first_break
     assert (later.decisions.rows, later.events.rows) == (4, 4)
+
+
+def test_a_decision_appended_while_verifying_a_live_revision_is_not_a_gap(
+    sessions: sessionmaker[Session],
+) -> None:
+    """An untimed revision is chained pins first, then the rest in task order: its order is
+    read up front too, so a decision after a pin (task 4 after pinned task 3) appended
+    between the reads was reported as task 3 missing."""
+    with transaction(sessions) as session:
+        session.add(
+            run_row(RUN, "running", n_tasks=6, n_robots=1, revision_of="p", chain_anchor="a" * 64)
+        )
+    _write(sessions, 3, pinned=True, pinned_from="p")
+    for task in (0, 1, 2):
+        _write(sessions, task)
+    with sessions() as session:
+        before = chain_heads(session, RUN)
+
+    _between_reads(lambda: _write(sessions, 4), sessions)
+    report = verify_trace(sessions=sessions, run_id=RUN)
+
+    # Not `ok`: there is no parent run here for the revision's link to be checked against.
+    assert report.decisions.first_break is None, report.decisions.first_break
+    assert report.events.first_break is None, report.events.first_break
+    assert (report.decisions.rows, report.decisions.head) == (4, before.decision_hash)
+    later = verify_trace(sessions=sessions, run_id=RUN)
+    assert later.decisions.first_break is None, later.decisions.first_break
+    assert later.decisions.rows == 5
