@@ -62,7 +62,8 @@ def test_a_guided_timed_run_killed_mid_run_resumes_on_its_stored_plan(tmp_path: 
     # knows: hold a task with predecessors and successors, neither first nor last in any
     # precedence-respecting order, so the kill is mid-run whatever the plan.
     held = next(
-        t for t in range(problem.instance.n_tasks)
+        t
+        for t in range(problem.instance.n_tasks)
         if timing.predecessors[t] and timing.successors[t]
     )
     held_at = PausePoint(held, "reason", after=False)

@@ -30,7 +30,6 @@ from app.reasoners.rules import RulesReasoner
 from app.solvers.cpsat.search import solve_schedule
 from app.solvers.ltaa import execute_ltaa
 from app.solvers.timed_guidance import guided_problem, plan_guidance
-from app.solvers.registry import get_solver
 from tests.fakes.scripted_reasoner import ScriptedReasoner
 from tests.unit.ltaa_support import problem as untimed_problem
 from tests.unit.ltaa_support import run
