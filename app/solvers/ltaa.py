@@ -197,6 +197,11 @@ class LTAASolver(Solver):
         except DomainError as exc:
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
         recorder = MemoryRecorder()
+        # Solved here rather than in graph_context: its order also places the pins without
+        # a start in graph_times below, as the graph placed them.
+        plan = None
+        if opts.guidance == "optimizer" and problem.instance.timed:
+            plan = plan_guidance(problem)
         try:
             execution = execute_ltaa(
                 problem,
@@ -207,6 +212,7 @@ class LTAASolver(Solver):
                 quality_threshold=opts.quality_threshold,
                 max_retries=opts.max_retries,
                 guidance=opts.guidance,
+                plan=plan,
             )
         except DomainError as exc:
             # e.g. the Messages API refusing the model: point at the request's option.
@@ -220,7 +226,11 @@ class LTAASolver(Solver):
             assignment,
             usage=used,
             details={
-                **graph_times(problem, assignment, decisions),
+                **graph_times(
+                    problem if plan is None else guided_problem(problem, plan),
+                    assignment,
+                    decisions,
+                ),
                 "reasoner": reasoner.name,
                 "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),
                 "fallbacks": sum(d.fallback for d in decisions),

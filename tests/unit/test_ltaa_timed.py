@@ -29,6 +29,7 @@ from app.graph.state import GraphContext
 from app.reasoners.rules import RulesReasoner
 from app.solvers.cpsat.search import solve_schedule
 from app.solvers.ltaa import execute_ltaa
+from app.solvers.registry import get_solver
 from app.solvers.timed_guidance import GuidancePlan, guided_problem, plan_guidance
 from tests.fakes.scripted_reasoner import ScriptedReasoner
 from tests.unit.ltaa_support import problem as untimed_problem
@@ -306,3 +307,20 @@ def test_any_plan_followed_in_its_order_ends_no_later_than_the_plan() -> None:
         plan.starts[t] + BASELINE.instance.timing.duration(t, plan.robots[t]) for t in range(36)
     )
     assert max(p.end for p in placed.placed.values()) <= plan_end + 1e-9
+
+
+def test_guided_allocate_times_pins_without_a_start_as_the_graph_placed_them(
+    proven: Schedule,
+) -> None:
+    """`/allocate` with `ltaa` and guidance: pins without a start are placed by the graph
+    when they come up in the plan's order, and the answer's schedule says the same."""
+    # Pin the tasks the plan starts last, each on its plan's robot: in SPEC 16's order
+    # they would come up elsewhere, so a re-timing in that order would move them.
+    last = sorted(range(36), key=lambda t: -proven.slots[t].start)[:6]
+    problem = Problem.build(BASELINE.instance, pinned={t: proven.slots[t].robot for t in last})
+    solution = get_solver("ltaa").solve(problem, seed=0, options={"guidance": "optimizer"})
+    details = solution.details
+    assert details["schedule_violations"] == []
+    # Re-timed in SPEC 16's order instead, the pins broke precedence and overlapped.
+    decided = {d["task_index"] for d in details["decisions"]}
+    assert decided.isdisjoint(last) and len(decided) == 30
