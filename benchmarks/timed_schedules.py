@@ -143,7 +143,8 @@ LTAA_RUNS = {"ltaa (rules, unguided)": {}, "ltaa (rules, guided)": {"guidance": 
 def ltaa_rows(label: str, problem: Problem) -> list[MethodRow]:
     """The LTAA graph in time (merged from `time-runs`), in memory through the `ltaa`
     solver with the rules reasoner, unguided and optimizer-guided. Its schedule is the
-    graph's own (decisions in earliest-start order on the robots' timelines)."""
+    graph's own (decisions on the robots' timelines in earliest-start order, or guided in
+    the schedule solver's plan's order)."""
     if problem.instance.n_tasks > LTAA_MAX_TASKS:
         return [
             MethodRow(label, name, None, None, 0, 0.0, f"not run past {LTAA_MAX_TASKS} tasks")

@@ -49,6 +49,9 @@ class EventKind(StrEnum):
     SUPERSEDED = "superseded"
     # Execution reports while the run is unfinished (after completion: annotations).
     EXECUTION_REPORTED = "execution_reported"
+    # SPEC 16/4: a guided timed run's guidance plan, written once before its first
+    # decision and read back on resume (app.solvers.timed_guidance says why).
+    GUIDANCE_PLANNED = "guidance_planned"
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ On a timed instance (SPEC 16) a problem also carries its objective (see
 `app.domain.objective` for why it lives here), the fixed starts of pinned tasks (tasks
 reported started or done), and `not_before`: no task without a fixed start begins before
 it (a revision's `now`). An untimed problem has none of these and is built as before.
+A guided timed LTAA run also carries its guidance plan's starts (`decide_by`).
 """
 
 from __future__ import annotations
@@ -46,6 +47,10 @@ class Problem:
     # task index -> fixed start minute, for pinned tasks that started (timed only)
     pinned_starts: Mapping[int, float] = field(default_factory=lambda: _NO_STARTS, hash=False)
     not_before: float = 0.0  # minutes; no task without a fixed start begins earlier
+    # task index -> its start in a guidance plan (timed, guided LTAA runs only): the graph
+    # decides in this order instead of SPEC 16's earliest start (app.solvers.timed_guidance
+    # says why). Empty: SPEC 16's order. Set with dataclasses.replace, never by build().
+    decide_by: Mapping[int, float] = field(default_factory=lambda: _NO_STARTS, hash=False)
 
     @classmethod
     def build(

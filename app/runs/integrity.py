@@ -174,7 +174,8 @@ def checked_for_resume(
         records.decision_record(d) for d in decision_repo.decisions(session=session, run_id=run_id)
     ]
     values = checkpoint.checkpoint["channel_values"] if checkpoint else None
-    problem = spec.problem
+    # A guided timed run decides in its stored plan's order (app.solvers.timed_guidance).
+    problem = records.run_problem(session, run_id, spec.problem, spec.guidance)
     order = problem.free_tasks
     if instance.timed:
         order = timed_order(problem, {d.task_index: d.robot for d in stored})

@@ -10,10 +10,19 @@ from collections.abc import Iterable
 from dataclasses import fields
 from typing import Any
 
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.domain.lifecycle import EventKind
+from app.domain.problem import Problem
 from app.domain.usage import ReplyUsage, Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord
 from app.reasoners.base import ReasonerReply
-from app.store.models import Attempt, Decision
+from app.runs import lifecycle
+from app.solvers.timed_guidance import GuidancePlan, guided_problem, plan_guidance
+from app.store import decision_repository as decision_repo
+from app.store.db import transaction
+from app.store.models import Attempt, Decision, RunEvent
 
 _DECISION_FIELDS = tuple(f.name for f in fields(DecisionRecord))
 
@@ -108,3 +117,57 @@ def usage_of_totals(rows: Iterable[Any]) -> Usage:
         transport_retries=sum(int(r[4]) for r in billed),
         latency_ms=sum((float(r[5]) for r in billed), 0.0),
     )
+
+
+# -- a guided timed run's plan (app.solvers.timed_guidance) ----------------------------------
+
+
+def stored_plan(session: Session, run_id: str) -> GuidancePlan | None:
+    """The guidance plan the run recorded as its `guidance_planned` event (None: not yet)."""
+    detail = session.scalar(
+        select(RunEvent.detail)
+        .where(RunEvent.run_id == run_id, RunEvent.kind == EventKind.GUIDANCE_PLANNED.value)
+        .order_by(RunEvent.seq)
+        .limit(1)
+    )
+    return GuidancePlan.from_json(detail) if detail is not None else None
+
+
+def run_problem(session: Session, run_id: str, problem: Problem, guidance: str | None) -> Problem:
+    """The problem a run decides: a guided timed run's in its stored plan's order."""
+    if guidance != "optimizer" or not problem.instance.timed:
+        return problem
+    plan = stored_plan(session, run_id)
+    return guided_problem(problem, plan) if plan is not None else problem
+
+
+def guidance_plan(
+    sessions: sessionmaker[Session],
+    run_id: str,
+    problem: Problem,
+    guidance: str | None,
+    replay_of: str | None = None,
+) -> GuidancePlan | None:
+    """The plan a guided timed run follows (None: not one): the stored one on resume; at
+    the start the original's for a replay, else solved now and recorded before the first
+    decision, so a resume after a crash never solves again (CP-SAT at a wall-clock limit
+    may return another plan)."""
+    if guidance != "optimizer" or not problem.instance.timed:
+        return None
+    with sessions() as session:
+        plan = stored_plan(session, run_id)
+        if plan is not None:
+            return plan
+        if decision_repo.decision_count(session=session, run_id=run_id):
+            # Started before plans were stored, in SPEC 16's order: unguided from here on
+            # rather than decided in an order its record does not have.
+            return GuidancePlan((), ())
+        original = stored_plan(session, replay_of) if replay_of is not None else None
+    plan = original if original is not None else plan_guidance(problem)
+    with transaction(sessions) as session:
+        lifecycle.record_event(
+            session, run_id=run_id, kind=EventKind.GUIDANCE_PLANNED, detail=plan.as_json()
+        )
+    with sessions() as session:
+        # Two processes racing on one run both record one: the first recorded holds.
+        return stored_plan(session, run_id) or plan

@@ -218,7 +218,10 @@ def run_schedule(
     robots = {d.task_index: d.robot for d in rows}
     starts = {d.task_index: d.start for d in rows if d.start is not None}
     if len(starts) < n:
-        placed = TimedProgress.replay(problem, robots).placed
+        with sessions() as session:
+            # A guided run placed them in its stored plan's order (app.solvers.timed_guidance).
+            order = records.run_problem(session, run_id, problem, spec.guidance)
+        placed = TimedProgress.replay(order, robots).placed
         starts = {t: starts.get(t, placed[t].start) for t in range(n)}
     return problem, build_schedule(
         problem, [robots[t] for t in range(n)], [float(starts[t]) for t in range(n)]

@@ -32,7 +32,7 @@ from app.graph.recorder import RunCancelled
 from app.graph.version import compatible, current_version, upgrade_blocked_message
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
-from app.runs import lifecycle, review_gate
+from app.runs import lifecycle, records, review_gate
 from app.runs.integrity import checked_for_resume
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
@@ -220,6 +220,10 @@ class RunWorker:
             with self._sessions() as session:
                 recorded = review_gate.recorded_resolutions(session=session, run_id=spec.replay_of)
         try:
+            # A guided timed run's plan, stored once: a resume follows the same one.
+            plan = records.guidance_plan(
+                self._sessions, run_id, spec.problem, spec.guidance, spec.replay_of
+            )
             execution = execute_ltaa(
                 spec.problem,
                 graph=self.graph,
@@ -234,6 +238,7 @@ class RunWorker:
                 recorded_reviews=recorded,
                 resume_with=admission.resume_with,
                 rate_notes=spec.rate_notes,
+                plan=plan,
             )
         except RunCancelled:
             self._end_stopped(run_id, stop)

@@ -33,7 +33,12 @@ from app.reasoners.factory import make_reasoner
 from app.reasoners.scope import DEFAULT_LLM_MARGIN
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
-from app.solvers.timed_guidance import ScheduleGuidance
+from app.solvers.timed_guidance import (
+    GuidancePlan,
+    ScheduleGuidance,
+    guided_problem,
+    plan_guidance,
+)
 
 
 class LTAAOptions(SolverOptions):
@@ -63,9 +68,13 @@ def graph_context(
     review: ReviewPolicy | None = None,
     recorded_reviews: Mapping[int, Resolution] | None = None,
     rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] | None = None,
+    plan: GuidancePlan | None = None,
 ) -> GraphContext:
     """The LTAA graph's run context, with exact regret always, guidance on request, and the
-    review gate when the run has a review policy (or replays recorded resolutions)."""
+    review gate when the run has a review policy (or replays recorded resolutions).
+
+    A guided timed run follows `plan` (a durable run's stored plan) or, without one, the
+    plan solved here; its problem then decides in the plan's order."""
     oracle = CompletionOracle(problem)
 
     def cost(task_index: int, loads: Sequence[int], robot: int) -> float | None:
@@ -79,10 +88,13 @@ def graph_context(
         else None
     )
     guide: Guidance | None = None
-    if guidance == "optimizer":
-        # In time, the `schedule` solver's plan of the remaining tasks (SPEC 16).
-        timed = problem.instance.timed
-        guide = ScheduleGuidance(problem, recorder) if timed else oracle.guidance
+    if guidance == "optimizer" and problem.instance.timed:
+        # In time, the `schedule` solver's plan, followed in its order (SPEC 16).
+        plan = plan if plan is not None else plan_guidance(problem)
+        problem = guided_problem(problem, plan)
+        guide = ScheduleGuidance(plan) if plan.robots else None
+    elif guidance == "optimizer":
+        guide = oracle.guidance
     return GraphContext(
         problem=problem,
         reasoner=reasoner,
@@ -113,6 +125,7 @@ def execute_ltaa(
     recorded_reviews: Mapping[int, Resolution] | None = None,
     resume_with: Any = None,
     rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] | None = None,
+    plan: GuidancePlan | None = None,
 ) -> Execution:
     """The one execution path of an LTAA problem (durable runs, `ltaa run` and the
     synchronous solver): its context with exact regret (and guidance on request), then
@@ -128,6 +141,7 @@ def execute_ltaa(
         review=review,
         recorded_reviews=recorded_reviews,
         rate_notes=rate_notes,
+        plan=plan,
     )
     return execute(graph, context, thread_id, resume=resume, resume_with=resume_with)
 
@@ -183,6 +197,11 @@ class LTAASolver(Solver):
         except DomainError as exc:
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
         recorder = MemoryRecorder()
+        # Solved here rather than in graph_context: its order also places the pins without
+        # a start in graph_times below, as the graph placed them.
+        plan = None
+        if opts.guidance == "optimizer" and problem.instance.timed:
+            plan = plan_guidance(problem)
         try:
             execution = execute_ltaa(
                 problem,
@@ -193,6 +212,7 @@ class LTAASolver(Solver):
                 quality_threshold=opts.quality_threshold,
                 max_retries=opts.max_retries,
                 guidance=opts.guidance,
+                plan=plan,
             )
         except DomainError as exc:
             # e.g. the Messages API refusing the model: point at the request's option.
@@ -206,7 +226,11 @@ class LTAASolver(Solver):
             assignment,
             usage=used,
             details={
-                **graph_times(problem, assignment, decisions),
+                **graph_times(
+                    problem if plan is None else guided_problem(problem, plan),
+                    assignment,
+                    decisions,
+                ),
                 "reasoner": reasoner.name,
                 "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),
                 "fallbacks": sum(d.fallback for d in decisions),

@@ -1,73 +1,84 @@
 """Optimizer guidance on a timed instance (SPEC 16 "The LTAA graph on time", SPEC 4): the
-`schedule` solver's plan for the tasks still to decide.
+`schedule` solver's plan, solved once when the run starts.
 
-The time-free oracle (app.solvers.oracle) counts the tasks after the current one in queue
-order; a timed run decides in time order and its best completion depends on when each
-robot is free. So the guidance here is CP-SAT's schedule of the remaining problem: every
-task decided so far pinned to its robot at its recorded start (a fact, as a revision's
-started tasks are), the rest free. It is solved when first asked, and again only when the
-run departs from it (a reasoner that overrules the guidance, a review): while the run
-follows the plan, the plan's remaining part stays the best known completion.
+Who alone is not enough in time. The graph places each task when it decides it, at the
+earliest its robot and predecessors allow, so the times depend on the order of the
+decisions: SPEC 16's earliest-start order gives each robot the plan's tasks in another
+sequence than the plan's, and the guided makespan fell 20-55% short of the optimum on
+`baseline_timed`. So a guided run decides in the plan's order (by the plan's starts, ties
+in queue order; only ready tasks come up, so precedence holds): a robot that follows the
+plan gets the plan's tasks in the plan's sequence, each placed no later than the plan has
+it (by induction over the order: its predecessors and the robot's previous task end no
+later), and the makespan is the plan's. Unguided runs keep SPEC 16's order.
 
-CP-SAT stops at a wall-clock limit, so two solves of one problem may return different
-plans of equal or near value: a guided timed run that is resumed after a crash solves
-again and may be guided differently from there on (docs/schedules.md, "Runs in time").
+One plan per run, never re-solved. Where the run departs from it (a reasoner overrules
+the guidance, a review), the rest is still decided in the plan's order, which stays a valid
+order (precedence-respecting; the times are placed as the graph chose), and the plan's
+robot remains the advice. Re-planning would guide better after a departure but CP-SAT
+stops at a wall-clock limit, so a re-plan is not reproducible; with one stored plan a run
+resumed after a crash decides in the same order with the same advice
+(docs/schedules.md, "Runs in time"). The durable runs store the plan as the run's
+`guidance_planned` event and read it back on resume (app.runs.records).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
-from app.graph.recorder import DecisionRecord, Recorder
 from app.solvers.cpsat.search import solve_schedule
 
 GUIDANCE_TIME_LIMIT_S = 5.0
 
 
+@dataclass(frozen=True)
+class GuidancePlan:
+    """The `schedule` solver's plan a guided timed run follows: per task its robot and
+    start. Empty: no schedule was found in time, so the run is not guided."""
+
+    robots: tuple[int, ...]
+    starts: tuple[float, ...]
+
+    def as_json(self) -> dict[str, Any]:
+        return {"robots": list(self.robots), "starts": list(self.starts)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> GuidancePlan:
+        return cls(
+            tuple(int(r) for r in data.get("robots") or ()),
+            tuple(float(s) for s in data.get("starts") or ()),
+        )
+
+
+def plan_guidance(problem: Problem, *, time_limit_s: float = GUIDANCE_TIME_LIMIT_S) -> GuidancePlan:
+    """The plan for a run that has decided nothing yet (its pins are the problem's)."""
+    try:
+        outcome = solve_schedule(problem, time_limit_s=time_limit_s, workers=1)
+    except DomainError:
+        # No schedule exists (or none was found in time): no guidance, the graph decides
+        # by its own rule and in SPEC 16's order.
+        return GuidancePlan((), ())
+    slots = outcome.schedule.slots  # one per task, in queue order
+    return GuidancePlan(tuple(s.robot for s in slots), tuple(float(s.start) for s in slots))
+
+
+def guided_problem(problem: Problem, plan: GuidancePlan) -> Problem:
+    """The problem whose decision order is the plan's (unchanged without a plan)."""
+    if not plan.robots:
+        return problem
+    return dataclasses.replace(problem, decide_by=MappingProxyType(dict(enumerate(plan.starts))))
+
+
 class ScheduleGuidance:
-    def __init__(
-        self,
-        problem: Problem,
-        recorder: Recorder,
-        *,
-        time_limit_s: float = GUIDANCE_TIME_LIMIT_S,
-    ) -> None:
-        self._problem = problem
-        self._recorder = recorder
-        self._time_limit_s = time_limit_s
-        self._plan: dict[int, int] | None = None
-        self.solves = 0
+    """The graph's guidance: the plan's robot for the task being decided."""
+
+    def __init__(self, plan: GuidancePlan) -> None:
+        self._robots = plan.robots
 
     def __call__(self, task_index: int, loads: Sequence[int]) -> int | None:
-        decided = {d.task_index: d for d in self._recorder.decisions() if d.start is not None}
-        plan = self._plan
-        if plan is None or any(plan.get(t) != d.robot for t, d in decided.items()):
-            plan = self._plan = self._solve(decided)
-        return plan.get(task_index)
-
-    def _solve(self, decided: Mapping[int, DecisionRecord]) -> dict[int, int]:
-        problem = self._problem
-        self.solves += 1
-        try:
-            rest = Problem.build(
-                problem.instance,
-                problem.mode,
-                problem.cap.max_deviation,
-                uncapped=problem.cap.max_deviation is None,
-                pinned={**problem.pinned, **{t: d.robot for t, d in decided.items()}},
-                unavailable=problem.unavailable,
-                objective=problem.objective,
-                pinned_starts={
-                    **problem.pinned_starts,
-                    **{t: d.start for t, d in decided.items() if d.start is not None},
-                },
-                not_before=problem.not_before,
-            )
-            outcome = solve_schedule(rest, time_limit_s=self._time_limit_s, workers=1)
-        except DomainError:
-            # No schedule of the rest exists (or none was found in time): no guidance, the
-            # graph decides by its own rule.
-            return {}
-        return dict(enumerate(outcome.schedule.assignment))
+        return self._robots[task_index] if task_index < len(self._robots) else None

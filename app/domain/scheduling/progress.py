@@ -10,6 +10,12 @@ allow. It is the list scheduler's rule (app.domain.scheduling.list_schedule) wit
 robot chosen at each step instead of given up front, so the graph's times are the list
 schedule of its own assignment placed in its own order.
 
+A guided run (a problem with `decide_by`, the guidance plan's starts) decides instead in
+the plan's order: among the ready tasks, the one the plan starts first (ties: queue
+order). Each robot that follows the plan then gets the plan's tasks in the plan's
+sequence, and placed at the earliest they end no later than in the plan
+(app.solvers.timed_guidance says why the order matters).
+
 Pinned tasks (a revision) are not the graph's to decide: a pin with a start is fixed on
 its robot from the outset; a pin without one is placed on its robot when it comes up in
 the order, like any task. Everything here is a deterministic function of the problem and
@@ -101,14 +107,21 @@ class TimedProgress:
             default=math.inf,
         )
 
+    def _key(self, task: int) -> float:
+        plan = self.problem.decide_by
+        if plan:
+            # A fixed key: the lazy heap below never needs to refresh it.
+            return plan.get(task, math.inf)
+        return self._estimate(task)
+
     def _push(self, task: int) -> None:
-        heapq.heappush(self._heap, (self._estimate(task), task))
+        heapq.heappush(self._heap, (self._key(task), task))
 
     def _peek(self) -> int | None:
         """The next task in the order (estimates only grow: a lazy heap, as list_schedule)."""
         while self._heap:
             est, t = self._heap[0]
-            now = self._estimate(t)
+            now = self._key(t)
             if now > est + EPS:
                 heapq.heapreplace(self._heap, (now, t))
                 continue
