@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated
 
 from fastapi import Depends, Path, Request
@@ -14,6 +14,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import Caller, KeyRing, Role
 from app.api.errors import ApiError
+from app.api.run_pages import AssignmentPages
 from app.api.schemas.runs import RUN_ID_PATTERN
 from app.config import Settings
 from app.runs.worker import RunWorker
@@ -36,6 +37,8 @@ class RunsContext:
 
     sessions: sessionmaker[Session]
     worker: RunWorker
+    # Polls render each stored assignment once (app.api.run_pages).
+    pages: AssignmentPages = field(default_factory=AssignmentPages)
 
 
 async def get_runs(request: Request) -> RunsContext:

@@ -201,7 +201,15 @@ class RunWorker:
         # The lease first: a process that lost the run to another is told so (LeaseLost)
         # before the state check, which also fails once the new owner moved the run.
         fence = fences(self.ownership.fence(run_id, stop), status_fence(run_id, stop))
-        recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop, fence=fence)
+        # Attempts wait for their decision's transaction unless a review may pause the
+        # graph inside a task (a resumed `finalize` reads them from the table).
+        recorder = SqlRecorder(
+            run_id=run_id,
+            sessions=self._sessions,
+            stop=stop,
+            fence=fence,
+            defer_offline=spec.review_policy is None,
+        )
         try:
             reasoner = self._reasoner(run_id, spec, fence)
         except DomainError as exc:

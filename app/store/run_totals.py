@@ -8,6 +8,7 @@ SQL, a poll reads a few numbers. The page itself is read as plain rows (no ORM o
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -72,3 +73,25 @@ def decision_page(*, session: Session, run_id: str, offset: int, limit: int | No
     d = _DECISIONS.c
     query = select(_DECISIONS).where(d.run_id == run_id).order_by(d.task_index).offset(offset)
     return list(session.execute(query if limit is None else query.limit(limit)))
+
+
+def page_indexes(*, session: Session, run_id: str, offset: int, limit: int | None) -> list[int]:
+    """The task indexes of decision_page's rows (read from the index alone)."""
+    d = _DECISIONS.c
+    query = select(d.task_index).where(d.run_id == run_id).order_by(d.task_index).offset(offset)
+    return [int(t) for t in session.scalars(query if limit is None else query.limit(limit))]
+
+
+def decision_rows(*, session: Session, run_id: str, tasks: Sequence[int]) -> list[Any]:
+    """The rows (as decision_page's) of these task indexes, in task order: one range read
+    from the first to the last, kept to those asked for."""
+    if not tasks:
+        return []
+    d = _DECISIONS.c
+    wanted = set(tasks)
+    query = (
+        select(_DECISIONS)
+        .where(d.run_id == run_id, d.task_index.between(min(wanted), max(wanted)))
+        .order_by(d.task_index)
+    )
+    return [row for row in session.execute(query) if row.task_index in wanted]
