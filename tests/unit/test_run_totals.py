@@ -50,6 +50,14 @@ def test_sql_totals_equal_the_row_by_row_ones(tmp_path: Path) -> None:
     )
     assert abs(by_sums.latency_ms - by_rows.latency_ms) < 1e-9
     assert [records.decision_record(d).task_index for d in page] == [2, 3, 4]
+    # A poll that kept some of the page reads its indexes, then the rows it lacks.
+    with sessions() as session:
+        indexes = run_totals.page_indexes(session=session, run_id="r1", offset=2, limit=3)
+        rows = run_totals.decision_rows(session=session, run_id="r1", tasks=[2, 4])
+        none = run_totals.decision_rows(session=session, run_id="r1", tasks=[])
+        everything = run_totals.page_indexes(session=session, run_id="r1", offset=0, limit=None)
+    assert indexes == [d.task_index for d in page] and everything == list(range(6))
+    assert rows == [page[0], page[2]] and none == []
 
     recorder.save_decision(decision_record(5, robot=1, regret=None))
     with sessions() as session:
