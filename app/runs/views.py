@@ -76,12 +76,16 @@ def run_view(
     offset: int = 0,
     limit: int | None = None,
     have: Collection[int] = (),
+    tallies: LruCache[run_totals.Tally] | None = None,
 ) -> RunView:
     """The run with its decisions from the offset-th, at most limit of them (None: all).
 
     `have`: task indexes whose decision the caller keeps from an earlier read (a stored
     decision never changes): those are left out of `decisions` unless they have an
-    execution report, the one part of a page row that moves."""
+    execution report, the one part of a page row that moves. `tallies`: the settled
+    totals of the runs this caller polls (app.store.run_totals.Tally), so that a poll reads
+    only what was stored since the last (aggregated in SQL, the whole run's rows are read
+    with their text: 30 ms a poll of a 10,000-task run); None: aggregated in SQL."""
     with sessions() as session:
         # The request (a 10,000-task instance is a megabyte of JSON) is read and parsed once
         # per run: it never changes, and a poll every 0.5 s parsed it every time.
@@ -91,7 +95,15 @@ def run_view(
         spec = _SPECS.get_or_load(
             run_id, lambda: RunSpec.from_json(require_run(session, run_id).request)
         )
-        totals = run_totals.decision_totals(session=session, run_id=run_id)
+        if tallies is None:
+            totals = run_totals.decision_totals(session=session, run_id=run_id)
+            replies = run_totals.reply_totals(session=session, run_id=run_id)
+        else:
+            now, settled = run_totals.tally(
+                session=session, run_id=run_id, settled=tallies.get(run_id) or run_totals.Tally()
+            )
+            tallies.put(run_id, settled)
+            totals, replies = now.totals(), now.reply_rows()
         execution = {
             r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
         }
@@ -108,7 +120,7 @@ def run_view(
             page = [d.task_index for d in rows]
         decisions = [records.decision_record(d) for d in rows]
         pins = pins_of(rows)
-        usage = records.usage_of_totals(run_totals.reply_totals(session=session, run_id=run_id))
+        usage = records.usage_of_totals(replies)
         signed = signoffs(session=session, run_id=run_id)
         completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
         # Every decision's robot only once the run is complete, for its metrics.

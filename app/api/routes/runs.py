@@ -201,7 +201,12 @@ def _page_out(runs: RunsContext, run_id: str, offset: int, limit: int) -> Respon
     (a poll of a long run reads and renders only the decisions stored since the last)."""
     kept = runs.pages.kept(run_id)
     view = views.run_view(
-        sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit, have=kept.keys()
+        sessions=runs.sessions,
+        run_id=run_id,
+        offset=offset,
+        limit=limit,
+        have=kept.keys(),
+        tallies=runs.tallies,
     )
     return runs.pages.response(
         view,
