@@ -141,7 +141,22 @@ def screenshots() -> list[Path]:
             f"{url}/runs/{running}/cancel", headers={"X-API-Key": SUPERVISOR_KEY}, timeout=60
         )
         out.append(_site_screenshot(page, url))
+        out.append(gantt_screenshot(page, url))
     return out
+
+
+def gantt_screenshot(page: Page, url: str) -> Path:
+    """A timed run's schedule (SPEC 16): the 36-task `baseline_timed` scenario's Gantt
+    chart on its run page, one lane per robot, the critical path in red."""
+    run_id = _start(url, {"scenario": "baseline_timed"})
+    _wait(url, run_id)
+    page.set_viewport_size({"width": 1280, "height": 800})
+    page.goto(f"{url}/console/runs/{run_id}")
+    section = page.locator("section", has=page.locator("#gantt-h"))
+    section.locator("figure.gantt-chart svg").wait_for()
+    path = IMG / "console_gantt.png"
+    section.screenshot(path=path)
+    return path
 
 
 def _site_screenshot(page: Page, url: str) -> Path:

@@ -21,6 +21,7 @@ SECTIONS = [
     "benchmarks.llm_scope",
     "benchmarks.adaptation",
     "benchmarks.site_learning",
+    "benchmarks.timed_schedules",
 ]
 
 
@@ -32,6 +33,16 @@ def _split(report: str) -> tuple[str, dict[str, str]]:
         title = chunk.split("\n", 1)[0]
         sections[title] = "## " + chunk.rstrip("\n") + "\n"
     return header.rstrip("\n") + "\n", sections
+
+
+def _stamped(header: str) -> list[str]:
+    """The clauses of the header's re-measured stamp ("'T' re-measured on D (`cmd`)" or
+    "Sections 'A' and 'B' re-measured ..."), without the closing "the rest" clause."""
+    if "\n_Sections " not in header:
+        return []
+    line = header.split("\n_Sections ", 1)[1].split("\n", 1)[0].rstrip("_")
+    clauses = [c.strip() for c in line.split("; ")]
+    return [c for c in clauses if c and not c.startswith("the rest")]
 
 
 def main(only: list[str] | None = None) -> None:
@@ -54,10 +65,13 @@ def main(only: list[str] | None = None) -> None:
     if only and path.exists():
         header, kept = _split(path.read_text(encoding="utf-8"))
         kept.update(zip(titles, parts, strict=True))
+        # Sections re-measured before keep their mention: the stamp lists them all.
+        earlier = _stamped(header)
         stamp = (
             f"_Sections {', '.join(repr(t) for t in titles)} re-measured on "
-            f"{dt.date.today().isoformat()} (`ltaa bench {' '.join(only)}`); the rest as "
-            "generated above._\n"
+            f"{dt.date.today().isoformat()} (`ltaa bench {' '.join(only)}`)"
+            + "".join(f"; {e}" for e in earlier if not any(repr(t) in e for t in titles))
+            + "; the rest as generated above._\n"
         )
         header = header.split("\n_Sections ", 1)[0].rstrip("\n") + "\n\n" + stamp
         path.write_text(header + "\n" + "\n".join(kept.values()), encoding="utf-8")

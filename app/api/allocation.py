@@ -5,6 +5,8 @@
 from __future__ import annotations
 
 import time
+from datetime import UTC, datetime
+from typing import Any
 
 from app.api.schemas.allocation import (
     AllocateRequest,
@@ -14,23 +16,35 @@ from app.api.schemas.allocation import (
     MetricsOut,
     UsageOut,
 )
+from app.api.schemas.schedule import ScheduleOut, ViolationOut
 from app.domain import catalog
 from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics
 from app.domain.models import Instance
+from app.domain.objective import Objective, ObjectiveKind
 from app.domain.pins import resolve_pins
 from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.schedule import Schedule
 from app.reasoners.factory import ReasonerSettings
+from app.schedules import schedule_json, violations_json
 from app.solvers.base import Solution, Solver
 from app.solvers.registry import get_solver
 
 
 def resolve_instance(request: InstanceRequest) -> Instance:
-    """The instance a request describes; DomainError naming the field if it describes none."""
+    """The instance a request describes; DomainError naming the field if it describes none.
+
+    A timed instance sent without `start` starts at the request's arrival (SPEC 16)."""
+    start = request.start
+    if start is None and any(t.duration is not None for t in request.tasks or ()):
+        start = datetime.now(UTC).replace(microsecond=0)
     return catalog.instance_of(
         request.scenario,
         None if request.tasks is None else [t.to_domain() for t in request.tasks],
         None if request.robots is None else [r.to_domain() for r in request.robots],
+        travel=request.travel,
+        start=start,
     )
 
 
@@ -40,8 +54,10 @@ def build_problem(request: InstanceRequest) -> Problem:
     # An explicit `"max_deviation": null` means no cap; leaving it out means the mode's.
     uncapped = "max_deviation" in request.model_fields_set and request.max_deviation is None
     instance = resolve_instance(request)
+    if not isinstance(request, AllocateRequest):
+        return Problem.build(instance, request.mode, request.max_deviation, uncapped=uncapped)
     pins = None
-    if isinstance(request, AllocateRequest) and (request.pinned or request.unavailable):
+    if request.pinned or request.unavailable:
         pins = resolve_pins(
             instance, [(p.task_id, p.robot) for p in request.pinned], request.unavailable
         )
@@ -52,7 +68,25 @@ def build_problem(request: InstanceRequest) -> Problem:
         uncapped=uncapped,
         pinned=pins.pinned if pins else None,
         unavailable=pins.unavailable if pins else (),
+        objective=Objective(ObjectiveKind(request.objective), request.min_expected_success),
+        pinned_starts=_pinned_starts(instance, request),
     )
+
+
+def _pinned_starts(instance: Instance, request: AllocateRequest) -> dict[int, float]:
+    """Task index -> fixed start, for the pins that carry one (SPEC 16)."""
+    index = {str(task.id): t for t, task in enumerate(instance.tasks)}
+    starts: dict[int, float] = {}
+    for i, pin in enumerate(request.pinned):
+        if pin.start is None:
+            continue
+        if not instance.timed:
+            raise DomainError(
+                f"pinned.{i}.start",
+                "a pin's start applies to timed instances only: give every task a 'duration'",
+            )
+        starts[index[str(pin.task_id)]] = float(pin.start)  # resolve_pins checked the id
+    return starts
 
 
 def load_solver(name: str, settings: ReasonerSettings | None = None) -> Solver:
@@ -92,7 +126,37 @@ def build_response(
         ),
         usage=UsageOut.from_domain(solution.usage),
         elapsed_ms=elapsed_ms,
+        **(_timed_fields(problem, solution.details) if instance.timed else {}),
     )
+
+
+def _timed_fields(problem: Problem, details: dict[str, Any]) -> dict[str, Any]:
+    """The schedule block of an answer on a timed instance (SPEC 16), and which part of it
+    is exact: CP-SAT's own schedule (`schedule`), or the list scheduler's timing of another
+    method's assignment (`app.solvers.timed`)."""
+    schedule: Schedule | None = details.get("schedule")
+    out: dict[str, Any] = {"schedule_model": details.get("schedule_model")}
+    if "schedule_model" not in details:  # the method scheduled itself: CP-SAT
+        status = details["status"]
+        out = {
+            "schedule_model": f"CP-SAT decided robots and start times together ({status}: "
+            + ("the makespan is proven" if status == "optimal" else "bound and gap below")
+            + ")",
+            "status": status,
+            "bound": details["bound"],
+            "gap": details["gap"],
+            "model": details["model"],
+        }
+    if schedule is None:
+        out["schedule_error"] = details.get("schedule_error")
+        return out
+    # Checked for every method, CP-SAT's too: the answer says what its schedule breaks.
+    out["schedule"] = ScheduleOut.model_validate(schedule_json(problem, schedule))
+    out["schedule_violations"] = [
+        ViolationOut.model_validate(v)
+        for v in violations_json(problem, check_schedule(problem, schedule))
+    ]
+    return out
 
 
 def allocate(

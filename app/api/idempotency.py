@@ -82,7 +82,10 @@ def keyed(key: str | None, request: Mapping[str, Any]) -> Idempotency | None:
 
 def idempotency_of(key: str | None, body: BaseModel) -> Idempotency | None:
     # Only the fields the client sent: an explicit `"max_deviation": null` (no cap) and an
-    # omitted one (the mode's cap) are different requests.
+    # omitted one (the mode's cap) are different requests. No key, no digest: dumping a
+    # large body (a 1,000-task timed instance) for nothing costs the request time.
+    if key is None:
+        return None
     return keyed(key, body.model_dump(mode="json", exclude_unset=True))
 
 

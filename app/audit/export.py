@@ -20,6 +20,7 @@ from app.audit.pages import (
 )
 from app.reasoners.attribution import Attribution, attempt_attribution, decision_attribution
 from app.store import chain
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.models import Attempt, Decision, Run, RunAnnotation, RunEvent, as_utc
 
@@ -132,8 +133,10 @@ def _record_pages(
         n_events += len(events)
         yield [_event_line(e) for e in events]
     # In chain order, so a checker links the lines as they come (a revision: pins first).
-    for pinned in chain_passes(header["revision_of"]):
-        for decisions in decision_pages(sessions, run_id, pinned):
+    with sessions() as session:
+        sequenced = decision_repo.sequenced_order(session=session, run_id=run_id) is not None
+    for pinned, by_seq in chain_passes(header["revision_of"], sequenced):
+        for decisions in decision_pages(sessions, run_id, pinned, by_seq):
             n_decisions += len(decisions)
             n_attempts += sum(len(a) for _, a in decisions)
             yield [_decision_line(d, a, header["reasoner"]) for d, a in decisions]

@@ -31,7 +31,11 @@ def chain_heads(session: Session, run_id: str) -> ChainHeads:
     last_decision = session.execute(
         select(Decision.chain_hash)
         .where(Decision.run_id == run_id)
-        .order_by(Decision.pinned.is_(None).desc(), Decision.task_index.desc())
+        # A timed run's decisions are chained in the order made (seq), others in task order.
+        .order_by(
+            Decision.pinned.is_(None).desc(),
+            func.coalesce(Decision.seq, Decision.task_index).desc(),
+        )
         .limit(1)
     ).first()
     decisions = session.scalar(

@@ -68,16 +68,23 @@ def annotation_pages(sessions: sessionmaker[Session], run_id: str) -> Iterator[l
     )
 
 
-def chain_passes(revision_of: str | None) -> tuple[bool | None, ...]:
-    """How to read a run's decisions in the order they were chained: all of them in task
-    order, or a revision's pins first, then the rest (repo.revision_chain_order)."""
-    return (None,) if revision_of is None else (True, False)
+def chain_passes(
+    revision_of: str | None, sequenced: bool = False
+) -> tuple[tuple[bool | None, bool], ...]:
+    """How to read a run's decisions in the order they were chained, as (pinned, by_seq)
+    passes: all of them in task order, or a revision's pins first, then the rest
+    (repo.revision_chain_order); a timed run's own decisions in the order the graph made
+    them (`sequenced`, SPEC 16)."""
+    if revision_of is None:
+        return ((None, sequenced),)
+    return ((True, False), (False, sequenced))
 
 
 def decision_pages(
     sessions: sessionmaker[Session],
     run_id: str,
     pinned: bool | None = None,
+    by_seq: bool = False,
 ) -> Iterator[list[tuple[Decision, list[Attempt]]]]:
     after = -1
     while True:
@@ -88,14 +95,16 @@ def decision_pages(
                 after_task=after,
                 limit=DECISIONS_PER_PAGE,
                 pinned=pinned,
+                by_seq=by_seq,
             )
             if not page:
                 return
+            tasks = [d.task_index for d in page]
             attempts = decision_repo.attempts_of_tasks(
-                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
+                session=session, run_id=run_id, first=min(tasks), last=max(tasks)
             )
         yield [(d, attempts.get(d.task_index, [])) for d in page]
-        after = page[-1].task_index
+        after = (page[-1].seq or 0) if by_seq else page[-1].task_index
 
 
 def columns(row: Any, fields: dict[str, Any]) -> dict[str, Any]:

@@ -94,6 +94,10 @@ def verify_trace(
             pins = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=True)
             rest = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=False)
             order = decision_repo.revision_chain_order(pins, rest)
+        sequenced = decision_repo.sequenced_order(session=session, run_id=run_id)
+        if sequenced is not None:  # a timed run: chained in the order the graph decided
+            pins = decision_repo.decided_indexes(session=session, run_id=run_id, pinned=True)
+            order = pins + sequenced
 
     decisions = chain.ChainCheck(
         "decisions",
@@ -103,8 +107,8 @@ def verify_trace(
         order=order,
         genesis_link=geneses["decisions"],
     )
-    for pinned in chain_passes(revision_of):
-        for page in decision_pages(sessions, run_id, pinned):
+    for pinned, by_seq in chain_passes(revision_of, sequenced is not None):
+        for page in decision_pages(sessions, run_id, pinned, by_seq):
             for d, attempts in page:
 
                 def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:

@@ -29,7 +29,8 @@ def allocate(
     instance: Annotated[
         Path | None,
         typer.Option(
-            help="JSON file with your own 'tasks' and 'robots' (replaces --scenario)",
+            help="JSON file with your own 'tasks' and 'robots', and for a timed instance "
+            "'travel' and 'start' (replaces --scenario)",
             exists=True,
             dir_okay=False,
         ),
@@ -54,14 +55,14 @@ def allocate(
         "solver": solver,
         "mode": mode.value,
         "seed": seed,
-        "options": _parse_options(option or []),
+        "options": parse_options(option or []),
     }
     if max_deviation is not None:
         body["max_deviation"] = max_deviation
     if instance is None:
         body["scenario"] = scenario
     else:
-        body.update(_read_instance(instance, as_json))
+        body.update(read_instance(instance, as_json))
     try:
         response = run_allocation(AllocateRequest.model_validate(body), get_settings())
     except ValidationError as exc:
@@ -75,7 +76,7 @@ def allocate(
         _print_report(response, show_tasks=show_tasks)
 
 
-def _parse_options(pairs: list[str]) -> dict[str, Any]:
+def parse_options(pairs: list[str]) -> dict[str, Any]:
     options: dict[str, Any] = {}
     for pair in pairs:
         key, sep, raw = pair.partition("=")
@@ -88,7 +89,8 @@ def _parse_options(pairs: list[str]) -> dict[str, Any]:
     return options
 
 
-def _read_instance(path: Path, as_json: bool) -> dict[str, Any]:
+def read_instance(path: Path, as_json: bool) -> dict[str, Any]:
+    """The instance part of an /allocate body from a JSON file (other keys are ignored)."""
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -113,7 +115,7 @@ def _read_instance(path: Path, as_json: bool) -> dict[str, Any]:
             },
             as_json,
         )
-    return {key: doc[key] for key in ("tasks", "robots") if key in doc}
+    return {key: doc[key] for key in ("tasks", "robots", "travel", "start") if key in doc}
 
 
 def _print_report(r: AllocateResponse, *, show_tasks: bool) -> None:

@@ -4,6 +4,7 @@ diff against its parent with rich. Talks HTTP (the run lives in the server's sto
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Annotated, Any
 
 import httpx
@@ -50,6 +51,22 @@ def parse_task(text: str) -> dict[str, Any]:
     return {"id": task_id, "features": features.split(",")}
 
 
+def parse_delay(text: str) -> dict[str, Any]:
+    """'21:30' -> task 21 takes 30 minutes longer (SPEC 16)."""
+    task_id, _, minutes = text.rpartition(":")
+    try:
+        value = float(minutes)
+    except ValueError:
+        value = 0.0
+    if not task_id or value <= 0:
+        raise ReviseError(f"--delay {text!r}: write <task id>:<minutes>, minutes above 0")
+    return {
+        "type": "delay",
+        "task_id": int(task_id) if task_id.isdigit() else task_id,
+        "minutes": int(value) if value.is_integer() else value,
+    }
+
+
 def build_changes(
     *,
     unavailable: list[str],
@@ -60,6 +77,7 @@ def build_changes(
     remove: list[str],
     mode: str | None,
     max_deviation: float | None,
+    delays: Sequence[str] = (),
 ) -> list[dict[str, Any]]:
     changes: list[dict[str, Any]] = [{"type": "robot_unavailable", "robot": r} for r in unavailable]
     changes += [{"type": "robot_available", "robot": r} for r in available]
@@ -85,6 +103,7 @@ def build_changes(
         if max_deviation is not None:
             change["max_deviation"] = max_deviation
         changes.append(change)
+    changes += [parse_delay(d) for d in delays]
     return changes
 
 
@@ -178,6 +197,35 @@ def print_diff(created: dict[str, Any], diff: dict[str, Any] | None, console: Co
             pct(c["success_after"]),
         )
     console.print(moved)
+    if diff.get("schedule"):
+        print_time_moves(diff["schedule"], console)
+
+
+def print_time_moves(schedule: dict[str, Any], console: Console) -> None:
+    """SPEC 16: the makespans and each task that starts or ends at another time."""
+
+    def minute(value: dict[str, Any]) -> str:
+        return f"{value['minutes']:g} min ({value['at'] or '-'})"
+
+    console.print(
+        f"makespan: {minute(schedule['makespan_before'])} -> {minute(schedule['makespan_after'])}"
+    )
+    moves = Table(title=f"{len(schedule['moves'])} task(s) moved in time")
+    for column in ("task", "name", "robot", "start", "end", "moved (min)"):
+        moves.add_column(column)
+    for m in schedule["moves"]:
+        robot = m["robot_after"]
+        if m["robot_before"] != robot:
+            robot = f"{m['robot_before']} -> {robot}"
+        moves.add_row(
+            str(m["task_id"]),
+            m["task_name"],
+            robot,
+            f"{m['start_before']:g} -> {m['start_after']:g}",
+            f"{m['end_before']:g} -> {m['end_after']:g}",
+            f"{m['start_moved']:+g} / {m['end_moved']:+g}",
+        )
+    console.print(moves)
 
 
 @cli.command()
@@ -201,6 +249,14 @@ def revise(
     remove_task: Annotated[list[str] | None, typer.Option(help="Task id to drop")] = None,
     mode: Annotated[str | None, typer.Option(help="New operational mode")] = None,
     max_deviation: Annotated[float | None, typer.Option(help="New workload cap")] = None,
+    delay: Annotated[
+        list[str] | None,
+        typer.Option(help="<task id>:<minutes> the task takes longer (timed runs; repeatable)"),
+    ] = None,
+    now: Annotated[
+        str | None,
+        typer.Option(help="Plan from this RFC 3339 time (timed runs; default: the arrival)"),
+    ] = None,
     pin: Annotated[
         str, typer.Option(help="reported | decided | through:<task index> | tasks:<id,...>")
     ] = "reported",
@@ -230,12 +286,15 @@ def revise(
                 remove=remove_task or [],
                 mode=mode,
                 max_deviation=max_deviation,
+                delays=delay or [],
             ),
             "pin": parse_pin(pin),
             "reason": reason,
         }
         if reasoner is not None:
             body["reasoner"] = reasoner
+        if now is not None:
+            body["now"] = now
         created, diff = post_revision(url=url, api_key=api_key, run_id=run_id, body=body, wait=wait)
     except ReviseError as exc:
         Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)

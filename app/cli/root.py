@@ -7,6 +7,7 @@ from typing import Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from app.config import Settings
 
@@ -50,5 +51,9 @@ def fail(body: dict[str, Any], as_json: bool) -> NoReturn:
         err = Console(stderr=True)
         for item in body["detail"]:
             where = ".".join(str(p) for p in item["loc"][1:]) or "request"
-            err.print(f"[bold red]error[/] [cyan]{where}[/]: {item['msg']}", highlight=False)
+            # The message quotes names from the request: print them as text, not markup.
+            err.print(
+                f"[bold red]error[/] [cyan]{escape(where)}[/]: {escape(item['msg'])}",
+                highlight=False,
+            )
     raise typer.Exit(code=1)

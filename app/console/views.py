@@ -11,11 +11,12 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.console import browse, charts
 from app.console.frontier import FrontierPoint, cached_frontier, frontier
-from app.domain.errors import RunNotFoundError
+from app.domain.errors import RunNotFoundError, StateConflictError
 from app.domain.models import TaskId
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
+from app.plans import current, revisions
 from app.plans import diff as diffs
-from app.plans import revisions
+from app.schedules import gantt_svg
 from app.store.models import Attempt
 
 DECISIONS_PER_PAGE = 25
@@ -135,6 +136,11 @@ class RunPage:
     lineage: list[revisions.LineageEntry]  # root to head; one entry: never revised
     diff: DiffView | None  # a revision's, when drawn in the page (see diff_deferred)
     diff_deferred: bool  # a large revision: the page's script fetches its diff
+    # SPEC 16, a timed run: its schedule as a Gantt chart once every task is decided (None:
+    # untimed, or not decided yet, which `timed` tells apart), with its makespan.
+    gantt_svg: Markup | None = None
+    makespan: float | None = None
+    timed: bool = False
 
     @property
     def head(self) -> revisions.LineageEntry:
@@ -193,4 +199,23 @@ def run_page(
         lineage=lineage,
         diff=diff_view(sessions=sessions, run_id=run_id) if inline_diff else None,
         diff_deferred=is_revision and not inline_diff,
+        **gantt(sessions=sessions, run_id=run_id, timed=spec.problem.instance.timed),
     )
+
+
+def gantt(*, sessions: sessionmaker[Session], run_id: str, timed: bool) -> dict[str, Any]:
+    """A timed run's Gantt chart (server-rendered by app.schedules, the critical path
+    marked), once its schedule is whole; nothing for an untimed run. Its current
+    schedule: the decisions re-timed by the site's execution reports (app.plans.current)."""
+    if not timed:
+        return {}
+    try:
+        planned = current.current_schedule(sessions=sessions, run_id=run_id)
+    except StateConflictError:  # not every task decided yet
+        planned = None
+    if planned is None:
+        return {"timed": True}
+    problem, schedule = planned
+    # gantt_svg escapes every name it writes (task ids, robot labels).
+    svg = Markup(gantt_svg(problem, schedule))
+    return {"timed": True, "gantt_svg": svg, "makespan": schedule.makespan}

@@ -5,7 +5,7 @@ scenarios of SPEC 16 (kept apart: `scenarios()` lists exactly the four untimed o
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
 from functools import cache
@@ -130,9 +130,13 @@ def instance_of(
     scenario_name: str | None,
     tasks: Sequence[Task] | None,
     robots: Sequence[Robot] | None,
+    *,
+    travel: Mapping[str, Mapping[str, float]] | None = None,
+    start: datetime | None = None,
 ) -> Instance:
     """The instance a request describes, by a built-in scenario's name or by its own tasks
-    and robots; DomainError naming the field if it describes none, or both."""
+    and robots (with, for a timed instance, its travel times and start); DomainError naming
+    the field if it describes none, or both."""
     custom = tasks is not None or robots is not None
     if scenario_name is not None:
         if custom:
@@ -141,6 +145,14 @@ def instance_of(
                 f"'scenario' was sent together with 'tasks'/'robots'; {_FORMS}, not both",
                 code="conflicting_fields",
             )
+        for name, value in (("travel", travel), ("start", start)):
+            if value is not None:
+                raise DomainError(
+                    name,
+                    f"'{name}' times your own tasks; the built-in scenarios are untimed, "
+                    "send 'tasks' and 'robots' with durations instead",
+                    code="conflicting_fields",
+                )
         return scenario(scenario_name).instance
     if tasks is None:
         raise DomainError(
@@ -150,4 +162,4 @@ def instance_of(
         )
     if robots is None:
         raise DomainError("robots", f"robots missing; {_FORMS}", code="missing")
-    return Instance(tasks=tuple(tasks), robots=tuple(robots))
+    return Instance(tasks=tuple(tasks), robots=tuple(robots), travel=travel, start=start)

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from app.domain.modes import Mode, Weights
 from app.domain.phases import Phase
+
+if TYPE_CHECKING:
+    from app.domain.scheduling.progress import TimeOption
 
 
 @dataclass(frozen=True)
@@ -37,6 +41,16 @@ class DecisionContext:
     # SPEC 17: per robot, what its rates for this task rest on when they are not the
     # configured ones ("dexterous learned on 37 reports"); empty: configured.
     rate_notes: tuple[str, ...] = ()
+    # SPEC 16, a timed instance: per robot, when it would start and end the task and whether
+    # that meets the deadline and its shift; empty untimed. `feasible` then holds only robots
+    # that meet them too (unless none does: then time rules out no one).
+    timing: tuple[TimeOption, ...] = ()
+    zone: str | None = None  # the task's zone, on a timed instance with zones
+    release: float = 0.0
+    deadline: float | None = None
+    # Tasks allocated before this one (pins and decisions), when the graph does not decide
+    # in queue order (a timed instance); None: task_index of them.
+    allocated: int | None = None
 
     @property
     def labels(self) -> tuple[str, ...]:

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from app.domain.decision import DecisionContext
 from app.domain.modes import strategic_weights
 from app.domain.phases import Phase
 from app.domain.problem import Problem
+from app.domain.scheduling.progress import TimeOption
 
 # robot -> feature -> (basis, reports): app.domain.estimates.rate_notes
 RateNotes = Mapping[str, Mapping[str, tuple[str, int]]]
@@ -33,7 +35,12 @@ def decision_context(
     *,
     tier: int = 0,
     rate_notes: RateNotes | None = None,
+    timing: Sequence[TimeOption] = (),
+    allocated: int | None = None,
 ) -> DecisionContext:
+    """`timing`: on a timed instance, what each robot would make of the task in time
+    (app.graph.timing); robots that would miss its deadline or break their shift are then
+    not allowed, unless no allowed robot meets them."""
     inst, cap = problem.instance, problem.cap
     t = state["task_index"]
     loads = tuple(state["loads"])
@@ -41,6 +48,17 @@ def decision_context(
     view = state["view"]
     phase = Phase(view["phase"])
     bounds = None if cap.max_deviation is None else (cap.lower, cap.upper)
+    feasible = tuple(view["feasible"])
+    in_time = tuple(r for r in feasible if timing and timing[r].allowed)
+    zone: str | None = None
+    release = 0.0
+    deadline: float | None = None
+    if timing:
+        tm = inst.timing
+        zone_index = tm.task_zone[t]
+        zone = None if zone_index is None else tm.zones[zone_index]
+        release = tm.release[t]
+        deadline = None if math.isinf(tm.deadline[t]) else tm.deadline[t]
     return DecisionContext(
         task_index=t,
         total_tasks=inst.n_tasks,
@@ -51,7 +69,7 @@ def decision_context(
         success=tuple(float(x) for x in inst.success[t]),
         loads=loads,
         target=problem.target,
-        feasible=tuple(view["feasible"]),
+        feasible=in_time or feasible,
         phase=phase,
         mode=problem.mode,
         weights=strategic_weights(problem.mode, phase),
@@ -64,4 +82,9 @@ def decision_context(
         rate_notes=tuple(_rate_note(rate_notes.get(r.name, {}), task.features) for r in inst.robots)
         if rate_notes
         else (),
+        timing=tuple(timing),
+        zone=zone,
+        release=release,
+        deadline=deadline,
+        allocated=allocated,
     )

@@ -8,6 +8,8 @@ drops explanation in favour of a step-by-step fill-in template.
 
 from __future__ import annotations
 
+import math
+
 from app.domain.decision import DecisionContext, percent
 from app.domain.modes import MODE_DESCRIPTIONS, tradeoff_threshold
 from app.domain.phases import Phase
@@ -56,9 +58,10 @@ def _facts(ctx: DecisionContext) -> str:
         cap = "no workload cap"
     else:
         cap = f"cap: final loads in [{ctx.load_bounds[0]}, {ctx.load_bounds[1]}]"
+    number = ctx.task_index if ctx.allocated is None else ctx.allocated
     return "\n".join(
         [
-            f"Task {ctx.task_index + 1}/{ctx.total_tasks}: {ctx.task_name}{task_type}; "
+            f"Task {number + 1}/{ctx.total_tasks}: {ctx.task_name}{task_type}; "
             f"features: {', '.join(ctx.features)}",
             "Robots (S = mean success over the task's features; load = tasks so far):",
             *rows,
@@ -68,13 +71,46 @@ def _facts(ctx: DecisionContext) -> str:
                 else []
             ),
             f"Target load W = {ctx.target:.1f}; allocated {allocated}/{ctx.total_tasks}; {cap}.",
+            *_time_facts(ctx),
         ]
     )
 
 
+def _minutes(x: float) -> str:
+    return f"{x:g}"
+
+
+def _time_facts(ctx: DecisionContext) -> list[str]:
+    """SPEC 16: per robot, when it is next free, its travel to the task's zone, the start
+    and end it would give and the slack to the deadline (nothing on an untimed instance)."""
+    if not ctx.timing:
+        return []
+    where = f"zone {ctx.zone}, " if ctx.zone is not None else ""
+    deadline = "no deadline" if ctx.deadline is None else f"deadline {_minutes(ctx.deadline)}"
+    rows = []
+    for o in ctx.timing:
+        head = f"- {ctx.labels[o.robot]}: free {_minutes(o.free)}, travel {_minutes(o.travel)}"
+        if o.end == math.inf:
+            rows.append(f"{head}, {o.why_not}")
+            continue
+        slack = "" if o.slack == math.inf else f", slack {_minutes(o.slack)}"
+        rows.append(
+            f"{head}, start {_minutes(o.start)}, end {_minutes(o.end)}{slack}"
+            + ("" if o.allowed else f", NOT allowed: {o.why_not}")
+        )
+    return [
+        f"Time (minutes from the plan's start; {where}release {_minutes(ctx.release)}, "
+        f"{deadline}):",
+        *rows,
+        "A robot that misses the deadline or ends after its shift is not allowed. In the "
+        "Trade-Off Summary, say how many minutes later your robot ends than the earliest end.",
+    ]
+
+
 def _guidance(ctx: DecisionContext) -> str:
     threshold = tradeoff_threshold(ctx.mode, ctx.phase)
-    progress = ctx.task_index / ctx.total_tasks if ctx.total_tasks else 1.0
+    done = ctx.task_index if ctx.allocated is None else ctx.allocated
+    progress = done / ctx.total_tasks if ctx.total_tasks else 1.0
     lines = [
         f"Phase: {ctx.phase.value} (progress {progress:.0%}); {_PHASE_GUIDANCE[ctx.phase]}.",
         f"Mode: {ctx.mode.value}, {MODE_DESCRIPTIONS[ctx.mode]}; weights success:balance "

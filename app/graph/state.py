@@ -23,6 +23,7 @@ from app.domain.phases import balance_urgency, detect_phase
 from app.domain.problem import Problem
 from app.graph.recorder import Recorder
 from app.graph.review import ReviewGate
+from app.graph.timing import TimedCursor, first_task
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.graph.verdicts import VerdictCache
 from app.reasoners.base import Reasoner
@@ -80,6 +81,8 @@ class GraphContext:
     # SPEC 17: robot -> feature -> (basis, reports) of rates learned from the site (the
     # prompt says so); empty: every rate is the configured one.
     rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] = field(default_factory=dict)
+    # SPEC 16: on a timed instance, the robots' timelines and the decision order.
+    timed: TimedCursor = field(default_factory=TimedCursor)
 
     @property
     def max_attempts(self) -> int:
@@ -90,7 +93,7 @@ def initial_state(problem: Problem) -> dict[str, Any]:
     """The state before the first free task: with pins (a revision, or /allocate `pinned`)
     the graph decides only the unpinned tasks, starting from the loads the pins make."""
     loads = list(problem.initial_loads)
-    first = next_task(problem, -1)
+    first = first_task(problem) if problem.instance.timed else next_task(problem, -1)
     return {
         "task_index": first,
         "done": first >= problem.instance.n_tasks,
@@ -111,10 +114,18 @@ def task_view(
     loads: Sequence[int],
     guided_robot: int | None,
     guided_costs: Sequence[float | None] | None = None,
+    decided: int | None = None,
 ) -> TaskView:
+    """`decided`: the graph's decisions so far, when it does not decide in queue order (a
+    timed instance); else they are the free tasks before `task_index`."""
     n = problem.instance.n_tasks
     # SPEC 10: p = (pins + tasks decided so far) / tasks; with no pins, task_index / n.
-    allocated = problem.allocated_before(task_index)
+    if decided is None:
+        allocated = problem.allocated_before(task_index)
+        remaining = problem.remaining_after(task_index)
+    else:
+        allocated = len(problem.pinned) + decided
+        remaining = len(problem.free_tasks) - decided - 1
     phase = detect_phase(allocated, n)
     weights = strategic_weights(problem.mode, phase)
     return {
@@ -123,7 +134,7 @@ def task_view(
         "balance": balance_of(problem, loads),
         "severity": severity_of(problem, loads),
         "weights": [weights.success, weights.balance],
-        "feasible": problem.cap.feasible_robots(loads, problem.remaining_after(task_index)),
+        "feasible": problem.cap.feasible_robots(loads, remaining),
         "guided_robot": guided_robot,
         "guided_costs": list(guided_costs) if guided_costs is not None else None,
     }

@@ -9,10 +9,12 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.errors import RunNotFoundError
+from app.domain.errors import RunNotFoundError, StateConflictError
 from app.domain.metrics import balance_score
 from app.graph.recorder import DecisionRecord
+from app.plans.current import current_schedule
 from app.plans.revisions import RevisionConflictError
+from app.plans.schedule_moves import Timed, time_moves
 from app.runs import records
 from app.runs.spec import RunSpec
 from app.store import decision_repository as decision_repo
@@ -30,6 +32,9 @@ class Diff:
     fleet_changes: list[dict[str, Any]]
     before: dict[str, Any]
     after: dict[str, Any]
+    # SPEC 16: start/end moves and the makespans (app.plans.schedule_moves); None for an
+    # untimed revision, and until both plans have decided every task.
+    schedule: dict[str, Any] | None = None
 
 
 def side(run: Run, spec: RunSpec, decisions: list[DecisionRecord]) -> dict[str, Any]:
@@ -102,4 +107,23 @@ def diff(*, sessions: sessionmaker[Session], run_id: str) -> Diff:
         fleet_changes=list(detail.get("fleet_changes", [])),
         before=side(parent, parent_spec, before),
         after=side(run, spec, after),
+        # An untimed revision reads no schedule (nor its decisions a second time).
+        schedule=_schedule_moves(sessions, parent.id, run_id)
+        if spec.problem.instance.timed
+        else None,
     )
+
+
+def _schedule_moves(
+    sessions: sessionmaker[Session], parent_id: str, run_id: str
+) -> dict[str, Any] | None:
+    """The parent's current schedule (its decisions re-timed by its reports) against the
+    revision's; None when either has no whole schedule (untimed, or still deciding)."""
+    try:
+        was = current_schedule(sessions=sessions, run_id=parent_id)
+        now = current_schedule(sessions=sessions, run_id=run_id)
+    except StateConflictError:
+        return None
+    if was is None or now is None:
+        return None
+    return time_moves(Timed(*was), Timed(*now))

@@ -10,15 +10,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
 from typing import Any
 
 from app.domain.errors import DomainError, InfeasibleCapError
-from app.domain.metrics import balance_score, severity
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.problem import Problem
 from app.domain.serialize import instance_from_dict
-from app.graph.recorder import DecisionRecord
+from app.plans.revision_pins import ParentDecision, pinned_rows
+from app.plans.revision_times import DELAY, ReportedTimes, plan_times
 from app.runs.spec import RunSpec
+
+_TASK_TIME = ("duration", "after", "zone", "release", "deadline")
 
 
 class ChangeType:
@@ -29,12 +32,7 @@ class ChangeType:
     ADD_TASKS = "add_tasks"
     REMOVE_TASKS = "remove_tasks"
     SET_MODE = "set_mode"
-
-
-@dataclass(frozen=True)
-class ParentDecision:
-    record: DecisionRecord
-    chain_hash: str | None
+    DELAY = DELAY
 
 
 @dataclass
@@ -46,6 +44,10 @@ class RevisionPlan:
     added_tasks: list[str] = field(default_factory=list)
     removed_tasks: list[str] = field(default_factory=list)
     fleet_changes: list[dict[str, Any]] = field(default_factory=list)
+    # SPEC 16: the `now` a timed revision planned from (None: untimed), and the reported
+    # (start, end) minutes of its pinned tasks, by revision task index.
+    now: datetime | None = None
+    facts: dict[int, tuple[float, float]] = field(default_factory=dict)
 
 
 def _names(robots: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -156,6 +158,9 @@ def plan_revision(
     model: str | None,
     parent_id: str,
     token_budget: int | None,
+    reports: Mapping[int, ReportedTimes] | None = None,
+    now: datetime | None = None,
+    arrival: datetime | None = None,
 ) -> RevisionPlan:
     if parent_spec.reasoner == "replay" and reasoner is None:
         raise DomainError(
@@ -296,6 +301,8 @@ def plan_revision(
                     "name": task.get("name") or str(task["id"]),
                     "type": task.get("type", "Custom"),
                     "features": list(task["features"]),
+                    # SPEC 16: an added task of a timed run brings its own time fields.
+                    **{k: task[k] for k in _TASK_TIME if task.get(k) is not None},
                 }
                 (added_next if c.get("position", "end") == "next" else added_end).append(entry)
     last_pin = max(pinned_parent) if pinned_parent else -1
@@ -315,16 +322,29 @@ def plan_revision(
     origin.extend([None] * len(added_end))
 
     names = _names(robots)
-    instance_data = {"tasks": queue, "robots": robots}
+    pinned_on = {
+        i: decided[t].record.robot_name
+        for i, t in enumerate(origin)
+        if t is not None and t in pinned_parent
+    }
+    times = plan_times(
+        instance_data=data,
+        queue=queue,
+        origin=origin,
+        pinned=pinned_on,
+        reports=reports or {},
+        changes=changes,
+        removed=removed,
+        now=now,
+        arrival=arrival or datetime.now(UTC),
+    )
+    # The parent's other instance fields (SPEC 16: travel, start) are the site's: kept.
+    instance_data = {**data, "tasks": times.tasks, "robots": robots}
     try:
         instance = instance_from_dict(instance_data)
     except DomainError as exc:
         raise DomainError("changes", exc.message, code=exc.code) from None
-    pinned = {
-        i: names.index(decided[t].record.robot_name)
-        for i, t in enumerate(origin)
-        if t is not None and t in pinned_parent
-    }
+    pinned = {i: names.index(robot) for i, robot in pinned_on.items()}
     off = {names.index(n) for n in unavailable}
 
     # The cap: set_mode's, else the parent's explicit cap kept, else the mode default for
@@ -352,6 +372,8 @@ def plan_revision(
             uncapped=keep and max_dev is None,
             pinned=pinned,
             unavailable=off,
+            pinned_starts=times.pinned_starts,
+            not_before=times.not_before,
         )
     except InfeasibleCapError as exc:
         raise InfeasibleCapError(
@@ -377,63 +399,17 @@ def plan_revision(
         pinned={str(t): r for t, r in sorted(pinned.items())},
         unavailable=sorted(off),
         revision_of=parent_id,
+        pinned_starts={str(t): m for t, m in sorted(times.pinned_starts.items())} or None,
+        not_before=times.not_before if instance.timed else None,
     )
     return RevisionPlan(
         spec=spec,
         problem=problem,
-        pinned_rows=pinned_rows(problem, origin, decided),
+        pinned_rows=pinned_rows(problem, origin, decided, times.facts),
         pinned_task_ids=[str(queue[i]["id"]) for i in sorted(pinned)],
         added_tasks=[str(t["id"]) for t in added_next + added_end],
         removed_tasks=removed,
         fleet_changes=fleet_changes,
+        now=times.now if instance.timed else None,
+        facts=times.facts,
     )
-
-
-def pinned_rows(
-    problem: Problem, origin: Sequence[int | None], decided: Mapping[int, ParentDecision]
-) -> list[dict[str, Any]]:
-    """The revision's own decision rows for its pins, in task order: the parent's robot,
-    success and reasoning; loads and balance counted in the revision's terms (pins on
-    available robots, W of the available fleet); regret 0 (nothing was chosen here)."""
-    inst, cap = problem.instance, problem.cap
-    loads = [0] * inst.n_robots
-    rows: list[dict[str, Any]] = []
-    for index in sorted(problem.pinned):
-        source_index = origin[index]
-        assert source_index is not None
-        parent = decided[source_index]
-        d = parent.record
-        robot = problem.pinned[index]
-        before = list(loads)
-        if robot not in problem.unavailable:
-            loads[robot] += 1
-        task = inst.tasks[index]
-        rows.append(
-            {
-                "task_index": index,
-                "task_id": str(task.id),
-                "task_name": task.name,
-                "robot": robot,
-                "robot_name": inst.robots[robot].name,
-                "phase": d.phase,
-                "expected_success": d.expected_success,
-                "reasoning": d.reasoning,
-                "confidence": d.confidence,
-                "tradeoff": d.tradeoff,
-                "quality": d.quality,
-                "fallback": d.fallback,
-                "attempts": 0,
-                "failure_log": [],
-                "loads_before": before,
-                "loads_after": list(loads),
-                "balance_before": balance_score(cap.balanced(before), problem.target),
-                "balance_after": balance_score(cap.balanced(loads), problem.target),
-                "severity_after": severity(cap.balanced(loads), problem.target).value,
-                "regret": 0.0,
-                # A supervisor's approval or override of the pinned decision stays with it.
-                "review": d.review,
-                "pinned": True,
-                "pinned_from": parent.chain_hash,
-            }
-        )
-    return rows

@@ -12,6 +12,7 @@ from __future__ import annotations
 import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 from sqlalchemy import update
@@ -25,8 +26,10 @@ from app.domain.errors import DomainError, RunNotFoundError
 from app.domain.estimates import DurationSource, RateSource
 from app.domain.lifecycle import FINISHED
 from app.plans.reports import head_of
-from app.plans.revision_plan import ParentDecision, plan_revision
+from app.plans.revision_pins import ParentDecision
+from app.plans.revision_plan import RevisionPlan, plan_revision
 from app.plans.revision_rates import revision_spec
+from app.plans.revision_times import ReportedTimes
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
@@ -38,7 +41,7 @@ from app.store import chain
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.models import ExecutionReport, Run
+from app.store.models import ExecutionReport, Run, as_utc, utcnow
 
 REVISABLE = frozenset(
     {
@@ -69,6 +72,8 @@ class RevisionRequest:
     # SPEC 17: None inherits the parent's.
     rates: RateSource | None = None
     durations: DurationSource | None = None
+    # SPEC 16: the time the revision plans from (aware); None: the request's arrival.
+    now: datetime | None = None
 
 
 def _lock(session: Session, run_id: str) -> Run:
@@ -167,6 +172,14 @@ def _create(
             r.task_index: r for r in repo.execution_reports(session=session, run_id=parent_id)
         }
         execution = {t: r.state for t, r in reports.items()}
+        times = {
+            t: ReportedTimes(
+                r.state,
+                None if r.started_at is None else as_utc(r.started_at),
+                None if r.ended_at is None else as_utc(r.ended_at),
+            )
+            for t, r in reports.items()
+        }
         budget = parent_spec.token_budget
         if budget is not None:
             budget = max(0, budget - lineage_tokens(session, parent))
@@ -180,6 +193,10 @@ def _create(
             model=request.model,
             parent_id=parent_id,
             token_budget=budget,
+            reports=times,
+            now=request.now,
+            # Whole seconds, as a run's default start: minutes read cleanly.
+            arrival=utcnow().replace(microsecond=0),
         )
         spec, learned = revision_spec(
             session=session,
@@ -215,6 +232,7 @@ def _create(
             "robots": plan.problem.instance.n_robots,
             "max_deviation": plan.problem.cap.max_deviation,
             **spec.site_detail(),
+            **_time_detail(plan),
         }
         run = lifecycle.new_run(
             session,
@@ -265,6 +283,21 @@ def _create(
             )
         session.flush()
     return run, active
+
+
+def _time_detail(plan: RevisionPlan) -> dict[str, Any]:
+    """SPEC 16: when a timed revision plans from, and the reported times it pinned."""
+    if plan.now is None:
+        return {}
+    tasks = plan.problem.instance.tasks
+    return {
+        "now": plan.now.isoformat(),
+        "not_before": plan.problem.not_before,
+        "pinned_times": {
+            str(tasks[t].id): {"start": start, "end": end}
+            for t, (start, end) in sorted(plan.facts.items())
+        },
+    }
 
 
 def _carried_rows(

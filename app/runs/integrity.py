@@ -13,12 +13,26 @@ from sqlalchemy.orm import Session
 
 from app.domain.metrics import balance_score
 from app.domain.phases import detect_phase
+from app.domain.problem import Problem
+from app.domain.scheduling.progress import TimedProgress, decision_order
 from app.graph.recorder import DecisionRecord
 from app.runs import lifecycle, records
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.spec import RunSpec
 from app.store import decision_repository as decision_repo
 from app.store.models import Run
+
+
+def timed_order(problem: Problem, robots: Mapping[int, int]) -> tuple[int, ...]:
+    """A timed run's free tasks in the order the graph decides them, as far as the stored
+    decisions fix it: those decisions replayed, then the task that comes next, then the rest
+    (in queue order: their order depends on decisions not yet made)."""
+    progress = TimedProgress.replay(problem, robots)
+    made = decision_order(problem, robots)
+    nxt = progress.current()
+    head = [*made, nxt] if nxt < problem.instance.n_tasks else made
+    seen = set(head)
+    return (*head, *(t for t in problem.free_tasks if t not in seen))
 
 
 @dataclass(frozen=True)
@@ -61,12 +75,18 @@ def check_integrity(
     A revision (SPEC 10) also has `pinned` rows (task index -> robot) written when it was
     created: each pin must be stored on its robot, the graph's decisions must be a prefix
     of the `free_tasks`, and loads count from `initial_loads` (the pins on available robots).
+    `free_tasks` is the order the graph decides in: queue order, or on a timed instance the
+    order in time (app.domain.scheduling.progress.decision_order and the next task).
     """
     problems: list[str] = []
     pins = dict(pinned or {})
     free = list(free_tasks) if free_tasks is not None else list(range(n_tasks))
     stored_pins = {d.task_index: d.robot for d in decisions if d.task_index in pins}
-    graph_made = [d for d in decisions if d.task_index not in pins]
+    place = {t: i for i, t in enumerate(free)}
+    graph_made = sorted(
+        (d for d in decisions if d.task_index not in pins),
+        key=lambda d: (place.get(d.task_index, len(free)), d.task_index),
+    )
     if stored_pins != pins:
         missing = sorted(set(pins) - set(stored_pins))
         wrong = sorted(t for t, r in stored_pins.items() if pins[t] != r)
@@ -96,7 +116,7 @@ def check_integrity(
     loads_consistent = True
     if cp_index is not None:
         # Free tasks before the checkpoint's task: what the graph had stored by then.
-        position = bisect.bisect_left(free, cp_index)
+        position = place.get(cp_index, bisect.bisect_left(free, cp_index))
         lag = len(graph_made) - position
         if lag not in (0, 1):
             problems.append(
@@ -155,13 +175,16 @@ def checked_for_resume(
     ]
     values = checkpoint.checkpoint["channel_values"] if checkpoint else None
     problem = spec.problem
+    order = problem.free_tasks
+    if instance.timed:
+        order = timed_order(problem, {d.task_index: d.robot for d in stored})
     report = check_integrity(
         decisions=stored,
         n_tasks=instance.n_tasks,
         n_robots=instance.n_robots,
         checkpoint=values,
         pinned=problem.pinned,
-        free_tasks=problem.free_tasks,
+        free_tasks=order,
         initial_loads=problem.initial_loads,
         balance_robots=problem.available,
         target=problem.target,

@@ -129,6 +129,12 @@ def fences(*parts: Fence | None) -> Fence | None:
     return Fence(guard, given[0].stop)
 
 
+def _chain_key(record: DecisionRecord) -> int:
+    """Where a decision sits in its run's chain: a timed run's in the order the graph made
+    them (SPEC 16), others in task order."""
+    return record.task_index if record.seq is None else record.seq
+
+
 class SqlRecorder:
     def __init__(
         self,
@@ -155,7 +161,7 @@ class SqlRecorder:
         # have only the attempts this recorder wrote: one writer per run (the lease fence
         # stops this one if another process takes the run), so a miss there needs no query.
         self._stored_through: int | None = None
-        # (task index, chain hash) of the last decision this recorder wrote: the next
+        # (chain key, chain hash) of the last decision this recorder wrote: the next
         # decision's link hangs off it, with no read.
         self._tip: tuple[int, str] | None = None
         # Why attempts may wait for their decision: a task killed before its decision is
@@ -256,7 +262,7 @@ class SqlRecorder:
         cached = [self._attempts.get((t, k)) for k in range(1, record.attempts + 1)]
         if (
             self._tip is not None
-            and self._tip[0] < t
+            and self._tip[0] < _chain_key(record)
             and t > self._stored_through_task()
             and sum(1 for key in self._attempts if key[0] == t) == len(cached)
             and all(a is not None for a in cached)
@@ -290,7 +296,7 @@ class SqlRecorder:
                     guard=guard,
                 ),
             )
-        self._tip = (record.task_index, link)
+        self._tip = (_chain_key(record), link)
         log.log(
             logging.WARNING if record.fallback else logging.INFO,
             "task %d -> %s (Q %.2f, %d attempt(s)%s)",

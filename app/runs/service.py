@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import uuid
+from datetime import UTC, datetime
 from typing import Any
 
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
-from app.domain.catalog import instance_of
-from app.domain.errors import RunStateConflictError
+from app.domain.catalog import instance_of, timed_scenario, timed_scenarios
+from app.domain.errors import DomainError, RunStateConflictError
 from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
+from app.domain.models import Instance
+from app.domain.objective import Objective
 from app.domain.problem import Problem
 from app.domain.serialize import instance_to_dict
 from app.reasoners.base import close_reasoner
@@ -136,13 +139,14 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
             replay_of=order.replay_of,
             sent=_sent_for_replay(order),
         )
-    instance = instance_of(order.scenario, order.tasks, order.robots)
+    instance = order_instance(order)
     # An explicit `"max_deviation": null` means no cap; leaving it out means the mode's.
     problem = Problem.build(
         instance,
         order.mode,
         order.max_deviation,
         uncapped="max_deviation" in order.sent and order.max_deviation is None,
+        objective=Objective(order.objective, order.min_expected_success),
     )
     scope: dict[str, Any] = {}
     if order.llm_scope is not None:
@@ -168,9 +172,39 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         site=order.site,
         rates=order.rates.value,
         durations=order.durations.value,
+        objective=problem.objective.kind.value,
+        min_expected_success=problem.objective.min_expected_success,
         **scope,
     )
     return learned_spec(spec, sessions=sessions, settings=settings)
+
+
+def order_instance(order: RunOrder) -> Instance:
+    """The instance a run order names: a built-in scenario (the timed ones of SPEC 16, such
+    as `baseline_timed`, included), or its own tasks and robots (a timed instance without
+    `start` starts at the request's arrival)."""
+    named = order.scenario
+    if named is not None and named in timed_scenarios() and order.tasks is None:
+        for field, value in (("robots", order.robots), ("travel", order.travel)):
+            if value is not None:
+                raise DomainError(
+                    field,
+                    f"'{field}' was sent with the built-in scenario {named!r}; send either "
+                    "the scenario or your own 'tasks' and 'robots', not both",
+                    code="conflicting_fields",
+                )
+        if order.start is not None:
+            raise DomainError(
+                "start",
+                f"the built-in scenario {named!r} has its own start; send 'tasks' and "
+                "'robots' to choose another",
+                code="conflicting_fields",
+            )
+        return timed_scenario(named).instance
+    start = order.start
+    if start is None and any(t.duration is not None for t in order.tasks or ()):
+        start = datetime.now(UTC).replace(microsecond=0)
+    return instance_of(order.scenario, order.tasks, order.robots, travel=order.travel, start=start)
 
 
 def learned_spec(
@@ -218,8 +252,7 @@ def _sent_for_replay(order: RunOrder) -> dict[str, Any]:
     values: dict[str, Any] = {}
     named = [f for f in ("scenario", "tasks", "robots") if getattr(order, f) is not None]
     if named:
-        instance = instance_of(order.scenario, order.tasks, order.robots)
-        values[named[0]] = instance_to_dict(instance)
+        values[named[0]] = instance_to_dict(order_instance(order))
     if "mode" in order.sent:
         values["mode"] = order.mode.value
     for name in _REPEATABLE:

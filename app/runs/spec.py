@@ -6,6 +6,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass, field, replace
+from datetime import datetime
 from functools import cached_property
 from typing import Any, Generic, TypeVar
 
@@ -15,6 +16,7 @@ from app.domain import estimates
 from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
+from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
 from app.domain.review import ReviewPolicy
 from app.domain.serialize import instance_from_dict, instance_to_dict
@@ -54,6 +56,11 @@ class RunSpec:
     pinned: dict[str, int] | None = None
     unavailable: list[int] | None = None
     revision_of: str | None = None
+    # Time in a revision (SPEC 16): task index (as text) -> the fixed start minute of a
+    # pinned task reported started or done, and the revision's `now` in minutes (nothing
+    # else starts earlier). None on every untimed run and every run that is not a revision.
+    pinned_starts: dict[str, float] | None = None
+    not_before: float | None = None
     # app.domain.review.ReviewPolicy as JSON; None: no review.
     review: dict[str, Any] | None = None
     # Learning from the site (SPEC 17): the site, which rates and durations the run plans
@@ -63,6 +70,10 @@ class RunSpec:
     rates: str = RateSource.CONFIGURED.value
     durations: str = DurationSource.CONFIGURED.value
     learned: dict[str, Any] | None = None
+    # SPEC 16, timed instances: the objective (app.domain.objective); specs stored before
+    # it existed read as the default.
+    objective: str = ObjectiveKind.SUCCESS_THEN_MAKESPAN.value
+    min_expected_success: float = 0.0
 
     @property
     def review_policy(self) -> ReviewPolicy | None:
@@ -85,7 +96,14 @@ class RunSpec:
             uncapped=self.max_deviation is None,
             pinned={int(t): r for t, r in (self.pinned or {}).items()},
             unavailable=self.unavailable or (),
+            objective=self.objective_of(),
+            pinned_starts={int(t): m for t, m in (self.pinned_starts or {}).items()},
+            not_before=self.not_before or 0.0,
         )
+
+    def objective_of(self) -> Objective:
+        """The objective (SPEC 16); Problem.build refuses any but the default untimed."""
+        return Objective(ObjectiveKind(self.objective), self.min_expected_success)
 
     def with_site_estimates(
         self,
@@ -180,6 +198,12 @@ class RunOrder:
     site: str = DEFAULT_SITE
     rates: RateSource = RateSource.CONFIGURED
     durations: DurationSource = DurationSource.CONFIGURED
+    # SPEC 16, timed instances: travel between zones, the wall-clock time of minute 0
+    # (None: the request's arrival), and the objective.
+    travel: Mapping[str, Mapping[str, float]] | None = None
+    start: datetime | None = None
+    objective: ObjectiveKind = ObjectiveKind.SUCCESS_THEN_MAKESPAN
+    min_expected_success: float = 0.0
     # The fields the request named: an explicit null max_deviation means no cap, and a
     # replay must repeat its source's value in every field it names.
     sent: frozenset[str] = field(default_factory=frozenset)

@@ -13,8 +13,12 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, defer, sessionmaker
 
 from app.audit.signoffs import SignOff, signoffs
+from app.domain.errors import StateConflictError
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
+from app.domain.problem import Problem
+from app.domain.scheduling.progress import TimedProgress
+from app.domain.scheduling.schedule import Schedule, build_schedule
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
 from app.runs import records
@@ -221,3 +225,35 @@ def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
     """Which of these decision rows a revision kept from its parent, with the parent
     decision's chain hash."""
     return {d.task_index: d.pinned_from for d in rows if d.pinned}
+
+
+def run_schedule(
+    *, sessions: sessionmaker[Session], run_id: str
+) -> tuple[Problem, Schedule] | None:
+    """A timed run's plan in time (SPEC 16), rebuilt from its stored decisions with
+    build_schedule: (its problem, its schedule); None for an untimed run (it has no times).
+    A task without a stored start (a revision's pin copied from a run before times were
+    stored) is placed as the graph placed it (app.domain.scheduling.progress), from the
+    stored robots. StateConflictError (409) while the run has not decided every task."""
+    with sessions() as session:
+        run = require_run(session, run_id)
+        spec = _SPECS.get_or_load(run_id, lambda: RunSpec.from_json(run.request))
+        rows = decision_repo.decisions(session=session, run_id=run_id)
+    problem = spec.problem
+    if not problem.instance.timed:
+        return None
+    n = problem.instance.n_tasks
+    if len(rows) < n:
+        raise StateConflictError(
+            "run_id",
+            f"run '{run_id}' has decided {len(rows)} of its {n} tasks ({run.status}); its "
+            "schedule is whole once every task is decided: poll GET /runs/{id}",
+        )
+    robots = {d.task_index: d.robot for d in rows}
+    starts = {d.task_index: d.start for d in rows if d.start is not None}
+    if len(starts) < n:
+        placed = TimedProgress.replay(problem, robots).placed
+        starts = {t: starts.get(t, placed[t].start) for t in range(n)}
+    return problem, build_schedule(
+        problem, [robots[t] for t in range(n)], [float(starts[t]) for t in range(n)]
+    )

@@ -18,18 +18,22 @@ from pydantic import Field
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.domain.review import Resolution, ReviewPolicy
+from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.progress import TimedProgress
+from app.domain.scheduling.schedule import build_schedule
 from app.graph.builder import build_graph
 from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
-from app.graph.recorder import Recorder
+from app.graph.recorder import DecisionRecord, Recorder
 from app.graph.review import ReviewGate
-from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext
+from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext, Guidance
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
 from app.reasoners.scope import DEFAULT_LLM_MARGIN
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
+from app.solvers.timed_guidance import ScheduleGuidance
 
 
 class LTAAOptions(SolverOptions):
@@ -74,14 +78,21 @@ def graph_context(
         if review is not None or recorded_reviews is not None
         else None
     )
+    guide: Guidance | None = None
+    if guidance == "optimizer":
+        # In time, the `schedule` solver's plan of the remaining tasks (SPEC 16).
+        timed = problem.instance.timed
+        guide = ScheduleGuidance(problem, recorder) if timed else oracle.guidance
     return GraphContext(
         problem=problem,
         reasoner=reasoner,
         recorder=recorder,
         quality_threshold=quality_threshold,
         max_retries=max_retries,
-        guidance=oracle.guidance if guidance == "optimizer" else None,
-        regret=oracle.regret,
+        guidance=guide,
+        # The oracle's regret counts the tasks after this one in queue order; a timed run
+        # decides in time order, so its decisions record no regret.
+        regret=None if problem.instance.timed else oracle.regret,
         review=gate,
         rate_notes=rate_notes or {},
     )
@@ -119,6 +130,30 @@ def execute_ltaa(
         rate_notes=rate_notes,
     )
     return execute(graph, context, thread_id, resume=resume, resume_with=resume_with)
+
+
+GRAPH_TIMES = "the LTAA graph's own times: decided in time order, each task placed when chosen"
+
+
+def graph_times(
+    problem: Problem, assignment: Sequence[int], decisions: Sequence[DecisionRecord]
+) -> dict[str, Any]:
+    """On a timed instance, the schedule the graph made as it decided (SPEC 16), which the
+    list-scheduler hook then leaves alone; nothing untimed. Pins without a recorded start
+    are placed as the graph placed them."""
+    if not problem.instance.timed:
+        return {}
+    starts = {d.task_index: d.start for d in decisions if d.start is not None}
+    placed = TimedProgress.replay(problem, dict(enumerate(assignment))).placed
+    n = problem.instance.n_tasks
+    schedule = build_schedule(
+        problem, list(assignment), [float(starts.get(t, placed[t].start)) for t in range(n)]
+    )
+    return {
+        "schedule": schedule,
+        "schedule_model": GRAPH_TIMES,
+        "schedule_violations": check_schedule(problem, schedule),
+    }
 
 
 class LTAASolver(Solver):
@@ -166,10 +201,12 @@ class LTAASolver(Solver):
             raise err from exc
         decisions, used = execution.decisions, execution.usage
         # The graph decides the free tasks only; pins complete the assignment.
+        assignment = problem.complete([d.robot for d in decisions])
         return Solution(
-            problem.complete([d.robot for d in decisions]),
+            assignment,
             usage=used,
             details={
+                **graph_times(problem, assignment, decisions),
                 "reasoner": reasoner.name,
                 "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),
                 "fallbacks": sum(d.fallback for d in decisions),

@@ -47,8 +47,9 @@ class ScheduleSolver(Solver):
         "(durations, precedence, travel between zones, releases, deadlines, shifts, the "
         "workload cap); 'optimal' only when proven, else the bound and gap.",
         exact=True,
-        limits="exact with travel circuits while robots x tasks^2 <= 40,000; past that a "
-        "relaxed model repaired with travel (never called optimal); time_limit_s <= 120",
+        limits="exact (pairwise travel) while robots x tasks^2 <= 40,000; past that a "
+        "load-balancing assignment, dispatch and a large-neighbourhood search over the exact "
+        "model (never called optimal); time_limit_s <= 120",
     )
     Options = ScheduleOptions
 

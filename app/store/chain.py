@@ -117,6 +117,16 @@ DECISION_FIELDS: dict[str, Normaliser] = {
 }
 # Hashed only when set, so decisions stored before the column existed keep their links.
 OPTIONAL_DECISION_FIELDS = frozenset({"review"})
+# SPEC 16, a timed run's decisions: hashed (and exported) only when set, as the pin columns,
+# so untimed decisions keep their links and their export lines.
+TIME_FIELDS: dict[str, Normaliser] = {
+    "start": _float,
+    "end": _float,
+    "zone": _opt_str,
+    "travel": _float,
+    "seq": lambda v: None if v is None else int(v),
+    "later_by": _float,
+}
 ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "attempt": _int,
     "tier": _int,
@@ -221,7 +231,7 @@ def revision_anchor(link: Mapping[str, Any]) -> str:
 def decision_columns(row: Any) -> dict[str, Any]:
     """The hashed columns of a stored decision row (pin columns included when set)."""
     values = {name: getattr(row, name) for name in DECISION_FIELDS}
-    for name in PIN_FIELDS:
+    for name in (*PIN_FIELDS, *TIME_FIELDS):
         value = getattr(row, name, None)
         if value is not None:
             values[name] = value
@@ -240,7 +250,7 @@ def decision_link(prev: str, decision: Mapping[str, Any], attempts: str) -> str:
         for name, normalise in DECISION_FIELDS.items()
         if name not in OPTIONAL_DECISION_FIELDS or decision.get(name) is not None
     }
-    for name, normalise in PIN_FIELDS.items():
+    for name, normalise in (*PIN_FIELDS.items(), *TIME_FIELDS.items()):
         if decision.get(name) is not None:
             content[name] = normalise(decision[name])
     return _sha256(canonical_json({"prev": prev, "decision": content, "attempts": attempts}))

@@ -60,9 +60,25 @@ def _upsert(
 
 
 def decisions_page(
-    *, session: Session, run_id: str, after_task: int, limit: int, pinned: bool | None = None
+    *,
+    session: Session,
+    run_id: str,
+    after_task: int,
+    limit: int,
+    pinned: bool | None = None,
+    by_seq: bool = False,
 ) -> list[Decision]:
-    """`pinned`: True only a revision's pins, False only the rest, None every decision."""
+    """`pinned`: True only a revision's pins, False only the rest, None every decision.
+    `by_seq`: in a timed run's decision order (`after_task` is then a seq), pins excluded."""
+    if by_seq:
+        return list(
+            session.scalars(
+                select(Decision)
+                .where(Decision.run_id == run_id, Decision.seq > after_task)
+                .order_by(Decision.seq)
+                .limit(limit)
+            )
+        )
     query = select(Decision).where(Decision.run_id == run_id, Decision.task_index > after_task)
     if pinned is True:
         query = query.where(Decision.pinned.is_(True))
@@ -199,7 +215,12 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
     ).all()
     attempts = [row._mapping for row in rows if row.attempt is not None]
     anchor = chain_anchor(session=session, run_id=run_id)
-    prev = rows[0].prev if anchor is None else _revision_prev(session, run_id, values)
+    if anchor is not None:
+        prev = _revision_prev(session, run_id, values)
+    elif values.get("seq") is not None:
+        prev = _sequenced_prev(session, run_id, values["seq"])
+    else:
+        prev = rows[0].prev
     prev_link = (
         prev
         if prev is not None
@@ -208,21 +229,36 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
     return chain.decision_link(prev_link, values, chain.attempts_digest(attempts))
 
 
+def _sequenced_prev(session: Session, run_id: str, seq: int) -> str | None:
+    """The link before a timed run's decision (SPEC 16): the run's decisions are chained in
+    the order the graph made them (`seq`), which is not task order."""
+    row = session.execute(
+        select(Decision.chain_hash)
+        .where(Decision.run_id == run_id, Decision.seq < seq, Decision.pinned.is_(None))
+        .order_by(Decision.seq.desc())
+        .limit(1)
+    ).first()
+    return None if row is None else chain.next_prev(row.chain_hash)
+
+
 def _revision_prev(session: Session, run_id: str, values: Mapping[str, Any]) -> str | None:
     """The link before this decision in a revision's chain order (None: it is the first)."""
-    t, pinned = values["task_index"], bool(values.get("pinned"))
+    t, pinned, seq = values["task_index"], bool(values.get("pinned")), values.get("seq")
 
-    def last(*where: Any) -> str | None:
+    def last(*where: Any, key: Any = Decision.task_index) -> str | None:
         row = session.execute(
             select(Decision.chain_hash)
             .where(Decision.run_id == run_id, *where)
-            .order_by(Decision.task_index.desc())
+            .order_by(key.desc())
             .limit(1)
         ).first()
         return None if row is None else chain.next_prev(row.chain_hash)
 
     if pinned:
         return last(Decision.pinned.is_(True), Decision.task_index < t)
+    if seq is not None:  # a timed revision: its own decisions in the order it made them
+        made = last(Decision.pinned.is_(None), Decision.seq < seq, key=Decision.seq)
+        return made or last(Decision.pinned.is_(True))
     return last(Decision.pinned.is_(None), Decision.task_index < t) or last(
         Decision.pinned.is_(True)
     )
@@ -232,6 +268,19 @@ def revision_chain_order(pinned: Sequence[int], decided: Sequence[int]) -> list[
     """The task indexes of a revision's decisions in chain order: pins, then the rest."""
     pins = set(pinned)
     return sorted(pins) + sorted(t for t in decided if t not in pins)
+
+
+def sequenced_order(*, session: Session, run_id: str) -> list[int] | None:
+    """A timed run's graph decisions (task indexes) in the order they were made and chained
+    (SPEC 16); None for a run whose decisions carry no order (chained in task order)."""
+    rows = session.execute(
+        select(Decision.task_index, Decision.seq)
+        .where(Decision.run_id == run_id, Decision.pinned.is_(None))
+        .order_by(Decision.seq)
+    ).all()
+    if not rows or rows[0].seq is None:
+        return None
+    return [row.task_index for row in rows]
 
 
 def upsert_decision(*, session: Session, run_id: str, values: Mapping[str, Any]) -> None:

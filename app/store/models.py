@@ -196,6 +196,15 @@ class Decision(Base):
     # Null on every decision the graph made; hashed only when set, so older links hold.
     pinned: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
     pinned_from: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # SPEC 16, a timed run (null otherwise): minutes from the plan's start, the task's zone,
+    # minutes travelled just before it, its place in the decision order (the chain order of
+    # a timed run) and how many minutes later it ends than an allowed robot's earliest end.
+    start: Mapped[float | None] = mapped_column(Float, nullable=True)
+    end: Mapped[float | None] = mapped_column(Float, nullable=True)
+    zone: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    travel: Mapped[float | None] = mapped_column(Float, nullable=True)
+    seq: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    later_by: Mapped[float | None] = mapped_column(Float, nullable=True)
 
 
 class ExecutionReport(Base):

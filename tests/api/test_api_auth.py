@@ -36,6 +36,7 @@ CLIENT_ENDPOINTS = [
     ("POST", "/runs/{id}/revisions"),
     ("GET", "/runs/{id}/revisions"),
     ("GET", "/runs/{id}/diff"),
+    ("GET", "/runs/{id}/schedule"),
     ("GET", "/sites"),
     ("GET", "/sites/{site}/estimates"),
 ]

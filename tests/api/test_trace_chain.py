@@ -375,8 +375,10 @@ def test_every_audited_column_is_in_the_chain() -> None:
     def columns(model: Any) -> set[str]:
         return {c.name for c in model.__table__.columns}
 
-    # The pin columns are hashed too, only when set (so links written before them hold).
-    assert set(chain.DECISION_FIELDS) | set(chain.PIN_FIELDS) == columns(Decision) - {
+    # The pin and time columns are hashed too, only when set (so links written before them
+    # hold).
+    hashed = set(chain.DECISION_FIELDS) | set(chain.PIN_FIELDS) | set(chain.TIME_FIELDS)
+    assert hashed == columns(Decision) - {
         "id",
         "run_id",
         "created_at",

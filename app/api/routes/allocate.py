@@ -55,6 +55,59 @@ EXAMPLES: dict[str, Example] = {
             "seed": 7,
         },
     ),
+    "timed": Example(
+        summary="Timed instance, exact schedule (SPEC 16)",
+        description="Durations (one number, or per robot), precedence (`after`), zones with "
+        "travel minutes between them, a release, a deadline and shifts. The answer carries "
+        "a `schedule` block; `schedule` proves its makespan (`status`, `bound`, `gap`), any "
+        "other solver's assignment is timed by the list scheduler.",
+        value={
+            "solver": "schedule",
+            "tasks": [
+                {
+                    "id": "form-1",
+                    "name": "Formwork",
+                    "features": ["heavy"],
+                    "duration": 40,
+                    "zone": "A",
+                },
+                {
+                    "id": "rebar-1",
+                    "name": "Rebar",
+                    "features": ["heavy", "dexterous"],
+                    "duration": {"arm": 50, "lifter": 35},
+                    "zone": "A",
+                    "after": ["form-1"],
+                },
+                {
+                    "id": "pour-1",
+                    "name": "Pour",
+                    "features": ["heavy"],
+                    "duration": 25,
+                    "zone": "B",
+                    "after": ["rebar-1"],
+                    "release": 60,
+                },
+                {
+                    "id": "check-1",
+                    "name": "Inspect",
+                    "features": ["dexterous"],
+                    "duration": 15,
+                    "zone": "B",
+                    "after": ["pour-1"],
+                    "deadline": 240,
+                },
+            ],
+            "robots": [
+                {**_CUSTOM_ROBOTS[0], "zone": "A", "available": [0, 480]},
+                {**_CUSTOM_ROBOTS[1], "zone": "B", "available": [30, 450]},
+            ],
+            "travel": {"A": {"B": 6}},
+            "start": "2026-03-02T07:00:00+01:00",
+            "mode": "success_focused",
+            "options": {"time_limit_s": 5},
+        },
+    ),
     "q_learning": Example(
         summary="Approximate solver with options",
         value={

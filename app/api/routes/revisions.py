@@ -15,6 +15,7 @@ from app.api.schemas.plans import (
     RevisionItem,
     RevisionRequestIn,
     RobotChange,
+    ScheduleDiff,
     SideMetrics,
 )
 from app.domain.lifecycle import RunStatus
@@ -97,6 +98,7 @@ def create_revision(
             model=body.model,
             rates=body.rates,
             durations=body.durations,
+            now=body.now,
         ),
         idempotency=_idempotency(idempotency_key, run_id, sent),
     )
@@ -133,7 +135,8 @@ def list_revisions(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> list[
 @router.get("/{run_id}/diff", response_model=DiffOut, responses=errors(*CLIENT, 404, 409))
 def get_diff(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> DiffOut:
     """A revision against its parent: tasks whose robot changed, added and removed tasks,
-    fleet changes, expected success and balance before and after."""
+    fleet changes, expected success and balance before and after; on a timed revision
+    (SPEC 16) the tasks that moved in time and the makespan before and after."""
     d = diff.diff(sessions=runs.sessions, run_id=run_id)
     return DiffOut(
         run_id=d.run_id,
@@ -144,4 +147,5 @@ def get_diff(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> DiffOut:
         fleet_changes=d.fleet_changes,
         before=SideMetrics(**d.before),
         after=SideMetrics(**d.after),
+        schedule=None if d.schedule is None else ScheduleDiff.model_validate(d.schedule),
     )

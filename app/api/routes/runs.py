@@ -21,6 +21,7 @@ from app.api.responses import BODY, CLIENT, SUPERVISOR, errors
 from app.api.routes.signoffs import signoff_out
 from app.api.schemas.allocation import MetricsOut, UsageOut
 from app.api.schemas.examples import RUN_EXAMPLES
+from app.api.schemas.run_times import decision_times
 from app.api.schemas.runs import (
     DEFAULT_PAGE,
     MAX_PAGE,
@@ -139,6 +140,7 @@ def _assignment(view: views.RunView, d: DecisionRecord) -> RunAssignment:
         pinned=d.task_index in view.pins,
         pinned_from=view.pins.get(d.task_index),
         execution=_execution_out(view.execution.get(d.task_index)),
+        **decision_times(instance, d),
     )
 
 
@@ -336,6 +338,7 @@ def _decision_out(
         pinned=d.task_index in pins,
         pinned_from=pins.get(d.task_index),
         attempts=outs,
+        **decision_times(instance, d),
     )
 
 

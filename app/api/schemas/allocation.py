@@ -16,9 +16,12 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from app.api.schemas.schedule import ScheduleOut, ViolationOut
+from app.api.schemas.timing import Duration, Minutes, PositiveMinutes, Shift, WallClock
 from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS, Robot, Task
 from app.domain.modes import Mode
+from app.domain.objective import ObjectiveKind
 from app.domain.usage import Usage
 
 
@@ -87,6 +90,17 @@ class TaskIn(BaseModel):
     features: list[Name] = Field(
         max_length=100, description="Features the task needs; every robot must rate each one"
     )
+    # SPEC 16, all optional: a task with a duration makes the instance timed, and then
+    # every task needs one.
+    duration: Duration | None = None
+    after: list[TaskId] = Field(
+        default_factory=list,
+        max_length=MAX_TASKS,
+        description="Task ids that must end before this task starts (finish to start)",
+    )
+    zone: Name | None = Field(None, description="Where the task is done (see `travel`)")
+    release: Minutes | None = Field(None, description="Earliest start, minutes from `start`")
+    deadline: PositiveMinutes | None = Field(None, description="Latest end, minutes from `start`")
 
     def to_domain(self) -> Task:
         return Task(
@@ -94,6 +108,11 @@ class TaskIn(BaseModel):
             name=self.name if self.name is not None else str(self.id),
             type=self.type,
             features=tuple(self.features),
+            duration=self.duration,
+            after=tuple(self.after),
+            zone=self.zone,
+            release=self.release,
+            deadline=self.deadline,
         )
 
 
@@ -108,6 +127,8 @@ class RobotIn(BaseModel):
     success: dict[Name, Probability] = Field(
         description="Success probability per feature, each in [0, 1]"
     )
+    zone: Name | None = Field(None, description="Where the robot starts (timed instances)")
+    available: Shift | None = None
 
     def to_domain(self) -> Robot:
         return Robot(
@@ -115,6 +136,8 @@ class RobotIn(BaseModel):
             label=self.label,
             description=self.description,
             success=dict(self.success),
+            zone=self.zone,
+            available=self.available,
         )
 
 
@@ -157,6 +180,16 @@ class InstanceRequest(BaseModel):
         description="Workload cap in tasks either side of the target load; omit it for the "
         "mode's default, send null for no cap",
     )
+    travel: dict[Name, dict[Name, Minutes]] | None = Field(
+        None,
+        description='Minutes between zones, {"A": {"B": 6}}: symmetric when one direction is '
+        "given, 0 inside a zone; every pair of zones in use needs an entry",
+    )
+    start: WallClock | None = Field(
+        None,
+        description="Timed instances: the wall-clock time of minute 0 (RFC 3339 with an "
+        "offset; schedule times are given in that offset). Default: the request's arrival",
+    )
 
 
 class PinIn(BaseModel):
@@ -166,6 +199,9 @@ class PinIn(BaseModel):
 
     task_id: TaskId
     robot: Name = Field(description="Robot name (or label)")
+    start: Minutes | None = Field(
+        None, description="Timed instances: the task's fixed start (it started or is done)"
+    )
 
 
 class AllocateRequest(InstanceRequest):
@@ -183,6 +219,19 @@ class AllocateRequest(InstanceRequest):
         description="Robots that keep their pins but take no new task and are outside the "
         "balance: W = (unpinned tasks + tasks pinned on available robots) / available robots",
     )
+    objective: ObjectiveKind = Field(
+        ObjectiveKind.SUCCESS_THEN_MAKESPAN,
+        description="Timed instances: 'success_then_makespan' (the highest expected success "
+        "under the cap, then the shortest makespan) or 'makespan' (the shortest makespan "
+        "whose expected success is at least min_expected_success)",
+    )
+    min_expected_success: float = Field(
+        0.0, ge=0, le=1, strict=True, allow_inf_nan=False, description="With 'makespan' only"
+    )
+
+
+def _absent(value: object) -> bool:
+    return value is None
 
 
 class Assignment(BaseModel):
@@ -252,6 +301,41 @@ class AllocateResponse(BaseModel):
     metrics: MetricsOut
     usage: UsageOut
     elapsed_ms: float
+    # SPEC 16, on timed instances only (absent otherwise, so untimed answers are unchanged).
+    schedule: ScheduleOut | None = Field(
+        None, description="Timed instances: when each task runs", exclude_if=_absent
+    )
+    schedule_model: str | None = Field(
+        None,
+        description="Which part is exact: CP-SAT decided robots and times together "
+        "(`schedule`), or the list scheduler timed another method's assignment",
+        exclude_if=_absent,
+    )
+    schedule_violations: list[ViolationOut] | None = Field(
+        None,
+        description="Rules the list scheduler's timing of the method's assignment breaks "
+        "(e.g. a deadline); empty when it breaks none",
+        exclude_if=_absent,
+    )
+    schedule_error: str | None = Field(
+        None,
+        description="Why the method's assignment has no schedule (a robot that cannot take a task)",
+        exclude_if=_absent,
+    )
+    status: Literal["optimal", "feasible"] | None = Field(
+        None,
+        description="`schedule`: 'optimal' only when CP-SAT proved the makespan",
+        exclude_if=_absent,
+    )
+    bound: float | None = Field(
+        None, description="`schedule`: a proven lower bound on the makespan", exclude_if=_absent
+    )
+    gap: float | None = Field(
+        None, description="`schedule`: (makespan - bound) / makespan", exclude_if=_absent
+    )
+    model: str | None = Field(
+        None, description="`schedule`: which CP-SAT model ran", exclude_if=_absent
+    )
 
 
 class HealthOut(BaseModel):

@@ -88,6 +88,14 @@ class UseLearned(_Strict):
     robots: list[Name] | None = Field(None, min_length=1, max_length=MAX_ROBOTS)
 
 
+class Delay(_Strict):
+    """SPEC 16: the task takes this many minutes longer, on every robot (timed runs only)."""
+
+    type: Literal["delay"]
+    task_id: TaskId
+    minutes: float = Field(gt=0, le=525_600, allow_inf_nan=False, description="Minutes added")
+
+
 Change = Annotated[
     RobotUnavailable
     | RobotAvailable
@@ -96,7 +104,8 @@ Change = Annotated[
     | AddTasks
     | RemoveTasks
     | SetMode
-    | UseLearned,
+    | UseLearned
+    | Delay,
     Field(discriminator="type"),
 ]
 
@@ -128,6 +137,12 @@ class RevisionRequestIn(_Strict):
     )
     durations: DurationSource | None = Field(
         None, description="'configured' or 'learned' (default: the parent's)"
+    )
+    now: RequestTime | None = Field(
+        None,
+        description="SPEC 16, timed runs: the time the revision plans from (RFC 3339 with an "
+        "offset; default: the request's arrival). Nothing unstarted is planned earlier; it may "
+        "not be before the plan's start",
     )
 
 
@@ -167,6 +182,37 @@ class SideMetrics(BaseModel):
     total: int
 
 
+class PlanMinute(BaseModel):
+    minutes: float = Field(description="Minutes from the plan's start")
+    at: str | None = Field(description="RFC 3339, in the plan's offset")
+
+
+class TaskMove(BaseModel):
+    task_id: int | str
+    task_name: str
+    robot_before: str
+    robot_after: str
+    start_before: float
+    start_after: float
+    end_before: float
+    end_after: float
+    start_before_at: str | None
+    start_after_at: str | None
+    end_before_at: str | None
+    end_after_at: str | None
+    start_moved: float = Field(description="Minutes later (negative: earlier)")
+    end_moved: float
+
+
+class ScheduleDiff(BaseModel):
+    """SPEC 16: the parent's current schedule (its decisions re-timed by its execution
+    reports) against the revision's."""
+
+    moves: list[TaskMove] = Field(description="Tasks whose start or end moved, queue order")
+    makespan_before: PlanMinute
+    makespan_after: PlanMinute
+
+
 class DiffOut(BaseModel):
     run_id: str
     parent: str
@@ -176,6 +222,9 @@ class DiffOut(BaseModel):
     fleet_changes: list[dict[str, object]]
     before: SideMetrics
     after: SideMetrics
+    schedule: ScheduleDiff | None = Field(
+        None, description="Timed runs only (SPEC 16): start/end moves and the makespans"
+    )
 
 
 __all__ = ["MAX_ROBOTS"]

@@ -19,9 +19,11 @@ from app.api.schemas.allocation import (
     absent,
     present,
 )
+from app.api.schemas.run_times import DecisionTimes
 from app.api.schemas.times import Timestamp
 from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
+from app.domain.objective import ObjectiveKind
 from app.domain.review import ReviewAction, ReviewOn
 from app.runs.spec import RunOrder
 
@@ -179,6 +181,15 @@ class RunRequest(InstanceRequest):
         description="'configured' (default) or 'learned' (the site's observed durations, "
         "the tasks' configured ones as priors; only timed instances have any)",
     )
+    objective: ObjectiveKind = Field(
+        ObjectiveKind.SUCCESS_THEN_MAKESPAN,
+        description="Timed instances (SPEC 16): 'success_then_makespan' (default) or "
+        "'makespan'; the graph decides in time order either way, and the objective is "
+        "what guidance optimises and the run records",
+    )
+    min_expected_success: float = Field(
+        0.0, ge=0, le=1, strict=True, allow_inf_nan=False, description="With 'makespan' only"
+    )
     replay_of: str | None = Field(
         None,
         min_length=1,
@@ -216,6 +227,10 @@ class RunRequest(InstanceRequest):
             site=self.site,
             rates=self.rates,
             durations=self.durations,
+            travel=self.travel,
+            start=self.start,
+            objective=self.objective,
+            min_expected_success=self.min_expected_success,
             sent=frozenset(self.model_fields_set),
         )
 
@@ -264,7 +279,7 @@ class ExecutionStateOut(BaseModel):
     ended_at: Timestamp | None
 
 
-class RunAssignment(BaseModel):
+class RunAssignment(DecisionTimes):
     task_index: int
     task_id: int | str
     task_name: str

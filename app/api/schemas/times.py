@@ -21,12 +21,11 @@ _RFC3339 = re.compile(_DATE_TIME + r"(?:[Zz]|[+-]\d{2}:\d{2})")
 _NO_OFFSET = re.compile(_DATE_TIME)
 
 
-def _rfc3339_utc(value: object) -> datetime:
-    """An RFC 3339 date-time string, offset required, as the same instant in UTC.
+def parse_rfc3339(value: object) -> datetime:
+    """An RFC 3339 date-time string, offset required, in the offset it was sent in.
 
     Pydantic alone would take a bare number as seconds since 1970 and a time without an
-    offset as it is (stored as if it were UTC, while the client may have meant local time),
-    and SQLite drops an offset: every stored time is UTC, so convert here."""
+    offset as it is (while the client may have meant local time)."""
     if not isinstance(value, str):
         raise PydanticCustomError(
             "datetime_type", f"must be an RFC 3339 date-time string with an offset, {_EXAMPLE}"
@@ -42,11 +41,17 @@ def _rfc3339_utc(value: object) -> datetime:
             f"must be an RFC 3339 date-time with an offset, {_EXAMPLE}",
         )
     try:
-        parsed = datetime.fromisoformat(value.upper())
+        return datetime.fromisoformat(value.upper())
     except ValueError as exc:
         raise PydanticCustomError(
             "datetime_parsing", "is not a valid date-time: {error}", {"error": str(exc)}
         ) from None
+
+
+def _rfc3339_utc(value: object) -> datetime:
+    """An RFC 3339 date-time string, offset required, as the same instant in UTC: SQLite
+    drops an offset, so every stored time is UTC."""
+    parsed = parse_rfc3339(value)
     try:
         return parsed.astimezone(UTC)
     except OverflowError:

@@ -6,6 +6,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
+from app.api.schemas.run_times import DecisionTimes
 from app.api.schemas.runs import DecisionReviewOut, Page, StandIn
 from app.api.schemas.times import Timestamp
 from app.domain.lifecycle import RunStatus
@@ -56,7 +57,7 @@ class AttemptOut(BaseModel):
     reply: str | None = Field(None, description="Raw reply, with ?include=prompts")
 
 
-class DecisionOut(BaseModel):
+class DecisionOut(DecisionTimes):
     task_index: int
     task_id: int | str
     task_name: str

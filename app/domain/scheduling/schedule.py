@@ -84,7 +84,10 @@ class Schedule:
         """RFC 3339 time of a minute of the plan, in `start`'s offset; None without start."""
         if self.start is None:
             return None
-        return (self.start + timedelta(minutes=minute)).isoformat()
+        try:
+            return (self.start + timedelta(minutes=minute)).isoformat()
+        except OverflowError:  # past the year 9999: no wall-clock time to give
+            return None
 
     def to_dict(self, problem: Problem) -> dict[str, Any]:
         """Plain JSON: task ids and robot names instead of indexes."""

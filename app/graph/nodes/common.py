@@ -8,6 +8,7 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.domain.decision import DecisionContext
+from app.domain.scheduling.progress import TimeOption
 from app.graph.context import decision_context
 from app.graph.gate import NODE_GATE
 from app.graph.prompts import SYSTEM_PROMPT
@@ -59,7 +60,18 @@ def require_attempt(recorder: Recorder, task_index: int, attempt: int) -> Attemp
     return record
 
 
+def timing(ctx: GraphContext, state: LTAAState) -> dict[str, Any]:
+    """decision_context's time arguments: on a timed instance, what each robot would make of
+    the current task in time, and how many tasks are allocated before it; else none."""
+    if not ctx.problem.instance.timed:
+        return {}
+    t = state["task_index"]
+    progress = ctx.timed.at(ctx.problem, ctx.recorder, t)
+    options: tuple[TimeOption, ...] = progress.options(t)
+    return {"timing": options, "allocated": len(ctx.problem.pinned) + progress.decided}
+
+
 def current_attempt(ctx: GraphContext, state: LTAAState) -> tuple[AttemptRecord, DecisionContext]:
     """The recorded attempt the state points at, and the true facts it is judged against."""
     record = require_attempt(ctx.recorder, state["task_index"], state["attempt"])
-    return record, decision_context(ctx.problem, state, tier=state["tier"])
+    return record, decision_context(ctx.problem, state, tier=state["tier"], **timing(ctx, state))

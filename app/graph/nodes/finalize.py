@@ -7,10 +7,11 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
-from app.graph.nodes.common import cancellable
+from app.graph.nodes.common import cancellable, timing
 from app.graph.recorder import AttemptRecord
 from app.graph.review import gate
 from app.graph.state import GraphContext, LTAAState
+from app.graph.timing import best_in_time, fallback_answer, time_record
 from app.graph.validation import validate_text
 from app.reasoners.rules import choose, compose_answer
 
@@ -30,7 +31,7 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
     ctx = runtime.context
     rec = ctx.recorder
     t, a = state["task_index"], state["attempt"]
-    dctx = decision_context(ctx.problem, state)
+    dctx = decision_context(ctx.problem, state, **timing(ctx, state))
     records = [r for k in range(1, a + 1) if (r := rec.attempt(t, k)) is not None]
     failures = [failure_line(r, ctx.quality_threshold) for r in records if not r.accepted]
     # The answer's text stays in the recorder when it is there already (the accepted
@@ -43,6 +44,13 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
         quality = accepted.quality or 0.0
         confidence = (accepted.parsed or {}).get("confidence")
         text = {"text_attempt": accepted.attempt}
+    elif dctx.timing:
+        # SPEC 16: in time, the fallback takes the allowed robot with the best success.
+        robot = best_in_time(dctx)
+        verdict = validate_text(fallback_answer(dctx, robot), dctx, ctx.quality_threshold)
+        fallback, quality = True, verdict.quality
+        confidence = verdict.parsed.confidence
+        text = {"reasoning": verdict.parsed.reasoning, "tradeoff": verdict.parsed.tradeoff}
     else:
         # The conservative fallback: the rules reasoner's answer, validated like any other.
         # The robot comes from the rule itself, never from re-parsing its text.
@@ -85,4 +93,7 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
             robot = reviewed.robot
             decision["expected_success"] = dctx.success[robot]
             decision["review"] = reviewed.review
+    if dctx.timing:
+        seq = ctx.timed.at(ctx.problem, rec, t).decided
+        decision["time"] = time_record(dctx, robot, seq)
     return {"robot": robot, "fallback": fallback, "decision": decision}

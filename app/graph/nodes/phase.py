@@ -14,7 +14,10 @@ from app.graph.state import GraphContext, LTAAState, task_view
 def detect_phase(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
     t, loads = state["task_index"], state["loads"]
+    decided = None
+    if ctx.problem.instance.timed:
+        decided = ctx.timed.at(ctx.problem, ctx.recorder, t).decided
     guided = ctx.guidance(t, tuple(loads)) if ctx.guidance is not None else None
     if guided is None or isinstance(guided, int):
-        return {"view": task_view(ctx.problem, t, loads, guided)}
-    return {"view": task_view(ctx.problem, t, loads, guided.robot, guided.costs)}
+        return {"view": task_view(ctx.problem, t, loads, guided, decided=decided)}
+    return {"view": task_view(ctx.problem, t, loads, guided.robot, guided.costs, decided=decided)}

@@ -7,7 +7,7 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
-from app.graph.nodes.common import cancellable, save_prompt
+from app.graph.nodes.common import cancellable, save_prompt, timing
 from app.graph.prompts import user_prompt
 from app.graph.state import GraphContext, LTAAState
 
@@ -15,7 +15,9 @@ from app.graph.state import GraphContext, LTAAState
 @cancellable
 def build_prompt(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     ctx = runtime.context
-    dctx = decision_context(ctx.problem, state, tier=0, rate_notes=ctx.rate_notes)
+    dctx = decision_context(
+        ctx.problem, state, tier=0, rate_notes=ctx.rate_notes, **timing(ctx, state)
+    )
     save_prompt(ctx.recorder, state["task_index"], 1, 0, user_prompt(dctx))
     # A task's flags are reset where the task starts, not where the previous one ended:
     # fewer writes per task (each is a checkpoint row).

@@ -11,7 +11,7 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
-from app.graph.nodes.common import cancellable, require_attempt
+from app.graph.nodes.common import cancellable, require_attempt, timing
 from app.graph.state import GraphContext, LTAAState
 from app.reasoners.attribution import attributed
 from app.reasoners.base import ReasonerError, ReasonerReply
@@ -26,7 +26,7 @@ def reason(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     if record.reply is not None:
         return {}
     rec.before_reason(t, a)
-    dctx = decision_context(ctx.problem, state, tier=state["tier"])
+    dctx = decision_context(ctx.problem, state, tier=state["tier"], **timing(ctx, state))
     try:
         reply = attributed(
             ctx.reasoner.reason(record.system_prompt, record.user_prompt, dctx),

@@ -7,7 +7,7 @@ from typing import Any
 from langgraph.runtime import Runtime
 
 from app.graph.context import decision_context
-from app.graph.nodes.common import cancellable, require_attempt, save_prompt
+from app.graph.nodes.common import cancellable, require_attempt, save_prompt, timing
 from app.graph.prompts import retry_prompt
 from app.graph.state import GraphContext, LTAAState
 
@@ -24,7 +24,9 @@ def retry(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
     previous = require_attempt(rec, t, a)
     attempt = a + 1
     tier = min(attempt - 1, MAX_TIER)
-    dctx = decision_context(ctx.problem, state, tier=tier, rate_notes=ctx.rate_notes)
+    dctx = decision_context(
+        ctx.problem, state, tier=tier, rate_notes=ctx.rate_notes, **timing(ctx, state)
+    )
     user = retry_prompt(
         dctx, tier, previous.feedback or "", previous.quality, ctx.quality_threshold
     )

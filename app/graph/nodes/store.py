@@ -47,9 +47,17 @@ def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
             severity_after=state["view"]["severity"],
             regret=ctx.regret(t, d["loads_before"], robot) if ctx.regret is not None else None,
             review=d.get("review"),
+            **(d.get("time") or {}),
         )
     )
     # build_prompt resets the per-task flags; clearing the text scratch keeps the next
     # task's checkpoints small.
-    following = next_task(ctx.problem, t)  # pinned tasks are not the graph's to decide
+    if inst.timed:
+        # Placed after the write: a write refused (a lost fence) leaves the timelines as
+        # the record has them.
+        progress = ctx.timed.at(ctx.problem, rec, t)
+        progress.place(t, robot)
+        following = progress.current()
+    else:
+        following = next_task(ctx.problem, t)  # pinned tasks are not the graph's to decide
     return {"task_index": following, "done": following >= inst.n_tasks, "decision": None}

@@ -126,8 +126,12 @@ class ScheduleModel:
                 for t, s in self.problem.pinned_starts.items()
             ]
         )
-        total = sum(max(tm.duration(t, r) for r in self.candidates[t]) for t in range(tm.n_tasks))
-        horizon = up(anchor) + up(total) + tm.n_tasks * up(longest_travel)
+        # Each duration rounded on its own: rounding the sum instead lost up to a unit per
+        # task, and with sub-unit durations proved a feasible instance infeasible.
+        total = sum(
+            max(up(tm.duration(t, r)) for r in self.candidates[t]) for t in range(tm.n_tasks)
+        )
+        horizon = up(anchor) + total + tm.n_tasks * up(longest_travel)
         shift_ends = [b for _, b in tm.shifts]
         if all(math.isfinite(b) for b in shift_ends):
             horizon = min(horizon, max(self.scale.down(b) for b in shift_ends))

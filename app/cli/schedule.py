@@ -1,0 +1,182 @@
+"""`ltaa schedule`: plan a timed instance with one method and print its schedule.
+
+The per-robot timeline by default (rich), or the schedule as JSON (the `schedule` block
+of POST /allocate's answer), CSV or iCalendar on stdout for a spreadsheet or a calendar.
+An instance file is read as an /allocate body's instance part and checked the same way;
+a built-in name is a timed scenario (`baseline_timed`).
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import UTC, datetime
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from pydantic import ValidationError
+from rich.console import Console
+from rich.markup import escape
+
+from app.api.allocation import build_problem, load_solver
+from app.api.errors import domain_error_body, validation_error_body
+from app.api.rounding import rounded
+from app.api.schemas.allocation import AllocateRequest
+from app.cli.allocate import parse_options, read_instance
+from app.cli.root import cli, fail
+from app.config import get_settings
+from app.domain import catalog
+from app.domain.errors import DomainError
+from app.domain.modes import Mode
+from app.domain.objective import Objective, ObjectiveKind
+from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.schedule import Schedule
+from app.schedules import render_timeline, schedule_csv, schedule_ics, schedule_json
+
+
+class Format(StrEnum):
+    TEXT = "text"
+    JSON = "json"
+    CSV = "csv"
+    ICS = "ics"
+
+
+@cli.command()
+def schedule(
+    source: Annotated[
+        str,
+        typer.Argument(
+            help="A JSON instance file (tasks, robots, travel, start) or a built-in timed "
+            "scenario's name"
+        ),
+    ] = "baseline_timed",
+    method: Annotated[str, typer.Option(help="Solver name (see GET /solvers)")] = "schedule",
+    mode: Annotated[Mode, typer.Option(help="Operational mode")] = Mode.BALANCED,
+    max_deviation: Annotated[
+        float | None,
+        typer.Option(help="Workload cap, in tasks either side of the target (default: the mode's)"),
+    ] = None,
+    objective: Annotated[
+        ObjectiveKind, typer.Option(help="What the exact scheduler optimises")
+    ] = ObjectiveKind.SUCCESS_THEN_MAKESPAN,
+    min_expected_success: Annotated[
+        float, typer.Option(help="With --objective makespan: the least expected success")
+    ] = 0.0,
+    time_limit: Annotated[
+        float | None,
+        typer.Option("--time-limit", help="Seconds for the `schedule` solver (default 10)"),
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Random seed")] = 0,
+    option: Annotated[
+        list[str] | None,
+        typer.Option("--option", "-o", help="Solver option KEY=VALUE (VALUE as JSON); repeatable"),
+    ] = None,
+    output: Annotated[Format, typer.Option("--format", help="What to print")] = Format.TEXT,
+) -> None:
+    """Plan a timed instance and print when each robot does what."""
+    as_json = output is Format.JSON
+    options = parse_options(option or [])
+    if time_limit is not None:
+        options["time_limit_s"] = time_limit
+    try:
+        problem = _problem(source, mode, max_deviation, objective, min_expected_success, as_json)
+        if not problem.instance.timed:
+            raise DomainError(
+                "tasks",
+                "the instance is untimed: give every task a 'duration' (minutes) to schedule it",
+                code="not_timed",
+            )
+        solver = load_solver(method, get_settings())
+        solution = solver.solve(problem, seed=seed, options=options)
+    except ValidationError as exc:
+        fail(validation_error_body(exc.errors(include_input=False), root=("body",)), as_json)
+    except DomainError as exc:
+        fail(domain_error_body(exc), as_json)
+    planned: Schedule | None = solution.details.get("schedule")
+    if planned is None:
+        fail(_error("method", str(solution.details.get("schedule_error")), "no_schedule"), as_json)
+    _warn_violations(problem, planned)
+    if output is Format.JSON:
+        typer.echo(json.dumps(rounded(schedule_json(problem, planned)), indent=2))
+    elif output is Format.CSV:
+        typer.echo(schedule_csv(problem, planned), nl=False)
+    elif output is Format.ICS:
+        name = Path(source).stem
+        typer.echo(
+            schedule_ics(
+                problem,
+                planned,
+                calendar_name=f"{name}: {method}",
+                uid_prefix=f"ltaa-{name}-{method}",
+                start=datetime.now(UTC).replace(microsecond=0),
+            ),
+            nl=False,
+        )
+    else:
+        console = Console()  # made per call: tests swap sys.stdout
+        _print_header(console, method, solution.details, planned)
+        render_timeline(problem, planned, console)
+
+
+def _problem(
+    source: str,
+    mode: Mode,
+    max_deviation: float | None,
+    objective: ObjectiveKind,
+    min_expected_success: float,
+    as_json: bool,
+) -> Problem:
+    path = Path(source)
+    if path.is_file():
+        body: dict[str, Any] = {
+            "solver": "schedule",  # checked on its own by load_solver
+            "mode": mode.value,
+            "objective": objective.value,
+            "min_expected_success": min_expected_success,
+            **read_instance(path, as_json),
+        }
+        if max_deviation is not None:
+            body["max_deviation"] = max_deviation
+        return build_problem(AllocateRequest.model_validate(body))
+    if source not in catalog.timed_scenarios():
+        known = ", ".join(catalog.timed_scenarios())
+        raise DomainError(
+            "source",
+            f"'{source}' is neither a file nor a timed scenario; name an instance file or "
+            f"one of: {known}",
+            code="unknown_scenario",
+        )
+    return Problem.build(
+        catalog.timed_scenario(source).instance,
+        mode,
+        max_deviation,
+        objective=Objective(objective, min_expected_success),
+    )
+
+
+def _error(field: str, message: str, type_: str) -> dict[str, Any]:
+    return {"detail": [{"loc": ["body", field], "msg": message, "type": type_}]}
+
+
+def _warn_violations(problem: Problem, planned: Schedule) -> None:
+    """The rules this schedule breaks (a method's assignment may miss a deadline), on
+    stderr so that stdout stays the schedule alone."""
+    err = Console(stderr=True)
+    for violation in check_schedule(problem, planned):
+        err.print(
+            f"[bold yellow]breaks[/] {violation.rule.value}: {escape(violation.message)}",
+            highlight=False,
+        )
+
+
+def _print_header(
+    console: Console, method: str, details: dict[str, Any], planned: Schedule
+) -> None:
+    line = f"[bold]{method}[/] · makespan {planned.makespan:g} min"
+    if "status" in details:
+        line += f" · {details['status']} (bound {details['bound']:g}, gap {details['gap']:.1%})"
+    else:
+        line += " · timed by the list scheduler"
+    console.print(line, highlight=False)

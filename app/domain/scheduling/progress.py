@@ -1,0 +1,210 @@
+"""The order in which the LTAA graph decides a timed instance's tasks, and what each
+choice would mean in time (SPEC 16 "The LTAA graph on time").
+
+The graph decides one task at a time. On a timed instance the next task is, among the
+tasks whose predecessors are all placed, the one that could start earliest on any robot
+that may take it (ties: queue order), given the robots' timelines as decided so far;
+the chosen robot appends it to its timeline at the earliest time its predecessors have
+ended, the robot is free and has travelled there, and its release and `not_before`
+allow. It is the list scheduler's rule (app.domain.scheduling.list_schedule) with the
+robot chosen at each step instead of given up front, so the graph's times are the list
+schedule of its own assignment placed in its own order.
+
+Pinned tasks (a revision) are not the graph's to decide: a pin with a start is fixed on
+its robot from the outset; a pin without one is placed on its robot when it comes up in
+the order, like any task. Everything here is a deterministic function of the problem and
+the robots chosen so far, so a resumed run rebuilds it from its stored decisions
+(`replay`) and continues exactly where it stopped.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from app.domain.problem import Problem
+from app.domain.scheduling.list_schedule import Timeline
+from app.domain.scheduling.schedule import EPS
+from app.domain.time_model import TimeModel
+
+
+@dataclass(frozen=True)
+class TimeOption:
+    """What giving the current task to one robot would mean in time."""
+
+    robot: int
+    free: float  # when the robot is next free (its shift start while it has no task)
+    travel: float  # minutes from where it is to the task's zone
+    start: float
+    end: float
+    slack: float  # deadline - end; math.inf without a deadline
+    allowed: bool  # meets the deadline and the shift (and the robot may take the task)
+    why_not: str = ""  # what it breaks, when not allowed
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a placed task sits: its robot's timeline, and its position in the order."""
+
+    robot: int
+    start: float
+    end: float
+    travel: float
+    seq: int  # the graph's decisions before it (pins are not counted)
+
+
+class TimedProgress:
+    """The robots' timelines and the decision order of one timed problem, step by step."""
+
+    def __init__(self, problem: Problem) -> None:
+        self.problem = problem
+        tm = problem.instance.timing
+        self.tm: TimeModel = tm
+        n = tm.n_tasks
+        self.placed: dict[int, Placement] = {}
+        self.decided = 0  # free tasks placed (the graph's decisions)
+        self._ends = [0.0] * n
+        self._lines = [Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
+        for t, start in sorted(problem.pinned_starts.items(), key=lambda item: item[1]):
+            r = problem.pinned[t]
+            end = start + tm.duration(t, r)
+            self._lines[r].fixed.append((start, end, t))
+            self._ends[t] = end
+            self.placed[t] = Placement(r, start, end, 0.0, -1)
+        self._waiting = [
+            sum(1 for p in tm.predecessors[t] if p not in self.placed) for t in range(n)
+        ]
+        self._heap: list[tuple[float, int]] = []
+        for t in range(n):
+            if t not in self.placed and self._waiting[t] == 0:
+                self._push(t)
+
+    # -- the order --------------------------------------------------------------------------
+
+    def _candidates(self, task: int) -> Iterable[int]:
+        pinned = self.problem.pinned.get(task)
+        if pinned is not None:
+            return (pinned,)
+        return (r for r in self.problem.available if self.tm.durations[task][r] is not None)
+
+    def ready_time(self, task: int) -> float:
+        tm = self.tm
+        ready = max((self._ends[p] for p in tm.predecessors[task]), default=0.0)
+        return max(ready, tm.release[task], self.problem.not_before)
+
+    def _estimate(self, task: int) -> float:
+        ready = self.ready_time(task)
+        return min(
+            (self._lines[r].earliest(self.tm, task, r, ready) for r in self._candidates(task)),
+            default=math.inf,
+        )
+
+    def _push(self, task: int) -> None:
+        heapq.heappush(self._heap, (self._estimate(task), task))
+
+    def _peek(self) -> int | None:
+        """The next task in the order (estimates only grow: a lazy heap, as list_schedule)."""
+        while self._heap:
+            est, t = self._heap[0]
+            now = self._estimate(t)
+            if now > est + EPS:
+                heapq.heapreplace(self._heap, (now, t))
+                continue
+            return t
+        return None
+
+    def current(self) -> int:
+        """The next task the graph decides (placing pins that come up first); n_tasks when
+        every task is placed."""
+        while True:
+            t = self._peek()
+            if t is None:
+                return self.tm.n_tasks
+            pinned = self.problem.pinned.get(t)
+            if pinned is None:
+                return t
+            self._place(t, pinned)
+
+    # -- a choice ---------------------------------------------------------------------------
+
+    def options(self, task: int) -> tuple[TimeOption, ...]:
+        """Per robot of the fleet: when it would start and end the task, and whether that
+        meets the task's deadline and the robot's shift."""
+        tm = self.tm
+        ready = self.ready_time(task)
+        deadline = tm.deadline[task]
+        allowed_robots = set(self._candidates(task))
+        out = []
+        for r, line in enumerate(self._lines):
+            travel = tm.travel_to_task(line.zone, task)
+            duration = tm.durations[task][r]
+            if duration is None or r not in allowed_robots:
+                why = "cannot take the task" if duration is None else "is unavailable"
+                out.append(
+                    TimeOption(r, line.free, travel, math.inf, math.inf, -math.inf, False, why)
+                )
+                continue
+            start = line.earliest(tm, task, r, ready)
+            end = start + duration
+            slack = deadline - end
+            why = ""
+            if end > deadline + EPS:
+                why = f"misses the deadline (minute {deadline:g}) by {end - deadline:g} min"
+            elif end > tm.shifts[r][1] + EPS:
+                why = f"ends after its shift (minute {tm.shifts[r][1]:g})"
+            out.append(TimeOption(r, line.free, travel, start, end, slack, not why, why))
+        return tuple(out)
+
+    def place(self, task: int, robot: int) -> Placement:
+        """Give the current task to `robot` (idempotent: a placed task keeps its place)."""
+        if task in self.placed:
+            return self.placed[task]
+        expected = self.current()
+        if task != expected:
+            raise ValueError(f"task {task} is not the next in the order ({expected} is)")
+        return self._place(task, robot)
+
+    def _place(self, task: int, robot: int) -> Placement:
+        tm = self.tm
+        line = self._lines[robot]
+        travel = tm.travel_to_task(line.zone, task)
+        start = line.earliest(tm, task, robot, self.ready_time(task))
+        line.place(tm, task, robot, start)
+        end = start + tm.duration(task, robot)
+        free = task not in self.problem.pinned
+        placement = Placement(robot, start, end, travel, self.decided if free else -1)
+        heapq.heappop(self._heap)  # `task` is the heap's top: current() said so
+        self.placed[task] = placement
+        self._ends[task] = end
+        if free:
+            self.decided += 1
+        for s in tm.successors[task]:
+            self._waiting[s] -= 1
+            if self._waiting[s] == 0 and s not in self.placed:
+                self._push(s)
+        return placement
+
+    # -- rebuilding ---------------------------------------------------------------------------
+
+    @classmethod
+    def replay(
+        cls, problem: Problem, robots: Mapping[int, int], *, until: int | None = None
+    ) -> TimedProgress:
+        """The progress after the stored decisions (task -> robot), placed in the order;
+        stopping at `until` (the task a resumed graph is about to decide again) or at the
+        first task without a decision."""
+        progress = cls(problem)
+        while True:
+            t = progress.current()
+            if t >= progress.tm.n_tasks or t == until or t not in robots:
+                return progress
+            progress._place(t, robots[t])
+
+
+def decision_order(problem: Problem, robots: Mapping[int, int]) -> list[int]:
+    """The free tasks with a decision, in the order the graph decided them."""
+    progress = TimedProgress.replay(problem, robots)
+    placed = [(p.seq, t) for t, p in progress.placed.items() if p.seq >= 0]
+    return [t for _, t in sorted(placed)]

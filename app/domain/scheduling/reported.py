@@ -1,0 +1,119 @@
+"""A plan re-timed by what the site reported (SPEC 16 "Time in living plans").
+
+Execution reports with times are the truth: a task reported started sits at its reported
+start, a task reported done (or failed) ends at its reported time, and a task that ran
+late pushes what follows it. A run that is not revised keeps its decisions, so its
+schedule view changes only in time: the reported tasks sit at their reported times, and
+every robot keeps its other tasks in the order it was given, each as early as its
+predecessors, its robot (plus travel), its release allow. An unreported task planned
+before a reported one stays before it where it fits in the time before it (the site may
+not have reported it yet), else it goes after it (the list scheduler's rule for fixed
+tasks, `list_schedule.Timeline`); a task planned after a reported one stays after it.
+
+The view depends on the decisions and the reports only, never on the clock: an unstarted
+task may still show a start in the past (nothing reported it late yet). A revision is
+what moves the unstarted work past `now` (`Problem.not_before`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import datetime
+
+from app.domain.problem import Problem
+from app.domain.scheduling.list_schedule import Timeline
+from app.domain.scheduling.schedule import Schedule, build_schedule
+from app.domain.time_model import TimeModel
+
+# A task reported done at the very instant it was reported started ran for no measurable
+# time; a duration is positive (SPEC 16), so it counts as one second.
+MIN_MINUTES = 1 / 60
+
+
+@dataclass(frozen=True)
+class Reported:
+    """What the site said of one task, in minutes of the plan: when it started (None: no
+    start was reported) and when it ended (done or failed; None: still running)."""
+
+    start: float | None
+    end: float | None = None
+
+
+def minutes_since(origin: datetime, at: datetime) -> float:
+    """Minutes from the plan's minute 0 (`origin`, aware) to an aware time."""
+    return (at - origin).total_seconds() / 60.0
+
+
+def reported_interval(reported: Reported, planned_minutes: float) -> tuple[float, float]:
+    """(start, end) of a reported task: a missing start is its end less the planned
+    duration; a missing end is its start plus the planned duration. Never before minute 0
+    (a start reported before the plan's start counts from minute 0)."""
+    if reported.start is None and reported.end is None:
+        raise ValueError("a reported task has a start or an end")
+    if reported.start is None:
+        assert reported.end is not None
+        start = max(0.0, reported.end - planned_minutes)
+    else:
+        start = max(0.0, reported.start)
+    end = start + planned_minutes if reported.end is None else max(reported.end, start)
+    return start, max(end, start + MIN_MINUTES)
+
+
+def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]) -> Schedule:
+    """The planned schedule with the reported tasks at their reported times and every other
+    task re-timed as early as the rules allow, each robot keeping its tasks and order.
+
+    Reported tasks are facts (as pinned starts are): they wait for nothing, and their ends
+    may differ from the planned durations (`check_schedule` then names the difference
+    under `duration`)."""
+    tm = problem.instance.timing
+    n = tm.n_tasks
+    robots = planned.assignment
+    fixed: dict[int, tuple[float, float]] = {}
+    for t, report in reported.items():
+        if 0 <= t < n:
+            fixed[t] = reported_interval(report, tm.duration(t, robots[t]))
+    for t, start in problem.pinned_starts.items():
+        if t not in fixed:
+            fixed[t] = (start, start + tm.duration(t, robots[t]))
+    starts = [0.0] * n
+    ends = [0.0] * n
+    done = [False] * n
+    lines = [Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
+    for t, (start, end) in sorted(fixed.items(), key=lambda item: item[1]):
+        lines[robots[t]].fixed.append((start, end, t))
+        starts[t], ends[t], done[t] = start, end, True
+    orders = planned.sequences(tm.n_robots)
+    position = {t: k for seq in orders for k, t in enumerate(seq)}
+    queues = [[t for t in seq if t not in fixed] for seq in orders]
+    cursor = [0] * len(queues)
+    progress = True
+    while progress:
+        progress = False
+        for r, queue in enumerate(queues):
+            while cursor[r] < len(queue):
+                t = queue[cursor[r]]
+                if not all(done[p] for p in tm.predecessors[t]):
+                    break
+                ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
+                ready = max(ready, tm.release[t], problem.not_before)
+                _pass_earlier_facts(tm, lines[r], position, t)
+                start = lines[r].earliest(tm, t, r, ready)
+                lines[r].place(tm, t, r, start)
+                starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
+                cursor[r] += 1
+                progress = True
+    if not all(done):
+        # Only when the planned orders contradict the precedence: facts wait for nothing.
+        raise ValueError("the robot orders contradict the precedence: no task can go next")
+    return build_schedule(problem, robots, starts, ends)
+
+
+def _pass_earlier_facts(tm: TimeModel, line: Timeline, position: Mapping[int, int], t: int) -> None:
+    """The robot's reported tasks planned before `t` come before it, whenever they ran: a
+    task planned after one does not slip into a gap before it (the order is kept)."""
+    ahead = sorted((f for f in line.fixed if position[f[2]] < position[t]), key=lambda f: f[1])
+    for fact in ahead:
+        line.fixed.remove(fact)
+        line.free, line.zone = max(line.free, fact[1]), tm.task_zone[fact[2]]

@@ -1,0 +1,182 @@
+"""A schedule as a Gantt chart: server-rendered SVG, one lane per robot.
+
+Each task is a bar with a <title> (the hover text: task, robot, times, zone, travel);
+bars on the critical path carry the class `critical`; travel and idle are drawn as one
+path each per lane, so a 1,000-task chart stays light (one element per task, not three).
+The page that embeds the chart may restyle it through the classes; the chart carries its
+own defaults and a legend.
+"""
+
+from __future__ import annotations
+
+from xml.sax.saxutils import escape, quoteattr
+
+from app.domain.problem import Problem
+from app.domain.scheduling.schedule import Schedule
+from app.schedules.json_view import LaneItem, LaneKind, critical_tasks, lanes
+
+WIDTH = 1200
+GUTTER = 150  # robot names
+TOP = 28  # the time axis
+LANE = 26
+BAR = 18
+LEGEND = 34
+LABEL_MIN_PX = 36  # a bar this wide gets its task id written on it
+_TICK_STEPS = (5, 10, 15, 30, 60, 120, 240, 480, 720, 1440, 2880, 10080, 20160, 43200)
+
+STYLE = (
+    ".lane{fill:#f4f5f7}.shift{fill:#e3e7ee}.task{fill:#4c78a8;stroke:#fff;stroke-width:.5}"
+    ".task.critical{fill:#d62728}.travel{fill:#f2b447}.idle{fill:url(#idle-hatch)}"
+    ".axis{stroke:#aab;stroke-width:.5}.end{stroke:#d62728;stroke-dasharray:4 3}"
+    "text{font:11px sans-serif;fill:#222}.bar-label{fill:#fff;font-size:9px}"
+)
+
+
+def _n(x: float) -> str:
+    """A coordinate to one decimal: enough on screen, and half the bytes of full floats."""
+    text = f"{x:.1f}"
+    return text[:-2] if text.endswith(".0") else text
+
+
+def _tick_step(makespan: float) -> int:
+    for step in _TICK_STEPS:
+        if makespan / step <= 12:
+            return step
+    return _TICK_STEPS[-1] * max(1, round(makespan / _TICK_STEPS[-1] / 12))
+
+
+def _minutes_label(minute: float) -> str:
+    hours, mins = divmod(round(minute), 60)
+    return f"{hours} h" if mins == 0 else f"{hours} h {mins:02d}"
+
+
+def _path(items: list[LaneItem], x: float, scale: float, y: float) -> str:
+    """One path of rectangles: M x,y h w v h h -w z per item."""
+    return "".join(
+        f"M{_n(x + it.start * scale)} {_n(y)}h{_n((it.end - it.start) * scale)}"
+        f"v{BAR}h{_n(-(it.end - it.start) * scale)}z"
+        for it in items
+    )
+
+
+def gantt_svg(problem: Problem, schedule: Schedule) -> str:
+    instance, tm = problem.instance, problem.instance.timing
+    span = max(schedule.makespan, 1.0)
+    scale = (WIDTH - GUTTER - 10) / span
+    height = TOP + LANE * instance.n_robots + LEGEND
+    critical = critical_tasks(schedule)
+    out = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height}" '
+        f'viewBox="0 0 {WIDTH} {height}" role="img" '
+        f'aria-label="Gantt chart: {instance.n_tasks} tasks on {instance.n_robots} robots, '
+        f'makespan {schedule.makespan:g} min">',
+        f"<style>{STYLE}</style>",
+        # Idle is hatched, so it reads apart from the shift behind it in any palette.
+        '<defs><pattern id="idle-hatch" width="6" height="6" patternUnits="userSpaceOnUse" '
+        'patternTransform="rotate(45)"><rect width="6" height="6" fill="#e3e7ee"/>'
+        '<line x1="0" y1="0" x2="0" y2="6" stroke="#9aa3b0" stroke-width="2"/></pattern></defs>',
+    ]
+    step = _tick_step(span)
+    for k in range(int(span // step) + 1):
+        x = GUTTER + k * step * scale
+        if x > WIDTH - 40:  # no room for its label
+            break
+        out.append(
+            f'<line class="axis" x1="{_n(x)}" y1="{TOP - 6}" x2="{_n(x)}" '
+            f'y2="{TOP + LANE * instance.n_robots}"/>'
+            f'<text x="{_n(x + 2)}" y="{TOP - 10}">{_minutes_label(k * step)}</text>'
+        )
+    for r, lane in enumerate(lanes(problem, schedule)):
+        robot = instance.robots[r]
+        y = TOP + r * LANE
+        bar_y = y + (LANE - BAR) / 2
+        a, b = tm.shifts[r]
+        shift_end = min(b, span)
+        out.append(
+            f'<g class="robot" data-robot={quoteattr(robot.name)}>'
+            f'<rect class="lane" x="{GUTTER}" y="{y}" width="{WIDTH - GUTTER - 10}" '
+            f'height="{LANE - 2}"/>'
+            f'<text x="6" y="{_n(y + LANE / 2 + 4)}">{escape(robot.display)}</text>'
+        )
+        if shift_end > a:
+            out.append(
+                f'<rect class="shift" x="{_n(GUTTER + a * scale)}" y="{_n(bar_y)}" '
+                f'width="{_n((shift_end - a) * scale)}" height="{BAR}"/>'
+            )
+        for kind in (LaneKind.IDLE, LaneKind.TRAVEL):
+            items = [it for it in lane if it.kind is kind]
+            if items:
+                out.append(
+                    f'<path class="{kind.value}" d="{_path(items, GUTTER, scale, bar_y)}">'
+                    f"<title>{kind.value}: {sum(it.end - it.start for it in items):g} min"
+                    "</title></path>"
+                )
+        for it in lane:
+            if it.kind is LaneKind.TASK and it.task is not None:
+                out.append(_bar(problem, schedule, it.task, critical, scale, bar_y))
+        out.append("</g>")
+    end_x = GUTTER + schedule.makespan * scale
+    bottom = TOP + LANE * instance.n_robots
+    out.append(
+        f'<line class="end" x1="{_n(end_x)}" y1="{TOP - 6}" x2="{_n(end_x)}" y2="{bottom}">'
+        f"<title>makespan {schedule.makespan:g} min</title></line>"
+    )
+    out.append(_legend(bottom + 12))
+    out.append("</svg>")
+    return "".join(out)
+
+
+def _bar(
+    problem: Problem,
+    schedule: Schedule,
+    t: int,
+    critical: frozenset[int],
+    scale: float,
+    y: float,
+) -> str:
+    slot, task = schedule.slots[t], problem.instance.tasks[t]
+    robot = problem.instance.robots[slot.robot]
+    x, width = GUTTER + slot.start * scale, max((slot.end - slot.start) * scale, 0.5)
+    when = f"{slot.start:g}-{slot.end:g} min"
+    start_at, end_at = schedule.wall_clock(slot.start), schedule.wall_clock(slot.end)
+    if start_at and end_at:
+        when += f" ({start_at[11:16]}-{end_at[11:16]})"
+    hover = f"{task.id} {task.name} on {robot.name}: {when}"
+    if slot.zone is not None:
+        hover += f", zone {slot.zone}"
+    if slot.travel:
+        hover += f", after {slot.travel:g} min travel"
+    classes = "task critical" if t in critical else "task"
+    if t in critical:
+        hover += ", critical path"
+    label = ""
+    if width >= LABEL_MIN_PX:
+        label = (
+            f'<text class="bar-label" x="{_n(x + 3)}" y="{_n(y + BAR / 2 + 3)}">'
+            f"{escape(str(task.id))[:8]}</text>"
+        )
+    return (
+        f'<rect class="{classes}" data-task={quoteattr(str(task.id))} x="{_n(x)}" '
+        f'y="{_n(y)}" width="{_n(width)}" height="{BAR}"><title>{escape(hover)}</title></rect>'
+        f"{label}"
+    )
+
+
+def _legend(y: float) -> str:
+    entries = (
+        ("task", "task"),
+        ("task critical", "critical path"),
+        ("travel", "travel"),
+        ("idle", "idle"),
+        ("shift", "shift"),
+    )
+    parts = ['<g class="legend">']
+    x = GUTTER
+    for css, label in entries:
+        parts.append(
+            f'<rect class="{css}" x="{x}" y="{_n(y)}" width="14" height="10"/>'
+            f'<text x="{x + 18}" y="{_n(y + 9)}">{label}</text>'
+        )
+        x += 40 + 7 * len(label)
+    parts.append("</g>")
+    return "".join(parts)

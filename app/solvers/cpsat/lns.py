@@ -1,0 +1,216 @@
+"""Large-neighbourhood search (LNS) for the large-instance path.
+
+Past `EXACT_LIMIT` no CP-SAT model of the whole plan finds anything in a minute (measured
+at 1,000 x 20, `large.py`), but the exact model of a few dozen tasks around a schedule
+solves in well under a second. So, from the best schedule so far, repeatedly: choose a
+neighbourhood (the tasks running around a task of the critical path, around a random
+time, or on the robot that ends last and a few others in a window), re-solve it with
+CP-SAT (`lns_model.Neighbourhood`: the rest keeps its robots and orders, its times
+float), re-time the answer at earliest times, and keep it if it passes `check_schedule`
+and is better: a shorter makespan, or the same makespan with a smaller sum of ends (a
+strict order, so it cannot cycle). Under `success_then_makespan` the free tasks keep
+their ES share exactly and may only use ES-optimal pairs (`success_pairs`), so ES stays
+at its proven optimum. The neighbourhood grows when CP-SAT solves it to optimality and
+shrinks when it does not within its slice of time. Every CP-SAT run stops at the call's
+time limit; nothing it finds is called optimal.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ortools.sat.python import cp_model
+
+from app.domain.errors import DomainError
+from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.list_schedule import sequence_schedule
+from app.domain.scheduling.schedule import EPS, Schedule, StepKind
+from app.solvers.cpsat.lns_model import Neighbourhood
+from app.solvers.cpsat.outcome import Setup
+
+SLICE_S = 1.5  # CP-SAT per neighbourhood: a few dozen tasks solve or stall by then
+MIN_SLICE_S = 0.3  # less than this left: stop (building the model alone takes ~0.1 s)
+# Measured at 1,000 x 20: 40 tasks across all robots (times after the window floating)
+# took 1-2 s to solve, 40 tasks on 3-5 robots (the rest fixed) 0.03-0.1 s. Each kind of
+# neighbourhood keeps its own size, grown while CP-SAT solves it fast and to optimality,
+# shrunk when it does not.
+START_SIZE = {"window": 30, "robots": 40}
+MIN_SIZE, MAX_SIZE = 6, 250
+FAST_S, SLOW_S = 0.3, 0.8
+GROW, SHRINK = 1.2, 0.8
+ROBOTS_SHARE = 0.5
+
+
+@dataclass
+class LnsReport:
+    neighbourhoods: int = 0
+    improved: int = 0
+    rejected: int = 0  # answers that failed check_schedule (kept out, counted to see)
+    wall_s: float = 0.0
+    start_makespan: float = 0.0
+    end_makespan: float = 0.0
+
+    def stage(self) -> dict[str, object]:
+        return {
+            "stage": "lns",
+            "status": "FEASIBLE",
+            "wall_s": round(self.wall_s, 3),
+            "neighbourhoods": self.neighbourhoods,
+            "improved": self.improved,
+            "rejected": self.rejected,
+            "objective": self.end_makespan,
+            "start_objective": self.start_makespan,
+        }
+
+
+def improve(
+    setup: Setup,
+    candidates: Sequence[Sequence[int]],
+    start: Schedule | None = None,
+    seconds: float | None = None,
+) -> LnsReport | None:
+    """Run LNS from `start` (default: the best schedule so far) for `seconds` (default: until
+    the call's time limit); None if there is nothing to start from or no time."""
+    search, feasible = setup.search, setup.feasible
+    current = start or feasible.best()
+    until = search.remaining() - (seconds if seconds is not None else search.remaining())
+    if current is None or search.remaining() < MIN_SLICE_S:
+        return None
+    problem = setup.problem
+    began = time.perf_counter()
+    rng = random.Random(search.seed)
+    ancestors = _ancestor_masks(setup)
+    movable = [
+        t
+        for t in range(problem.instance.n_tasks)
+        if t not in problem.pinned and len(candidates[t]) >= 1
+    ]
+    report = LnsReport(start_makespan=current.makespan, end_makespan=current.makespan)
+    size = {kind: float(n) for kind, n in START_SIZE.items()}
+    while search.remaining() - until >= MIN_SLICE_S and movable:
+        kind = "robots" if rng.random() < ROBOTS_SHARE else "window"
+        free, robots = _choose(rng, current, movable, int(size[kind]), kind, candidates)
+        allowed = candidates
+        if robots is not None:  # an exchange among these robots only
+            allowed = [[r for r in c if r in robots] for c in candidates]
+        hood = Neighbourhood(setup, current, free, allowed, ancestors, kind == "window")
+        status, solver = _solve(
+            hood.model, setup, min(SLICE_S, search.remaining() - until - 0.1), rng
+        )
+        report.neighbourhoods += 1
+
+        if status == "OPTIMAL" and solver.wall_time < FAST_S:
+            size[kind] = min(MAX_SIZE, size[kind] * GROW)
+        elif status != "OPTIMAL" or solver.wall_time > SLOW_S:
+            size[kind] = max(MIN_SIZE, size[kind] * SHRINK)
+        if status not in ("OPTIMAL", "FEASIBLE"):
+            continue
+        schedule = _retimed(setup, *hood.read(solver))
+        if schedule is None:
+            report.rejected += 1
+            continue
+        if _better(schedule, current):
+            feasible.offer(schedule)
+            current = schedule
+            report.improved += 1
+    report.wall_s = time.perf_counter() - began
+    report.end_makespan = current.makespan
+    search.stages.append(report.stage())
+    return report
+
+
+def _choose(
+    rng: random.Random,
+    current: Schedule,
+    movable: list[int],
+    size: int,
+    kind: str,
+    candidates: Sequence[Sequence[int]],
+) -> tuple[list[int], set[int] | None]:
+    """`size` movable tasks close in time to a centre: a task on the critical path, a random
+    minute, or (robots) the tasks of a robot that ends last and of two to four others."""
+    slots = current.slots
+    pool, chosen = movable, None
+    if kind == "window" and rng.random() < 0.6:
+        critical = [
+            s.task for s in current.critical_path if s.kind is StepKind.TASK and s.task is not None
+        ]
+        centre = slots[rng.choice(critical)].start if critical else rng.uniform(0, current.makespan)
+    elif kind == "window":
+        centre = rng.uniform(0, current.makespan)
+    else:
+        # Where the makespan is: one of the three robots that end last, its tasks around a
+        # random one of them, with two to four robots that could take some of those tasks
+        # (the earliest to finish first: they have room), all in the same time window.
+        ends: dict[int, float] = {}
+        for s in slots:
+            ends[s.robot] = max(ends.get(s.robot, 0.0), s.end)
+        late = sorted(ends, key=lambda r: -ends[r])[:3]
+        last = rng.choice(late)
+        mine = [t for t in movable if slots[t].robot == last]
+        centre = slots[rng.choice(mine)].start if mine else rng.uniform(0, current.makespan)
+        near = sorted(mine, key=lambda t: abs(slots[t].start - centre))[: max(1, size // 4)]
+        partners = sorted({r for t in near for r in candidates[t]} - {last}, key=lambda r: ends[r])
+        if not partners:
+            partners = sorted(set(ends) - {last}, key=lambda r: ends[r])
+        chosen = {last, *rng.sample(partners[:6], min(len(partners[:6]), rng.randint(2, 4)))}
+        pool = [t for t in movable if slots[t].robot in chosen]
+    return sorted(pool, key=lambda t: (abs(slots[t].start - centre), t))[:size], chosen
+
+
+def _solve(
+    model: cp_model.CpModel, setup: Setup, seconds: float, rng: random.Random
+) -> tuple[str, cp_model.CpSolver]:
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = max(0.05, seconds)
+    solver.parameters.num_workers = setup.search.workers
+    solver.parameters.random_seed = rng.randrange(1 << 30)
+    # A small model: probing and repeated presolve cost more than they save here.
+    solver.parameters.cp_model_probing_level = 0
+    solver.parameters.max_presolve_iterations = 1
+    return solver.status_name(solver.solve(model)), solver
+
+
+def _retimed(setup: Setup, robots: list[int], starts: list[float]) -> Schedule | None:
+    """The answer's per-robot orders at their earliest times, if that passes the check and
+    the objective's ES condition."""
+    problem = setup.problem
+    sequences: list[list[int]] = [[] for _ in range(problem.instance.n_robots)]
+    for t in sorted(range(len(robots)), key=lambda k: (starts[k], k)):
+        sequences[robots[t]].append(t)
+    try:
+        schedule = sequence_schedule(problem, sequences)
+    except (ValueError, DomainError):
+        return None
+    if check_schedule(problem, schedule):
+        return None
+    if not setup.feasible.condition(setup.weights.of(schedule.assignment)):
+        return None
+    return schedule
+
+
+def _better(new: Schedule, old: Schedule) -> bool:
+    if new.makespan < old.makespan - EPS:
+        return True
+    return new.makespan <= old.makespan + EPS and _sum_ends(new) < _sum_ends(old) - EPS
+
+
+def _sum_ends(schedule: Schedule) -> float:
+    return sum(s.end for s in schedule.slots)
+
+
+def _ancestor_masks(setup: Setup) -> list[int]:
+    """Per task, a bitmask of the tasks that must end before it starts (none through a
+    task with a pinned start: a fact waits for nothing)."""
+    problem = setup.problem
+    tm = problem.instance.timing
+    masks = [0] * tm.n_tasks
+    for t in tm.order:
+        if t in problem.pinned_starts:
+            continue
+        for p in tm.predecessors[t]:
+            masks[t] |= masks[p] | (1 << p)
+    return masks

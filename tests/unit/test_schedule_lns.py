@@ -1,0 +1,122 @@
+"""The large-instance path's LNS (`app/solvers/cpsat/lns.py`, `lns_model.py`): a
+neighbourhood of every task is the exact model; from any start it never gets worse;
+under `success_then_makespan` ES stays at the allocation optimum; the makespan objective
+keeps its floor; the path answers within its limit."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from ortools.sat.python import cp_model
+
+from app.domain.metrics import expected_success
+from app.domain.modes import Mode
+from app.domain.objective import Objective, ObjectiveKind
+from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.list_schedule import list_schedule
+from app.domain.scheduling.schedule import Schedule
+from app.solvers.cpsat.common import Search, time_free_optimum
+from app.solvers.cpsat.large import _candidates
+from app.solvers.cpsat.lns import _ancestor_masks, _retimed, improve
+from app.solvers.cpsat.lns_model import Neighbourhood
+from app.solvers.cpsat.outcome import Setup
+from app.solvers.cpsat.search import _setup, solve_schedule
+from app.solvers.registry import get_solver
+from benchmarks.timed_instances import construction_site
+
+
+def setup_of(problem: Problem, seconds: float) -> Setup:
+    return _setup(problem, Search(seconds, 2, 0), None)
+
+
+def site_200() -> Problem:
+    return Problem.build(construction_site(200, 20, seed=0), Mode.BALANCED)
+
+
+def optimal_es(problem: Problem) -> float:
+    return expected_success(problem.instance, get_solver("optimal").solve(problem).assignment)
+
+
+@pytest.mark.parametrize(
+    "build",
+    [
+        lambda inst: Problem.build(inst, Mode.BALANCED),
+        lambda inst: Problem.build(
+            inst, Mode.BALANCED, pinned={0: 1}, pinned_starts={0: 0.0}, not_before=20
+        ),
+        lambda inst: Problem.build(
+            inst, Mode.SUCCESS_FOCUSED, objective=Objective(ObjectiveKind.MAKESPAN, 0.5)
+        ),
+    ],
+    ids=["plain", "pins-and-now", "makespan"],
+)
+def test_a_neighbourhood_of_every_task_finds_the_exact_optimum(build) -> None:  # type: ignore[no-untyped-def]
+    problem = build(construction_site(9, 3, seed=3))
+    exact = solve_schedule(problem, time_limit_s=20)
+    assert exact.status == "optimal"
+    setup = setup_of(problem, 20)
+    start = list_schedule(problem, setup.feasible.best().assignment)  # type: ignore[union-attr]
+    candidates = [_candidates(setup, t) for t in range(problem.instance.n_tasks)]
+    everything = range(problem.instance.n_tasks)
+    hood = Neighbourhood(setup, start, everything, candidates, _ancestor_masks(setup))
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = 20
+    solver.parameters.num_workers = 2
+    assert solver.status_name(solver.solve(hood.model)) == "OPTIMAL"
+    schedule = _retimed(setup, *hood.read(solver))
+    assert schedule is not None and check_schedule(problem, schedule) == []
+    assert schedule.makespan == pytest.approx(exact.makespan)
+
+
+def test_from_a_poor_start_it_only_improves_and_keeps_the_optimal_success() -> None:
+    problem = site_200()
+    setup = setup_of(problem, 4)
+    # The time-free optimum as it comes (no dispatch): far from the best, room to improve.
+    start = list_schedule(problem, time_free_optimum(problem))
+    before = len(setup.feasible.found)
+    report = improve(setup, [_candidates(setup, t) for t in range(200)], start=start)
+    assert report is not None and report.neighbourhoods > 0
+    accepted = [s for _, s in setup.feasible.found[before:]]
+    assert report.improved == len(accepted) >= 1
+    best = optimal_es(problem)
+    previous = start
+    for schedule in accepted:
+        assert check_schedule(problem, schedule) == []
+        # Strictly better each time: a shorter plan, or as long with earlier ends.
+        assert (schedule.makespan, ends(schedule)) < (previous.makespan, ends(previous))
+        assert expected_success(problem.instance, schedule.assignment) == pytest.approx(best)
+        previous = schedule
+    assert report.end_makespan == previous.makespan <= start.makespan
+
+
+def ends(schedule: Schedule) -> float:
+    return sum(s.end for s in schedule.slots)
+
+
+def test_200_tasks_answer_within_the_limit_with_the_optimal_success() -> None:
+    problem = site_200()
+    started = time.perf_counter()
+    outcome = solve_schedule(problem, time_limit_s=6)
+    elapsed = time.perf_counter() - started
+    assert elapsed < 6 + 5, f"{elapsed:.1f} s for a 6 s limit"
+    assert outcome.status == "feasible" and "LNS" in outcome.model
+    assert check_schedule(problem, outcome.schedule) == []
+    assert outcome.expected_success == pytest.approx(optimal_es(problem), abs=1e-12)
+    assert 0 < outcome.bound <= outcome.makespan
+    lns = next(s for s in outcome.stages if s["stage"] == "lns")
+    assert lns["objective"] == outcome.makespan <= lns["start_objective"]
+
+
+def test_the_makespan_objective_keeps_its_floor_in_the_lns() -> None:
+    floor = 0.7
+    problem = Problem.build(
+        construction_site(200, 20, seed=0),
+        Mode.BALANCED,
+        objective=Objective(ObjectiveKind.MAKESPAN, floor),
+    )
+    outcome = solve_schedule(problem, time_limit_s=5)
+    assert "LNS" in outcome.model
+    assert check_schedule(problem, outcome.schedule) == []
+    assert expected_success(problem.instance, outcome.schedule.assignment) >= floor - 1e-12
