@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated
 
 from fastapi import Depends, Path, Request
@@ -14,9 +14,12 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import Caller, KeyRing, Role
 from app.api.errors import ApiError
+from app.api.run_pages import AssignmentPages
 from app.api.schemas.runs import RUN_ID_PATTERN
 from app.config import Settings
+from app.runs.spec import LruCache
 from app.runs.worker import RunWorker
+from app.store.run_totals import Tally
 
 log = logging.getLogger("ltaa.auth")
 
@@ -36,6 +39,10 @@ class RunsContext:
 
     sessions: sessionmaker[Session]
     worker: RunWorker
+    # Polls render each stored assignment once (app.api.run_pages) and fold in only the
+    # decisions and attempts stored since the last (app.store.run_totals.Tally).
+    pages: AssignmentPages = field(default_factory=AssignmentPages)
+    tallies: LruCache[Tally] = field(default_factory=lambda: LruCache(64))
 
 
 async def get_runs(request: Request) -> RunsContext:

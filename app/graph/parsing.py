@@ -7,6 +7,7 @@ whatever it cannot read is left as None and validation scores it.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -30,6 +31,7 @@ _HEADER = re.compile(
 )
 _NUMBER = re.compile(r"(\d+(?:\.\d+)?)\s*(%|percent)?", re.IGNORECASE)
 _CONFIDENCE = re.compile(r"\b(high|medium|low)\b", re.IGNORECASE)
+_COUNT_AFTER = r"[^\d\n,;|]*?(\d+)"  # a robot's name, then the first number after it
 _SENTENCE_END = re.compile(r"(?<=[.!?])\s+(?=\S)")
 
 
@@ -78,7 +80,13 @@ def split_sections(text: str) -> dict[str, str]:
     return {k: _clean("\n".join(v)) for k, v in sections.items()}
 
 
-def _aliases(names: Sequence[str], labels: Sequence[str]) -> list[tuple[str, int]]:
+def _aliases(names: Sequence[str], labels: Sequence[str]) -> tuple[tuple[str, int], ...]:
+    return _aliases_of(tuple(names), tuple(labels))
+
+
+@functools.lru_cache(maxsize=64)
+def _aliases_of(names: tuple[str, ...], labels: tuple[str, ...]) -> tuple[tuple[str, int], ...]:
+    # Cached: a run asks for the same fleet's aliases several times per reply.
     pairs = {
         (alias.strip().lower(), i)
         for i in range(len(names))
@@ -86,11 +94,16 @@ def _aliases(names: Sequence[str], labels: Sequence[str]) -> list[tuple[str, int
         if alias and alias.strip()
     }
     # Longest first, so "Heavy Robot" wins over a key "heavy" at the same place.
-    return sorted(pairs, key=lambda p: -len(p[0]))
+    return tuple(sorted(pairs, key=lambda p: -len(p[0])))
 
 
 def _alias_pattern(alias: str) -> str:
     return r"(?<![\w-])" + re.escape(alias) + r"(?![\w-])"
+
+
+@functools.lru_cache(maxsize=256)
+def _alias_regex(alias: str, suffix: str = "") -> re.Pattern[str]:
+    return re.compile(_alias_pattern(alias) + suffix)
 
 
 def find_robot(text: str, names: Sequence[str], labels: Sequence[str]) -> int | None:
@@ -98,7 +111,7 @@ def find_robot(text: str, names: Sequence[str], labels: Sequence[str]) -> int | 
     lowered = text.lower()
     found: list[tuple[int, int, int]] = []
     for alias, i in _aliases(names, labels):
-        m = re.search(_alias_pattern(alias), lowered)
+        m = _alias_regex(alias).search(lowered)
         if m:
             found.append((m.start(), -len(alias), i))
     return min(found)[2] if found else None
@@ -106,7 +119,7 @@ def find_robot(text: str, names: Sequence[str], labels: Sequence[str]) -> int | 
 
 def mentioned_robots(text: str, names: Sequence[str], labels: Sequence[str]) -> set[int]:
     lowered = text.lower()
-    return {i for alias, i in _aliases(names, labels) if re.search(_alias_pattern(alias), lowered)}
+    return {i for alias, i in _aliases(names, labels) if _alias_regex(alias).search(lowered)}
 
 
 def parse_probability(text: str) -> float | None:
@@ -127,7 +140,7 @@ def parse_workload(text: str, names: Sequence[str], labels: Sequence[str]) -> di
     for alias, i in _aliases(names, labels):
         if i in out:
             continue
-        m = re.search(_alias_pattern(alias) + r"[^\d\n,;|]*?(\d+)", lowered)
+        m = _alias_regex(alias, _COUNT_AFTER).search(lowered)
         if m:
             out[i] = int(m.group(1))
     return out

@@ -41,8 +41,20 @@ class AttemptRecord:
         are shared (a full deepcopy was a tenth of a durable run's time)."""
         out = copy.copy(self)
         out.scores = dict(self.scores)
-        out.parsed = copy.deepcopy(self.parsed) if self.parsed is not None else None
+        out.parsed = _copy_json(self.parsed) if self.parsed is not None else None
         return out
+
+
+def _copy_json(value: Any) -> Any:
+    """A deep copy of JSON-shaped data (what `parsed` holds), a few times quicker than
+    copy.deepcopy, which a run paid seven times per task."""
+    if isinstance(value, dict):
+        return {k: _copy_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copy_json(v) for v in value]
+    if isinstance(value, str | int | float | bool | None):
+        return value
+    return copy.deepcopy(value)
 
 
 @dataclass

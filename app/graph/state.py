@@ -142,9 +142,9 @@ def task_view(
 
 def next_task(problem: Problem, after: int) -> int:
     """The next task the graph decides after queue position `after` (n_tasks: none left)."""
-    for t in problem.free_tasks[bisect.bisect_right(problem.free_tasks, after) :]:
-        return t
-    return problem.instance.n_tasks
+    free = problem.free_tasks
+    i = bisect.bisect_right(free, after)  # no slice: a copy of the rest of the queue per task
+    return free[i] if i < len(free) else problem.instance.n_tasks
 
 
 def balance_of(problem: Problem, loads: Sequence[int]) -> float:

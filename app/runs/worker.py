@@ -26,6 +26,7 @@ from app.audit.signing import SigningKeys, sign_run
 from app.config import Settings
 from app.domain.errors import DomainError
 from app.graph.builder import build_graph
+from app.graph.checkpoint_sparse import TaskBoundaryMixin
 from app.graph.execution import GraphEndedEarly
 from app.graph.pause import NodeHook
 from app.graph.recorder import RunCancelled
@@ -201,7 +202,18 @@ class RunWorker:
         # The lease first: a process that lost the run to another is told so (LeaseLost)
         # before the state check, which also fails once the new owner moved the run.
         fence = fences(self.ownership.fence(run_id, stop), status_fence(run_id, stop))
-        recorder = SqlRecorder(run_id=run_id, sessions=self._sessions, stop=stop, fence=fence)
+        # Attempts wait for their decision's transaction only where a resume starts the
+        # task again (the SQLite saver checkpoints where a task begins; PostgreSQL's every
+        # step, so a resumed node reads the attempts before it) and no review may pause
+        # the graph inside a task (a resumed `finalize` reads them from the table).
+        recorder = SqlRecorder(
+            run_id=run_id,
+            sessions=self._sessions,
+            stop=stop,
+            fence=fence,
+            defer_offline=spec.review_policy is None
+            and isinstance(self.checkpointer, TaskBoundaryMixin),
+        )
         try:
             reasoner = self._reasoner(run_id, spec, fence)
         except DomainError as exc:

@@ -8,6 +8,7 @@ SQL, a poll reads a few numbers. The page itself is read as plain rows (no ORM o
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -72,3 +73,106 @@ def decision_page(*, session: Session, run_id: str, offset: int, limit: int | No
     d = _DECISIONS.c
     query = select(_DECISIONS).where(d.run_id == run_id).order_by(d.task_index).offset(offset)
     return list(session.execute(query if limit is None else query.limit(limit)))
+
+
+def page_indexes(*, session: Session, run_id: str, offset: int, limit: int | None) -> list[int]:
+    """The task indexes of decision_page's rows (read from the index alone)."""
+    d = _DECISIONS.c
+    query = select(d.task_index).where(d.run_id == run_id).order_by(d.task_index).offset(offset)
+    return [int(t) for t in session.scalars(query if limit is None else query.limit(limit))]
+
+
+def decision_rows(*, session: Session, run_id: str, tasks: Sequence[int]) -> list[Any]:
+    """The rows (as decision_page's) of these task indexes, in task order: one range read
+    from the first to the last, kept to those asked for."""
+    if not tasks:
+        return []
+    d = _DECISIONS.c
+    wanted = set(tasks)
+    query = (
+        select(_DECISIONS)
+        .where(d.run_id == run_id, d.task_index.between(min(wanted), max(wanted)))
+        .order_by(d.task_index)
+    )
+    return [row for row in session.execute(query) if row.task_index in wanted]
+
+
+@dataclass
+class Tally:
+    """A run's totals over its settled prefix: the decisions of task indexes 0..through
+    (every one stored) and their tasks' attempts. Neither changes once stored (a resumed
+    node rewrites the same values), so a poll folds in only what was stored since."""
+
+    through: int = -1
+    allocated: int = 0
+    by_robot: dict[int, int] = field(default_factory=dict)
+    with_regret: int = 0
+    regret: float = 0.0
+    # reply model -> [replies, input tokens, output tokens, transport retries, latency ms]
+    replies: dict[str | None, list[float]] = field(default_factory=dict)
+
+    def totals(self) -> DecisionTotals:
+        return DecisionTotals(
+            allocated=self.allocated,
+            by_robot=dict(self.by_robot),
+            regret=None if self.with_regret < self.allocated else self.regret,
+        )
+
+    def reply_rows(self) -> list[tuple[Any, ...]]:
+        """As reply_totals' rows."""
+        return [(model, *sums) for model, sums in self.replies.items()]
+
+
+def _copy(tally: Tally, through: int) -> Tally:
+    return Tally(
+        through=through,
+        allocated=tally.allocated,
+        by_robot=dict(tally.by_robot),
+        with_regret=tally.with_regret,
+        regret=tally.regret,
+        replies={model: list(sums) for model, sums in tally.replies.items()},
+    )
+
+
+def tally(*, session: Session, run_id: str, settled: Tally) -> tuple[Tally, Tally]:
+    """(the run's totals now, the settled prefix to keep for the next call), reading only
+    the decisions and attempts of task indexes after `settled.through`.
+
+    Decisions are stored as a prefix of the queue (pins and the free tasks in order), so
+    the stored task indexes from 0 with no gap are settled; a revision's pins past the
+    gap, and the attempts of the task being decided, are counted but read again next time."""
+    d, a = _DECISIONS.c, _ATTEMPTS.c
+    rows = session.execute(
+        select(d.task_index, d.robot, d.regret)
+        .where(d.run_id == run_id, d.task_index > settled.through)
+        .order_by(d.task_index)
+    ).all()
+    through = settled.through
+    for row in rows:
+        if row.task_index != through + 1:
+            break
+        through += 1
+    keep, now = _copy(settled, through), _copy(settled, through)
+    for row in rows:
+        for part in (keep, now) if row.task_index <= through else (now,):
+            part.by_robot[int(row.robot)] = part.by_robot.get(int(row.robot), 0) + 1
+            part.allocated += 1
+            if row.regret is not None:
+                part.with_regret += 1
+                part.regret += float(row.regret)
+    for attempt in session.execute(
+        select(
+            a.task_index,
+            a.reply_model,
+            a.input_tokens,
+            a.output_tokens,
+            a.transport_retries,
+            a.latency_ms,
+        ).where(a.run_id == run_id, a.task_index > settled.through)
+    ):
+        values = (1, attempt[2] or 0, attempt[3] or 0, attempt[4] or 0, attempt[5] or 0.0)
+        for part in (keep, now) if attempt.task_index <= through else (now,):
+            sums = part.replies.setdefault(attempt.reply_model, [0, 0, 0, 0, 0.0])
+            for i, value in enumerate(values):
+                sums[i] += value
+    return now, keep

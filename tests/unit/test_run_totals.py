@@ -50,7 +50,60 @@ def test_sql_totals_equal_the_row_by_row_ones(tmp_path: Path) -> None:
     )
     assert abs(by_sums.latency_ms - by_rows.latency_ms) < 1e-9
     assert [records.decision_record(d).task_index for d in page] == [2, 3, 4]
+    # A poll that kept some of the page reads its indexes, then the rows it lacks.
+    with sessions() as session:
+        indexes = run_totals.page_indexes(session=session, run_id="r1", offset=2, limit=3)
+        rows = run_totals.decision_rows(session=session, run_id="r1", tasks=[2, 4])
+        none = run_totals.decision_rows(session=session, run_id="r1", tasks=[])
+        everything = run_totals.page_indexes(session=session, run_id="r1", offset=0, limit=None)
+    assert indexes == [d.task_index for d in page] and everything == list(range(6))
+    assert rows == [page[0], page[2]] and none == []
 
     recorder.save_decision(decision_record(5, robot=1, regret=None))
     with sessions() as session:
         assert run_totals.decision_totals(session=session, run_id="r1").regret is None
+
+
+def test_a_tally_folded_poll_by_poll_equals_the_sql_totals(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'app.db'}"
+    upgrade_head(url)
+    sessions = make_session_factory(make_engine(url))
+    with transaction(sessions) as session:
+        session.add(run_row("r1", RunStatus.RUNNING.value, n_tasks=9))
+    recorder = SqlRecorder(run_id="r1", sessions=sessions, stop=RunStop())
+    settled = run_totals.Tally()
+
+    def poll() -> None:
+        nonlocal settled
+        with sessions() as session:
+            now, settled = run_totals.tally(session=session, run_id="r1", settled=settled)
+            totals = run_totals.decision_totals(session=session, run_id="r1")
+            replies = run_totals.reply_totals(session=session, run_id="r1")
+        assert (now.totals().allocated, now.totals().by_robot) == (
+            totals.allocated,
+            totals.by_robot,
+        )
+        assert (now.totals().regret is None) == (totals.regret is None)
+        if totals.regret is not None:
+            assert abs((now.totals().regret or 0.0) - totals.regret) < 1e-12
+        assert records.usage_of_totals(now.reply_rows()) == records.usage_of_totals(replies)
+
+    # Pins past a gap (a revision's scattered pins) are stored first: counted, not settled.
+    for t in (6, 8):
+        recorder.save_decision(decision_record(t, robot=1, regret=0.0))
+    poll()
+    assert settled.through == -1
+    for t in range(6):
+        prompt = _attempt(t)
+        prompt.reply = None
+        recorder.save_attempt(prompt)
+        poll()  # the task being decided: its prompt, then its reply, are read again
+        prompt.reply = ReasonerReply(text="x", input_tokens=t, output_tokens=1, model="m")
+        recorder.save_attempt(prompt)
+        poll()
+        recorder.save_decision(decision_record(t, robot=t % 2, regret=0.01 * t))
+        poll()
+        assert settled.through == (6 if t == 5 else t)  # the pin at 6 joins the prefix
+    recorder.save_decision(decision_record(7, robot=0, regret=None))
+    poll()
+    assert settled.through == 8 and settled.allocated == 9 and settled.totals().regret is None

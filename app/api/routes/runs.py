@@ -127,10 +127,26 @@ def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
     return None if review is None else DecisionReviewOut.model_validate(review)
 
 
-def _run_out(view: views.RunView, limit: int) -> RunOut:
+def _assignment(view: views.RunView, d: DecisionRecord) -> RunAssignment:
+    instance = view.spec.problem.instance
+    return RunAssignment(
+        task_index=d.task_index,
+        task_id=instance.tasks[d.task_index].id,
+        task_name=d.task_name,
+        robot=instance.robots[d.robot].name,
+        success=d.expected_success,
+        fallback=d.fallback,
+        review=_review_out(d.review),
+        pinned=d.task_index in view.pins,
+        pinned_from=view.pins.get(d.task_index),
+        execution=_execution_out(view.execution.get(d.task_index)),
+        **decision_times(instance, d),
+    )
+
+
+def _run_head(view: views.RunView, limit: int) -> RunOut:
+    """The run's answer without its assignments, which app.api.run_pages fills in."""
     run, spec = view.run, view.spec
-    instance = spec.problem.instance
-    names = [r.name for r in instance.robots]
     return RunOut(
         id=run.id,
         status=RunStatus(run.status),
@@ -139,22 +155,7 @@ def _run_out(view: views.RunView, limit: int) -> RunOut:
         max_deviation=run.max_deviation,
         progress=Progress(**view.progress),
         workload=view.workload,
-        assignments=[
-            RunAssignment(
-                task_index=d.task_index,
-                task_id=instance.tasks[d.task_index].id,
-                task_name=d.task_name,
-                robot=names[d.robot],
-                success=d.expected_success,
-                fallback=d.fallback,
-                review=_review_out(d.review),
-                pinned=d.task_index in view.pins,
-                pinned_from=view.pins.get(d.task_index),
-                execution=_execution_out(view.execution.get(d.task_index)),
-                **decision_times(instance, d),
-            )
-            for d in view.decisions
-        ],
+        assignments=[],
         assignments_page=Page(offset=view.offset, limit=limit, total=view.allocated),
         metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
         regret=view.regret,
@@ -192,14 +193,29 @@ def get_run(
     runs: RunsDep,
     offset: PageOffset = 0,
     limit: PageLimit = DEFAULT_PAGE,
-) -> RunOut:
+) -> Response:
     """A run's status, progress, workload, a page of its assignments, metrics and usage."""
     return _page_out(runs, run_id, offset, limit)
 
 
-def _page_out(runs: RunsContext, run_id: str, offset: int, limit: int) -> RunOut:
-    view = views.run_view(sessions=runs.sessions, run_id=run_id, offset=offset, limit=limit)
-    return _run_out(view, limit)
+def _page_out(runs: RunsContext, run_id: str, offset: int, limit: int) -> Response:
+    """RunOut's JSON, with the assignments this process rendered before kept as rendered
+    (a poll of a long run reads and renders only the decisions stored since the last)."""
+    kept = runs.pages.kept(run_id)
+    view = views.run_view(
+        sessions=runs.sessions,
+        run_id=run_id,
+        offset=offset,
+        limit=limit,
+        have=kept.keys(),
+        tallies=runs.tallies,
+    )
+    return runs.pages.response(
+        view,
+        _run_head(view, limit),
+        kept,
+        lambda d: _assignment(view, d),
+    )
 
 
 def _attempt_out(a: Attempt, prompts: bool, run_reasoner: str) -> AttemptOut:
@@ -355,7 +371,7 @@ def resume_run(
 @router.post(
     "/{run_id}/cancel", response_model=RunOut, responses=errors(*SUPERVISOR, 404, 409, 410)
 )
-def cancel_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> RunOut:
+def cancel_run(caller: SupervisorDep, run_id: RunIdPath, runs: RunsDep) -> Response:
     """For supervisors: cancel a queued or running run; a running one stops within one node."""
     service.cancel_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     return _page_out(runs, run_id, 0, DEFAULT_PAGE)
