@@ -128,6 +128,26 @@ learned_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
 [ "$(call GET "/runs/$learned_id/trace" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace of the learned run"
 check 'd["events"][0]["detail"]["learned"]["source"] == "learned" and d["events"][0]["detail"]["learned"]["reports"] >= 1' "the learned run's first event records its numbers"
 echo "smoke: sites ok (estimates, 404, 422s, a learned run $learned_id)"
+# A run in time (SPEC 16): the timed scenario decided by LTAA, its schedule as JSON, CSV and
+# iCalendar; an untimed run has no schedule (409).
+code=$(call POST /runs '{"scenario":"baseline_timed","reasoner":"rules"}' "${CLIENT[@]}")
+[ "$code" = 202 ] || fail "POST /runs baseline_timed -> $code $(head -c 300 "$TMP/out")"
+timed_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
+for _ in $(seq 1 300); do
+  [ "$(call GET "/runs/$timed_id" '' "${CLIENT[@]}")" = 200 ] || fail "GET /runs/$timed_id"
+  status=$(python3 -c "import json; print(json.load(open('$TMP/out'))['status'])")
+  case "$status" in completed) break;; failed|cancelled) fail "timed run ended $status";; esac
+  sleep 0.2
+done
+[ "$status" = completed ] || fail "timed run did not complete in time (status $status)"
+[ "$(call GET "/runs/$timed_id/schedule" '' "${CLIENT[@]}")" = 200 ] || fail "GET /runs/$timed_id/schedule"
+check 'len(d["tasks"]) == 36 and d["makespan"] > 0 and d["critical_path"] and all(t["start_at"] for t in d["tasks"])' "a timed run's schedule: 36 tasks with wall-clock times"
+[ "$(call GET "/runs/$timed_id/schedule?format=csv" '' "${CLIENT[@]}")" = 200 ] || fail "schedule as CSV"
+[ "$(python3 -c "import csv; print(len(list(csv.DictReader(open('$TMP/out')))))")" = 36 ] || fail "the CSV has one row per task"
+[ "$(call GET "/runs/$timed_id/schedule?format=ics" '' "${CLIENT[@]}")" = 200 ] || fail "schedule as iCalendar"
+[ "$(grep -c '^BEGIN:VEVENT' "$TMP/out")" = 36 ] || fail "the iCalendar has one VEVENT per task"
+[ "$(call GET "/runs/$run_id/schedule" '' "${CLIENT[@]}")" = 409 ] || fail "an untimed run's schedule should be 409"
+echo "smoke: plans in time ok (run $timed_id, schedule as JSON, CSV and iCalendar; untimed 409)"
 # Webhooks: create (secret shown once), list, refuse a private target, delete. The event
 # subscribed to is never emitted by a smoke run, so nothing is sent anywhere.
 hook_url="https://hooks.example.com/ltaa-smoke-$$"

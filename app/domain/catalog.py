@@ -145,14 +145,22 @@ def instance_of(
                 f"'scenario' was sent together with 'tasks'/'robots'; {_FORMS}, not both",
                 code="conflicting_fields",
             )
+        timed = scenario_name in timed_scenarios()
         for name, value in (("travel", travel), ("start", start)):
             if value is not None:
+                own = (
+                    f"the built-in scenario {scenario_name!r} has its own"
+                    if timed
+                    else "the built-in scenario is untimed"
+                )
                 raise DomainError(
                     name,
-                    f"'{name}' times your own tasks; the built-in scenarios are untimed, "
-                    "send 'tasks' and 'robots' with durations instead",
+                    f"'{name}' times your own tasks; {own}, send 'tasks' and 'robots' with "
+                    "durations instead",
                     code="conflicting_fields",
                 )
+        if timed:
+            return timed_scenario(scenario_name).instance
         return scenario(scenario_name).instance
     if tasks is None:
         raise DomainError(

@@ -10,8 +10,8 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
-from app.domain.catalog import instance_of, timed_scenario, timed_scenarios
-from app.domain.errors import DomainError, RunStateConflictError
+from app.domain.catalog import instance_of
+from app.domain.errors import RunStateConflictError
 from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
 from app.domain.models import Instance
@@ -183,24 +183,6 @@ def order_instance(order: RunOrder) -> Instance:
     """The instance a run order names: a built-in scenario (the timed ones of SPEC 16, such
     as `baseline_timed`, included), or its own tasks and robots (a timed instance without
     `start` starts at the request's arrival)."""
-    named = order.scenario
-    if named is not None and named in timed_scenarios() and order.tasks is None:
-        for field, value in (("robots", order.robots), ("travel", order.travel)):
-            if value is not None:
-                raise DomainError(
-                    field,
-                    f"'{field}' was sent with the built-in scenario {named!r}; send either "
-                    "the scenario or your own 'tasks' and 'robots', not both",
-                    code="conflicting_fields",
-                )
-        if order.start is not None:
-            raise DomainError(
-                "start",
-                f"the built-in scenario {named!r} has its own start; send 'tasks' and "
-                "'robots' to choose another",
-                code="conflicting_fields",
-            )
-        return timed_scenario(named).instance
     start = order.start
     if start is None and any(t.duration is not None for t in order.tasks or ()):
         start = datetime.now(UTC).replace(microsecond=0)
