@@ -69,6 +69,7 @@ def test_killed_after_completion_before_delivery_delivers_after_restart(tmp_path
         server = Server(data, env={**FAST, "LTAA_WEBHOOK_DISPATCH": "false"}).start()
         try:
             hook = subscribe(server, receiver.url)
+            receiver.secret = hook["secret"]
             run_id = start_run(server)
             state = server.wait_for(run_id, lambda s: s["status"] == "completed")
             pending = outbox(data)
@@ -104,6 +105,7 @@ def test_ten_kills_at_random_points_lose_no_webhook(tmp_path: Path) -> None:
         try:
             server.start()
             hook = subscribe(server, receiver.url)
+            receiver.secret = hook["secret"]
             runs = []
             for kill in range(10):
                 if kill:
@@ -148,6 +150,7 @@ def test_deliveries_resume_after_the_receiver_was_down_30_s(tmp_path: Path) -> N
         assert {a["outcome"] for d in log for a in d["attempt_log"]} == {"network_error"}
         held.close()
         with running_receiver(port=port) as receiver:
+            receiver.secret = hook["secret"]
             receiver.wait_for(lambda got: len(got) >= 2, what="both deliveries", timeout=15)
             rows = wait_all_delivered(data, timeout=15)
             assert {r[0] for r in rows} == receiver.ids()

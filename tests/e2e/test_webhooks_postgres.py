@@ -61,6 +61,7 @@ def test_two_processes_share_the_outbox_and_take_over_a_dead_ones(
             a.start()
             b.start()
             hook = subscribe(a, receiver.url)
+            receiver.secret = hook["secret"]
             runs = [start_run(server) for server in (a, b, a, b, a, b)]
             for run_id in runs:
                 a.wait_for(run_id, lambda s: s["status"] == "completed")
