@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from contextlib import ExitStack
 from typing import Any
 
 import pytest
@@ -10,6 +11,8 @@ from fastapi.testclient import TestClient
 
 from app.config import Settings
 from app.main import create_app
+from app.store.migrate import upgrade_head
+from tests.e2e.postgres import fresh_database
 
 ClientFactory = Callable[..., TestClient]
 
@@ -42,3 +45,18 @@ def make_client(settings: Settings) -> Iterator[ClientFactory]:
 @pytest.fixture
 def client(make_client: ClientFactory) -> TestClient:
     return make_client()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def any_db_client(
+    request: pytest.FixtureRequest, make_client: ClientFactory
+) -> Iterator[TestClient]:
+    """A client on each store: a SQLite file, then a fresh PostgreSQL database migrated to
+    head (SQLite hands times back without an offset, PostgreSQL with one)."""
+    with ExitStack() as stack:
+        if request.param == "sqlite":
+            yield make_client()
+            return
+        url = stack.enter_context(fresh_database())
+        upgrade_head(url)
+        yield make_client(database_url=url)

@@ -5,17 +5,12 @@ SQLite and PostgreSQL, where nothing may be stored."""
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterator
-from contextlib import ExitStack
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
-from app.store.migrate import upgrade_head
-from tests.api.conftest import ClientFactory
 from tests.api.test_api_timed import ROBOTS, TASKS, TRAVEL, timed
-from tests.e2e.postgres import fresh_database
 
 
 def with_task(i: int, **changes: Any) -> list[dict[str, Any]]:
@@ -208,19 +203,6 @@ def test_time_fields_on_an_untimed_instance_are_a_422(
 ) -> None:
     body = {k: v for k, v in {**UNTIMED, **extra}.items() if v is not None}
     _assert_names(client.post("/allocate", json=body), loc, [])
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def any_db_client(
-    request: pytest.FixtureRequest, make_client: ClientFactory
-) -> Iterator[TestClient]:
-    with ExitStack() as stack:
-        if request.param == "sqlite":
-            yield make_client()
-            return
-        url = stack.enter_context(fresh_database())
-        upgrade_head(url)
-        yield make_client(database_url=url)
 
 
 # The rules that need no travel: the same site without zones (wiring a run's travel and

@@ -8,8 +8,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Iterator
-from contextlib import ExitStack
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -18,27 +16,11 @@ import icalendar
 import pytest
 from fastapi.testclient import TestClient
 
-from app.store.migrate import upgrade_head
-from tests.api.conftest import ClientFactory
 from tests.api.test_docs_check_trace import check_trace_source
-from tests.e2e.postgres import fresh_database
 from tests.offline_check import check_offline
 from tests.polling import wait_until
 
 TIMED = {"scenario": "baseline_timed"}
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def any_db_client(
-    request: pytest.FixtureRequest, make_client: ClientFactory
-) -> Iterator[TestClient]:
-    with ExitStack() as stack:
-        if request.param == "sqlite":
-            yield make_client()
-            return
-        url = stack.enter_context(fresh_database())
-        upgrade_head(url)
-        yield make_client(database_url=url)
 
 
 def completed(client: TestClient, body: dict[str, Any]) -> dict[str, Any]:

@@ -6,31 +6,13 @@ PostgreSQL refuses a NUL character in any text value (SQLite stores it), so thes
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from contextlib import ExitStack
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
-from app.store.migrate import upgrade_head
-from tests.api.conftest import ClientFactory
-from tests.e2e.postgres import fresh_database
 from tests.polling import wait_until
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def any_db_client(
-    request: pytest.FixtureRequest, make_client: ClientFactory
-) -> Iterator[TestClient]:
-    with ExitStack() as stack:
-        if request.param == "sqlite":
-            yield make_client()
-            return
-        url = stack.enter_context(fresh_database())
-        upgrade_head(url)
-        yield make_client(database_url=url)
-
 
 RUN_PATHS = [
     ("GET", "/runs/{}"),

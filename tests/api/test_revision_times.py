@@ -3,8 +3,6 @@ input refused with nothing stored."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import ExitStack
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -13,10 +11,8 @@ from fastapi.testclient import TestClient
 
 from app.domain.catalog import timed_scenario
 from app.domain.serialize import instance_to_dict
-from app.store.migrate import upgrade_head
 from tests.api.conftest import ClientFactory
 from tests.api.test_revisions import completed_run, wait_status
-from tests.e2e.postgres import fresh_database
 from tests.polling import eventually
 from tests.time_rules import TimeRules, site_history, slots_of
 
@@ -141,21 +137,6 @@ def test_a_late_report_moves_the_successors_in_the_runs_schedule(client: TestCli
     assert page.status_code == 200
     assert now["makespan"] > planned["makespan"]  # here the delay reaches the last task
     assert f"makespan of {now['makespan']:,.0f} min" in page.text
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def any_db_client(
-    request: pytest.FixtureRequest, make_client: ClientFactory
-) -> Iterator[TestClient]:
-    """SQLite hands report times back without an offset, PostgreSQL with one: both read
-    as the same minutes of the plan."""
-    with ExitStack() as stack:
-        if request.param == "sqlite":
-            yield make_client()
-            return
-        url = stack.enter_context(fresh_database())
-        upgrade_head(url)
-        yield make_client(database_url=url)
 
 
 def test_a_timed_revision_at_now_keeps_reports_delays_and_the_diff_shows_it(
