@@ -27,6 +27,7 @@ from itertools import pairwise
 from ortools.sat.python import cp_model
 
 from app.domain.scheduling.schedule import Schedule
+from app.solvers.cpsat.model import add_after
 from app.solvers.cpsat.outcome import Setup
 
 
@@ -193,16 +194,7 @@ class Neighbourhood:
         self._add_after(r, u, t, [*both, before.Not()])
 
     def _add_after(self, r: int, t: int, u: int, when: Sequence[cp_model.LiteralT]) -> None:
-        """u after t on robot r with the travel between them; after a pinned task that
-        ended before the shift, the way starts at the shift start (as in `model.py`)."""
-        tm, up = self.tm, self.scale.up
-        move = up(tm.travel(tm.task_zone[t], tm.task_zone[u]))
-        fixed = self.problem.pinned_starts.get(t)
-        if fixed is None:
-            self.model.add(self.start[u] >= self.end[t] + move).only_enforce_if(when)
-            return
-        free = max(up(fixed + tm.duration(t, r)), up(tm.shifts[r][0]))
-        self.model.add(self.start[u] >= free + move).only_enforce_if(when)
+        add_after(self.model, self.problem, self.scale, self.start, self.end, (r, t, u), when)
 
     def _add_precedence(self) -> None:
         for t, preds in enumerate(self.tm.predecessors):

@@ -236,17 +236,7 @@ class ScheduleModel:
                 self._add_after(r, u, t, [*both, before.Not()])
 
     def _add_after(self, r: int, t: int, u: int, when: Sequence[cp_model.LiteralT]) -> None:
-        """u after t on robot r, with the travel between them. The robot travels within
-        its shift, so after a fixed task that ended before the shift started, the way
-        starts at the shift start."""
-        tm, up = self.tm, self.scale.up
-        move = up(tm.travel(tm.task_zone[t], tm.task_zone[u]))
-        fixed = self.problem.pinned_starts.get(t)
-        if fixed is None:
-            self.model.add(self.start[u] >= self.end[t] + move).only_enforce_if(when)
-            return
-        free = max(up(fixed + tm.duration(t, r)), up(tm.shifts[r][0]))
-        self.model.add(self.start[u] >= free + move).only_enforce_if(when)
+        add_after(self.model, self.problem, self.scale, self.start, self.end, (r, t, u), when)
 
     def _add_zone_blocks(self, r: int) -> list[tuple[int, cp_model.IntVar]]:
         """Per zone other than the start zone: (minutes into it, visited literal)."""
@@ -310,3 +300,26 @@ class ScheduleModel:
         ]
         starts = [self.scale.minutes(solver.value(s)) for s in self.start]
         return robots, starts
+
+
+def add_after(
+    model: cp_model.CpModel,
+    problem: Problem,
+    scale: TimeScale,
+    start: Sequence[cp_model.IntVar],
+    end: Sequence[cp_model.LinearExprT],
+    robot_pair: tuple[int, int, int],
+    when: Sequence[cp_model.LiteralT],
+) -> None:
+    """Task u after task t on robot r (`robot_pair` = (r, t, u)), with the travel between
+    them, where `when` holds. The robot travels within its shift, so after a fixed task
+    that ended before the shift started, the way starts at the shift start."""
+    r, t, u = robot_pair
+    tm, up = problem.instance.timing, scale.up
+    move = up(tm.travel(tm.task_zone[t], tm.task_zone[u]))
+    fixed = problem.pinned_starts.get(t)
+    if fixed is None:
+        model.add(start[u] >= end[t] + move).only_enforce_if(when)
+        return
+    free = max(up(fixed + tm.duration(t, r)), up(tm.shifts[r][0]))
+    model.add(start[u] >= free + move).only_enforce_if(when)
