@@ -154,3 +154,26 @@ def test_site_learning_cases_differ_where_the_benchmark_says() -> None:
     instance = sl.instance_with(sl.TRUE_RATES)
     assert instance.n_tasks == 36
     assert sl.success(sl.TRUE_RATES, "heavy", ["heavy", "dexterous"]) == (0.9 + 0.3) / 2
+
+
+def test_durable_cost_reads_the_cost_per_task_from_the_polls() -> None:
+    from benchmarks.durable_cost import Measure, SizeResult, growth, report
+
+    # Polls at (tasks decided, server CPU): 9 ms a task up to 2,000, 12 ms after 8,000.
+    progress = ((900, 8.1), (1_000, 9.0), (2_000, 18.0), (8_000, 72.0), (9_000, 84.0))
+    late = Measure(90.0, 96.0, 5, 0.1, progress)
+    assert late.cpu_per_task((0.1, 0.2), 10_000) == pytest.approx(0.009)
+    assert late.cpu_per_task((0.8, 0.9), 10_000) == pytest.approx(0.012)
+    assert Measure(1.0, 1.0, 1, 0.0, ((500, 4.0),)).cpu_per_task((0.1, 0.2), 10_000) is None
+    assert "(**1.33×**)" in growth(SizeResult(10_000, (late,), (late,)))
+
+    small = SizeResult(
+        1_000,
+        tuple(Measure(1.0, cpu) for cpu in (7.0, 8.0, 9.0, 30.0)),
+        tuple(Measure(1.0, cpu) for cpu in (9.0, 10.0, 11.0, 40.0)),
+    )
+    assert small.memory.cpu == 8.5 and small.durable.cpu == 10.5  # medians: a burst ignored
+    text = report([small, SizeResult(10_000, (Measure(90.0, 85.0),), (late,))], None)
+    # 96 / 10.5 = 9.1x the small run: met; 96 / 85 = 1.13x in memory: met.
+    assert "| durable 10,000 tasks ≤ 10× 1,000 tasks | 9.1× CPU" in text
+    assert "| durable ≤ 1.5× in-memory CPU, 10,000 tasks (polled) | 1.13× | met |" in text
