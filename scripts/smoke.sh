@@ -129,7 +129,9 @@ learned_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
 check 'd["events"][0]["detail"]["learned"]["source"] == "learned" and d["events"][0]["detail"]["learned"]["reports"] >= 1' "the learned run's first event records its numbers"
 echo "smoke: sites ok (estimates, 404, 422s, a learned run $learned_id)"
 # A run in time (SPEC 16): the timed scenario decided by LTAA, its schedule as JSON, CSV and
-# iCalendar; an untimed run has no schedule (409).
+# iCalendar; an untimed run has no schedule (409). GET /scenarios says which one is timed.
+[ "$(call GET /scenarios '' "${CLIENT[@]}")" = 200 ] || fail "GET /scenarios"
+check 'any(s["name"] == "baseline_timed" and s["timed"] and all(t["duration"] for t in s["tasks"]) for s in d)' "GET /scenarios lists baseline_timed with its durations"
 code=$(call POST /runs '{"scenario":"baseline_timed","reasoner":"rules"}' "${CLIENT[@]}")
 [ "$code" = 202 ] || fail "POST /runs baseline_timed -> $code $(head -c 300 "$TMP/out")"
 timed_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")

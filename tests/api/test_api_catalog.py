@@ -38,8 +38,11 @@ def test_scenarios_include_tasks_and_robots(client: TestClient) -> None:
     r = client.get("/scenarios")
     assert r.status_code == 200
     scenarios = {s["name"]: s for s in r.json()}
-    assert set(scenarios) == {"baseline", "heavy_excels", "medium_excels", "light_excels"}
+    untimed = {"baseline", "heavy_excels", "medium_excels", "light_excels"}
+    assert set(scenarios) == untimed | {"baseline_timed"}
+    assert {name for name, s in scenarios.items() if not s["timed"]} == untimed
     baseline = scenarios["baseline"]
+    assert "travel" not in baseline and "start" not in baseline
     assert baseline["description"]
     assert len(baseline["tasks"]) == 36
     assert baseline["tasks"][14] == {
@@ -55,6 +58,25 @@ def test_scenarios_include_tasks_and_robots(client: TestClient) -> None:
     assert robots["light"]["success"] == {"careful": 0.9, "dexterous": 0.8, "heavy": 0.5}
     assert robots["heavy"]["success"]["heavy"] == 0.9
     assert scenarios["heavy_excels"]["robots"][2]["success"]["heavy"] == 0.95
+
+
+def test_a_timed_scenario_lists_its_times_and_they_describe_the_same_instance(
+    client: TestClient,
+) -> None:
+    """An integrator can read baseline_timed from GET /scenarios, edit it and send it back
+    as its own tasks: sent unchanged, it is the same instance as the scenario's name."""
+    timed = next(s for s in client.get("/scenarios").json() if s["name"] == "baseline_timed")
+    assert timed["timed"] is True and len(timed["tasks"]) == 36
+    assert all(set(t["duration"]) == {"light", "medium", "heavy"} for t in timed["tasks"])
+    assert all(t["zone"] for t in timed["tasks"]) and any(t.get("after") for t in timed["tasks"])
+    assert all(r["zone"] and len(r["available"]) == 2 for r in timed["robots"])
+    assert timed["travel"] and timed["start"]
+    by_name = client.post("/allocate", json={"scenario": "baseline_timed", "solver": "greedy"})
+    own = {k: timed[k] for k in ("tasks", "robots", "travel", "start")}
+    by_content = client.post("/allocate", json={**own, "solver": "greedy"})
+    assert by_name.status_code == by_content.status_code == 200, by_content.text
+    for key in ("assignments", "metrics", "schedule"):
+        assert by_content.json()[key] == by_name.json()[key]
 
 
 def test_openapi_documents_every_route_and_allocate_examples(client: TestClient) -> None:

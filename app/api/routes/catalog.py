@@ -9,9 +9,10 @@ from fastapi import APIRouter
 from app.api.allocation import load_solver
 from app.api.deps import ClientDep
 from app.api.responses import CLIENT, errors
-from app.api.schemas.allocation import RobotOut, ScenarioOut, SolverOut, TaskOut
+from app.api.schemas.allocation import ScenarioOut, SolverOut
 from app.domain import catalog
 from app.domain.errors import DomainError
+from app.domain.serialize import instance_to_dict
 from app.solvers.registry import solver_names
 
 router = APIRouter(tags=["catalog"])
@@ -41,23 +42,22 @@ def list_solvers(caller: ClientDep) -> list[SolverOut]:
     return out
 
 
-@router.get("/scenarios", response_model=list[ScenarioOut], responses=errors(*CLIENT))
+@router.get(
+    "/scenarios",
+    response_model=list[ScenarioOut],
+    response_model_exclude_none=True,
+    responses=errors(*CLIENT),
+)
 def list_scenarios(caller: ClientDep) -> list[ScenarioOut]:
-    """List the built-in scenarios: the 36 TEACh tasks and each scenario's robot success rates."""
+    """List the built-in scenarios: the 36 TEACh tasks and each scenario's robot success
+    rates; the timed ones (`timed: true`) add durations, zones, precedence, releases and
+    deadlines, the robots' start zones and shifts, travel times and the start."""
+    listed = [(sc, False) for sc in catalog.scenarios().values()]
+    listed += [(sc, True) for sc in catalog.timed_scenarios().values()]
     return [
-        ScenarioOut(
-            name=sc.name,
-            description=sc.description,
-            tasks=[
-                TaskOut(id=t.id, name=t.name, type=t.type, features=list(t.features))
-                for t in sc.instance.tasks
-            ],
-            robots=[
-                RobotOut(
-                    name=r.name, label=r.label, description=r.description, success=dict(r.success)
-                )
-                for r in sc.instance.robots
-            ],
+        ScenarioOut.model_validate(
+            {"name": sc.name, "description": sc.description, "timed": timed}
+            | instance_to_dict(sc.instance)
         )
-        for sc in catalog.scenarios().values()
+        for sc, timed in listed
     ]

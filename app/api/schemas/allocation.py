@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Annotated, Any, Literal
 
 from pydantic import (
@@ -362,6 +363,12 @@ class TaskOut(BaseModel):
     name: str
     type: str
     features: list[str]
+    # SPEC 16, on a timed scenario only (left out of an untimed one's tasks)
+    duration: float | dict[str, float] | None = None
+    after: list[int | str] | None = None
+    zone: str | None = None
+    release: float | None = None
+    deadline: float | None = None
 
 
 class RobotOut(BaseModel):
@@ -369,10 +376,18 @@ class RobotOut(BaseModel):
     label: str
     description: str
     success: dict[str, float]
+    zone: str | None = None  # timed scenarios only, as `available`
+    available: list[float] | None = None
 
 
 class ScenarioOut(BaseModel):
     name: str
     description: str
+    timed: bool = Field(
+        description="Its tasks have durations, zones and precedence (SPEC 16): every answer "
+        "about it carries a schedule"
+    )
     tasks: list[TaskOut]
     robots: list[RobotOut]
+    travel: dict[str, dict[str, float]] | None = None
+    start: datetime | None = None
