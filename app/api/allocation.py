@@ -33,18 +33,14 @@ from app.solvers.registry import get_solver
 
 
 def resolve_instance(request: InstanceRequest) -> Instance:
-    """The instance a request describes; DomainError naming the field if it describes none.
-
-    A timed instance sent without `start` starts at the request's arrival (SPEC 16)."""
-    start = request.start
-    if start is None and any(t.duration is not None for t in request.tasks or ()):
-        start = datetime.now(UTC).replace(microsecond=0)
+    """The instance a request describes; DomainError naming the field if it describes none."""
     return catalog.instance_of(
         request.scenario,
         None if request.tasks is None else [t.to_domain() for t in request.tasks],
         None if request.robots is None else [r.to_domain() for r in request.robots],
         travel=request.travel,
-        start=start,
+        start=request.start,
+        arrival=datetime.now(UTC).replace(microsecond=0),
     )
 
 

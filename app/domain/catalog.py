@@ -133,10 +133,12 @@ def instance_of(
     *,
     travel: Mapping[str, Mapping[str, float]] | None = None,
     start: datetime | None = None,
+    arrival: datetime | None = None,
 ) -> Instance:
     """The instance a request describes, by a built-in scenario's name or by its own tasks
     and robots (with, for a timed instance, its travel times and start); DomainError naming
-    the field if it describes none, or both."""
+    the field if it describes none, or both. Timed tasks of its own sent without `start`
+    start at the request's `arrival` (SPEC 16)."""
     custom = tasks is not None or robots is not None
     if scenario_name is not None:
         if custom:
@@ -170,4 +172,6 @@ def instance_of(
         )
     if robots is None:
         raise DomainError("robots", f"robots missing; {_FORMS}", code="missing")
+    if start is None and any(t.duration is not None for t in tasks):
+        start = arrival
     return Instance(tasks=tuple(tasks), robots=tuple(robots), travel=travel, start=start)

@@ -183,10 +183,14 @@ def order_instance(order: RunOrder) -> Instance:
     """The instance a run order names: a built-in scenario (the timed ones of SPEC 16, such
     as `baseline_timed`, included), or its own tasks and robots (a timed instance without
     `start` starts at the request's arrival)."""
-    start = order.start
-    if start is None and any(t.duration is not None for t in order.tasks or ()):
-        start = datetime.now(UTC).replace(microsecond=0)
-    return instance_of(order.scenario, order.tasks, order.robots, travel=order.travel, start=start)
+    return instance_of(
+        order.scenario,
+        order.tasks,
+        order.robots,
+        travel=order.travel,
+        start=order.start,
+        arrival=datetime.now(UTC).replace(microsecond=0),
+    )
 
 
 def learned_spec(

@@ -187,3 +187,22 @@ def test_an_untimed_runs_schedule_is_a_409_saying_it_has_no_times(client: TestCl
     assert "has no times" in error["msg"] and "untimed" in error["msg"]
     missing = client.get("/runs/nosuchrun/schedule")
     assert missing.status_code == 404
+
+
+def test_a_timed_run_of_its_own_tasks_without_start_starts_at_its_arrival(
+    client: TestClient,
+) -> None:
+    body = {
+        "tasks": [
+            {"id": "dig", "features": ["heavy"], "duration": 30},
+            {"id": "pour", "features": ["careful"], "duration": 20, "after": ["dig"]},
+        ],
+        "robots": [
+            {"name": "a", "success": {"heavy": 0.9, "careful": 0.4}},
+            {"name": "b", "success": {"heavy": 0.5, "careful": 0.8}},
+        ],
+    }
+    before = datetime.now().astimezone().replace(microsecond=0)
+    run_id = completed(client, body)["id"]
+    start = datetime.fromisoformat(client.get(f"/runs/{run_id}/schedule").json()["start"])
+    assert before <= start <= datetime.now().astimezone()
