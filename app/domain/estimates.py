@@ -26,7 +26,6 @@ from enum import StrEnum
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 DEFAULT_SITE = "default"
 DEFAULT_PRIOR_STRENGTH = 10.0
@@ -99,6 +98,10 @@ class BetaEstimate:
         against it is a point mass (scipy's Beta needs both parameters positive)."""
         if self.alpha <= 0 or self.beta <= 0:
             return (self.mean, self.mean)
+        # Imported here: scipy.stats takes a second to import, and every server start and
+        # command imports this module; only the intervals need it.
+        from scipy import stats
+
         low, high = stats.beta.ppf([_TAIL, 1.0 - _TAIL], self.alpha, self.beta)
         return (float(low), float(high))
 
@@ -171,6 +174,8 @@ class DurationEstimate:
         if sd is None or median is None:
             return None
         weight = self.observed.n + (self.strength if self.planned else 0.0)
+        from scipy import stats  # as in BetaEstimate.interval
+
         half = float(stats.t.ppf(1.0 - _TAIL, self.observed.n - 1)) * sd / math.sqrt(weight)
         return (median * math.exp(-half), median * math.exp(half))
 

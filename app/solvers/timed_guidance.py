@@ -31,7 +31,6 @@ from typing import Any
 
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
-from app.solvers.cpsat.search import solve_schedule
 
 GUIDANCE_TIME_LIMIT_S = 5.0
 
@@ -57,6 +56,10 @@ class GuidancePlan:
 
 def plan_guidance(problem: Problem, *, time_limit_s: float = GUIDANCE_TIME_LIMIT_S) -> GuidancePlan:
     """The plan for a run that has decided nothing yet (its pins are the problem's)."""
+    # Imported here: OR-Tools takes half a second to import, and every server start reads
+    # this module (a resumed run reads its stored plan); only a guided timed run solves one.
+    from app.solvers.cpsat.search import solve_schedule
+
     try:
         outcome = solve_schedule(problem, time_limit_s=time_limit_s, workers=1)
     except DomainError:
