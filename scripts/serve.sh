@@ -1,5 +1,6 @@
 #!/bin/sh
-# Apply migrations, then serve. `make run` and the Docker image both start the service
+# Serve (the app applies the migrations as it starts, under PostgreSQL's advisory lock when
+# several processes start at once). `make run` and the Docker image both start the service
 # through this script, so there is one way to start it.
 set -eu
 HOST="${HOST:-127.0.0.1}"
@@ -8,5 +9,4 @@ PORT="${PORT:-8000}"
 # (and names it, port included, in its start-up warning).
 export LTAA_HOST="$HOST" LTAA_PORT="$PORT"
 BIN="${LTAA_BIN:-}"
-"${BIN}alembic" upgrade head
 exec "${BIN}uvicorn" app.main:create_app --factory --host "$HOST" --port "$PORT"

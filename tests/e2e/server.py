@@ -1,5 +1,6 @@
-"""A real server for end-to-end tests: scripts/serve.sh (migrations, then uvicorn) in a
-subprocess on a free loopback port, exactly as `make run` starts it; stoppable with SIGKILL."""
+"""A real server for end-to-end tests: scripts/serve.sh (uvicorn; the app migrates as it
+starts) in a subprocess on a free loopback port, exactly as `make run` starts it; stoppable
+with SIGKILL."""
 
 from __future__ import annotations
 
