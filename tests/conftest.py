@@ -9,6 +9,28 @@ import pytest
 from app.config import Settings
 from tests.fakes.llm_providers import PROVIDERS, Provider
 
+# The directories whose tests take minutes (servers killed and restarted, a browser), in
+# the order they are handed out: see pytest_collection_modifyitems.
+LONG_FIRST = ("tests/e2e/", "tests/browser/")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The long tests first. xdist's `load` scheduler hands the first quarter of the list
+    out round-robin, so every worker starts on its share of the end-to-end and browser
+    tests (and of the tests marked slow) and the short ones fill in after them; in
+    collection order one of those minutes-long tests could start last and the whole run
+    would wait for it."""
+
+    def rank(item: pytest.Item) -> int:
+        if item.get_closest_marker("slow"):  # training runs of a minute, wherever they live
+            return 0
+        return next(
+            (i for i, prefix in enumerate(LONG_FIRST) if item.nodeid.startswith(prefix)),
+            len(LONG_FIRST),
+        )
+
+    items.sort(key=rank)  # stable: within a rank, collection order
+
 
 @pytest.fixture
 def settings(tmp_path: Path) -> Settings:
