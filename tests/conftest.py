@@ -15,9 +15,10 @@ LONG_FIRST = ("tests/e2e/", "tests/browser/")
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The long tests first. xdist's `load` scheduler hands the first quarter of the list
-    out round-robin, so every worker starts on its share of the end-to-end and browser
-    tests (and of the tests marked slow) and the short ones fill in after them; in
+    """The long tests first, longest-first scheduling: pytest-xdist's `load` with
+    --maxschedchunk=1 (pyproject.toml) hands tests out from the head of this list one at a
+    time as workers finish, so the end-to-end and browser tests (and the tests marked slow)
+    spread over every worker at the start and the short ones fill in after them; in
     collection order one of those minutes-long tests could start last and the whole run
     would wait for it."""
 
