@@ -14,15 +14,9 @@ $(BIN)/python:
 
 # torch goes first and on its own: pinned, pip takes the CPU build from local disk,
 # while letting the resolver pick a torch pulls a multi-GB CUDA build.
-# --no-compile: pip would compile every installed module to bytecode, one file after another
-# (torch, scipy, sympy, OR-Tools...: over a minute of CPU measured here); the suite's
-# processes compile the modules they import on first use and keep the bytecode instead. The
-# import below compiles what every server, CLI call and test worker imports, once, before
-# four workers start at the same moment (and checks that the installed app imports).
 $(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install --quiet --no-compile torch==2.13.0
-	$(BIN)/pip install --quiet --no-compile -e '.[rl,dev]'
-	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -c "import app.main, app.cli"
+	$(BIN)/pip install --quiet torch==2.13.0
+	$(BIN)/pip install --quiet -e '.[rl,dev]'
 	touch $@
 
 install: $(VENV)/.installed
