@@ -76,6 +76,17 @@ def test_anchors_skip_code_fences_and_number_repeats(tmp_path: Path) -> None:
     assert anchors(page) == {"top", "pins", "pins-1"}
 
 
+def test_the_patterns_find_every_form_and_nothing_else() -> None:
+    cited = ["(SPEC 16)", "SPEC §4", "SPEC section 12", "see spec section 3", "SPEC.md", "SPEC's"]
+    assert all(SPEC_CITATION.search(text) for text in cited)
+    assert not any(SPEC_CITATION.search(text) for text in ["_SPECS = {}", "spec: RunSpec"])
+    line = "rules (docs/schedules.md#a-schedule-and-its-check; README.md#console)"
+    assert DOC_CITATION.findall(line) == [
+        ("docs/schedules.md", "a-schedule-and-its-check"),
+        ("README.md", "console"),
+    ]
+
+
 def test_no_citation_of_the_contract_outside_the_repository() -> None:
     found = [
         f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
