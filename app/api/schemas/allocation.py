@@ -13,7 +13,9 @@ from pydantic import (
     Field,
     PlainValidator,
     StrictFloat,
+    StrictInt,
     StrictStr,
+    model_validator,
 )
 from pydantic_core import PydanticCustomError
 
@@ -72,7 +74,14 @@ TaskId = Annotated[
     Field(description="Integer or string, unique in the queue"),
 ]
 Probability = Annotated[StrictFloat, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
-MAX_SEED = 2**32 - 1  # the widest seed every RNG we use (numpy, torch, random) accepts
+MAX_SEED = 2**32 - 1
+
+
+def _absent(value: object) -> bool:
+    return value is None
+
+
+# the widest seed every RNG we use (numpy, torch, random) accepts
 
 
 class TaskIn(BaseModel):
@@ -89,7 +98,16 @@ class TaskIn(BaseModel):
     )
     type: Name = Field("Custom", validation_alias=AliasChoices("type", "action_type"))
     features: list[Name] = Field(
-        max_length=100, description="Features the task needs; every robot must rate each one"
+        default_factory=list,
+        max_length=100,
+        description="Features the task needs; every robot must rate each one. Required, "
+        "unless `team` is given (then they are its keys)",
+    )
+    team: dict[Name, StrictInt] | None = Field(
+        None,
+        max_length=100,
+        description='Robots needed at once, per feature (docs/allocation.md#teams): {"heavy": 2, '
+        '"careful": 1} is three distinct robots, two covering heavy, one careful',
     )
     # docs/api.md#plans-in-time, all optional: a task with a duration makes the instance timed, and
     # then every task needs one.
@@ -103,12 +121,24 @@ class TaskIn(BaseModel):
     release: Minutes | None = Field(None, description="Earliest start, minutes from `start`")
     deadline: PositiveMinutes | None = Field(None, description="Latest end, minutes from `start`")
 
+    @model_validator(mode="after")
+    def _features_or_team(self) -> TaskIn:
+        if "features" not in self.model_fields_set and self.team is None:
+            raise PydanticCustomError(
+                "features_required", "give the features the task needs (`features`), or a `team`"
+            )
+        return self
+
     def to_domain(self) -> Task:
+        features = self.features
+        if "features" not in self.model_fields_set and self.team is not None:
+            features = list(self.team)
         return Task(
             id=self.id,
             name=self.name if self.name is not None else str(self.id),
             type=self.type,
-            features=tuple(self.features),
+            features=tuple(features),
+            team=None if self.team is None else dict(self.team),
             duration=self.duration,
             after=tuple(self.after),
             zone=self.zone,
@@ -130,6 +160,13 @@ class RobotIn(BaseModel):
     )
     zone: Name | None = Field(None, description="Where the robot starts (timed instances)")
     available: Shift | None = None
+    skills: list[Name] | None = Field(
+        None,
+        max_length=100,
+        description="Features it may work on (docs/allocation.md#teams): a single-robot task "
+        "only if all its features are skills, a team unit only of a skill. Default: any "
+        "task, and in a team any feature it rates above 0",
+    )
 
     def to_domain(self) -> Robot:
         return Robot(
@@ -139,6 +176,7 @@ class RobotIn(BaseModel):
             success=dict(self.success),
             zone=self.zone,
             available=self.available,
+            skills=None if self.skills is None else tuple(dict.fromkeys(self.skills)),
         )
 
 
@@ -232,15 +270,22 @@ class AllocateRequest(InstanceRequest):
     )
 
 
-def _absent(value: object) -> bool:
-    return value is None
+class TeamMemberOut(BaseModel):
+    robot: str
+    feature: str = Field(description="The feature of the unit this member covers")
 
 
 class Assignment(BaseModel):
     task_id: int | str
     task_name: str
-    robot: str
+    robot: str = Field(description="The robot; for a team task the member covering its first unit")
     success: float
+    team: list[TeamMemberOut] | None = Field(
+        None,
+        description="Team tasks only (docs/allocation.md#teams): one entry per unit, in the "
+        "team's key order",
+        exclude_if=_absent,
+    )
     # Omitted unless true, so a request without pins gets exactly the response it always did.
     pinned: bool = Field(
         False,
