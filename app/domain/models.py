@@ -232,9 +232,12 @@ def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
         for feature in task.features:
             missing = [r.name for r in robots if feature not in r.success]
             if missing:
+                where = "features" if task.team is None else f"team.{feature}"
+                named = "" if task.team is None else f"task {task.id!r}: "
                 raise DomainError(
-                    f"tasks.{i}.features",
-                    f"unknown feature '{feature}': not rated by robot(s) {', '.join(missing)}; "
+                    f"tasks.{i}.{where}",
+                    f"{named}unknown feature '{feature}': not rated by robot(s) "
+                    f"{', '.join(missing)}; "
                     "every robot must rate every feature a task needs",
                 )
     check_skills(robots)

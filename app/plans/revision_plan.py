@@ -17,6 +17,7 @@ from app.domain.errors import DomainError, InfeasibleCapError
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.problem import Problem
 from app.domain.serialize import instance_from_dict
+from app.domain.teams import refuse_teams
 from app.plans.revision_pins import ParentDecision, pinned_rows
 from app.plans.revision_times import DELAY, ReportedTimes, plan_times
 from app.runs.spec import RunSpec
@@ -366,6 +367,8 @@ def plan_revision(
         max_dev, keep = None, False
     else:
         max_dev, keep = parent_spec.max_deviation, True
+    # Runs plan one robot per task: a revision may not add a team task (yet).
+    refuse_teams(instance.tasks, "a run's revision", "plan team tasks with POST /allocate")
     try:
         problem = Problem.build(
             instance,

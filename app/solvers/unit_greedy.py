@@ -47,10 +47,7 @@ def _choose(view: UnitView, i: int, loads: list[int], rest: Sequence[Item]) -> M
             (c for c in view.unit_columns(i, feature) if c not in members),
             key=lambda c: -robots[view.robots[c]].success[feature],
         )
-        left = units[u + 1 :]
-        c = _first_feasible(
-            view, ranked, loads, list(rest), Item(i, left, frozenset(members)) if left else None
-        )
+        c = _first_feasible(view, ranked, loads, list(rest), (i, units[u + 1 :], members))
         members.append(c)
     # Units of one feature are interchangeable: their members in robot order.
     return tuple(
@@ -65,12 +62,16 @@ def _first_feasible(
     ranked: Sequence[int],
     loads: list[int],
     rest: list[Item],
-    partial: Item | None = None,
+    team: tuple[int, tuple[str, ...], list[int]] | None = None,
 ) -> int:
-    items = rest if partial is None else [partial, *rest]
-    remaining = sum(len(it.units) or 1 for it in items)
+    """The first of `ranked` after which what is left still fits; `team`: (task, its units
+    still to cover, its members so far), when choosing a member of a team."""
     for c in ranked:
+        items = rest
+        if team is not None and team[1]:
+            items = [Item(team[0], team[1], frozenset([*team[2], c])), *rest]
         loads[c] += 1
+        remaining = sum(len(it.units) or 1 for it in items)
         if view.cap.can_complete(loads, remaining) and (
             place_units(view, items, loads, optimise=False) is not None
         ):
