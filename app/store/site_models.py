@@ -45,11 +45,11 @@ class SiteReport(Base):
             "task_type",
             "predicted_bin",
             "success",
+            "unmeasured",  # grouped on too: before received_at, so the group is a prefix
             "received_at",
             "log_minutes",
             "planned_minutes",
             "predicted",
-            "unmeasured",
         ),
     )
 

@@ -36,7 +36,11 @@ def upgrade() -> None:
     with op.batch_alter_table("site_reports", schema=None) as batch_op:
         batch_op.add_column(sa.Column("unmeasured", sa.String(length=40), nullable=True))
     op.drop_index("ix_site_reports_estimates", table_name="site_reports")
-    op.create_index("ix_site_reports_estimates", "site_reports", [*_OLD, "unmeasured"])
+    # After `success`: the estimates group on it, and a group that is a prefix of the index
+    # is read in index order with no sort.
+    grouped = _OLD[: _OLD.index("success") + 1]
+    new = [*grouped, "unmeasured", *_OLD[len(grouped) :]]
+    op.create_index("ix_site_reports_estimates", "site_reports", new)
 
 
 def downgrade() -> None:
