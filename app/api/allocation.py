@@ -106,6 +106,8 @@ def build_response(
     instance = problem.instance
     teams = solution.teams
     s = task_successes(instance, solution.assignment, teams)
+    timed = _timed_fields(problem, solution.details) if instance.timed else {}
+    times = _assignment_times(timed.get("schedule"), instance.n_tasks)
     return AllocateResponse(
         solver=solver,
         mode=problem.mode,
@@ -118,6 +120,7 @@ def build_response(
                 success=float(s[t]),
                 pinned=t in problem.pinned,
                 team=_team_out(problem, t, teams[t]) if t in teams else None,
+                **times[t],
             )
             for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
         ],
@@ -132,7 +135,7 @@ def build_response(
         ),
         usage=UsageOut.from_domain(solution.usage),
         elapsed_ms=elapsed_ms,
-        **(_timed_fields(problem, solution.details) if instance.timed else {}),
+        **timed,
     )
 
 
@@ -142,6 +145,15 @@ def _team_out(problem: Problem, t: int, members: tuple[int, ...]) -> list[TeamMe
         TeamMemberOut(robot=robots[r].name, feature=f)
         for f, r in zip(problem.instance.units[t], members, strict=True)
     ]
+
+
+def _assignment_times(schedule: ScheduleOut | None, n_tasks: int) -> list[dict[str, Any]]:
+    """Per task (queue order), its entry of `schedule.tasks` as the time fields of its
+    assignment: copied, so the two can never disagree. None without a schedule."""
+    if schedule is None:
+        return [{} for _ in range(n_tasks)]
+    keys = ("start", "end", "start_at", "end_at", "zone", "travel")
+    return [{key: getattr(slot, key) for key in keys} for slot in schedule.tasks]
 
 
 def _timed_fields(problem: Problem, details: dict[str, Any]) -> dict[str, Any]:
