@@ -10,21 +10,43 @@ teams existed, so an instance without the new fields is planned exactly as it wa
 On a timed instance the duration map (docs/schedules.md#the-model) restricts eligibility
 further; `app.domain.models.Instance.eligible` combines both, and every method reads that.
 
-This module knows tasks and robots only through the attributes it reads, so `models` can
-call its checks while it builds an Instance.
+This module knows tasks and robots only through the attributes it reads (the protocols
+below), so `models` can call its checks while it builds an Instance.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from app.domain.errors import DomainError
 
-if TYPE_CHECKING:
-    from app.domain.models import Robot, Task
+
+class Task(Protocol):
+    """What this module reads of `app.domain.models.Task` (models imports this module)."""
+
+    @property
+    def id(self) -> int | str: ...
+    @property
+    def features(self) -> tuple[str, ...]: ...
+    @property
+    def team(self) -> Mapping[str, int] | None: ...
+    @property
+    def duration(self) -> object: ...
+
+
+class Robot(Protocol):
+    """What this module reads of `app.domain.models.Robot`."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def success(self) -> Mapping[str, float]: ...
+    @property
+    def skills(self) -> tuple[str, ...] | None: ...
+
 
 # Task index -> the robot covering each of its units, in unit order (team tasks only).
 Teams = Mapping[int, tuple[int, ...]]
