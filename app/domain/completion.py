@@ -43,8 +43,8 @@ def completable(eligible: np.ndarray, loads: Sequence[int], lower: int, upper: i
 
     for k in range(c):
         arc(source, 1 + k, int(counts[k]))
-        for j in np.flatnonzero(rows[k]):
-            arc(1 + k, 1 + c + int(j), int(counts[k]))
+        for col in np.flatnonzero(rows[k]):
+            arc(1 + k, 1 + c + int(col), int(counts[k]))
     for j in range(r):
         arc(1 + c + j, sink, need[j])
         arc(1 + c + j, spare, room[j] - need[j])

@@ -41,8 +41,8 @@ class DynamicProgrammingSolver(Solver):
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         if needs_units(problem):  # teams or eligibility: each task's own choices
             view = UnitView.of(problem)
-            choices, states = dynamic_programme(view, MAX_STATES)
-            return view.solution(choices, {"states": states})
+            teams, states = dynamic_programme(view, MAX_STATES)
+            return view.solution(teams, {"states": states})
         # The free tasks on the available robots, loads starting from the pins.
         part = FreePart.of(problem)
         s, cap = part.success, part.cap

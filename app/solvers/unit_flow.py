@@ -98,8 +98,8 @@ def place_units(
     if not net.tails or flow.solve() != flow.OPTIMAL:
         return None if total else {}
     out: dict[int, Members] = {}
-    for members, arcs in class_arcs:
-        queue = [c for arc, c in arcs for _ in range(flow.flow(arc))]
+    for members, pairs in class_arcs:
+        queue = [c for arc, c in pairs for _ in range(flow.flow(arc))]
         for i, c in zip(members, queue, strict=True):
             out[i] = (c,)
     for i, arcs in unit_arcs.items():
