@@ -14,6 +14,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from app.domain.errors import DomainError, InfeasibleCapError
+from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.problem import Problem
 from app.domain.serialize import instance_from_dict
@@ -26,7 +27,7 @@ from app.plans.revision_changes import (
     fleet_names,
 )
 from app.plans.revision_pins import ParentDecision, pinned_rows
-from app.plans.revision_times import ReportedTimes, plan_times
+from app.plans.revision_times import ReportedTimes, RevisionTimes, plan_times
 from app.runs.spec import RunSpec
 
 
@@ -185,6 +186,52 @@ def _cap(parent_spec: RunSpec, d: Draft) -> tuple[float | None, bool]:
     return parent_spec.max_deviation, True
 
 
+def _pinned_parent(
+    pin: str | Mapping[str, Any],
+    decided: Mapping[int, ParentDecision],
+    execution: Mapping[int, str],
+    d: Draft,
+) -> list[int]:
+    """Pins: what the rule names, less failed tasks and tasks started (not done) on a robot
+    that is now unavailable."""
+    return [
+        t
+        for t in _pin_candidates(pin, decided, d.tasks, execution)
+        if execution.get(t) != "failed"
+        and not (execution.get(t) == "started" and decided[t].record.robot_name in d.unavailable)
+    ]
+
+
+def _problem(
+    instance: Instance,
+    mode: Mode,
+    max_dev: float | None,
+    keep: bool,
+    pinned: dict[int, int],
+    off: set[int],
+    times: RevisionTimes,
+) -> Problem:
+    try:
+        return Problem.build(
+            instance,
+            mode,
+            max_dev,
+            uncapped=keep and max_dev is None,
+            pinned=pinned,
+            unavailable=off,
+            pinned_starts=times.pinned_starts,
+            not_before=times.not_before,
+        )
+    except InfeasibleCapError as exc:
+        raise InfeasibleCapError(
+            f"the revision's pins and fleet break the workload cap: {exc.message}",
+            field="pin",
+            suggested_max_deviation=exc.suggested_max_deviation,
+        ) from None
+    except DomainError as exc:
+        raise DomainError("changes", exc.message, code=exc.code) from None
+
+
 def plan_revision(
     *,
     parent_spec: RunSpec,
@@ -212,15 +259,7 @@ def plan_revision(
             code="no_robot_left",
         )
 
-    # Pins: what the rule names, less failed tasks and tasks started (not done) on a robot
-    # that is now unavailable.
-    candidates = _pin_candidates(pin, decided, d.tasks, execution)
-    pinned_parent = [
-        t
-        for t in candidates
-        if execution.get(t) != "failed"
-        and not (execution.get(t) == "started" and decided[t].record.robot_name in d.unavailable)
-    ]
+    pinned_parent = _pinned_parent(pin, decided, execution, d)
     d.pinned_ids = {str(d.tasks[t]["id"]) for t in pinned_parent}
     apply_changes(d, changes, QUEUE_HANDLERS)
     queue, origin = _queue(d, max(pinned_parent) if pinned_parent else -1)
@@ -251,25 +290,7 @@ def plan_revision(
     pinned = {i: names.index(robot) for i, robot in pinned_on.items()}
     off = {names.index(n) for n in d.unavailable}
     max_dev, keep = _cap(parent_spec, d)
-    try:
-        problem = Problem.build(
-            instance,
-            d.mode,
-            max_dev,
-            uncapped=keep and max_dev is None,
-            pinned=pinned,
-            unavailable=off,
-            pinned_starts=times.pinned_starts,
-            not_before=times.not_before,
-        )
-    except InfeasibleCapError as exc:
-        raise InfeasibleCapError(
-            f"the revision's pins and fleet break the workload cap: {exc.message}",
-            field="pin",
-            suggested_max_deviation=exc.suggested_max_deviation,
-        ) from None
-    except DomainError as exc:
-        raise DomainError("changes", exc.message, code=exc.code) from None
+    problem = _problem(instance, d.mode, max_dev, keep, pinned, off, times)
 
     # Everything not named here is inherited as it is (quality threshold, retries,
     # temperature, guidance, seed, LLM scope, and whatever a run spec gains later).
