@@ -6,7 +6,7 @@ SIGKILL (or SIGTERM) the server at a known place anywhere in the graph.
 before LangGraph takes the step's checkpoint: the window in which a crash makes the node
 run again from its top, which is where a non-idempotent side effect would show. (The
 worker's saver writes a checkpoint where each task begins, so a crash at either point
-re-runs the task's nodes from its start: app.graph.checkpoint_sparse.)
+re-runs the task's nodes from its start: app.graph.checkpoint._sparse.)
 
 A held run waits, polling `Recorder.check_cancelled`, until the process dies or the run is
 stopped (a cancel or the server draining raises RunCancelled out of the hold).
