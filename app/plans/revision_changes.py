@@ -1,4 +1,4 @@
-"""The changes of a revision (docs/living-plans.md), one handler per change type: each
+"""The changes of a revision (docs/living-plans.md#changes), one handler per change type: each
 checks its change against the draft revision and applies it, naming the request field of
 any error.
 """
@@ -170,7 +170,8 @@ def _add_tasks(d: Draft, i: int, c: Mapping[str, Any]) -> None:
             "name": task.get("name") or str(task["id"]),
             "type": task.get("type", "Custom"),
             "features": list(task["features"]),
-            # SPEC 16: an added task of a timed run brings its own time fields.
+            # docs/living-plans.md#a-revision-in-time: an added task of a timed run brings its
+            # own time fields.
             **{k: task[k] for k in _TASK_TIME if task.get(k) is not None},
         }
         (d.added_next if c.get("position", "end") == "next" else d.added_end).append(entry)
