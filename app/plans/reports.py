@@ -150,6 +150,7 @@ def _apply_updates(
     changed: list[dict[str, Any]] = []
     outcomes: list[site_repo.Reported] = []
     pending: dict[str, ExecutionState] = {}
+    started_here: dict[str, bool] = {}  # task id -> its `started` here carried `at`
     for i, update in enumerate(updates):
         _check_task(i, update, run_id, tasks, decided)
         row = stored.get(update.task_id)
@@ -173,6 +174,7 @@ def _apply_updates(
                 "task_index": decided[update.task_id],
                 "state": update.state.value,
                 "at": at.isoformat(),
+                **_server_clock(update),
             }
         )
         if row is None:
@@ -187,11 +189,19 @@ def _apply_updates(
         row.state = update.state.value
         if update.state == ExecutionState.STARTED:
             row.started_at = at
+            started_here[update.task_id] = update.at is not None
         else:
             row.ended_at = at
             outcomes.append(
                 site_repo.Reported(
-                    row.task_index, update.task_id, update.state.value, at, row.started_at
+                    row.task_index,
+                    update.task_id,
+                    update.state.value,
+                    at,
+                    row.started_at,
+                    together_without_at=site_repo.together_without_at(
+                        started_here, update.task_id, at_sent=update.at is not None
+                    ),
                 )
             )
     return changed, outcomes
@@ -253,6 +263,12 @@ def _record_reports(
         site_repo.record_outcomes(
             session=session, run=run, reported=outcomes, received_at=record.created_at
         )
+
+
+def _server_clock(update: Update) -> dict[str, str]:
+    """What the record adds to an update sent without `at`: its time is the server's, so
+    the rebuild of the site's rows (app.sites.rebuild) can tell, as the report did."""
+    return {} if update.at is not None else dict(site_repo.SERVER_CLOCK)
 
 
 def current_states(session: Session, run_id: str, task_ids: Sequence[str]) -> dict[str, str]:
