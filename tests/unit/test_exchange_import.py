@@ -3,46 +3,14 @@ formats for one project, import to the same draft (docs/exchange.md)."""
 
 from __future__ import annotations
 
-from datetime import datetime
-from functools import cache
 from typing import Any
 
 import pytest
 
 from app.exchange import read_mspdi, read_schedule, read_xer
-from tests.mpxj_oracle import Spec, build_project, write
+from tests.exchange_support import files
 
-START = datetime(2026, 3, 2, 8, 0)
 pytestmark = pytest.mark.usefixtures("mpxj")
-
-
-def site() -> list[Spec]:
-    """All four link types with lags (a lead too), a milestone between two tasks, a task
-    with two resources and one feature, constraints, a task without features."""
-    return [
-        Spec("Formwork", 8, "lift", ("Crane",), release=datetime(2026, 3, 2, 9, 0)),
-        Spec("Pour", 4, "pour, heavy", ("Pump",), links=(("Formwork", "FS", 30),)),
-        Spec("Screed", 3, "screed", ("Screeder",), links=(("Pour", "SS", 20),)),
-        Spec("Trowel", 2, "screed", ("Screeder",), links=(("Screed", "FF", -15),)),
-        Spec(
-            "Inspect",
-            1,
-            "scan",
-            ("Scanner",),
-            links=(("Trowel", "SF", 60),),
-            finish_by=datetime(2026, 3, 3, 17, 0),
-        ),
-        Spec("Slab ready", 0, milestone=True, links=(("Inspect", "FS", 5),)),
-        Spec("Strip", 2.5, "lift", ("Crane",), links=(("Slab ready", "FS", 10),)),
-        Spec("Lift rebar", 2, "lift", ("Crane", "Hoist"), links=(("Formwork", "SS", 0),)),
-        Spec("Sweep", 1, None, ("Crane",), links=(("Strip", "FS", 0),)),
-    ]
-
-
-@cache
-def files() -> dict[str, bytes]:
-    project = build_project("Level 2 slab", START, site())
-    return {fmt: write(project, fmt) for fmt in ("mspdi", "xer")}
 
 
 def by_name(draft: dict[str, Any]) -> dict[str, dict[str, Any]]:
