@@ -117,11 +117,14 @@ def refuse_positive_cycles(
     succ: dict[str, list[str]] = defaultdict(list)
     for link in links:
         succ[link.predecessor].append(link.successor)
-    for part in _components(list(durations), succ):
-        members = set(part)
-        inner = [k for k in links if k.predecessor in members and k.successor in members]
-        if inner:
-            _bellman_ford(part, inner, durations, ids)
+    parts = _components(list(durations), succ)
+    part_of = {t: i for i, part in enumerate(parts) for t in part}
+    inner: dict[int, list[Link]] = defaultdict(list)
+    for link in links:
+        if part_of[link.predecessor] == part_of[link.successor]:
+            inner[part_of[link.predecessor]].append(link)
+    for i, within in inner.items():
+        _bellman_ford(parts[i], within, durations, ids)
 
 
 def _bellman_ford(

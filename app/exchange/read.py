@@ -116,4 +116,13 @@ def read_schedule(
                 code="wrong_format",
             )
     reader = read_mspdi if kind == "mspdi" else read_xer
-    return reader(data, features_field=features_field, default_features=default_features)
+    try:
+        return reader(data, features_field=features_field, default_features=default_features)
+    except ExchangeError:
+        raise
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        # A value the readers did not foresee (a number that is not one, say): still the
+        # file's fault, so a 422 naming it rather than a 500.
+        raise ExchangeError(
+            f"the {kind} file could not be read: {type(exc).__name__}: {exc}", code="malformed"
+        ) from None
