@@ -166,3 +166,18 @@ def test_xer_links_to_other_projects_are_skipped_with_why() -> None:
     assert len(whys) == 2
     assert any("another project" in w for w in whys)
     assert any("not in the file" in w for w in whys)
+
+
+def test_no_entity_but_xmls_own_without_a_dtd_and_no_dtd_after_the_root() -> None:
+    # Without a DTD an entity reference other than XML's five is not well-formed, and a
+    # document type declaration inside the root element is refused by the parser itself.
+    with pytest.raises(ExchangeError) as caught:
+        read_mspdi(mspdi(task(1).replace("<Name>T1</Name>", "<Name>&x;</Name>")))
+    assert caught.value.code == "malformed"
+    late = mspdi(task(1)).replace(b"<Tasks>", b'<Tasks><!DOCTYPE x [<!ENTITY y "z">]>')
+    with pytest.raises(ExchangeError) as caught:
+        read_mspdi(late)
+    assert caught.value.code == "malformed"
+    # XML's own entities are text as usual.
+    named = read_mspdi(mspdi(task(1).replace("<Name>T1</Name>", "<Name>A &amp; B</Name>")))
+    assert named.tasks[0]["name"] == "A & B"
