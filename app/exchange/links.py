@@ -9,7 +9,7 @@ milestone back, as nothing does once it is not planned).
 A cycle of links is not always wrong (two start-to-start links with lag 0 only say two
 tasks start together); it is wrong when going round it, with each task's duration between
 its start and its end, adds up to more than zero: a positive cycle in the longest-path
-graph over start and end points (SPEC's "lags summed along it > 0", durations counted).
+graph over start and end points (the lags summed along it, durations counted, above zero).
 Only strongly connected parts of the link graph can hold a cycle, so the Bellman-Ford
 search runs there alone and an acyclic 10,000-task file costs one linear pass.
 """
