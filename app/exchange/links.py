@@ -147,10 +147,10 @@ def _bellman_ford(
     last: Point | None = None
     for _ in range(len(dist)):
         last = None
-        for u, v, w, link in edges:
+        for u, v, w, by in edges:
             if dist[u] + w > dist[v] + 1e-6:
                 dist[v] = dist[u] + w
-                via[v] = (u, link)
+                via[v] = (u, by)
                 last = v
         if last is None:
             return
@@ -160,9 +160,9 @@ def _bellman_ford(
     cycle: list[Link] = []
     point = last
     while True:
-        point, link = via[point]
-        if link is not None:
-            cycle.append(link)
+        point, step = via[point]
+        if step is not None:
+            cycle.append(step)
         if point == last:
             break
     cycle.reverse()

@@ -47,7 +47,7 @@ class _Fields:
     def __init__(self, element: ET.Element) -> None:
         self.element = element
 
-    def get(self, name: str, default: str | None = None) -> str | None:
+    def get(self, name: str, default: str = "") -> str:
         text = self.element.findtext(_Q + name)
         return default if text is None else text.strip()
 
@@ -118,7 +118,7 @@ def _links(task: ET.Element, uid: str, uids: set[str]) -> list[Link]:
     for element in _children(task, "PredecessorLink"):
         f = _fields(element)
         pred = f.get("PredecessorUID", "")
-        kind = LINK_TYPES.get(f.get("Type", "1"), "FS")
+        kind: LinkType = LINK_TYPES.get(f.get("Type", "1"), "FS")
         lag = float(f.get("LinkLag") or 0) / 10
         refused = None
         if f.get("CrossProject") == "1":
