@@ -163,3 +163,12 @@ def test_a_timed_team_instance_is_refused_with_a_sentence(client: TestClient) ->
     assert r.status_code == 422, r.text
     (item,) = assert_error_shape(r.json())
     assert item["loc"] == ["body", "tasks", 0, "team"] and "timed" in item["msg"]
+
+
+def test_a_durable_run_refuses_team_tasks_with_a_sentence(client: TestClient) -> None:
+    r = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), "reasoner": "rules"})
+    assert r.status_code == 422, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"][-3:] == ["tasks", 0, "team"]
+    assert "LTAA graph" in item["msg"] and "'optimal'" in item["msg"]
+    assert client.get("/runs").json() == []  # nothing stored
