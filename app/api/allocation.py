@@ -14,10 +14,10 @@ from app.api.schemas.allocation import (
     Assignment,
     InstanceRequest,
     MetricsOut,
-    TeamMemberOut,
     UsageOut,
 )
 from app.api.schemas.schedule import ScheduleOut, ViolationOut
+from app.api.schemas.teams import TeamMemberOut
 from app.domain import catalog
 from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics, task_successes, workload

@@ -13,13 +13,20 @@ from pydantic import (
     Field,
     PlainValidator,
     StrictFloat,
-    StrictInt,
     StrictStr,
     model_validator,
 )
 from pydantic_core import PydanticCustomError
 
 from app.api.schemas.schedule import ScheduleOut, ViolationOut
+from app.api.schemas.teams import (
+    MEMBERS_FIELD,
+    SKILLS_FIELD,
+    TEAM_FIELD,
+    Team,
+    TeamMemberOut,
+    task_features,
+)
 from app.api.schemas.timing import Duration, Minutes, PositiveMinutes, Shift, WallClock
 from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS, Robot, Task
@@ -103,12 +110,7 @@ class TaskIn(BaseModel):
         description="Features the task needs; every robot must rate each one. Required, "
         "unless `team` is given (then they are its keys)",
     )
-    team: dict[Name, StrictInt] | None = Field(
-        None,
-        max_length=100,
-        description='Robots needed at once, per feature (docs/allocation.md#teams): {"heavy": 2, '
-        '"careful": 1} is three distinct robots, two covering heavy, one careful',
-    )
+    team: Team | None = TEAM_FIELD
     # docs/api.md#plans-in-time, all optional: a task with a duration makes the instance timed, and
     # then every task needs one.
     duration: Duration | None = None
@@ -123,21 +125,15 @@ class TaskIn(BaseModel):
 
     @model_validator(mode="after")
     def _features_or_team(self) -> TaskIn:
-        if "features" not in self.model_fields_set and self.team is None:
-            raise PydanticCustomError(
-                "features_required", "give the features the task needs (`features`), or a `team`"
-            )
+        task_features(self.features, self.team, "features" in self.model_fields_set)
         return self
 
     def to_domain(self) -> Task:
-        features = self.features
-        if "features" not in self.model_fields_set and self.team is not None:
-            features = list(self.team)
         return Task(
             id=self.id,
             name=self.name if self.name is not None else str(self.id),
             type=self.type,
-            features=tuple(features),
+            features=task_features(self.features, self.team, "features" in self.model_fields_set),
             team=None if self.team is None else dict(self.team),
             duration=self.duration,
             after=tuple(self.after),
@@ -160,13 +156,7 @@ class RobotIn(BaseModel):
     )
     zone: Name | None = Field(None, description="Where the robot starts (timed instances)")
     available: Shift | None = None
-    skills: list[Name] | None = Field(
-        None,
-        max_length=100,
-        description="Features it may work on (docs/allocation.md#teams): a single-robot task "
-        "only if all its features are skills, a team unit only of a skill. Default: any "
-        "task, and in a team any feature it rates above 0",
-    )
+    skills: list[Name] | None = SKILLS_FIELD
 
     def to_domain(self) -> Robot:
         return Robot(
@@ -270,22 +260,12 @@ class AllocateRequest(InstanceRequest):
     )
 
 
-class TeamMemberOut(BaseModel):
-    robot: str
-    feature: str = Field(description="The feature of the unit this member covers")
-
-
 class Assignment(BaseModel):
     task_id: int | str
     task_name: str
     robot: str = Field(description="The robot; for a team task the member covering its first unit")
     success: float
-    team: list[TeamMemberOut] | None = Field(
-        None,
-        description="Team tasks only (docs/allocation.md#teams): one entry per unit, in the "
-        "team's key order",
-        exclude_if=_absent,
-    )
+    team: list[TeamMemberOut] | None = MEMBERS_FIELD
     # Omitted unless true, so a request without pins gets exactly the response it always did.
     pinned: bool = Field(
         False,
