@@ -31,8 +31,6 @@ RUN groupadd --system --gid 10001 ltaa \
     && mkdir -p /data && chown 10001:10001 /data
 COPY --from=build /opt/venv /opt/venv
 WORKDIR /srv
-COPY alembic.ini ./
-COPY migrations ./migrations
 COPY scripts/serve.sh ./scripts/serve.sh
 USER 10001:10001
 VOLUME ["/data"]
