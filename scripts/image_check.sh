@@ -79,6 +79,7 @@ bah build --isolation chroot --pull=never --format docker \
     tail -40 "$WORK/build.log" >&2
     exit 1
 }
+bah rmi --prune >/dev/null 2>&1 || true # the previous check's image, now untagged
 # One container for the checks and the server: with vfs each one is a full copy.
 bah rm ltaa-image-check >/dev/null 2>&1 || true
 ctr=$(bah from --pull=never --name ltaa-image-check "$IMAGE")
@@ -98,8 +99,10 @@ port=$(python3 -c 'import socket; s = socket.socket(); s.bind(("", 0)); print(s.
 client=$(python3 -c 'import secrets; print(secrets.token_urlsafe(24))')
 supervisor=$(python3 -c 'import secrets; print(secrets.token_urlsafe(24))')
 say "run '$cmd' as $user in $workdir, port $port"
+# buildah itself in the background (not the bah function, a subshell that would not pass
+# a signal on): it forwards SIGTERM to the server, which stops as it would in Docker.
 # shellcheck disable=SC2086  # cmd is the image's CMD, split into its words
-bah run --isolation chroot --user "$user" --workingdir "$workdir" --env PORT="$port" \
+buildah $STORAGE run --isolation chroot --user "$user" --workingdir "$workdir" --env PORT="$port" \
     --env LTAA_API_KEYS="$client:client,$supervisor:supervisor" "$ctr" -- $cmd \
     >"$WORK/serve.log" 2>&1 &
 server=$!
