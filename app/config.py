@@ -8,6 +8,8 @@ from typing import Annotated, Literal
 from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+# MPXJ writes 10,000 activities as 23 MB of MSPDI (3 MB of XER): docs/exchange.md.
+DEFAULT_IMPORT_MAX_BYTES = 20 * 1024 * 1024
 DEFAULT_MAX_BODY_BYTES = 10 * 1024 * 1024  # 10,000 tasks with TEACh metadata fit comfortably
 # Seconds between a webhook's failed attempts (8 attempts over ~27.6 h, as Svix does): a
 # receiver down for a day still gets every event. Jitter of +-20% is added to each.
@@ -76,8 +78,8 @@ class Settings(BaseSettings):
     # LLM tokens (input + output) a run may spend when its request names no token_budget;
     # then its remaining tasks go to the offline rules reasoner. None: no limit.
     run_token_budget: int | None = Field(None, ge=1)
-    # Site estimates (SPEC 17): how many pseudo-observations the configured rate (and
-    # duration) weighs as the prior of each posterior.
+    # Site estimates (docs/estimates.md#the-model): how many pseudo-observations the configured rate
+    # (and duration) weighs as the prior of each posterior.
     prior_strength: float = Field(10.0, gt=0, le=1_000_000, allow_inf_nan=False)
 
     # Test-only seam: every durable run holds at `<task index>:<node>:<before|after>` (any
@@ -102,6 +104,9 @@ class Settings(BaseSettings):
     retired_public_keys_dir: Path | None = None
 
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
+    # POST /schedules/import: a site's MS Project or P6 file (docs/exchange.md); larger than
+    # a JSON request may be, as the files carry much the draft leaves out.
+    import_max_bytes: int = Field(DEFAULT_IMPORT_MAX_BYTES, ge=1)
 
     # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.api.auth. A SecretStr so
     # repr(), model_dump() and validation errors never show a key.

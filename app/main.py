@@ -10,15 +10,16 @@ from contextlib import AsyncExitStack, asynccontextmanager
 from functools import partial
 from pathlib import Path
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from fastapi.concurrency import run_in_threadpool
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.auth import InsecureBindError, KeyRing, check_bind
-from app.api.deps import RunsContext
+from app.api.deps import RunsContext, require_client
 from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.openapi import install_openapi
+from app.api.responses import CLIENT, errors
 from app.api.rounding import RoundedJSONResponse
 from app.api.routes import (
     admin,
@@ -39,6 +40,8 @@ from app.api.routes import (
 from app.api.routes.webhooks import WebhooksContext
 from app.config import Settings, get_settings
 from app.console import install as install_console
+from app.exchange import endpoints as exchange
+from app.exchange.endpoints import IMPORT_PATH
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
 from app.runs.factory import make_worker
@@ -166,7 +169,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.keyring = keyring
     app.state.metrics = Metrics()
     install_error_handlers(app)
-    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(
+        BodySizeLimit,
+        max_bytes=settings.max_body_bytes,
+        paths={IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES")},
+    )
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
     for module in (
@@ -186,6 +193,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         audit_keys,
     ):
         app.include_router(module.router)
+    app.include_router(
+        exchange.router, dependencies=[Depends(require_client)], responses=errors(*CLIENT, 413)
+    )
     install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)
     return app

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -52,3 +53,13 @@ def provider(request: pytest.FixtureRequest) -> Provider:
     """Each LLM provider in turn (anthropic, openai): a test taking it runs once for each."""
     provider: Provider = request.param
     return provider
+
+
+@pytest.fixture(scope="session")
+def mpxj() -> Iterator[None]:
+    """MPXJ in a JVM (tests/mpxj_oracle.py), started once per test process: JPype cannot
+    start a second JVM in a process."""
+    from tests.mpxj_oracle import start_jvm
+
+    start_jvm()
+    yield

@@ -1,6 +1,6 @@
-"""GET /console/sites and /console/sites/{site} (SPEC 17): the sites, and a site's learned
-rates with their intervals and report counts, the ones farthest from the configured rates
-marked, observed durations and the plans' reliability."""
+"""GET /console/sites and /console/sites/{site} (docs/estimates.md#the-site-page): the sites, and a
+site's learned rates with their intervals and report counts, the ones farthest from the configured
+rates marked, observed durations and the plans' reliability."""
 
 from __future__ import annotations
 
@@ -16,6 +16,12 @@ from app.domain.models import MAX_NAME_CHARS
 from app.sites import service
 
 router = APIRouter(prefix="/console", include_in_schema=False)
+
+# Why a started/done pair taught no duration, as the durations table says it.
+LEFT_OUT_REASONS = {
+    "together_without_at": "sent in one request without both times (at)",
+    "zero_length": "started and ended at the same time",
+}
 
 
 @router.get("/sites")
@@ -62,5 +68,6 @@ async def site_page(
         "marked": marked,
         "rates_chart": rates_chart(rows) if rows else None,
         "reliability_chart": reliability_chart(bins),
+        "left_out_reasons": LEFT_OUT_REASONS,
     }
     return finish(request, console.render(request, "site.html", context, signed=signed))

@@ -24,7 +24,14 @@ from sqlalchemy import (
     UniqueConstraint,
 )
 from sqlalchemy import event as orm_event
-from sqlalchemy.orm import DeclarativeBase, Mapped, ORMExecuteState, Session, mapped_column
+from sqlalchemy.orm import (
+    DeclarativeBase,
+    Mapped,
+    ORMExecuteState,
+    Session,
+    declared_attr,
+    mapped_column,
+)
 
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_NAME_CHARS
@@ -76,8 +83,8 @@ class Run(Base):
         String(255), nullable=True, unique=True, index=True
     )
     request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
-    # Revisions (SPEC 10): the run this one revises, its place in the lineage (0 = root),
-    # the revision that replaced this run, and the digest of the link to the parent (its
+    # Revisions (docs/living-plans.md#revisions): the run this one revises, its place in the lineage
+    # (0 = root), the revision that replaced this run, and the digest of the link to the parent (its
     # heads and the change set) that this run's chains start from (app.store.chain).
     revision_of: Mapped[str | None] = mapped_column(String(32), nullable=True, index=True)
     revision: Mapped[int] = mapped_column(Integer, default=0)
@@ -88,8 +95,8 @@ class Run(Base):
     graph_version: Mapped[str | None] = mapped_column(String(64), nullable=True)
     # How its hash chains are built (app.store.chain.SCHEMES); null: v1, from before.
     chain_scheme: Mapped[str | None] = mapped_column(String(32), nullable=True)
-    # The site it plans for (SPEC 17): its robots are (site, name); its execution reports
-    # feed that site's estimates (app.store.site_models).
+    # The site it plans for (docs/estimates.md#sites): its robots are (site, name); its execution
+    # reports feed that site's estimates (app.store.site_models).
     site: Mapped[str] = mapped_column(
         String(MAX_NAME_CHARS), default="default", server_default="default", index=True
     )
@@ -124,9 +131,15 @@ class ArchivedRun(Base):
     archived_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
-class RunEvent(Base):
-    __tablename__ = "run_events"
-    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_run_events_run_seq"),)
+class _SeqChained:
+    """The columns of a row in one run's `seq`-ordered hash chain (app.store.chain): the
+    events while it runs, the annotations after. The unique (run_id, seq) is what keeps a
+    re-executed node from appending the same link twice."""
+
+    @declared_attr.directive
+    @classmethod
+    def __table_args__(cls) -> tuple[Any, ...]:
+        return (UniqueConstraint("run_id", "seq", name=f"uq_{cls.__tablename__}_run_seq"),)  # type: ignore[attr-defined]
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
@@ -138,26 +151,23 @@ class RunEvent(Base):
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
-class RunAnnotation(Base):
+class RunEvent(_SeqChained, Base):
+    __tablename__ = "run_events"
+
+
+class RunAnnotation(_SeqChained, Base):
     """A record made about a run after it finished (app.domain.annotations): append-only,
     hash-chained per run in `seq` order like the events."""
 
     __tablename__ = "run_annotations"
-    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_run_annotations_run_seq"),)
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
-    seq: Mapped[int] = mapped_column(Integer)
-    kind: Mapped[str] = mapped_column(String(32))
-    detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
     # The Idempotency-Key of the POST that made it (keys are global, as for runs), and a
     # digest of that request, so a retry returns this row and a reused key is refused.
+    # After the chain's columns (sort_order), where the migrations put them.
     idempotency_key: Mapped[str | None] = mapped_column(
-        String(255), nullable=True, unique=True, index=True
+        String(255), nullable=True, unique=True, index=True, sort_order=1
     )
-    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True, sort_order=1)
 
 
 class Decision(Base):
@@ -192,13 +202,14 @@ class Decision(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     # Tamper evidence: a hash over this row's content and the previous link of its run.
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
-    # A revision's pin (SPEC 10): copied from the parent's decision with this chain hash.
-    # Null on every decision the graph made; hashed only when set, so older links hold.
+    # A revision's pin (docs/living-plans.md#pins): copied from the parent's decision with this
+    # chain hash. Null on every decision the graph made; hashed only when set, so older links hold.
     pinned: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
     pinned_from: Mapped[str | None] = mapped_column(String(64), nullable=True)
-    # SPEC 16, a timed run (null otherwise): minutes from the plan's start, the task's zone,
-    # minutes travelled just before it, its place in the decision order (the chain order of
-    # a timed run) and how many minutes later it ends than an allowed robot's earliest end.
+    # docs/schedules.md#what-a-decision-records, a timed run (null otherwise): minutes from the
+    # plan's start, the task's zone, minutes travelled just before it, its place in the decision
+    # order (the chain order of a timed run) and how many minutes later it ends than an allowed
+    # robot's earliest end.
     start: Mapped[float | None] = mapped_column(Float, nullable=True)
     end: Mapped[float | None] = mapped_column(Float, nullable=True)
     zone: Mapped[str | None] = mapped_column(String(200), nullable=True)
@@ -208,8 +219,8 @@ class Decision(Base):
 
 
 class ExecutionReport(Base):
-    """Where the site says a decided task stands (SPEC 10): one row per run and task, moved
-    forward only (started -> done | failed)."""
+    """Where the site says a decided task stands (docs/living-plans.md#execution-reports): one row
+    per run and task, moved forward only (started -> done | failed)."""
 
     __tablename__ = "execution_reports"
     __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_execution_run_task"),)

@@ -1,5 +1,5 @@
-"""GET /runs/{id}/schedule (SPEC 16 "Reading a schedule"): a timed run's plan in time, as
-the schedule JSON block, CSV (one row per task) or iCalendar (one VEVENT per task), read
+"""GET /runs/{id}/schedule (docs/schedules.md#reading-a-runs-schedule): a timed run's plan in time,
+as the schedule JSON block, CSV (one row per task) or iCalendar (one VEVENT per task), read
 by app.schedules from the schedule rebuilt from the run's stored decisions and re-timed
 by its execution reports (app.plans.current).
 
@@ -18,6 +18,7 @@ from app.api.deps import ClientDep, RunIdPath, RunsDep
 from app.api.responses import CLIENT, errors
 from app.api.schemas.schedule import ScheduleOut
 from app.domain.errors import StateConflictError
+from app.exchange import write_mspdi
 from app.plans import current
 from app.schedules import schedule_csv, schedule_ics, schedule_json
 
@@ -25,13 +26,15 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 
 CALENDAR_TYPE = "text/calendar; charset=utf-8"
 CSV_TYPE = "text/csv; charset=utf-8"
+MSPDI_TYPE = "application/vnd.ms-project+xml; charset=utf-8"
 FORMATS: dict[int | str, dict[str, Any]] = {
     200: {
         "content": {
             CSV_TYPE: {"schema": {"type": "string"}},
             CALENDAR_TYPE: {"schema": {"type": "string"}},
+            MSPDI_TYPE: {"schema": {"type": "string"}},
         },
-        "description": "JSON by default; ?format=csv or ?format=ics",
+        "description": "JSON by default; ?format=csv, ?format=ics or ?format=mspdi",
     }
 }
 
@@ -46,18 +49,20 @@ def get_schedule(
     run_id: RunIdPath,
     runs: RunsDep,
     format_: Annotated[
-        Literal["json", "csv", "ics"],
+        Literal["json", "csv", "ics", "mspdi"],
         Query(
             alias="format",
             description="json (default): per robot its tasks in time order with travel and "
-            "idle gaps; csv: one row per task; ics: iCalendar, one VEVENT per task",
+            "idle gaps; csv: one row per task; ics: iCalendar, one VEVENT per task; mspdi: "
+            "MS Project XML (docs/exchange.md)",
         ),
     ] = "json",
 ) -> ScheduleOut | Response:
     """A timed run's schedule, once every task is decided (409 for an untimed run): its
     decisions, with the tasks the site reported at their reported times and what waits
     for them moved (docs/living-plans.md)."""
-    # SPEC 16: the decisions re-timed by the site's execution reports (living plans).
+    # docs/living-plans.md#the-runs-current-schedule: the decisions re-timed by the site's execution
+    # reports (living plans).
     planned = current.current_schedule(sessions=runs.sessions, run_id=run_id)
     if planned is None:
         raise StateConflictError(
@@ -66,6 +71,12 @@ def get_schedule(
             "'duration'); GET /runs/{id} has its assignments",
         )
     problem, schedule = planned
+    if format_ == "mspdi":
+        return Response(
+            write_mspdi(problem, schedule, project_name=f"LTAA run {run_id}"),
+            media_type=MSPDI_TYPE,
+            headers={"Content-Disposition": f'attachment; filename="run-{run_id}.xml"'},
+        )
     if format_ == "csv":
         return Response(
             schedule_csv(problem, schedule),

@@ -1,4 +1,5 @@
-"""Learning from the site (SPEC 17): the sites, and each site's estimates from its reports."""
+"""Learning from the site (docs/estimates.md#sites): the sites, and each site's estimates from its
+reports."""
 
 from __future__ import annotations
 
@@ -92,6 +93,7 @@ def estimates_out(e: service.SiteEstimates) -> SiteEstimatesOut:
                         task_type=d.task_type,
                         planned_minutes=d.estimate.planned,
                         observed=d.estimate.observed.n,
+                        left_out=dict(d.left_out),
                         observed_median_minutes=d.estimate.observed_median,
                         estimate_minutes=d.estimate.median,
                         interval=d.estimate.interval,

@@ -1,4 +1,4 @@
-"""Bodies of the /sites endpoints (SPEC 17): the sites and their estimates."""
+"""Bodies of the /sites endpoints (docs/estimates.md#sites): the sites and their estimates."""
 
 from __future__ import annotations
 
@@ -44,10 +44,21 @@ class FeatureEstimateOut(BaseModel):
 class DurationOut(BaseModel):
     task_type: str
     planned_minutes: float | None = Field(
-        description="Mean configured duration of the reported tasks (SPEC 16); null for "
+        description="Mean configured duration of the reported tasks "
+        "(docs/estimates.md#the-model); null for "
         "untimed runs"
     )
-    observed: int = Field(description="started -> done pairs with both times")
+    observed: int = Field(
+        description="started -> done (or failed) pairs that taught a duration: both with "
+        "`at`, or sent in separate requests"
+    )
+    left_out: dict[str, int] = Field(
+        default_factory=dict,
+        description="Pairs whose outcome counts but that taught no duration, by reason: "
+        "'together_without_at' (started and done sent in one request, not both with `at`: "
+        "the times are the server's, not the site's), 'zero_length' (the same time for "
+        "both); empty when none",
+    )
     observed_median_minutes: float | None = Field(description="exp(mean of ln minutes)")
     estimate_minutes: float | None = Field(
         description="Posterior median: the planned duration as a prior of prior_strength "
