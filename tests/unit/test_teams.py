@@ -235,3 +235,27 @@ def test_one_task_at_a_time_methods_never_walk_into_an_unfinishable_queue(name: 
     assert problem.feasible_robots(0, [0, 0], 1) == [0]
     options = {"q_learning": {"episodes": 50}, "dqn": {"timesteps": 200}}.get(name)
     assert get_solver(name).solve(problem, options=options).assignment == [0, 1]
+
+
+@pytest.mark.parametrize("guidance", [None, "optimizer"])
+def test_ltaa_regret_and_guidance_respect_skills(guidance: str | None) -> None:
+    # Regret is measured against the optimum of the restricted problem, so it is never
+    # negative and sums to optimal's ES minus the run's; guidance reaches that optimum.
+    instance = Instance(
+        tasks=tuple(Task(k, f"t{k}", (FEATURES[k % 2],)) for k in range(6)),
+        robots=(
+            Robot("a", {"heavy": 0.6, "careful": 0.99}, skills=("heavy",)),
+            Robot("b", {"heavy": 0.6, "careful": 0.7}),
+            Robot("c", {"heavy": 0.5, "careful": 0.8}, skills=("careful",)),
+        ),
+    )
+    problem = Problem.build(instance, Mode.BALANCED)
+    best = get_solver("optimal").solve(problem).assignment
+    solution = get_solver("ltaa").solve(problem, options={"guidance": guidance})
+    assert all(instance.eligible[t, r] for t, r in enumerate(solution.assignment))
+    regrets = [d["regret"] for d in solution.details["decisions"]]
+    assert min(regrets) >= -1e-12
+    gap = expected_success(instance, best) - expected_success(instance, solution.assignment)
+    assert sum(regrets) == pytest.approx(gap, abs=1e-9)
+    if guidance:
+        assert gap == pytest.approx(0, abs=1e-12)
