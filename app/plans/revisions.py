@@ -33,7 +33,6 @@ from app.plans.revision_times import ReportedTimes
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
-from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
@@ -41,6 +40,7 @@ from app.store import chain
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, run_for_key
 from app.store.models import ExecutionReport, Run, as_utc, utcnow
 
 REVISABLE = frozenset(

@@ -21,7 +21,6 @@ from app.domain.serialize import instance_to_dict
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, review_gate
-from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import REPLAY, replay_spec, validate_replay
 from app.runs.spec import RunOrder, RunSpec
@@ -30,6 +29,7 @@ from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import site_repository as site_repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, run_for_key
 from app.store.models import Run, utcnow
 
 
