@@ -5,8 +5,9 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, Protocol
 
 from app.allocation.schedule_schemas import ScheduleOut, ViolationOut
 from app.allocation.schemas import (
@@ -20,7 +21,7 @@ from app.allocation.schemas import (
 from app.domain import catalog
 from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics
-from app.domain.models import Instance
+from app.domain.models import Instance, Robot, Task
 from app.domain.objective import Objective, ObjectiveKind
 from app.domain.pins import resolve_pins
 from app.domain.problem import Problem
@@ -32,14 +33,37 @@ from app.solvers.base import Solution, Solver
 from app.solvers.registry import get_solver
 
 
-def resolve_instance(request: InstanceRequest) -> Instance:
-    """The instance a request describes; DomainError naming the field if it describes none."""
+class InstanceOrder(Protocol):
+    """An instance named in domain terms, as a run order holds it (app.runs.spec.RunOrder)."""
+
+    @property
+    def scenario(self) -> str | None: ...
+    @property
+    def tasks(self) -> Sequence[Task] | None: ...
+    @property
+    def robots(self) -> Sequence[Robot] | None: ...
+    @property
+    def travel(self) -> Mapping[str, Mapping[str, float]] | None: ...
+    @property
+    def start(self) -> datetime | None: ...
+
+
+def resolve_instance(source: InstanceRequest | InstanceOrder) -> Instance:
+    """The instance a POST /allocate body or a run order names: a built-in scenario (the
+    timed ones, such as `baseline_timed`, included), or its own tasks and robots (a timed
+    instance without `start` starts at the request's arrival, in whole seconds);
+    DomainError naming the field if it names none."""
+    if isinstance(source, InstanceRequest):
+        tasks = None if source.tasks is None else [t.to_domain() for t in source.tasks]
+        robots = None if source.robots is None else [r.to_domain() for r in source.robots]
+    else:
+        tasks, robots = source.tasks, source.robots
     return catalog.instance_of(
-        request.scenario,
-        None if request.tasks is None else [t.to_domain() for t in request.tasks],
-        None if request.robots is None else [r.to_domain() for r in request.robots],
-        travel=request.travel,
-        start=request.start,
+        source.scenario,
+        tasks,
+        robots,
+        travel=source.travel,
+        start=source.start,
         arrival=datetime.now(UTC).replace(microsecond=0),
     )
 

@@ -25,7 +25,7 @@ from app.domain.lifecycle import RunStatus
 from app.domain.objective import ObjectiveKind
 from app.domain.review import ReviewAction, ReviewOn
 from app.http.times import Timestamp
-from app.runs.spec import RunOrder
+from app.runs.spec import ORDER_INSTANCE_FIELDS, RUN_PARAMETERS, RunOrder
 from app.runs.time_schemas import DecisionTimes
 
 StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
@@ -210,31 +210,16 @@ class RunRequest(InstanceRequest):
 
     def to_order(self) -> RunOrder:
         """The request as the run service takes it (app.runs.service.submit_run)."""
+        sent_as_is = {
+            name: getattr(self, name)
+            for name in (*ORDER_INSTANCE_FIELDS, *(p.name for p in RUN_PARAMETERS))
+            if name not in ("tasks", "robots", "review")
+        }
         return RunOrder(
-            scenario=self.scenario,
+            **sent_as_is,
             tasks=None if self.tasks is None else tuple(t.to_domain() for t in self.tasks),
             robots=None if self.robots is None else tuple(r.to_domain() for r in self.robots),
-            reasoner=self.reasoner,
-            replay_of=self.replay_of,
-            mode=self.mode,
-            max_deviation=self.max_deviation,
-            seed=self.seed,
-            quality_threshold=self.quality_threshold,
-            max_retries=self.max_retries,
-            model=self.model,
-            temperature=self.temperature,
-            guidance=self.guidance,
-            token_budget=self.token_budget,
-            llm_scope=self.llm_scope,
-            llm_margin=self.llm_margin,
             review=None if self.review is None else self.review.model_dump(mode="json"),
-            site=self.site,
-            rates=self.rates,
-            durations=self.durations,
-            travel=self.travel,
-            start=self.start,
-            objective=self.objective,
-            min_expected_success=self.min_expected_success,
             sent=frozenset(self.model_fields_set),
         )
 
