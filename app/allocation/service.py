@@ -53,6 +53,8 @@ def resolve_instance(source: InstanceRequest | InstanceOrder) -> Instance:
     timed ones, such as `baseline_timed`, included), or its own tasks and robots (a timed
     instance without `start` starts at the request's arrival, in whole seconds);
     DomainError naming the field if it names none."""
+    tasks: Sequence[Task] | None
+    robots: Sequence[Robot] | None
     if isinstance(source, InstanceRequest):
         tasks = None if source.tasks is None else [t.to_domain() for t in source.tasks]
         robots = None if source.robots is None else [r.to_domain() for r in source.robots]
