@@ -234,6 +234,33 @@ class Assignment(BaseModel):
         description="Present (true) only for a task fixed by the request's `pinned`",
         exclude_if=lambda pinned: not pinned,
     )
+    # Timed instances only, and the same fields a timed run's assignments carry
+    # (docs/schedules.md): a client reads one shape from /allocate and from /runs.
+    start: float | None = Field(
+        None,
+        description="Timed instances: start, minutes from the plan's start (as in "
+        "`schedule.tasks`); absent when the assignment has no schedule",
+        exclude_if=_absent,
+    )
+    end: float | None = Field(None, description="Timed instances: end, minutes", exclude_if=_absent)
+    start_at: str | None = Field(
+        None,
+        description="Timed instances with a `start`: start on the wall clock (RFC 3339)",
+        exclude_if=_absent,
+    )
+    end_at: str | None = Field(
+        None,
+        description="Timed instances with a `start`: end on the wall clock (RFC 3339)",
+        exclude_if=_absent,
+    )
+    zone: str | None = Field(
+        None, description="Timed instances: the task's zone, if it has one", exclude_if=_absent
+    )
+    travel: float | None = Field(
+        None,
+        description="Timed instances: minutes the robot travelled just before the task",
+        exclude_if=_absent,
+    )
 
 
 class CompletionOut(BaseModel):

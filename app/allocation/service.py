@@ -129,6 +129,8 @@ def build_response(
 ) -> AllocateResponse:
     instance = problem.instance
     s = instance.success
+    timed = _timed_fields(problem, solution.details) if instance.timed else {}
+    times = _assignment_times(timed.get("schedule"), instance.n_tasks)
     return AllocateResponse(
         solver=solver,
         mode=problem.mode,
@@ -140,6 +142,7 @@ def build_response(
                 robot=instance.robots[r].name,
                 success=float(s[t, r]),
                 pinned=t in problem.pinned,
+                **times[t],
             )
             for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
         ],
@@ -148,8 +151,17 @@ def build_response(
         ),
         usage=UsageOut.from_domain(solution.usage),
         elapsed_ms=elapsed_ms,
-        **(_timed_fields(problem, solution.details) if instance.timed else {}),
+        **timed,
     )
+
+
+def _assignment_times(schedule: ScheduleOut | None, n_tasks: int) -> list[dict[str, Any]]:
+    """Per task (queue order), its entry of `schedule.tasks` as the time fields of its
+    assignment: copied, so the two can never disagree. None without a schedule."""
+    if schedule is None:
+        return [{} for _ in range(n_tasks)]
+    keys = ("start", "end", "start_at", "end_at", "zone", "travel")
+    return [{key: getattr(slot, key) for key in keys} for slot in schedule.tasks]
 
 
 def _timed_fields(problem: Problem, details: dict[str, Any]) -> dict[str, Any]:

@@ -35,10 +35,12 @@ def _minutes_value(value: object, what: str) -> float | int:
             "duration_type", "{what} must be a number of minutes", {"what": what}
         )
     if not math.isfinite(value) or not 0 < value <= MAX_MINUTES:
+        # pydantic fills a template's `{name}` with str(value) and knows no format spec, so
+        # the limit goes in already formatted.
         raise PydanticCustomError(
             "duration_range",
-            "{what} must be more than 0 and at most {limit:,} minutes, got {got}",
-            {"what": what, "limit": MAX_MINUTES, "got": value},
+            "{what} must be more than 0 and at most {limit} minutes, got {got}",
+            {"what": what, "limit": f"{MAX_MINUTES:,}", "got": value},
         )
     return value
 
@@ -51,7 +53,8 @@ def _duration(value: object) -> float | int | dict[str, float | int]:
     if not value:
         raise PydanticCustomError(
             "duration_map_empty",
-            "a duration map names at least one robot: {{robot name: minutes}}",
+            # Not a `{{` escape: pydantic copies a template's braces as they are.
+            "a duration map names at least one robot: {robot name: minutes}",
         )
     out: dict[str, float | int] = {}
     for name, minutes in value.items():

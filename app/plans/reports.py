@@ -133,6 +133,7 @@ def _report(
         changed: list[dict[str, Any]] = []
         outcomes: list[site_repo.Reported] = []
         pending: dict[str, ExecutionState] = {}
+        started_here: dict[str, bool] = {}  # task id -> its `started` here carried `at`
         for i, update in enumerate(updates):
             field = f"updates.{i}.task_id"
             if update.task_id not in tasks:
@@ -177,6 +178,7 @@ def _report(
                     "task_index": decided[update.task_id],
                     "state": update.state.value,
                     "at": at.isoformat(),
+                    **_server_clock(update),
                 }
             )
             if row is None:
@@ -191,11 +193,19 @@ def _report(
             row.state = update.state.value
             if update.state == ExecutionState.STARTED:
                 row.started_at = at
+                started_here[update.task_id] = update.at is not None
             else:
                 row.ended_at = at
                 outcomes.append(
                     site_repo.Reported(
-                        row.task_index, update.task_id, update.state.value, at, row.started_at
+                        row.task_index,
+                        update.task_id,
+                        update.state.value,
+                        at,
+                        row.started_at,
+                        together_without_at=site_repo.together_without_at(
+                            started_here, update.task_id, at_sent=update.at is not None
+                        ),
                     )
                 )
         if changed:
@@ -221,6 +231,12 @@ def _report(
             )
         session.flush()
         return current_states(session, run_id, [u.task_id for u in updates])
+
+
+def _server_clock(update: Update) -> dict[str, str]:
+    """What the record adds to an update sent without `at`: its time is the server's, so
+    the rebuild of the site's rows (app.sites.rebuild) can tell, as the report did."""
+    return {} if update.at is not None else dict(site_repo.SERVER_CLOCK)
 
 
 def current_states(session: Session, run_id: str, task_ids: Sequence[str]) -> dict[str, str]:

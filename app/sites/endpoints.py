@@ -94,6 +94,7 @@ def estimates_out(e: service.SiteEstimates) -> SiteEstimatesOut:
                         task_type=d.task_type,
                         planned_minutes=d.estimate.planned,
                         observed=d.estimate.observed.n,
+                        left_out=dict(d.left_out),
                         observed_median_minutes=d.estimate.observed_median,
                         estimate_minutes=d.estimate.median,
                         interval=d.estimate.interval,

@@ -41,7 +41,17 @@ class DurationOut(BaseModel):
         "(docs/estimates.md#the-model); null for "
         "untimed runs"
     )
-    observed: int = Field(description="started -> done pairs with both times")
+    observed: int = Field(
+        description="started -> done (or failed) pairs that taught a duration: both with "
+        "`at`, or sent in separate requests"
+    )
+    left_out: dict[str, int] = Field(
+        default_factory=dict,
+        description="Pairs whose outcome counts but that taught no duration, by reason: "
+        "'together_without_at' (started and done sent in one request, not both with `at`: "
+        "the times are the server's, not the site's), 'zero_length' (the same time for "
+        "both); empty when none",
+    )
     observed_median_minutes: float | None = Field(description="exp(mean of ln minutes)")
     estimate_minutes: float | None = Field(
         description="Posterior median: the planned duration as a prior of prior_strength "
