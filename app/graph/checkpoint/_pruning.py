@@ -52,6 +52,12 @@ class PruningPutMixin(BaseCheckpointSaver[str]):
     _schedule: PruneSchedule
 
     def prune_due(self, thread_id: str, checkpoint_ns: str) -> None:
+        """Prune the thread's superseded checkpoints, the saver's own way.
+
+        Args:
+            thread_id: The thread whose checkpoint was just stored.
+            checkpoint_ns: The namespace of that checkpoint.
+        """
         raise NotImplementedError
 
     def put(
@@ -61,6 +67,17 @@ class PruningPutMixin(BaseCheckpointSaver[str]):
         metadata: CheckpointMetadata,
         new_versions: ChannelVersions,
     ) -> RunnableConfig:
+        """Store the checkpoint (the saver's put), then prune the thread if it is due.
+
+        Args:
+            config: The config to associate with the checkpoint.
+            checkpoint: The checkpoint to save.
+            metadata: Additional metadata to save with the checkpoint.
+            new_versions: New channel versions as of this write.
+
+        Returns:
+            RunnableConfig: The saver's config naming the stored checkpoint.
+        """
         saved = super().put(config, checkpoint, metadata, new_versions)
         thread_id = str(config["configurable"]["thread_id"])
         if self._schedule.due(thread_id):

@@ -75,6 +75,8 @@ class TaskBoundaryMixin(BaseCheckpointSaver[Any]):
         self._unwritten_lock = threading.Lock()
 
     def durable(self, checkpoint: Checkpoint, metadata: CheckpointMetadata) -> bool:
+        """Whether this checkpoint goes to disk: the input one, the last one, or one whose
+        next step begins a task."""
         after = next_nodes(checkpoint)
         return metadata.get("source") == "input" or not after or bool(after & self.boundary)
 
@@ -85,6 +87,18 @@ class TaskBoundaryMixin(BaseCheckpointSaver[Any]):
         metadata: CheckpointMetadata,
         new_versions: ChannelVersions,
     ) -> RunnableConfig:
+        """Write the checkpoint if a task begins at it (or it is the input or the last
+        one); else keep it in memory as the thread's latest, unwritten.
+
+        Args:
+            config: The config to associate with the checkpoint.
+            checkpoint: The checkpoint to save.
+            metadata: Additional metadata to save with the checkpoint.
+            new_versions: New channel versions as of this write.
+
+        Returns:
+            RunnableConfig: The config naming the checkpoint, written or not.
+        """
         thread_id = str(config["configurable"]["thread_id"])
         if self.durable(checkpoint, metadata):
             with self._unwritten_lock:
@@ -101,6 +115,15 @@ class TaskBoundaryMixin(BaseCheckpointSaver[Any]):
         task_id: str,
         task_path: str = "",
     ) -> None:
+        """Store an interrupt's writes (first writing the checkpoint they belong to, if
+        it was kept in memory); drop every other write, whose step re-runs on resume.
+
+        Args:
+            config: The config naming the checkpoint the writes belong to.
+            writes: (channel, value) pairs.
+            task_id: The task that made the writes.
+            task_path: The task's path, as the base class takes it.
+        """
         if not any(channel in KEPT_WRITES for channel, _ in writes):
             return
         configurable = config["configurable"]
@@ -116,6 +139,11 @@ class TaskBoundaryMixin(BaseCheckpointSaver[Any]):
         super().put_writes(config, writes, task_id, task_path)
 
     def delete_thread(self, thread_id: str) -> None:
+        """Delete the thread's checkpoints and writes, and its unwritten latest.
+
+        Args:
+            thread_id: The thread ID to delete.
+        """
         with self._unwritten_lock:
             self._unwritten.pop(str(thread_id), None)
         super().delete_thread(thread_id)

@@ -1,7 +1,7 @@
 """The LangGraph Postgres checkpointer over a psycopg pool, for the scale-out deployment.
 
 Imported only when the database URL is PostgreSQL, so the embedded SQLite default never
-loads psycopg.
+loads psycopg (as LangGraph keeps its aiosqlite saver in `langgraph.checkpoint.sqlite.aio`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,9 @@ from psycopg.rows import dict_row
 from psycopg_pool import ConnectionPool
 from sqlalchemy.engine import make_url
 
-from app.graph.checkpoint_pruning import PRUNE_EVERY, PruneSchedule, PruningPutMixin
+from app.graph.checkpoint._pruning import PRUNE_EVERY, PruneSchedule, PruningPutMixin
+
+__all__ = ["SETUP_LOCK_KEY", "PrunedPostgresSaver", "libpq_url", "open_postgres_saver"]
 
 log = logging.getLogger("ltaa.runs")
 
@@ -41,6 +43,12 @@ class PrunedPostgresSaver(PruningPutMixin, PostgresSaver):
         self._schedule = PruneSchedule(prune_every)
 
     def prune_due(self, thread_id: str, checkpoint_ns: str) -> None:
+        """Prune the thread its schedule says is due (PruningPutMixin).
+
+        Args:
+            thread_id: The thread (the run id) whose checkpoint was just stored.
+            checkpoint_ns: Unused: PostgresSaver prunes every namespace of the thread.
+        """
         try:
             self.prune([thread_id], strategy="keep_latest")
         except psycopg.Error:

@@ -1,10 +1,15 @@
-"""An optional, smaller SQLite checkpointer for the LTAA graph.
+"""The LTAA graph's checkpoint savers, one package as LangGraph's own
+`langgraph.checkpoint.sqlite`: the SQLite savers here, the PostgreSQL one in
+`app.graph.checkpoint.postgres` (imported only when the database URL is PostgreSQL, so the
+embedded SQLite default never loads psycopg), and what both share in private modules:
+pruning a thread's superseded checkpoints as it runs (`_pruning`) and writing checkpoints
+only at task boundaries (`_sparse`).
 
-SqliteSaver stores every channel version as a 50-character string
-("000...0121.0.4195519186718633"), twice per channel per checkpoint (channel_versions
-and versions_seen). For this graph those strings were ~1.9 KB of a ~2.5 KB checkpoint.
-Integer versions (LangGraph's default for savers that do not override them) carry the
-same ordering in a few bytes.
+The SQLite savers are smaller than SqliteSaver: it stores every channel version as a
+50-character string ("000...0121.0.4195519186718633"), twice per channel per checkpoint
+(channel_versions and versions_seen). For this graph those strings were ~1.9 KB of a
+~2.5 KB checkpoint. Integer versions (LangGraph's default for savers that do not override
+them) carry the same ordering in a few bytes.
 
 A thread keeps the version type it started with: LangGraph derives each new version from
 the maximum existing one, so a thread begun by the stock saver stays on strings and can
@@ -20,8 +25,21 @@ from typing import Any
 
 from langgraph.checkpoint.sqlite import SqliteSaver
 
-from app.graph.checkpoint_pruning import KEEP_LATEST, PRUNE_EVERY, PruneSchedule, PruningPutMixin
-from app.graph.checkpoint_sparse import TaskBoundaryMixin
+from app.graph.checkpoint._pruning import KEEP_LATEST, PRUNE_EVERY, PruneSchedule, PruningPutMixin
+from app.graph.checkpoint._sparse import TaskBoundaryMixin
+
+__all__ = [
+    "KEEP_LATEST",
+    "PRUNE_EVERY",
+    "TRUNCATE_WAL_EVERY",
+    "WAL_SIZE_LIMIT",
+    "CompactSqliteSaver",
+    "PruneSchedule",
+    "PruningPutMixin",
+    "TaskBoundaryMixin",
+    "TaskBoundarySqliteSaver",
+    "open_sqlite_saver",
+]
 
 # The WAL is truncated back to this after each checkpoint of it; without a limit SQLite
 # keeps the file at its high-water mark (169 MB after a 10,000-task run).
@@ -58,6 +76,16 @@ class CompactSqliteSaver(PruningPutMixin, SqliteSaver):
         self._prunes = 0
 
     def get_next_version(self, current: Any, channel: None) -> Any:
+        """The next version of a channel: an integer, unless the thread began on strings.
+
+        Args:
+            current: The channel's current version (None for a new channel).
+            channel: Unused, as in the base class.
+
+        Returns:
+            current + 1 for an integer (1 for a new channel); the base class's string
+            successor for a thread the stock saver began.
+        """
         if current is None:
             return 1
         if isinstance(current, int):
@@ -65,6 +93,12 @@ class CompactSqliteSaver(PruningPutMixin, SqliteSaver):
         return super().get_next_version(current, channel)
 
     def prune_due(self, thread_id: str, checkpoint_ns: str) -> None:
+        """Prune the thread its schedule says is due (PruningPutMixin).
+
+        Args:
+            thread_id: The thread (the run id) whose checkpoint was just stored.
+            checkpoint_ns: The namespace of that checkpoint.
+        """
         self.prune_thread(thread_id, checkpoint_ns)
 
     def prune_thread(self, thread_id: str, checkpoint_ns: str = "") -> None:
@@ -87,7 +121,7 @@ class CompactSqliteSaver(PruningPutMixin, SqliteSaver):
 
 class TaskBoundarySqliteSaver(TaskBoundaryMixin, CompactSqliteSaver):
     """The compact saver, writing a thread's checkpoints only where a task begins (and
-    where the graph pauses or ends): app.graph.checkpoint_sparse."""
+    where the graph pauses or ends): app.graph.checkpoint._sparse."""
 
     def __init__(self, conn: sqlite3.Connection, *, boundary: Sequence[str]) -> None:
         super().__init__(conn)
