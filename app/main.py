@@ -1,4 +1,4 @@
-"""The application factory: `uvicorn app.main:create_app --factory`."""
+"""The application factory (served as `uvicorn app.asgi:create_app --factory`: app/asgi.py)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.api.drain import drain_on_signal
 from app.api.openapi import install_openapi
-from app.api.routers import ROUTERS
+from app.api.routers import body_limits, mount_routers
 from app.config import Settings, get_settings
 from app.console import install as install_console
 from app.http.auth import InsecureBindError, KeyRing, check_bind
@@ -151,11 +151,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.keyring = keyring
     app.state.metrics = Metrics()
     install_error_handlers(app)
-    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(
+        BodySizeLimit,
+        max_bytes=settings.max_body_bytes,
+        paths=body_limits(settings),
+    )
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for router in ROUTERS:
-        app.include_router(router)
+    mount_routers(app)
     install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)
     return app

@@ -180,19 +180,27 @@ class BodySizeLimit:
     """Answer 413 for bodies above `max_bytes`, whether declared (Content-Length) or streamed.
 
     Pure ASGI so the limit is enforced while reading, before anything is buffered or parsed.
+    `paths` gives a path a limit of its own: {path: (bytes, the setting that sets it)}
+    (an imported schedule file may be larger than any JSON request).
     """
 
-    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+    def __init__(
+        self, app: ASGIApp, max_bytes: int, paths: dict[str, tuple[int, str]] | None = None
+    ) -> None:
         self.app = app
         self.max_bytes = max_bytes
+        self.paths = paths or {}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        limit, setting = self.paths.get(
+            scope.get("path", ""), (self.max_bytes, "LTAA_MAX_BODY_BYTES")
+        )
         declared = dict(scope.get("headers") or []).get(b"content-length")
-        if declared is not None and declared.isdigit() and int(declared) > self.max_bytes:
-            await self._reject(scope, receive, send, int(declared))
+        if declared is not None and declared.isdigit() and int(declared) > limit:
+            await self._reject(scope, receive, send, int(declared), limit, setting)
             return
 
         seen = 0
@@ -203,23 +211,25 @@ class BodySizeLimit:
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
-                if seen > self.max_bytes:
-                    raise self._too_large(None)
+                if seen > limit:
+                    raise self._too_large(None, limit, setting)
             return message
 
         await self.app(scope, counting_receive, send)
 
-    def _too_large(self, size: int | None) -> ApiError:
+    def _too_large(self, size: int | None, limit: int, setting: str) -> ApiError:
         amount = f"{size:,} bytes" if size is not None else "too large"
         return ApiError(
             413,
             ["body"],
-            f"request body is {amount}: the limit is {self.max_bytes:,} bytes "
-            "(LTAA_MAX_BODY_BYTES); send fewer tasks or raise the limit",
+            f"request body is {amount}: the limit is {limit:,} bytes "
+            f"({setting}); send less or raise the limit",
             "body_too_large",
         )
 
-    async def _reject(self, scope: Scope, receive: Receive, send: Send, size: int) -> None:
-        exc = self._too_large(size)
+    async def _reject(
+        self, scope: Scope, receive: Receive, send: Send, size: int, limit: int, setting: str
+    ) -> None:
+        exc = self._too_large(size, limit, setting)
         body = error_body(exc.loc, str(exc.detail), exc.type)
         await JSONResponse(body, status_code=413)(scope, receive, send)

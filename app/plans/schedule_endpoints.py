@@ -16,6 +16,7 @@ from fastapi import APIRouter, Query, Response
 
 from app.allocation.schedule_schemas import ScheduleOut
 from app.domain.errors import StateConflictError
+from app.exchange import write_mspdi
 from app.http.deps import ClientDep
 from app.http.responses import CLIENT, errors
 from app.plans import current
@@ -26,13 +27,15 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 
 CALENDAR_TYPE = "text/calendar; charset=utf-8"
 CSV_TYPE = "text/csv; charset=utf-8"
+MSPDI_TYPE = "application/vnd.ms-project+xml; charset=utf-8"
 FORMATS: dict[int | str, dict[str, Any]] = {
     200: {
         "content": {
             CSV_TYPE: {"schema": {"type": "string"}},
             CALENDAR_TYPE: {"schema": {"type": "string"}},
+            MSPDI_TYPE: {"schema": {"type": "string"}},
         },
-        "description": "JSON by default; ?format=csv or ?format=ics",
+        "description": "JSON by default; ?format=csv, ?format=ics or ?format=mspdi",
     }
 }
 
@@ -47,11 +50,12 @@ def get_schedule(
     run_id: RunIdPath,
     runs: RunsDep,
     format_: Annotated[
-        Literal["json", "csv", "ics"],
+        Literal["json", "csv", "ics", "mspdi"],
         Query(
             alias="format",
             description="json (default): per robot its tasks in time order with travel and "
-            "idle gaps; csv: one row per task; ics: iCalendar, one VEVENT per task",
+            "idle gaps; csv: one row per task; ics: iCalendar, one VEVENT per task; mspdi: "
+            "MS Project XML (docs/exchange.md)",
         ),
     ] = "json",
 ) -> ScheduleOut | Response:
@@ -68,6 +72,12 @@ def get_schedule(
             "'duration'); GET /runs/{id} has its assignments",
         )
     problem, schedule = planned
+    if format_ == "mspdi":
+        return Response(
+            write_mspdi(problem, schedule, project_name=f"LTAA run {run_id}"),
+            media_type=MSPDI_TYPE,
+            headers={"Content-Disposition": f'attachment; filename="run-{run_id}.xml"'},
+        )
     if format_ == "csv":
         return Response(
             schedule_csv(problem, schedule),

@@ -37,6 +37,7 @@ CLIENT_ENDPOINTS = [
     ("GET", "/runs/{id}/revisions"),
     ("GET", "/runs/{id}/diff"),
     ("GET", "/runs/{id}/schedule"),
+    ("POST", "/schedules/import"),
     ("GET", "/sites"),
     ("GET", "/sites/{site}/estimates"),
 ]
