@@ -10,45 +10,27 @@ from contextlib import AsyncExitStack, asynccontextmanager
 from functools import partial
 from pathlib import Path
 
-from fastapi import Depends, FastAPI
+from fastapi import FastAPI
 from fastapi.concurrency import run_in_threadpool
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.auth import InsecureBindError, KeyRing, check_bind
-from app.api.deps import RunsContext, require_client
 from app.api.drain import drain_on_signal
-from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.openapi import install_openapi
-from app.api.responses import CLIENT, errors
-from app.api.rounding import RoundedJSONResponse
-from app.api.routes import (
-    admin,
-    allocate,
-    audit_keys,
-    catalog,
-    events,
-    health,
-    metrics,
-    reviews,
-    revisions,
-    runs,
-    schedules,
-    signoffs,
-    sites,
-    webhooks,
-)
-from app.api.routes.webhooks import WebhooksContext
+from app.api.routers import body_limits, mount_routers
 from app.config import Settings, get_settings
 from app.console import install as install_console
-from app.exchange import endpoints as exchange
-from app.exchange.endpoints import IMPORT_PATH
+from app.http.auth import InsecureBindError, KeyRing, check_bind
+from app.http.errors import BodySizeLimit, install_error_handlers
+from app.http.rounding import RoundedJSONResponse
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
+from app.runs.deps import RunsContext
 from app.runs.factory import make_worker
 from app.runs.worker import RunWorker
 from app.store.db import make_engine, make_session_factory
 from app.store.lock import listen_url
 from app.store.migrate import upgrade_head
+from app.webhooks.deps import WebhooksContext
 from app.webhooks.dispatcher import Dispatcher
 from app.webhooks.metrics import WebhookTablesCollector
 from app.webhooks.secret_box import SecretBox
@@ -172,30 +154,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(
         BodySizeLimit,
         max_bytes=settings.max_body_bytes,
-        paths={IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES")},
+        paths=body_limits(settings),
     )
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (
-        health,
-        catalog,
-        allocate,
-        runs,
-        schedules,
-        revisions,
-        signoffs,
-        reviews,
-        events,
-        metrics,
-        webhooks,
-        sites,
-        admin,
-        audit_keys,
-    ):
-        app.include_router(module.router)
-    app.include_router(
-        exchange.router, dependencies=[Depends(require_client)], responses=errors(*CLIENT, 413)
-    )
+    mount_routers(app)
     install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)
     return app
