@@ -46,6 +46,7 @@ from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
 from app.runs.factory import make_worker
 from app.runs.worker import RunWorker
+from app.sites import service as site_service
 from app.store.db import make_engine, make_session_factory
 from app.store.lock import listen_url
 from app.store.migrate import upgrade_head
@@ -148,6 +149,13 @@ def _log_access_mode(settings: Settings, keyring: KeyRing) -> None:
         log.info("access control on: API keys by role: %s", keyring.summary())
 
 
+def _site_rates(app: FastAPI, site: str) -> dict[str, dict[str, float]]:
+    """POST /schedules/import?site=: the site's learned rates (app.exchange.endpoints)."""
+    return site_service.site_rates(
+        sessions=app.state.runs.sessions, site=site, strength=app.state.settings.prior_strength
+    )
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or get_settings()
     configure_logging(settings)
@@ -196,6 +204,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(
         exchange.router, dependencies=[Depends(require_client)], responses=errors(*CLIENT, 413)
     )
+    app.state.site_rates = partial(_site_rates, app)
     install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)
     return app
