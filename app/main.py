@@ -40,6 +40,7 @@ from app.api.routes import (
 from app.api.routes.webhooks import WebhooksContext
 from app.config import Settings, get_settings
 from app.console import install as install_console
+from app.console.imports import CONSOLE_IMPORT_PATH
 from app.exchange import endpoints as exchange
 from app.exchange.endpoints import IMPORT_PATH
 from app.observability.logs import configure_logging
@@ -180,7 +181,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(
         BodySizeLimit,
         max_bytes=settings.max_body_bytes,
-        paths={IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES")},
+        paths={
+            path: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES")
+            for path in (IMPORT_PATH, CONSOLE_IMPORT_PATH)
+        },
     )
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
