@@ -19,7 +19,6 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import RedirectResponse, Response
 
 from app.console.context import ConsoleDep, CsrfDep, SignedInDep, finish, sessions_of
-from app.console.sessions import SignedIn
 from app.domain.errors import DomainError
 from app.domain.estimates import DEFAULT_SITE
 from app.domain.models import MAX_NAME_CHARS
@@ -118,28 +117,25 @@ async def import_file(
 
     try:
         draft = await run_in_threadpool(_read, data, form, rates_of)
+        sites = await run_in_threadpool(_sites, request)
     except ExchangeError as exc:
         where = f"{exc.field}: " if exc.field and exc.field != "links" else ""
         return refuse(f"{file.filename or 'The file'} was not imported: {where}{exc.message}.", 422)
     except site_service.SiteNotFoundError as exc:
         return refuse(f"Site '{form['site']}': {exc.message}.", 404)
-    return _draft_page(request, console, signed, draft, form, file.filename or "")
+    context = _draft_context(draft, form, file.filename or "", sites)
+    return finish(request, console.render(request, "import.html", context, signed=signed))
 
 
-def _draft_page(
-    request: Request,
-    console: Any,
-    signed: SignedIn,
-    draft: Draft,
-    form: dict[str, str],
-    filename: str,
-) -> Response:
+def _draft_context(
+    draft: Draft, form: dict[str, str], filename: str, sites: list[str]
+) -> dict[str, Any]:
     typed = typed_links(draft)
     unrated = _unrated(draft)
     startable = not typed and not unrated
-    context = {
+    return {
         "title": "Import a schedule",
-        "sites": [],
+        "sites": sites,
         "form": form,
         "filename": filename,
         "draft": draft,
@@ -148,7 +144,6 @@ def _draft_page(
         "startable": startable,
         "request_json": json.dumps(plain_request(draft)) if startable else "",
     }
-    return finish(request, console.render(request, "import.html", context, signed=signed))
 
 
 def _order(request_json: str, site: str) -> RunOrder:
