@@ -1,4 +1,4 @@
-"""The application factory: `uvicorn app.main:create_app --factory`."""
+"""The application factory (served as `uvicorn app.asgi:create_app --factory`: app/asgi.py)."""
 
 from __future__ import annotations
 

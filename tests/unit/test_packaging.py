@@ -28,7 +28,7 @@ def test_make_run_docker_and_compose_start_the_same_script() -> None:
     assert "sh scripts/serve.sh" in run_recipe
     assert "command:" not in compose  # compose keeps the image's command
     serve = (ROOT / "scripts" / "serve.sh").read_text()
-    assert "app.main:create_app --factory" in serve
+    assert "app.asgi:create_app --factory" in serve
     # The app migrates as it starts (under PostgreSQL's advisory lock): a second, separate
     # `alembic upgrade head` before it would race another replica's start for nothing.
     commands = [line for line in serve.splitlines() if not line.lstrip().startswith("#")]
