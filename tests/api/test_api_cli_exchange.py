@@ -96,3 +96,12 @@ def test_schedule_as_mspdi_imports_back_to_the_plans_tasks(
             str(p) for p in sent[task["id"]].get("after", [])
         ]
     assert draft.start is not None and draft.start.startswith(body["start"][:16])
+
+
+def test_the_readmes_example_file_is_the_test_file(runner: CliRunner) -> None:
+    """docs/examples/level-3-fit-out.xml (README's tour, step 9) imports as the file these
+    tests write: regenerate it from tests.exchange_files.small_mspdi if the writer changes."""
+    example = Path(__file__).resolve().parents[2] / "docs/examples/level-3-fit-out.xml"
+    result = runner.invoke(cli, ["import", str(example)])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout) == read_mspdi(small_mspdi()).to_dict()
