@@ -44,3 +44,14 @@ def test_the_licence_is_an_spdx_expression_with_its_file() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["license"] == "MIT"
     assert all((ROOT / name).is_file() for name in project["license-files"])
+
+
+def test_make_image_check_runs_the_image_check_script() -> None:
+    # The image check itself takes minutes and root (outside CI): here, that the target
+    # runs it and the script parses; tests/e2e/test_installed_wheel.py serves the wheel.
+    makefile = (ROOT / "Makefile").read_text()
+    recipe = makefile.split("\nimage-check:", 1)[1].split("\n\n", 1)[0]
+    assert "sh scripts/image_check.sh" in recipe
+    script = ROOT / "scripts" / "image_check.sh"
+    parsed = subprocess.run(["sh", "-n", str(script)], capture_output=True, text=True)
+    assert parsed.returncode == 0, parsed.stderr
