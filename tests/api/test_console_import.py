@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import json
 import re
+from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
-from httpx import Response
 
 from app.exchange import plain_request, read_mspdi
 from tests.api.conftest import ClientFactory
@@ -24,7 +24,7 @@ def _token(client: TestClient) -> str:
     return found[1]
 
 
-def _upload(client: TestClient, data: bytes, **form: str) -> Response:
+def _upload(client: TestClient, data: bytes, **form: str) -> Any:
     return client.post(
         "/console/import",
         data=form,
