@@ -19,7 +19,7 @@ from app.api.deps import RunsContext, require_client
 from app.api.drain import drain_on_signal
 from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.openapi import install_openapi
-from app.api.responses import CLIENT, errors
+from app.api.responses import CLIENT, ErrorOut, errors
 from app.api.rounding import RoundedJSONResponse
 from app.api.routes import (
     admin,
@@ -205,8 +205,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         audit_keys,
     ):
         app.include_router(module.router)
+    unknown_site = {"model": ErrorOut, "description": "No run names the site of ?site="}
     app.include_router(
-        exchange.router, dependencies=[Depends(require_client)], responses=errors(*CLIENT, 413)
+        exchange.router,
+        dependencies=[Depends(require_client)],
+        responses={**errors(*CLIENT, 413), 404: unknown_site},
     )
     app.state.site_rates = partial(_site_rates, app)
     install_openapi(app, open_access=keyring.open)
