@@ -13,9 +13,10 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.exchange import read_mspdi
+from app.exchange import read_mspdi, read_xer
 from tests.api.test_api_timed import timed
 from tests.exchange_files import small_mspdi
+from tests.exchange_support import files
 
 
 @pytest.fixture
@@ -105,3 +106,13 @@ def test_the_readmes_example_file_is_the_test_file(runner: CliRunner) -> None:
     result = runner.invoke(cli, ["import", str(example)])
     assert result.exit_code == 0, result.output
     assert json.loads(result.stdout) == read_mspdi(small_mspdi()).to_dict()
+
+
+@pytest.mark.usefixtures("mpxj")
+def test_import_reads_an_xer_file_mpxj_wrote(runner: CliRunner, tmp_path: Path) -> None:
+    path = tmp_path / "slab.xer"
+    path.write_bytes(files()["xer"])
+    for args in ([], ["--format", "xer"]):
+        result = runner.invoke(cli, ["import", str(path), *args])
+        assert result.exit_code == 0, result.output
+        assert json.loads(result.stdout) == read_xer(files()["xer"]).to_dict()
