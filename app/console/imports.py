@@ -37,7 +37,6 @@ from app.sites import service as site_service
 
 CONSOLE_IMPORT_PATH = "/console/import"
 router = APIRouter(prefix="/console", include_in_schema=False)
-FORMATS = ("mspdi", "xer")
 # A started draft comes back as the hidden form field the page wrote: a run request's size.
 MAX_DRAFT_CHARS = 10 * 1024 * 1024
 
@@ -61,9 +60,10 @@ def _unrated(draft: Draft) -> list[str]:
 
 
 def _read(data: bytes, form: dict[str, str], rates_of: Any) -> Draft:
+    kind = form["format"]
     draft = read_schedule(
         data,
-        format=form["format"] or None,  # type: ignore[arg-type]
+        format="mspdi" if kind == "mspdi" else "xer" if kind == "xer" else None,
         features_field=form["features_field"] or None,
         default_features=form["default_features"] or None,
     )
@@ -85,7 +85,7 @@ async def import_file(
 ) -> Response:
     """The uploaded file's draft, shown: nothing is stored until "Start a run"."""
     form = {
-        "format": format_ if format_ in FORMATS else "",
+        "format": format_ if format_ in ("mspdi", "xer") else "",
         "features_field": features_field.strip(),
         "default_features": default_features.strip(),
         "site": site.strip(),
