@@ -108,11 +108,11 @@ class Settings(BaseSettings):
     # a JSON request may be, as the files carry much the draft leaves out.
     import_max_bytes: int = Field(DEFAULT_IMPORT_MAX_BYTES, ge=1)
 
-    # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.api.auth. A SecretStr so
+    # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.http.auth. A SecretStr so
     # repr(), model_dump() and validation errors never show a key.
     api_keys: SecretStr | None = None
     # Non-secret names of the keys above, by fingerprint: "key-3f2a9c1b=alice,..." (see
-    # app.api.auth). Unnamed keys are called by their fingerprint.
+    # app.http.auth). Unnamed keys are called by their fingerprint.
     api_key_names: str | None = None
     log_format: Literal["json", "text"] = "json"
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"

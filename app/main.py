@@ -10,47 +10,28 @@ from contextlib import AsyncExitStack, asynccontextmanager
 from functools import partial
 from pathlib import Path
 
-from fastapi import Depends, FastAPI
+from fastapi import FastAPI
 from fastapi.concurrency import run_in_threadpool
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.auth import InsecureBindError, KeyRing, check_bind
-from app.api.deps import RunsContext, require_client
 from app.api.drain import drain_on_signal
-from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.openapi import install_openapi
-from app.api.responses import CLIENT, ErrorOut, errors
-from app.api.rounding import RoundedJSONResponse
-from app.api.routes import (
-    admin,
-    allocate,
-    audit_keys,
-    catalog,
-    events,
-    health,
-    metrics,
-    reviews,
-    revisions,
-    runs,
-    schedules,
-    signoffs,
-    sites,
-    webhooks,
-)
-from app.api.routes.webhooks import WebhooksContext
+from app.api.routers import body_limits, mount_routers
 from app.config import Settings, get_settings
 from app.console import install as install_console
 from app.console.imports import CONSOLE_IMPORT_PATH
-from app.exchange import endpoints as exchange
-from app.exchange.endpoints import IMPORT_PATH
+from app.http.auth import InsecureBindError, KeyRing, check_bind
+from app.http.errors import BodySizeLimit, install_error_handlers
+from app.http.rounding import RoundedJSONResponse
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
+from app.runs.deps import RunsContext
 from app.runs.factory import make_worker
 from app.runs.worker import RunWorker
-from app.sites import service as site_service
 from app.store.db import make_engine, make_session_factory
 from app.store.lock import listen_url
 from app.store.migrate import upgrade_head
+from app.webhooks.deps import WebhooksContext
 from app.webhooks.dispatcher import Dispatcher
 from app.webhooks.metrics import WebhookTablesCollector
 from app.webhooks.secret_box import SecretBox
@@ -150,13 +131,6 @@ def _log_access_mode(settings: Settings, keyring: KeyRing) -> None:
         log.info("access control on: API keys by role: %s", keyring.summary())
 
 
-def _site_rates(app: FastAPI, site: str) -> dict[str, dict[str, float]]:
-    """POST /schedules/import?site=: the site's learned rates (app.exchange.endpoints)."""
-    return site_service.site_rates(
-        sessions=app.state.runs.sessions, site=site, strength=app.state.settings.prior_strength
-    )
-
-
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or get_settings()
     configure_logging(settings)
@@ -182,36 +156,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         BodySizeLimit,
         max_bytes=settings.max_body_bytes,
         paths={
-            path: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES")
-            for path in (IMPORT_PATH, CONSOLE_IMPORT_PATH)
+            **body_limits(settings),
+            # The console's upload of a schedule file: the same limit as POST /schedules/import.
+            CONSOLE_IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES"),
         },
     )
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (
-        health,
-        catalog,
-        allocate,
-        runs,
-        schedules,
-        revisions,
-        signoffs,
-        reviews,
-        events,
-        metrics,
-        webhooks,
-        sites,
-        admin,
-        audit_keys,
-    ):
-        app.include_router(module.router)
-    unknown_site = {"model": ErrorOut, "description": "No run names the site of ?site="}
-    app.include_router(
-        exchange.router,
-        dependencies=[Depends(require_client)],
-        responses={**errors(*CLIENT, 413), 404: unknown_site},
-    )
-    app.state.site_rates = partial(_site_rates, app)
+    mount_routers(app)
     install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)
     return app

@@ -20,10 +20,8 @@ from pydantic import ValidationError
 from rich.console import Console
 from rich.markup import escape
 
-from app.api.allocation import build_problem, load_solver
-from app.api.errors import domain_error_body, validation_error_body
-from app.api.rounding import rounded
-from app.api.schemas.allocation import AllocateRequest
+from app.allocation.schemas import AllocateRequest
+from app.allocation.service import build_problem, load_solver
 from app.cli.allocate import parse_options, read_instance
 from app.cli.root import cli, fail
 from app.config import get_settings
@@ -35,6 +33,8 @@ from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.schedule import Schedule
 from app.exchange import write_mspdi
+from app.http.errors import domain_error_body, validation_error_body
+from app.http.rounding import rounded
 from app.schedules import render_timeline, schedule_csv, schedule_ics, schedule_json
 
 

@@ -10,8 +10,6 @@ from fastapi import APIRouter, Form, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import RedirectResponse, Response
 
-from app.api.audit import jsonl_trace
-from app.api.schemas.reviews import MAX_STATEMENT_CHARS
 from app.audit.verify import verify_trace
 from app.console import browse, views
 from app.console.context import (
@@ -28,8 +26,10 @@ from app.domain.errors import DomainError, RunNotFoundError, RunStateConflictErr
 from app.domain.lifecycle import ACTIVE, FINISHED, RunStatus
 from app.plans.revisions import RevisionConflictError
 from app.reviews import signoff
+from app.reviews.schemas import MAX_STATEMENT_CHARS
 from app.runs import service
 from app.runs import views as run_views
+from app.runs.trace import jsonl_trace
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 RUNS_PER_PAGE = 50

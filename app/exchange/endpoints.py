@@ -24,7 +24,7 @@ from app.exchange.read import read_schedule
 IMPORT_PATH = "/schedules/import"
 
 # site -> {robot: {feature: learned rate}}, raising a 404 error for an unknown site. Handed
-# in by app.main as `app.state.site_rates` (the site's estimates live in app.sites, a layer
+# in by app.api.routers as `app.state.site_rates` (the site's estimates live in app.sites, a layer
 # this package must not import).
 SiteRates = Callable[[str], Mapping[str, Mapping[str, float]]]
 

@@ -24,12 +24,12 @@ from app.domain.annotations import AnnotationKind
 from app.domain.errors import DomainError, RunNotFoundError
 from app.domain.lifecycle import FINISHED
 from app.runs import lifecycle
-from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store import site_repository as site_repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.store.models import ExecutionReport, RequestKey, Run, as_utc, utcnow
 
 

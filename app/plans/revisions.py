@@ -34,14 +34,15 @@ from app.plans.revision_times import ReportedTimes
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
-from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
+from app.runs.service import insert_run
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, run_for_key
 from app.store.models import ExecutionReport, Run, as_utc, utcnow
 
 REVISABLE = frozenset(
@@ -262,34 +263,19 @@ def _new_revision(
         "added_tasks": plan.added_tasks,
         "removed_tasks": plan.removed_tasks,
         "fleet_changes": plan.fleet_changes + learned,
-        "reasoner": spec.reasoner,
-        "mode": spec.mode,
-        "tasks": plan.problem.instance.n_tasks,
-        "robots": plan.problem.instance.n_robots,
-        "max_deviation": plan.problem.cap.max_deviation,
-        **spec.site_detail(),
         **_time_detail(plan),
     }
-    run = lifecycle.new_run(
+    run = insert_run(
         session,
         run_id=run_id,
-        request=spec.to_json(),
-        reasoner=spec.reasoner,
-        mode=spec.mode,
-        max_deviation=plan.problem.cap.max_deviation,
-        n_tasks=plan.problem.instance.n_tasks,
-        n_robots=plan.problem.instance.n_robots,
-        resumes=0,
-        cancel_requested=False,
-        idempotency_key=idempotency.key if idempotency else None,
-        request_digest=idempotency.digest if idempotency else None,
+        spec=spec,
+        problem=plan.problem,
+        idempotency=idempotency,
+        created=detail,
+        first_event=EventKind.REVISED,
         revision_of=parent_id,
         revision=revision_no,
         chain_anchor=chain.revision_anchor(chain.revision_link(link)),
-        chain_scheme=chain.SCHEME_V2,
-        site=spec.site,
-        first_event=EventKind.REVISED,
-        created=detail,
     )
     for values in plan.pinned_rows:
         decision_repo.upsert_decision(session=session, run_id=run_id, values=values)

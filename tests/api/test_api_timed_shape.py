@@ -8,7 +8,7 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
-from app.api.schemas.run_times import DecisionTimes
+from app.runs.time_schemas import DecisionTimes
 from tests.api.test_api_timed import ROBOTS, TASKS, TRAVEL, timed
 from tests.api.test_api_timed_runs import all_assignments, completed
 

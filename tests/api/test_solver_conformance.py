@@ -153,8 +153,8 @@ def _pinned_cases() -> list[Any]:
 def _instance_of(body: dict[str, Any]) -> Any:
     if "scenario" in body:
         return scenario(body["scenario"]).instance
-    from app.api.allocation import resolve_instance
-    from app.api.schemas.allocation import InstanceRequest
+    from app.allocation.schemas import InstanceRequest
+    from app.allocation.service import resolve_instance
 
     return resolve_instance(
         InstanceRequest.model_validate({k: body[k] for k in ("tasks", "robots")})
