@@ -19,6 +19,7 @@ from app.api.openapi import install_openapi
 from app.api.routers import body_limits, mount_routers
 from app.config import Settings, get_settings
 from app.console import install as install_console
+from app.console.imports import CONSOLE_IMPORT_PATH
 from app.http.auth import InsecureBindError, KeyRing, check_bind
 from app.http.errors import BodySizeLimit, install_error_handlers
 from app.http.rounding import RoundedJSONResponse
@@ -154,7 +155,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(
         BodySizeLimit,
         max_bytes=settings.max_body_bytes,
-        paths=body_limits(settings),
+        paths={
+            **body_limits(settings),
+            # The console's upload of a schedule file: the same limit as POST /schedules/import.
+            CONSOLE_IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES"),
+        },
     )
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)

@@ -11,15 +11,22 @@ path).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Header, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field
 
+from app.exchange.rates import fill_rates
 from app.exchange.read import read_schedule
 
 IMPORT_PATH = "/schedules/import"
+
+# site -> {robot: {feature: learned rate}}, raising a 404 error for an unknown site. Handed
+# in by app.api.routers as `app.state.site_rates` (the site's estimates live in app.sites, a layer
+# this package must not import).
+SiteRates = Callable[[str], Mapping[str, Mapping[str, float]]]
 
 router = APIRouter(tags=["schedules"])
 
@@ -73,6 +80,16 @@ async def import_schedule(
             description="Comma-separated features for tasks without any (else skipped)",
         ),
     ] = None,
+    site: Annotated[
+        str | None,
+        Query(
+            min_length=1,
+            max_length=200,
+            pattern=r"^[^\x00]+$",
+            description="Fill the robots' rates from this site's learned estimates (GET "
+            "/sites/{site}/estimates); an unknown site is a 404",
+        ),
+    ] = None,
     content_type: Annotated[str | None, Header()] = None,
 ) -> ImportedDraft:
     """A schedule file as a draft instance: nothing is stored (docs/exchange.md)."""
@@ -86,4 +103,8 @@ async def import_schedule(
             default_features=default_features,
         )
     )
+    if site is not None:
+        site_rates: SiteRates = request.app.state.site_rates
+        rates = await run_in_threadpool(site_rates, site)
+        draft = fill_rates(draft, rates, site=site)
     return ImportedDraft.model_validate(draft.to_dict())

@@ -190,3 +190,21 @@ def _reliability(totals: site_repo.SiteTotals) -> list[ReliabilityBin]:
 def list_sites(*, sessions: sessionmaker[Session]) -> list[site_repo.SiteSummary]:
     with sessions() as session:
         return site_repo.sites(session=session)
+
+
+class SiteNotFoundForImport(SiteNotFoundError):
+    """`?site=` of POST /schedules/import names no site: a 404 on the query parameter."""
+
+    location = "query"
+
+
+def site_rates(
+    *, sessions: sessionmaker[Session], site: str, strength: float
+) -> dict[str, dict[str, float]]:
+    """{robot: {feature: learned rate}}: the posterior means an imported draft's robots take
+    (app.exchange.rates.fill_rates; docs/exchange.md#rates-from-a-site)."""
+    try:
+        e = site_estimates(sessions=sessions, site=site, strength=strength)
+    except SiteNotFoundError:
+        raise SiteNotFoundForImport(site) from None
+    return {r.robot: {f.feature: f.posterior.mean for f in r.features} for r in e.robots}
