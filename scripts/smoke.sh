@@ -65,6 +65,17 @@ code=$(call POST /allocate "$cycle" "${CLIENT[@]}")
 check 'd["detail"][0]["loc"][:2] == ["body", "tasks"] and "cycle" in d["detail"][0]["msg"]' "422 names the cycle's task"
 echo "smoke: timed /allocate ok (schedule optimal, makespan 72; a cycle is 422)"
 
+# Teams (docs/allocation.md#teams): a beam two heavy robots lift, a panel a heavy and a careful
+# robot fix; the crane may do heavy work only. `optimal` answers whole teams.
+team='{"solver":"optimal","mode":"success_focused",
+ "tasks":[{"id":"beam","team":{"heavy":2}},{"id":"panel","team":{"heavy":1,"careful":1}},{"id":"sweep","features":["careful"]}],
+ "robots":[{"name":"crane","success":{"heavy":0.9,"careful":0.2},"skills":["heavy"]},{"name":"arm","success":{"heavy":0.3,"careful":0.95}},{"name":"lifter","success":{"heavy":0.8,"careful":0.4}}]}'
+code=$(call POST /allocate "$team" "${CLIENT[@]}")
+[ "$code" = 200 ] || fail "team /allocate optimal -> $code $(head -c 300 "$TMP/out")"
+check 'd["assignments"][0]["team"] == [{"robot": "crane", "feature": "heavy"}, {"robot": "lifter", "feature": "heavy"}] and d["assignments"][0]["robot"] == "crane"' "team answer: the beam's two members"
+check '[m["feature"] for m in d["assignments"][1]["team"]] == ["heavy", "careful"] and "team" not in d["assignments"][2] and sum(d["metrics"]["workload"].values()) == 5' "team answer: one member per unit, loads count units"
+echo "smoke: team /allocate ok (optimal forms the teams)"
+
 code=$(call POST /runs '{"scenario":"baseline","mode":"balanced","reasoner":"rules"}' "${CLIENT[@]}")
 [ "$code" = 202 ] || fail "POST /runs -> $code"
 run_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")

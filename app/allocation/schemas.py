@@ -13,10 +13,19 @@ from pydantic import (
     PlainValidator,
     StrictFloat,
     StrictStr,
+    model_validator,
 )
 from pydantic_core import PydanticCustomError
 
 from app.allocation.schedule_schemas import ScheduleOut, ViolationOut
+from app.allocation.teams import (
+    MEMBERS_FIELD,
+    SKILLS_FIELD,
+    TEAM_FIELD,
+    Team,
+    TeamMemberOut,
+    task_features,
+)
 from app.allocation.timing import Duration, Minutes, PositiveMinutes, Shift, WallClock
 from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS, Robot, Task
@@ -59,7 +68,14 @@ TaskId = Annotated[
     Field(description="Integer or string, unique in the queue"),
 ]
 Probability = Annotated[StrictFloat, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
-MAX_SEED = 2**32 - 1  # the widest seed every RNG we use (numpy, torch, random) accepts
+MAX_SEED = 2**32 - 1
+
+
+def _absent(value: object) -> bool:
+    return value is None
+
+
+# the widest seed every RNG we use (numpy, torch, random) accepts
 
 
 class TaskIn(BaseModel):
@@ -76,8 +92,12 @@ class TaskIn(BaseModel):
     )
     type: Name = Field("Custom", validation_alias=AliasChoices("type", "action_type"))
     features: list[Name] = Field(
-        max_length=100, description="Features the task needs; every robot must rate each one"
+        default_factory=list,
+        max_length=100,
+        description="Features the task needs; every robot must rate each one. Required, "
+        "unless `team` is given (then they are its keys)",
     )
+    team: Team | None = TEAM_FIELD
     # docs/api.md#plans-in-time, all optional: a task with a duration makes the instance timed, and
     # then every task needs one.
     duration: Duration | None = None
@@ -90,12 +110,18 @@ class TaskIn(BaseModel):
     release: Minutes | None = Field(None, description="Earliest start, minutes from `start`")
     deadline: PositiveMinutes | None = Field(None, description="Latest end, minutes from `start`")
 
+    @model_validator(mode="after")
+    def _features_or_team(self) -> TaskIn:
+        task_features(self.features, self.team, "features" in self.model_fields_set)
+        return self
+
     def to_domain(self) -> Task:
         return Task(
             id=self.id,
             name=self.name if self.name is not None else str(self.id),
             type=self.type,
-            features=tuple(self.features),
+            features=task_features(self.features, self.team, "features" in self.model_fields_set),
+            team=None if self.team is None else dict(self.team),
             duration=self.duration,
             after=tuple(self.after),
             zone=self.zone,
@@ -117,6 +143,7 @@ class RobotIn(BaseModel):
     )
     zone: Name | None = Field(None, description="Where the robot starts (timed instances)")
     available: Shift | None = None
+    skills: list[Name] | None = SKILLS_FIELD
 
     def to_domain(self) -> Robot:
         return Robot(
@@ -126,6 +153,7 @@ class RobotIn(BaseModel):
             success=dict(self.success),
             zone=self.zone,
             available=self.available,
+            skills=None if self.skills is None else tuple(dict.fromkeys(self.skills)),
         )
 
 
@@ -219,15 +247,12 @@ class AllocateRequest(InstanceRequest):
     )
 
 
-def _absent(value: object) -> bool:
-    return value is None
-
-
 class Assignment(BaseModel):
     task_id: int | str
     task_name: str
-    robot: str
+    robot: str = Field(description="The robot; for a team task the member covering its first unit")
     success: float
+    team: list[TeamMemberOut] | None = MEMBERS_FIELD
     # Omitted unless true, so a request without pins gets exactly the response it always did.
     pinned: bool = Field(
         False,

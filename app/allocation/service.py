@@ -18,15 +18,17 @@ from app.allocation.schemas import (
     MetricsOut,
     UsageOut,
 )
+from app.allocation.teams import TeamMemberOut
 from app.domain import catalog
 from app.domain.errors import DomainError
-from app.domain.metrics import compute_metrics
+from app.domain.metrics import compute_metrics, task_successes, workload
 from app.domain.models import Instance, Robot, Task
 from app.domain.objective import Objective, ObjectiveKind
 from app.domain.pins import resolve_pins
 from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.schedule import Schedule
+from app.domain.teams import team_problem
 from app.reasoners.factory import ReasonerSettings
 from app.schedules import schedule_json, violations_json
 from app.solvers.base import Solution, Solver
@@ -128,7 +130,8 @@ def build_response(
     problem: Problem, solver: str, solution: Solution, *, seed: int, elapsed_ms: float
 ) -> AllocateResponse:
     instance = problem.instance
-    s = instance.success
+    teams = solution.teams
+    s = task_successes(instance, solution.assignment, teams)
     timed = _timed_fields(problem, solution.details) if instance.timed else {}
     times = _assignment_times(timed.get("schedule"), instance.n_tasks)
     return AllocateResponse(
@@ -140,19 +143,34 @@ def build_response(
                 task_id=task.id,
                 task_name=task.name,
                 robot=instance.robots[r].name,
-                success=float(s[t, r]),
+                success=float(s[t]),
                 pinned=t in problem.pinned,
+                team=_team_out(problem, t, teams[t]) if t in teams else None,
                 **times[t],
             )
             for t, (task, r) in enumerate(zip(instance.tasks, solution.assignment, strict=True))
         ],
         metrics=MetricsOut.from_domain(
-            compute_metrics(instance, solution.assignment, seed=seed, scope=problem.balance_scope)
+            compute_metrics(
+                instance,
+                solution.assignment,
+                seed=seed,
+                scope=problem.balance_scope,
+                teams=teams,
+            )
         ),
         usage=UsageOut.from_domain(solution.usage),
         elapsed_ms=elapsed_ms,
         **timed,
     )
+
+
+def _team_out(problem: Problem, t: int, members: tuple[int, ...]) -> list[TeamMemberOut]:
+    robots = problem.instance.robots
+    return [
+        TeamMemberOut(robot=robots[r].name, feature=f)
+        for f, r in zip(problem.instance.units[t], members, strict=True)
+    ]
 
 
 def _assignment_times(schedule: ScheduleOut | None, n_tasks: int) -> list[dict[str, Any]]:
@@ -220,6 +238,30 @@ def _check_solution(problem: Problem, solution: Solution, solver: str) -> None:
         raise RuntimeError(f"solver '{solver}' moved pinned task(s) {moved}")
     if problem.unavailable and any(a[t] in problem.unavailable for t in problem.free_tasks):
         raise RuntimeError(f"solver '{solver}' gave an unpinned task to an unavailable robot")
-    loads = [a.count(i) for i in range(r)]
+    _check_teams(problem, solution, solver)
+    loads = workload(a, r, solution.teams)
     if not problem.cap.respected_by(loads):
         raise RuntimeError(f"solver '{solver}' returned an invalid allocation (loads {loads})")
+
+
+def _check_teams(problem: Problem, solution: Solution, solver: str) -> None:
+    """Every task on a robot that may take it; every team task's units covered by distinct
+    eligible robots, its `robot` the first unit's member (docs/allocation.md#teams)."""
+    instance = problem.instance
+    teams = solution.teams
+    eligible = instance.eligible
+    for t, task in enumerate(instance.tasks):
+        members = teams.get(t)
+        if task.team is None:
+            if members is not None or not eligible[t, solution.assignment[t]]:
+                raise RuntimeError(f"solver '{solver}' gave task {task.id!r} an ineligible robot")
+            continue
+        if members is None:
+            raise RuntimeError(f"solver '{solver}' returned no team for task {task.id!r}")
+        why = team_problem(task, instance.robots, members)
+        if why is None and members[0] != solution.assignment[t]:
+            why = "its robot is not the member covering the first unit"
+        if why is None and any(m in problem.unavailable for m in members):
+            why = "a member is unavailable"
+        if why is not None:
+            raise RuntimeError(f"solver '{solver}' returned an invalid team for {task.id!r}: {why}")

@@ -18,6 +18,7 @@ from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.problem import Problem
 from app.domain.serialize import instance_from_dict
+from app.domain.teams import refuse_teams
 from app.plans.revision_changes import (
     FLEET_HANDLERS,
     QUEUE_HANDLERS,
@@ -211,6 +212,8 @@ def _problem(
     off: set[int],
     times: RevisionTimes,
 ) -> Problem:
+    # Runs plan one robot per task: a revision may not add a team task (yet).
+    refuse_teams(instance.tasks, "a run's revision", "plan team tasks with POST /allocate")
     try:
         return Problem.build(
             instance,
