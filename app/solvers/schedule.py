@@ -36,7 +36,7 @@ class HintEntry(BaseModel):
 
 class ScheduleOptions(SolverOptions):
     time_limit_s: float = Field(default=10.0, gt=0, le=120)
-    workers: int = Field(default=2, ge=1, le=16)
+    workers: int = Field(default=1, ge=1, le=16)
     hint: list[HintEntry] | None = None
 
 
