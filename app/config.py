@@ -76,8 +76,8 @@ class Settings(BaseSettings):
     # LLM tokens (input + output) a run may spend when its request names no token_budget;
     # then its remaining tasks go to the offline rules reasoner. None: no limit.
     run_token_budget: int | None = Field(None, ge=1)
-    # Site estimates (SPEC 17): how many pseudo-observations the configured rate (and
-    # duration) weighs as the prior of each posterior.
+    # Site estimates (docs/estimates.md#the-model): how many pseudo-observations the configured rate
+    # (and duration) weighs as the prior of each posterior.
     prior_strength: float = Field(10.0, gt=0, le=1_000_000, allow_inf_nan=False)
 
     # Test-only seam: every durable run holds at `<task index>:<node>:<before|after>` (any

@@ -146,8 +146,9 @@ def screenshots() -> list[Path]:
 
 
 def gantt_screenshot(page: Page, url: str) -> Path:
-    """A timed run's schedule (SPEC 16): the 36-task `baseline_timed` scenario's Gantt
-    chart on its run page, one lane per robot, the critical path in red."""
+    """A timed run's schedule (docs/schedules.md#reading-a-runs-schedule): the 36-task
+    `baseline_timed` scenario's Gantt chart on its run page, one lane per robot, the critical path
+    in red."""
     run_id = _start(url, {"scenario": "baseline_timed"})
     _wait(url, run_id)
     page.set_viewport_size({"width": 1280, "height": 800})

@@ -1,5 +1,5 @@
-"""Learning from the site (SPEC 17, issue 23 item 6): a simulated site whose true success
-rates differ from the configured ones, 30 days of the paper's 36 tasks, every outcome drawn
+"""Learning from the site (docs/estimates.md#sites, issue 23 item 6): a simulated site whose true
+success rates differ from the configured ones, 30 days of the paper's 36 tasks, every outcome drawn
 from the true rates and reported through the API (an in-process server: POST /runs, POST
 /runs/{id}/execution, GET /sites/{site}/estimates).
 
@@ -368,7 +368,8 @@ def _report(
         f"{'met' if day10 <= 0.5 else 'missed'}), {day30:.2f} on day 30; configured stays at "
         f"{configured['overrated']:.2f} every day. Brier score and coverage: the table above; "
         "where the coverage of the true rate falls short while the coverage of the counted "
-        "rate holds, the shortfall is SPEC 17's counting rule (a two-feature task's outcome "
+        "rate holds, the shortfall is the counting rule of docs/estimates.md#the-model "
+        "(a two-feature task's outcome "
         "counts for both features, so a feature's count mixes in its partner's rate), not the "
         "intervals.\n\n"
         f"**The harder case.** With learned rates the heavy robot was given no careful task on "

@@ -1,5 +1,6 @@
-"""The read at scale (SPEC 17): the estimates of a site with 100,000 reports, through the API
-and in the service, on the embedded SQLite store (part of benchmarks.site_learning)."""
+"""The read at scale (docs/estimates.md#sites): the estimates of a site with 100,000 reports,
+through the API and in the service, on the embedded SQLite store (part of
+benchmarks.site_learning)."""
 
 from __future__ import annotations
 

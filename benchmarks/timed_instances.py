@@ -1,4 +1,4 @@
-"""Seeded timed construction instances (SPEC 16): floors x zones x trades.
+"""Seeded timed construction instances (docs/schedules.md#the-generator): floors x zones x trades.
 
 A building of `floors` floors, each split into `zones_per_floor` zones; each zone holds
 work packages, and each package is one trade chain: formwork -> rebar -> pour ->

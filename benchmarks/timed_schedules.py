@@ -1,5 +1,6 @@
-"""Plans in time (SPEC 16): CP-SAT's `schedule` solver and every allocation method's list
-schedule, on the timed paper instance and on generated construction sites.
+"""Plans in time (docs/benchmarks.md#plans-in-time-cp-sat-and-the-list-scheduler): CP-SAT's
+`schedule` solver and every allocation method's list schedule, on the timed paper instance and on
+generated construction sites.
 
     python -m benchmarks.timed_schedules      # this section of docs/benchmarks.md only
 
@@ -204,7 +205,8 @@ def api_seconds(problem: Problem, limit_s: float) -> tuple[float | None, str]:
 
 
 def allocate_body(problem: Problem, limit_s: float) -> dict[str, Any]:
-    """The instance with its time fields, as the /allocate body of SPEC 16 writes them."""
+    """The instance with its time fields, as the /allocate body of docs/api.md#plans-in-time writes
+    them."""
     instance = problem.instance
     tasks = []
     for task in instance.tasks:
@@ -348,7 +350,8 @@ def body(
                 "CP-SAT's ES minus the method's (CP-SAT's is the proven optimum, so a regret "
                 "is never negative); makespan regret is against CP-SAT's makespan (negative: "
                 "the method's plan is shorter, possible only when it gives up ES) and against "
-                "CP-SAT's proven bound. Violations: rules of SPEC 16 the list schedule breaks "
+                "CP-SAT's proven bound. Violations: rules of "
+                "docs/schedules.md#a-schedule-and-its-check the list schedule breaks "
                 "(a missed deadline or shift).",
                 methods_table,
                 f"![makespans]({image})",

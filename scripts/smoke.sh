@@ -48,7 +48,8 @@ code=$(call POST /allocate '{"solver":"dp","scenario":"baseline","max_deviation"
 [ "$code" = 422 ] || fail "bad input should be 422, got $code"
 check 'd["detail"][0]["loc"][-1] == "max_deviation"' "422 names the field"
 
-# Time (SPEC 16): a timed instance, planned by the exact `schedule` solver; six tasks it proves.
+# Time (docs/api.md#plans-in-time): a timed instance, planned by the exact `schedule` solver; six
+# tasks it proves.
 timed='{"solver":"schedule","mode":"success_focused","start":"2026-03-02T07:00:00+01:00","travel":{"A":{"B":3,"C":5},"B":{"C":4}},"options":{"time_limit_s":10},
  "robots":[{"name":"a","success":{"heavy":0.9,"dexterous":0.4},"zone":"A","available":[0,200]},{"name":"b","success":{"heavy":0.5,"dexterous":0.85},"zone":"C","available":[10,200]}],
  "tasks":[{"id":"dig","features":["heavy"],"duration":{"a":20,"b":30},"zone":"A"},{"id":"frame","features":["heavy","dexterous"],"duration":15,"zone":"B","after":["dig"]},
@@ -114,7 +115,8 @@ check "d['ok'] is True and d['parent']['run_id'] == '$run_id' and d['parent']['o
 [ "$(call GET "/runs/$run_id/trace/verify" '' "${SUPERVISOR[@]}")" = 200 ] || fail "parent verify"
 check 'd["ok"] is True' "completed parent still verifies after reports and a revision"
 echo "smoke: living plans ok (execution reports, revision $revision_id, diff, verify)"
-# Sites (SPEC 17): the report above taught the default site; a learned run records its numbers.
+# Sites (docs/estimates.md#using-the-estimates): the report above taught the default site; a learned
+# run records its numbers.
 [ "$(call GET /sites '' "${CLIENT[@]}")" = 200 ] || fail "GET /sites"
 check 'any(s["site"] == "default" and s["reports"] >= 1 for s in d)' "the default site counts the report"
 [ "$(call GET /sites/default/estimates '' "${CLIENT[@]}")" = 200 ] || fail "GET /sites/default/estimates"
@@ -128,8 +130,9 @@ learned_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
 [ "$(call GET "/runs/$learned_id/trace" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace of the learned run"
 check 'd["events"][0]["detail"]["learned"]["source"] == "learned" and d["events"][0]["detail"]["learned"]["reports"] >= 1' "the learned run's first event records its numbers"
 echo "smoke: sites ok (estimates, 404, 422s, a learned run $learned_id)"
-# A run in time (SPEC 16): the timed scenario decided by LTAA, its schedule as JSON, CSV and
-# iCalendar; an untimed run has no schedule (409). GET /scenarios says which one is timed.
+# A run in time (docs/schedules.md#runs-in-time): the timed scenario decided by LTAA, its schedule
+# as JSON, CSV and iCalendar; an untimed run has no schedule (409). GET /scenarios says which one is
+# timed.
 [ "$(call GET /scenarios '' "${CLIENT[@]}")" = 200 ] || fail "GET /scenarios"
 check 'any(s["name"] == "baseline_timed" and s["timed"] and all(t["duration"] for t in s["tasks"]) for s in d)' "GET /scenarios lists baseline_timed with its durations"
 code=$(call POST /runs '{"scenario":"baseline_timed","reasoner":"rules"}' "${CLIENT[@]}")

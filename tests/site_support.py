@@ -1,5 +1,5 @@
-"""SPEC 17 by hand: the posterior a test expects, computed from the reports it sent (not
-from the service's code), for the API, end-to-end and browser tests alike."""
+"""docs/estimates.md#the-model by hand: the posterior a test expects, computed from the reports it
+sent (not from the service's code), for the API, end-to-end and browser tests alike."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""SPEC 16 "Time in living plans", written out for the tests: what a revision's schedule
+"""docs/living-plans.md#a-revision-in-time, written out for the tests: what a revision's schedule
 must show, checked from the parent's instance, the site's reports and the request, on
 plain values (so unit, API and end-to-end tests read the same rules), never through the
 app's own `check_schedule`.

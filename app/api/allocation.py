@@ -70,7 +70,7 @@ def build_problem(request: InstanceRequest) -> Problem:
 
 
 def _pinned_starts(instance: Instance, request: AllocateRequest) -> dict[int, float]:
-    """Task index -> fixed start, for the pins that carry one (SPEC 16)."""
+    """Task index -> fixed start, for the pins that carry one (docs/api.md#plans-in-time)."""
     index = {str(task.id): t for t, task in enumerate(instance.tasks)}
     starts: dict[int, float] = {}
     for i, pin in enumerate(request.pinned):
@@ -127,9 +127,9 @@ def build_response(
 
 
 def _timed_fields(problem: Problem, details: dict[str, Any]) -> dict[str, Any]:
-    """The schedule block of an answer on a timed instance (SPEC 16), and which part of it
-    is exact: CP-SAT's own schedule (`schedule`), or the list scheduler's timing of another
-    method's assignment (`app.solvers.timed`)."""
+    """The schedule block of an answer on a timed instance (docs/api.md#plans-in-time), and which
+    part of it is exact: CP-SAT's own schedule (`schedule`), or the list scheduler's timing of
+    another method's assignment (`app.solvers.timed`)."""
     schedule: Schedule | None = details.get("schedule")
     out: dict[str, Any] = {"schedule_model": details.get("schedule_model")}
     if "schedule_model" not in details:  # the method scheduled itself: CP-SAT
@@ -171,7 +171,8 @@ def allocate(
 
 
 def _check_solution(problem: Problem, solution: Solution, solver: str) -> None:
-    """Never return an allocation that is incomplete or breaks the cap (SPEC §1)."""
+    """Never return an allocation that is incomplete or breaks the cap
+    (docs/allocation.md#the-workload-cap)."""
     n, r = problem.instance.n_tasks, problem.instance.n_robots
     a = solution.assignment
     if len(a) != n or any(not 0 <= robot < r for robot in a):

@@ -118,7 +118,7 @@ async def _on_domain(request: Request, exc: DomainError) -> JSONResponse:
 
 def _archived_or(request: Request, exc: RunNotFoundError) -> DomainError:
     """A run id with no row that was archived is 410 Gone naming its file, whichever route
-    looked it up (SPEC 15), at the place in the request the lookup named."""
+    looked it up (docs/operations.md#archive), at the place in the request the lookup named."""
     runs = getattr(request.app.state, "runs", None)
     if runs is None:
         return exc

@@ -85,7 +85,7 @@ def chain_passes(
     """How to read a run's decisions in the order they were chained, as (pinned, by_seq)
     passes: all of them in task order, or a revision's pins first, then the rest
     (repo.revision_chain_order); a timed run's own decisions in the order the graph made
-    them (`sequenced`, SPEC 16)."""
+    them (`sequenced`, docs/schedules.md#the-chain-in-decision-order)."""
     if revision_of is None:
         return ((None, sequenced),)
     return ((True, False), (False, sequenced))

@@ -38,7 +38,7 @@ class ChainCheckResult:
 
 @dataclass(frozen=True)
 class ParentLink:
-    """How a revision hangs off its parent (SPEC 10): checked by trace/verify."""
+    """How a revision hangs off its parent (docs/living-plans.md#audit): checked by trace/verify."""
 
     parent: str
     ok: bool

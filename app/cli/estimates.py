@@ -1,4 +1,4 @@
-"""`ltaa estimates` and `ltaa rebuild-estimates` (SPEC 17).
+"""`ltaa estimates` and `ltaa rebuild-estimates` (docs/estimates.md#sites).
 
 `ltaa estimates [SITE]` reads a running server's estimates over its API, like `ltaa
 reviews` (the server and key from `--url` / `LTAA_URL` and `--key` / `LTAA_API_KEY`, a client

@@ -52,7 +52,7 @@ def parse_task(text: str) -> dict[str, Any]:
 
 
 def parse_delay(text: str) -> dict[str, Any]:
-    """'21:30' -> task 21 takes 30 minutes longer (SPEC 16)."""
+    """'21:30' -> task 21 takes 30 minutes longer (docs/living-plans.md#a-revision-in-time)."""
     task_id, _, minutes = text.rpartition(":")
     try:
         value = float(minutes)
@@ -202,7 +202,8 @@ def print_diff(created: dict[str, Any], diff: dict[str, Any] | None, console: Co
 
 
 def print_time_moves(schedule: dict[str, Any], console: Console) -> None:
-    """SPEC 16: the makespans and each task that starts or ends at another time."""
+    """docs/living-plans.md#the-diff-in-time: the makespans and each task that starts or ends at
+    another time."""
 
     def minute(value: dict[str, Any]) -> str:
         return f"{value['minutes']:g} min ({value['at'] or '-'})"
@@ -272,7 +273,8 @@ def revise(
     ] = None,
     wait: Annotated[bool, typer.Option(help="Wait for the revision and print the diff")] = True,
 ) -> None:
-    """Revise a run on a server (SPEC 10) and print the diff against its parent."""
+    """Revise a run on a server (docs/living-plans.md#the-lineage-and-the-diff) and print the diff
+    against its parent."""
 
     console = Console()
     try:

@@ -1,4 +1,4 @@
-"""The supervisor console: server-rendered pages under /console (SPEC section 13).
+"""The supervisor console: server-rendered pages under /console (README.md#console).
 
 A thin layer over app.runs, the services the JSON API uses; its own state is only the
 sign-in sessions. Pages load nothing from outside this server.

@@ -1,6 +1,6 @@
-"""GET /console/sites and /console/sites/{site} (SPEC 17): the sites, and a site's learned
-rates with their intervals and report counts, the ones farthest from the configured rates
-marked, observed durations and the plans' reliability."""
+"""GET /console/sites and /console/sites/{site} (docs/estimates.md#the-site-page): the sites, and a
+site's learned rates with their intervals and report counts, the ones farthest from the configured
+rates marked, observed durations and the plans' reliability."""
 
 from __future__ import annotations
 

@@ -136,8 +136,9 @@ class RunPage:
     lineage: list[revisions.LineageEntry]  # root to head; one entry: never revised
     diff: DiffView | None  # a revision's, when drawn in the page (see diff_deferred)
     diff_deferred: bool  # a large revision: the page's script fetches its diff
-    # SPEC 16, a timed run: its schedule as a Gantt chart once every task is decided (None:
-    # untimed, or not decided yet, which `timed` tells apart), with its makespan.
+    # docs/schedules.md#reading-a-runs-schedule, a timed run: its schedule as a Gantt chart once
+    # every task is decided (None: untimed, or not decided yet, which `timed` tells apart), with its
+    # makespan.
     gantt_svg: Markup | None = None
     makespan: float | None = None
     timed: bool = False

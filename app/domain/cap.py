@@ -1,7 +1,7 @@
 """The workload cap: every robot's final load must lie in [ceil(W - cap), floor(W + cap)].
 
-With pins (SPEC 10) some robots may be unavailable: they keep the tasks pinned on them
-but take no new task and stand outside the balance. `n_tasks` and `n_robots` are then the
+With pins (docs/living-plans.md#pins) some robots may be unavailable: they keep the tasks pinned on
+them but take no new task and stand outside the balance. `n_tasks` and `n_robots` are then the
 tasks and robots *in the balance* (W = n_tasks / n_robots), while load vectors still have
 one entry per robot of the fleet; the unavailable robots' entries are ignored.
 """

@@ -1,6 +1,7 @@
 """The built-in data: the 36 TEACh actions, the four robot scenarios, and the timed
-scenarios of SPEC 16 (kept apart: `scenarios()` lists exactly the four untimed ones that
-`GET /scenarios` serves; a later phase decides how the API offers the timed ones)."""
+scenarios of docs/schedules.md#where-the-numbers-of-baseline_timed-come-from (kept apart:
+`scenarios()` lists exactly the four untimed ones that `GET /scenarios` serves; a later phase
+decides how the API offers the timed ones)."""
 
 from __future__ import annotations
 
@@ -138,7 +139,7 @@ def instance_of(
     """The instance a request describes, by a built-in scenario's name or by its own tasks
     and robots (with, for a timed instance, its travel times and start); DomainError naming
     the field if it describes none, or both. Timed tasks of its own sent without `start`
-    start at the request's `arrival` (SPEC 16)."""
+    start at the request's `arrival` (docs/api.md#plans-in-time)."""
     custom = tasks is not None or robots is not None
     if scenario_name is not None:
         if custom:

@@ -38,12 +38,12 @@ class DecisionContext:
     # 1-based attempt at this task (tiers stop at 3; attempts do not): the key, with
     # task_index, of a recorded reply, for reasoners that replay a run's record.
     attempt: int = 1
-    # SPEC 17: per robot, what its rates for this task rest on when they are not the
-    # configured ones ("dexterous learned on 37 reports"); empty: configured.
+    # docs/estimates.md#using-the-estimates: per robot, what its rates for this task rest on when
+    # they are not the configured ones ("dexterous learned on 37 reports"); empty: configured.
     rate_notes: tuple[str, ...] = ()
-    # SPEC 16, a timed instance: per robot, when it would start and end the task and whether
-    # that meets the deadline and its shift; empty untimed. `feasible` then holds only robots
-    # that meet them too (unless none does: then time rules out no one).
+    # docs/schedules.md#the-prompt-in-time, a timed instance: per robot, when it would start and end
+    # the task and whether that meets the deadline and its shift; empty untimed. `feasible` then
+    # holds only robots that meet them too (unless none does: then time rules out no one).
     timing: tuple[TimeOption, ...] = ()
     zone: str | None = None  # the task's zone, on a timed instance with zones
     release: float = 0.0

@@ -1,8 +1,8 @@
 """Which robot may take which task, and the time arguments of a Problem, checked.
 
 A per-robot duration map that omits a robot makes that (task, robot) pair ineligible
-(SPEC 16). On top of the instance's own rules, a problem's pins and unavailable robots
-must leave every task a robot that may take it; a pinned start belongs to a pinned task.
+(docs/schedules.md#the-model). On top of the instance's own rules, a problem's pins and unavailable
+robots must leave every task a robot that may take it; a pinned start belongs to a pinned task.
 """
 
 from __future__ import annotations

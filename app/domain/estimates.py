@@ -1,5 +1,5 @@
-"""Learning from the site (SPEC 17): Beta posteriors of success rates and log-normal
-durations, computed from outcome counts; and the rates a run plans with when it asks for
+"""Learning from the site (docs/estimates.md#the-model): Beta posteriors of success rates and
+log-normal durations, computed from outcome counts; and the rates a run plans with when it asks for
 learned (posterior means) or sampled (one Thompson draw) ones.
 
 Pure arithmetic over counts: where the counts come from (the execution reports) is the
@@ -330,8 +330,8 @@ def plan_durations(
 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """The tasks (as instance JSON) with learned durations: each timed task's duration
     becomes a per-robot map of posterior medians, the configured minutes the prior of each
-    (robot, task type); untimed tasks stay untimed (SPEC 16: then every task is untimed).
-    Returns the tasks and the record of what changed."""
+    (robot, task type); untimed tasks stay untimed (docs/schedules.md#the-model: then every task is
+    untimed). Returns the tasks and the record of what changed."""
     out: list[dict[str, Any]] = []
     used: dict[str, dict[str, dict[str, Any]]] = {}
     for task in tasks:
@@ -344,7 +344,7 @@ def plan_durations(
         for robot in robots:
             planned = duration.get(robot) if isinstance(duration, Mapping) else duration
             if planned is None:
-                continue  # the robot may not take the task (SPEC 16)
+                continue  # the robot may not take the task (docs/schedules.md#the-model)
             seen = observed.get((robot, kind), LogStats())
             estimate = DurationEstimate(float(planned), seen, strength)
             median = estimate.median
@@ -360,7 +360,10 @@ def plan_durations(
     if applied:
         record["robots"] = used
     else:
-        record["why"] = "the instance has no task durations (SPEC 16): nothing to learn into"
+        record["why"] = (
+            "the instance has no task durations (docs/schedules.md#the-model): "
+            "nothing to learn into"
+        )
     return out, record
 
 

@@ -22,9 +22,11 @@ class RunStatus(StrEnum):
     # Its checkpoint belongs to another graph version: no worker takes it up until a
     # supervisor resumes it under a release of that version (or revises it).
     BLOCKED = "blocked"
-    # Paused before a decision that its review policy sends to a supervisor (SPEC 11).
+    # Paused before a decision that its review policy sends to a supervisor
+    # (docs/reviews.md#which-decisions-wait-for-review).
     AWAITING_REVIEW = "awaiting_review"
-    # Replaced by a revision before it finished (SPEC 10): terminal, never claimed again.
+    # Replaced by a revision before it finished (docs/living-plans.md#the-parent): terminal, never
+    # claimed again.
     SUPERSEDED = "superseded"
 
 
@@ -44,13 +46,13 @@ class EventKind(StrEnum):
     REVIEW_REQUESTED = "review_requested"
     REVIEW_RESOLVED = "review_resolved"
     REVIEW_CLOSED = "review_closed"
-    # SPEC 10: a revision's first event, and its unfinished parent's last.
+    # docs/living-plans.md#audit: a revision's first event, and its unfinished parent's last.
     REVISED = "revised"
     SUPERSEDED = "superseded"
     # Execution reports while the run is unfinished (after completion: annotations).
     EXECUTION_REPORTED = "execution_reported"
-    # SPEC 16/4: a guided timed run's guidance plan, written once before its first
-    # decision and read back on resume (app.solvers.timed_guidance says why).
+    # docs/schedules.md#guidance-in-time: a guided timed run's guidance plan, written once before
+    # its first decision and read back on resume (app.solvers.timed_guidance says why).
     GUIDANCE_PLANNED = "guidance_planned"
 
 

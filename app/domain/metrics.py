@@ -1,4 +1,5 @@
-"""Quality measures of an allocation (SPEC §1): success, balance, fairness, simulation."""
+"""Quality measures of an allocation (docs/allocation.md#success-and-balance): success, balance,
+fairness, simulation."""
 
 from __future__ import annotations
 
@@ -94,8 +95,9 @@ def simulate_completion(
 
 @dataclass(frozen=True)
 class BalanceScope:
-    """What balance is measured over when some robots are outside it (SPEC 10 pins):
-    the target W of the available fleet and the robots in the balance."""
+    """What balance is measured over when some robots are outside it (pins,
+    docs/allocation.md#success-and-balance): the target W of the available fleet and the robots in
+    the balance."""
 
     target: float
     robots: tuple[int, ...]

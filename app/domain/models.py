@@ -1,9 +1,9 @@
 """Tasks, robots and the instance they form, with the success model S(r, t).
 
-The time fields (SPEC 16: durations, `after`, zones, releases, deadlines, shifts, travel,
-`start`) are optional and default to "absent": an instance without them is the untimed
-instance of SPEC 1, built and compared exactly as before. Their rules live in
-`app.domain.timing_rules`; their index view (what schedulers read) in
+The time fields (docs/schedules.md#the-model: durations, `after`, zones, releases, deadlines,
+shifts, travel, `start`) are optional and default to "absent": an instance without them is the
+untimed instance of docs/allocation.md#success-and-balance, built and compared exactly as before.
+Their rules live in `app.domain.timing_rules`; their index view (what schedulers read) in
 `app.domain.time_model`.
 """
 
@@ -38,7 +38,7 @@ class Task:
     name: str
     features: tuple[str, ...]
     type: str = "Custom"
-    # SPEC 16, all optional. hash=False: a per-robot map is not hashable.
+    # docs/schedules.md#the-model, all optional. hash=False: a per-robot map is not hashable.
     duration: Duration | None = dataclasses.field(default=None, hash=False)
     after: tuple[TaskId, ...] = ()  # finish-to-start: starts once each of these has ended
     zone: str | None = None
@@ -52,7 +52,7 @@ class Robot:
     success: Mapping[str, float]
     label: str = ""
     description: str = ""
-    zone: str | None = None  # where it starts (SPEC 16)
+    zone: str | None = None  # where it starts (docs/schedules.md#the-model)
     available: tuple[float, float] | None = None  # its shift [start, end], minutes
 
     @property
@@ -66,8 +66,8 @@ class Instance:
 
     tasks: tuple[Task, ...]
     robots: tuple[Robot, ...]
-    # SPEC 16: minutes between zones ({"A": {"B": 6}}, symmetric when one direction is
-    # given) and the wall-clock time of minute 0 (timezone-aware).
+    # docs/schedules.md#the-model: minutes between zones ({"A": {"B": 6}}, symmetric when one
+    # direction is given) and the wall-clock time of minute 0 (timezone-aware).
     travel: Mapping[str, Mapping[str, float]] | None = dataclasses.field(default=None, hash=False)
     start: datetime | None = None
     # The checked index view of the time fields; None for an untimed instance.
@@ -83,7 +83,7 @@ class Instance:
 
     @property
     def timed(self) -> bool:
-        """Does any task have a duration? (Then every task has one: SPEC 16.)"""
+        """Does any task have a duration? (Then every task has one: docs/schedules.md#the-model.)"""
         return self._time_model is not None
 
     @property

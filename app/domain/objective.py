@@ -1,4 +1,4 @@
-"""What "optimal" means for a timed plan (SPEC 16 "One meaning of optimal").
+"""What "optimal" means for a timed plan (docs/schedules.md#the-model).
 
 The objective lives on the Problem, beside the mode and the workload cap, not on the
 Instance. The instance is the site as it is (tasks, robots, durations, zones, shifts);
@@ -21,7 +21,8 @@ from app.domain.errors import DomainError
 
 
 class ObjectiveKind(StrEnum):
-    # Maximise expected success under the cap (SPEC 1), then the shortest makespan.
+    # Maximise expected success under the cap (docs/allocation.md#the-workload-cap), then the
+    # shortest makespan.
     SUCCESS_THEN_MAKESPAN = "success_then_makespan"
     # The shortest makespan under the cap whose expected success is at least a floor.
     MAKESPAN = "makespan"

@@ -1,12 +1,12 @@
 """An allocation problem: an instance, an operational mode and the workload cap it implies.
 
-Optionally with pins (SPEC 10 "Pins in /allocate"): tasks fixed on robots, and robots that
+Optionally with pins (docs/living-plans.md#pins-in-allocate): tasks fixed on robots, and robots that
 are unavailable (they keep their pins, take no new task and stand outside the balance).
 Then W = (free tasks + tasks pinned on available robots) / available robots, loads start
 from the pins on available robots, and the cap's bounds apply to available robots only.
 Tasks pinned on an unavailable robot count for expected success, not for loads.
 
-On a timed instance (SPEC 16) a problem also carries its objective (see
+On a timed instance (docs/schedules.md#the-model) a problem also carries its objective (see
 `app.domain.objective` for why it lives here), the fixed starts of pinned tasks (tasks
 reported started or done), and `not_before`: no task without a fixed start begins before
 it (a revision's `now`). An untimed problem has none of these and is built as before.
@@ -48,8 +48,9 @@ class Problem:
     pinned_starts: Mapping[int, float] = field(default_factory=lambda: _NO_STARTS, hash=False)
     not_before: float = 0.0  # minutes; no task without a fixed start begins earlier
     # task index -> its start in a guidance plan (timed, guided LTAA runs only): the graph
-    # decides in this order instead of SPEC 16's earliest start (app.solvers.timed_guidance
-    # says why). Empty: SPEC 16's order. Set with dataclasses.replace, never by build().
+    # decides in this order instead of the earliest start (app.solvers.timed_guidance says why;
+    # docs/schedules.md#the-order-of-decisions). Empty: the earliest-start order. Set with
+    # dataclasses.replace, never by build().
     decide_by: Mapping[int, float] = field(default_factory=lambda: _NO_STARTS, hash=False)
 
     @classmethod
@@ -130,7 +131,8 @@ class Problem:
         return len(self.free_tasks) - bisect.bisect_right(self.free_tasks, task_index)
 
     def allocated_before(self, task_index: int) -> int:
-        """Pins plus free tasks before `task_index`: the phase rule's count (SPEC 10)."""
+        """Pins plus free tasks before `task_index`: the phase rule's count
+        (docs/living-plans.md#balance-and-phases)."""
         return len(self.pinned) + bisect.bisect_left(self.free_tasks, task_index)
 
     @property

@@ -1,5 +1,6 @@
-"""Supervisor review of decisions (SPEC 11): the policy a run is created with, the triggers
-it fires on the true facts of a decision, and the vocabulary of a resolution.
+"""Supervisor review of decisions (docs/reviews.md#which-decisions-wait-for-review): the policy a
+run is created with, the triggers it fires on the true facts of a decision, and the vocabulary of a
+resolution.
 
 Pure rules; the graph evaluates them at each decision and app.reviews.service stores them.
 """

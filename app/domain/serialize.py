@@ -1,7 +1,7 @@
 """Plain-JSON form of an instance, so a stored run can be rebuilt exactly on resume.
 
-The time fields of SPEC 16 appear only when set, so an untimed instance's form (and every
-hash computed over it) is exactly what it was before time existed.
+The time fields of docs/schedules.md#the-model appear only when set, so an untimed instance's form
+(and every hash computed over it) is exactly what it was before time existed.
 """
 
 from __future__ import annotations

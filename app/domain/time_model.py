@@ -4,8 +4,8 @@ Built once by `app.domain.timing_rules.check_timing` after every rule held, so e
 here may assume a valid instance: every task has a duration on at least one robot, `after`
 names known tasks without a cycle, every pair of zones in use has a travel time.
 
-Conventions (SPEC 16): minutes from the plan's start (minute 0 is `start` on the wall
-clock); a missing release is 0, a missing deadline or shift end is unbounded (`math.inf`);
+Conventions (docs/schedules.md#the-model): minutes from the plan's start (minute 0 is `start` on the
+wall clock); a missing release is 0, a missing deadline or shift end is unbounded (`math.inf`);
 a robot with no start zone starts where its first task is (no travel before it); tasks
 have no zone only when no task has one, and then nothing ever travels.
 """
@@ -92,7 +92,8 @@ class TimeModel:
     def earliest_finish(self) -> tuple[float, ...]:
         """Per task: release and predecessors on their shortest durations, robots ignored.
 
-        A lower bound on the task's end in any schedule: the chain rule of SPEC 16."""
+        A lower bound on the task's end in any schedule: the chain rule of
+        docs/schedules.md#the-model."""
         finish = [0.0] * self.n_tasks
         for t in self.order:
             ready = max((finish[p] for p in self.predecessors[t]), default=0.0)

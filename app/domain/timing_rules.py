@@ -1,4 +1,5 @@
-"""The rules a timed instance obeys (SPEC 16), checked once when an Instance is built.
+"""The rules a timed instance obeys (docs/schedules.md#the-model), checked once when an Instance is
+built.
 
 Every error is a DomainError whose field is the dotted path into the request
 (`tasks.4.after`, `travel.A.C`, `robots.2.available`) and whose message names the task

@@ -1,4 +1,5 @@
-"""The trade-off rule (SPEC §4): the one place that decides "best robot or least-loaded robot".
+"""The trade-off rule (docs/allocation.md#the-trade-off-rule): the one place that decides "best
+robot or least-loaded robot".
 
 The rules reasoner, the mode-compliance criterion and the fallback all call this, so the
 three can never disagree about what the mode and phase require.

@@ -81,8 +81,9 @@ def _minutes(x: float) -> str:
 
 
 def _time_facts(ctx: DecisionContext) -> list[str]:
-    """SPEC 16: per robot, when it is next free, its travel to the task's zone, the start
-    and end it would give and the slack to the deadline (nothing on an untimed instance)."""
+    """docs/schedules.md#the-prompt-in-time: per robot, when it is next free, its travel to the
+    task's zone, the start and end it would give and the slack to the deadline (nothing on an
+    untimed instance)."""
     if not ctx.timing:
         return []
     where = f"zone {ctx.zone}, " if ctx.zone is not None else ""

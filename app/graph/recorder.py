@@ -81,12 +81,13 @@ class DecisionRecord:
     balance_after: float
     severity_after: str
     regret: float | None = None
-    # The supervisor's review, when the run's policy sent this decision to one (SPEC 11).
+    # The supervisor's review, when the run's policy sent this decision to one
+    # (docs/reviews.md#resolving-a-review).
     review: dict[str, Any] | None = None
-    # SPEC 16, a timed run: minutes from the plan's start, the task's zone, the minutes
-    # travelled just before it, its place in the decision order (the graph's decisions
-    # before it) and the trade-off in minutes (how much later it ends than the earliest
-    # end an allowed robot offered). None on an untimed run.
+    # docs/schedules.md#what-a-decision-records, a timed run: minutes from the plan's start, the
+    # task's zone, the minutes travelled just before it, its place in the decision order (the
+    # graph's decisions before it) and the trade-off in minutes (how much later it ends than the
+    # earliest end an allowed robot offered). None on an untimed run.
     start: float | None = None
     end: float | None = None
     zone: str | None = None

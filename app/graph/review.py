@@ -1,6 +1,7 @@
 """The review gate at the end of finalize: evaluate the run's review policy on the true facts
 of the proposed decision and, when a trigger fires, pause the graph with `interrupt()`
-before the decision touches the loads or the record (SPEC 11).
+before the decision touches the loads or the record
+(docs/reviews.md#which-decisions-wait-for-review).
 
 Everything before `interrupt()` is a pure computation over the recorder's rows (no LLM
 call), because LangGraph re-runs the node from its top when the graph is resumed. A replay

@@ -19,7 +19,8 @@ STEPS_PER_RETRY = 4  # build_feedback, retry, reason, validate
 
 
 def recursion_limit(n_tasks: int, max_retries: int) -> int:
-    """The worst case: every task exhausts its retries (SPEC §4), plus one."""
+    """The worst case: every task exhausts its retries (docs/allocation.md#the-recursion-limit),
+    plus one."""
     return (STEPS_PER_TASK + STEPS_PER_RETRY * max_retries) * n_tasks + 1
 
 

@@ -75,13 +75,15 @@ class GraphContext:
     max_retries: int = DEFAULT_MAX_RETRIES
     guidance: Guidance | None = None
     regret: Regret | None = None
-    # The run's review policy (SPEC 11), or a replay's recorded resolutions; None: no review.
+    # The run's review policy (docs/reviews.md#which-decisions-wait-for-review), or a replay's
+    # recorded resolutions; None: no review.
     review: ReviewGate | None = None
     verdicts: VerdictCache = field(default_factory=VerdictCache)
-    # SPEC 17: robot -> feature -> (basis, reports) of rates learned from the site (the
-    # prompt says so); empty: every rate is the configured one.
+    # docs/estimates.md#using-the-estimates: robot -> feature -> (basis, reports) of rates learned
+    # from the site (the prompt says so); empty: every rate is the configured one.
     rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] = field(default_factory=dict)
-    # SPEC 16: on a timed instance, the robots' timelines and the decision order.
+    # docs/schedules.md#the-order-of-decisions: on a timed instance, the robots' timelines and the
+    # decision order.
     timed: TimedCursor = field(default_factory=TimedCursor)
 
     @property
@@ -119,7 +121,8 @@ def task_view(
     """`decided`: the graph's decisions so far, when it does not decide in queue order (a
     timed instance); else they are the free tasks before `task_index`."""
     n = problem.instance.n_tasks
-    # SPEC 10: p = (pins + tasks decided so far) / tasks; with no pins, task_index / n.
+    # docs/living-plans.md#balance-and-phases: p = (pins + tasks decided so far) / tasks; with no
+    # pins, task_index / n.
     if decided is None:
         allocated = problem.allocated_before(task_index)
         remaining = problem.remaining_after(task_index)

@@ -1,5 +1,5 @@
-"""The graph's view of time on a timed instance (SPEC 16): which task comes next and what
-each robot would make of it, from the robots' timelines as decided so far.
+"""The graph's view of time on a timed instance (docs/schedules.md#runs-in-time): which task comes
+next and what each robot would make of it, from the robots' timelines as decided so far.
 
 The timelines grow with the run, so they live here, in the run-scoped context, never in
 the checkpointed state (which stays O(robots)). They are a deterministic function of the
@@ -48,9 +48,9 @@ def options_for(
 
 
 def best_in_time(dctx: DecisionContext) -> int:
-    """The fallback on a timed instance (SPEC 16): among the robots allowed (the cap, the
-    deadline and the shift), the one with the best success; ties: the earlier end, then
-    fleet order."""
+    """The fallback on a timed instance (docs/schedules.md#validation-in-time): among the robots
+    allowed (the cap, the deadline and the shift), the one with the best success; ties: the earlier
+    end, then fleet order."""
     return min(dctx.feasible, key=lambda r: (-dctx.success[r], dctx.timing[r].end, r))
 
 

@@ -77,7 +77,8 @@ def hard_invalid_reason(parsed: ParsedResponse, ctx: DecisionContext) -> str | N
     if parsed.robot not in ctx.feasible:
         allowed = ", ".join(labels[r] for r in ctx.feasible)
         if ctx.timing and not ctx.timing[parsed.robot].allowed:
-            # SPEC 16: a choice that misses the deadline or breaks a shift is hard-invalid.
+            # docs/schedules.md#validation-in-time: a choice that misses the deadline or breaks a
+            # shift is hard-invalid.
             why = ctx.timing[parsed.robot].why_not
             return f"{labels[parsed.robot]} {why}; allowed now: {allowed}"
         return (

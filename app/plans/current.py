@@ -1,5 +1,5 @@
-"""A run's current schedule (SPEC 16 "Time in living plans"): the schedule its decisions
-make, re-timed by the execution reports the site sent (`app.domain.scheduling.reported`).
+"""A run's current schedule (docs/living-plans.md#the-runs-current-schedule): the schedule its
+decisions make, re-timed by the execution reports the site sent (`app.domain.scheduling.reported`).
 
 What `GET /runs/{id}/schedule`, the console's Gantt chart and the diff's "before" read: a
 task reported done later than planned moves what waits for it. Only the reports with

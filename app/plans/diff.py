@@ -1,5 +1,6 @@
-"""A revision against its parent (SPEC 10): what moved, what was added or removed, what the
-fleet lost or gained, and expected success and balance before and after."""
+"""A revision against its parent (docs/living-plans.md#the-lineage-and-the-diff): what moved, what
+was added or removed, what the fleet lost or gained, and expected success and balance before and
+after."""
 
 from __future__ import annotations
 
@@ -32,8 +33,9 @@ class Diff:
     fleet_changes: list[dict[str, Any]]
     before: dict[str, Any]
     after: dict[str, Any]
-    # SPEC 16: start/end moves and the makespans (app.plans.schedule_moves); None for an
-    # untimed revision, and until both plans have decided every task.
+    # docs/living-plans.md#the-diff-in-time: start/end moves and the makespans
+    # (app.plans.schedule_moves); None for an untimed revision, and until both plans have decided
+    # every task.
     schedule: dict[str, Any] | None = None
 
 

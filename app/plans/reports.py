@@ -1,4 +1,5 @@
-"""Execution reports (SPEC 10): where the site says each decided task stands.
+"""Execution reports (docs/living-plans.md#execution-reports): where the site says each decided task
+stands.
 
 States move forward only: started -> done | failed, done and failed are final, and the
 same report again is a no-op; a task is not done (or failed) at a time before it started.
@@ -208,8 +209,8 @@ def _report(
                     session, run_id=run_id, kind=EventKind.EXECUTION_REPORTED, detail=detail
                 )
             if outcomes:
-                # The site's outcome rows (SPEC 17), received when the record says: the
-                # rebuild from the record reads the same time.
+                # The site's outcome rows (docs/estimates.md#counting-each-report-once), received
+                # when the record says: the rebuild from the record reads the same time.
                 session.flush()
                 site_repo.record_outcomes(
                     session=session, run=run, reported=outcomes, received_at=record.created_at

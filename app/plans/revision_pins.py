@@ -1,5 +1,5 @@
-"""The pinned decisions of a revision (SPEC 10) as its own decision rows: the parent's
-robot, success and reasoning, with loads and balance counted in the revision's terms."""
+"""The pinned decisions of a revision (docs/living-plans.md#pins) as its own decision rows: the
+parent's robot, success and reasoning, with loads and balance counted in the revision's terms."""
 
 from __future__ import annotations
 
@@ -73,9 +73,9 @@ def pinned_rows(
 
 
 def _times(problem: Problem, index: int, fact: tuple[float, float] | None) -> dict[str, Any]:
-    """SPEC 16: a pin the site reported keeps its reported times (and its zone). A pin
-    without a report gets its time when the revision's graph places it, so its row has
-    none (app.runs.views.run_schedule places it the same way)."""
+    """docs/living-plans.md#a-revision-in-time: a pin the site reported keeps its reported times
+    (and its zone). A pin without a report gets its time when the revision's graph places it, so its
+    row has none (app.runs.views.run_schedule places it the same way)."""
     if fact is None:
         return {}
     return {"start": fact[0], "end": fact[1], "zone": problem.instance.tasks[index].zone}

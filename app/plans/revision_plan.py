@@ -1,6 +1,6 @@
-"""What a revision is (SPEC 10), computed from its parent without touching the database:
-the pins the rule selects, the fleet and queue after the changes, the cap, and the pinned
-decision rows in the revision's own terms.
+"""What a revision is (docs/living-plans.md#revisions), computed from its parent without touching
+the database: the pins the rule selects, the fleet and queue after the changes, the cap, and the
+pinned decision rows in the revision's own terms.
 
 Changes arrive as plain dicts (the API validated their shape); every error here names the
 request field it is about, so a bad revision is a 4xx before anything is written.
@@ -44,8 +44,8 @@ class RevisionPlan:
     added_tasks: list[str] = field(default_factory=list)
     removed_tasks: list[str] = field(default_factory=list)
     fleet_changes: list[dict[str, Any]] = field(default_factory=list)
-    # SPEC 16: the `now` a timed revision planned from (None: untimed), and the reported
-    # (start, end) minutes of its pinned tasks, by revision task index.
+    # docs/living-plans.md#a-revision-in-time: the `now` a timed revision planned from (None:
+    # untimed), and the reported (start, end) minutes of its pinned tasks, by revision task index.
     now: datetime | None = None
     facts: dict[int, tuple[float, float]] = field(default_factory=dict)
 
@@ -301,7 +301,8 @@ def plan_revision(
                     "name": task.get("name") or str(task["id"]),
                     "type": task.get("type", "Custom"),
                     "features": list(task["features"]),
-                    # SPEC 16: an added task of a timed run brings its own time fields.
+                    # docs/living-plans.md#a-revision-in-time: an added task of a timed run brings
+                    # its own time fields.
                     **{k: task[k] for k in _TASK_TIME if task.get(k) is not None},
                 }
                 (added_next if c.get("position", "end") == "next" else added_end).append(entry)
@@ -338,7 +339,8 @@ def plan_revision(
         now=now,
         arrival=arrival or datetime.now(UTC),
     )
-    # The parent's other instance fields (SPEC 16: travel, start) are the site's: kept.
+    # The parent's other instance fields (docs/living-plans.md#a-revision-in-time: travel, start)
+    # are the site's: kept.
     instance_data = {**data, "tasks": times.tasks, "robots": robots}
     try:
         instance = instance_from_dict(instance_data)

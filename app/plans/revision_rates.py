@@ -1,5 +1,6 @@
-"""The rates a revision plans with (SPEC 17): inherited `rates` and `durations` (or the
-request's), and `use_learned {robots?}` changes, over the fleet the other changes left.
+"""The rates a revision plans with (docs/estimates.md#using-the-estimates): inherited `rates` and
+`durations` (or the request's), and `use_learned {robots?}` changes, over the fleet the other
+changes left.
 
 The configured rates go on through a lineage: a parent that planned with learned ones
 recorded its configured ones, and a `set_rates` change in the revision configures anew.

@@ -1,4 +1,4 @@
-"""Time in a revision (SPEC 16 "Time in living plans"), computed from the revision's queue
+"""Time in a revision (docs/living-plans.md#a-revision-in-time), computed from the revision's queue
 without touching the database.
 
 - `now` (default: the request's arrival) is the revision's minute `not_before`: nothing

@@ -1,4 +1,5 @@
-"""Revisions (SPEC 10): a new run that replaces its parent when the site changes.
+"""Revisions (docs/living-plans.md#revisions): a new run that replaces its parent when the site
+changes.
 
 Creating a revision and stopping its parent is one transaction. It begins by writing the
 parent's row (a lock: SQLite's write lock, a PostgreSQL row lock), so the decisions it pins
@@ -69,10 +70,11 @@ class RevisionRequest:
     reason: str
     reasoner: str | None = None
     model: str | None = None
-    # SPEC 17: None inherits the parent's.
+    # docs/estimates.md#using-the-estimates: None inherits the parent's.
     rates: RateSource | None = None
     durations: DurationSource | None = None
-    # SPEC 16: the time the revision plans from (aware); None: the request's arrival.
+    # docs/living-plans.md#a-revision-in-time: the time the revision plans from (aware); None: the
+    # request's arrival.
     now: datetime | None = None
 
 
@@ -286,7 +288,8 @@ def _create(
 
 
 def _time_detail(plan: RevisionPlan) -> dict[str, Any]:
-    """SPEC 16: when a timed revision plans from, and the reported times it pinned."""
+    """docs/living-plans.md#a-revision-in-time: when a timed revision plans from, and the reported
+    times it pinned."""
     if plan.now is None:
         return {}
     tasks = plan.problem.instance.tasks

@@ -1,7 +1,7 @@
-"""What a revision did to the plan in time (SPEC 16: `GET /runs/{id}/diff` adds start/end
-moves and the makespan before and after), from two schedules: the parent's as it stood
-(its decisions re-timed by its execution reports, as `GET /runs/{parent}/schedule` reads
-it) and the revision's.
+"""What a revision did to the plan in time (docs/living-plans.md#the-diff-in-time:
+`GET /runs/{id}/diff` adds start/end moves and the makespan before and after), from two
+schedules: the parent's as it stood (its decisions re-timed by its execution reports, as
+`GET /runs/{parent}/schedule` reads it) and the revision's.
 
 Tasks are matched by id. A task is listed when its start or its end moved (by more than
 `EPS`), with both times before and after in minutes of the plan and in RFC 3339 (the two

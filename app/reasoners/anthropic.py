@@ -7,9 +7,10 @@ key, unknown model) is a ReasonerRejectedError that ends the run.
 
 Temperature: the pinned SDK (2.x) sends `anthropic-version: 2026-10-21` and no longer has a
 `temperature` argument; that API version rejects sampling parameters with HTTP 400. The
-SPEC asks for 0.1, so a set temperature is sent in the body (`extra_body`) on the API
-version that accepts it, 2023-06-01. `temperature=None` sends no sampling parameter and
-keeps the SDK's own API version (for models that refuse temperature altogether).
+service's default is 0.1 (docs/reasoners.md#the-anthropic-reasoner-claude), so a set temperature is
+sent in the body (`extra_body`) on the API version that accepts it, 2023-06-01. `temperature=None`
+sends no sampling parameter and keeps the SDK's own API version (for models that refuse temperature
+altogether).
 """
 
 from __future__ import annotations

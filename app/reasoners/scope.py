@@ -1,4 +1,5 @@
-"""`llm_scope: "contested"` (SPEC §14): the LLM is asked only where its judgement can matter.
+"""`llm_scope: "contested"` (docs/reasoners.md#llm_scope-ask-the-model-only-where-it-matters): the
+LLM is asked only where its judgement can matter.
 
 Among the cap-feasible robots the trade-off rule picks `best` iff its gap over `fewest`
 exceeds the mode/phase threshold T. A decision is contested when that verdict is close

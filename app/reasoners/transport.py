@@ -23,8 +23,9 @@ from app.reasoners.base import ReasonerError
 # Statuses worth another try later (after the SDK's own retries): the rest are our fault.
 TRANSIENT_STATUSES = frozenset({408, 409, 429})
 
-# Every SDK-backed reasoner's defaults: the SPEC's temperature, and one transport budget so
-# that the providers fail alike.
+# Every SDK-backed reasoner's defaults: temperature 0.1
+# (docs/reasoners.md#the-anthropic-reasoner-claude), and one transport budget so that the providers
+# fail alike.
 DEFAULT_TEMPERATURE = 0.1
 DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
 DEFAULT_TIMEOUT_S = 60.0

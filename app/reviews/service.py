@@ -1,5 +1,6 @@
-"""Supervisor reviews of decisions (SPEC 11): the queue of decisions waiting for a person,
-and their resolution, as keyword-only functions the routes, the console and the CLI call.
+"""Supervisor reviews of decisions (docs/reviews.md#which-decisions-wait-for-review): the queue of
+decisions waiting for a person, and their resolution, as keyword-only functions the routes, the
+console and the CLI call.
 
 A resolution is stored with the run and queues it again in one transaction; the worker's
 side of a review (pausing, resuming with the resolution) is app.runs.review_gate.

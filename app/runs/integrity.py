@@ -72,8 +72,8 @@ def check_integrity(
     node wrote its decision but did not finish: that node re-runs and upserts the same
     row, so a lag of exactly one is consistent. Anything else is reported as a problem.
 
-    A revision (SPEC 10) also has `pinned` rows (task index -> robot) written when it was
-    created: each pin must be stored on its robot, the graph's decisions must be a prefix
+    A revision (docs/living-plans.md#pins) also has `pinned` rows (task index -> robot) written when
+    it was created: each pin must be stored on its robot, the graph's decisions must be a prefix
     of the `free_tasks`, and loads count from `initial_loads` (the pins on available robots).
     `free_tasks` is the order the graph decides in: queue order, or on a timed instance the
     order in time (app.domain.scheduling.progress.decision_order and the next task).

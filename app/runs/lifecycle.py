@@ -91,8 +91,8 @@ def new_run(
     first_event: EventKind = EventKind.CREATED,
     **fields: Any,
 ) -> Run:
-    """A queued run and its first event: `created`, or `revised` for a revision (SPEC 10),
-    whose detail is the link its chains are anchored to."""
+    """A queued run and its first event: `created`, or `revised` for a revision
+    (docs/living-plans.md#audit), whose detail is the link its chains are anchored to."""
     with status_writes():
         run = Run(id=run_id, status=RunStatus.QUEUED.value, **fields)
     session.add(run)

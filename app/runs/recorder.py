@@ -32,7 +32,8 @@ class LeaseLost(RunCancelled):
 
 
 class RunSuperseded(RunCancelled):
-    """A revision replaced this run (SPEC 10): stop without writing anything more."""
+    """A revision replaced this run (docs/living-plans.md#the-parent): stop without writing anything
+    more."""
 
 
 class RunStop:
@@ -131,7 +132,7 @@ def fences(*parts: Fence | None) -> Fence | None:
 
 def _chain_key(record: DecisionRecord) -> int:
     """Where a decision sits in its run's chain: a timed run's in the order the graph made
-    them (SPEC 16), others in task order."""
+    them (docs/schedules.md#the-chain-in-decision-order), others in task order."""
     return record.task_index if record.seq is None else record.seq
 
 

@@ -159,7 +159,7 @@ def guidance_plan(
         if plan is not None:
             return plan
         if decision_repo.decision_count(session=session, run_id=run_id):
-            # Started before plans were stored, in SPEC 16's order: unguided from here on
+            # Started before plans were stored, in the earliest-start order: unguided from here on
             # rather than decided in an order its record does not have.
             return GuidancePlan((), ())
         original = stored_plan(session, replay_of) if replay_of is not None else None

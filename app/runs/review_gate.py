@@ -1,5 +1,5 @@
-"""The run's side of supervisor reviews (SPEC 11): the review policy a run is created with,
-and what the worker does when the graph pauses for a person.
+"""The run's side of supervisor reviews (docs/reviews.md#which-decisions-wait-for-review): the
+review policy a run is created with, and what the worker does when the graph pauses for a person.
 
 A run whose review policy fires pauses inside the graph (`interrupt()`, app.graph.review);
 the worker then records the review here and moves the run to `awaiting_review`, holding

@@ -180,9 +180,9 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
 
 
 def order_instance(order: RunOrder) -> Instance:
-    """The instance a run order names: a built-in scenario (the timed ones of SPEC 16, such
-    as `baseline_timed`, included), or its own tasks and robots (a timed instance without
-    `start` starts at the request's arrival)."""
+    """The instance a run order names: a built-in scenario (the timed ones of
+    docs/schedules.md#asking-for-one, such as `baseline_timed`, included), or its own tasks and
+    robots (a timed instance without `start` starts at the request's arrival)."""
     return instance_of(
         order.scenario,
         order.tasks,
@@ -201,8 +201,9 @@ def learned_spec(
     source: RateSource | None = None,
     only: list[str] | None = None,
 ) -> RunSpec:
-    """SPEC 17: a run asking for learned (or sampled) rates or durations plans with the
-    site's estimates now, its own configured rates the priors; nothing to do otherwise."""
+    """docs/estimates.md#using-the-estimates: a run asking for learned (or sampled) rates or
+    durations plans with the site's estimates now, its own configured rates the priors; nothing to
+    do otherwise."""
     if (source or spec.rates) == RateSource.CONFIGURED and spec.durations == "configured":
         return spec
     as_of = utcnow().isoformat()  # taken before the read: an as_of read later sees as much

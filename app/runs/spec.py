@@ -51,27 +51,29 @@ class RunSpec:
     # Whether max_deviation was asked for (kept by a revision) or the mode's default
     # (recomputed for a revision's W); None for runs stored before it was recorded.
     cap_explicit: bool | None = None
-    # Revisions (SPEC 10): task index (as text, JSON keys) -> robot index of the pins,
-    # robot indexes that take no new task, and the run revised.
+    # Revisions (docs/living-plans.md#pins): task index (as text, JSON keys) -> robot index of the
+    # pins, robot indexes that take no new task, and the run revised.
     pinned: dict[str, int] | None = None
     unavailable: list[int] | None = None
     revision_of: str | None = None
-    # Time in a revision (SPEC 16): task index (as text) -> the fixed start minute of a
-    # pinned task reported started or done, and the revision's `now` in minutes (nothing
-    # else starts earlier). None on every untimed run and every run that is not a revision.
+    # Time in a revision (docs/living-plans.md#a-revision-in-time): task index (as text) -> the
+    # fixed start minute of a pinned task reported started or done, and the revision's `now` in
+    # minutes (nothing else starts earlier). None on every untimed run and every run that is not a
+    # revision.
     pinned_starts: dict[str, float] | None = None
     not_before: float | None = None
     # app.domain.review.ReviewPolicy as JSON; None: no review.
     review: dict[str, Any] | None = None
-    # Learning from the site (SPEC 17): the site, which rates and durations the run plans
-    # with, and what learning put into instance_data (app.domain.estimates.rates_record:
-    # every number, with the configured rate and the reports behind it; None: configured).
+    # Learning from the site (docs/estimates.md#using-the-estimates): the site, which rates and
+    # durations the run plans with, and what learning put into instance_data
+    # (app.domain.estimates.rates_record: every number, with the configured rate and the reports
+    # behind it; None: configured).
     site: str = DEFAULT_SITE
     rates: str = RateSource.CONFIGURED.value
     durations: str = DurationSource.CONFIGURED.value
     learned: dict[str, Any] | None = None
-    # SPEC 16, timed instances: the objective (app.domain.objective); specs stored before
-    # it existed read as the default.
+    # docs/schedules.md#the-model, timed instances: the objective (app.domain.objective); specs
+    # stored before it existed read as the default.
     objective: str = ObjectiveKind.SUCCESS_THEN_MAKESPAN.value
     min_expected_success: float = 0.0
 
@@ -102,7 +104,8 @@ class RunSpec:
         )
 
     def objective_of(self) -> Objective:
-        """The objective (SPEC 16); Problem.build refuses any but the default untimed."""
+        """The objective (docs/schedules.md#the-model); Problem.build refuses any but the default
+        untimed."""
         return Objective(ObjectiveKind(self.objective), self.min_expected_success)
 
     def with_site_estimates(
@@ -114,9 +117,9 @@ class RunSpec:
         source: RateSource | None = None,
         only: Collection[str] | None = None,
     ) -> RunSpec:
-        """This run planning with the site's estimates (SPEC 17) as its `rates` and
-        `durations` ask (or `source` for the robots in `only`): the numbers go into the
-        instance, the configured rates and the counts behind each number into `learned`."""
+        """This run planning with the site's estimates (docs/estimates.md#using-the-estimates) as
+        its `rates` and `durations` ask (or `source` for the robots in `only`): the numbers go into
+        the instance, the configured rates and the counts behind each number into `learned`."""
         source = source or RateSource(self.rates)
         robots = estimates.configured_rates(self.instance_data["robots"], self.learned)
         rng = (
@@ -198,8 +201,8 @@ class RunOrder:
     site: str = DEFAULT_SITE
     rates: RateSource = RateSource.CONFIGURED
     durations: DurationSource = DurationSource.CONFIGURED
-    # SPEC 16, timed instances: travel between zones, the wall-clock time of minute 0
-    # (None: the request's arrival), and the objective.
+    # docs/schedules.md#the-model, timed instances: travel between zones, the wall-clock time of
+    # minute 0 (None: the request's arrival), and the objective.
     travel: Mapping[str, Mapping[str, float]] | None = None
     start: datetime | None = None
     objective: ObjectiveKind = ObjectiveKind.SUCCESS_THEN_MAKESPAN

@@ -191,8 +191,8 @@ class Trace:
     decisions: list[DecisionRecord]
     attempts: dict[int, list[Attempt]]
     total: int
-    # A revision's decisions kept from its parent (SPEC 10): task index -> the parent
-    # decision's chain hash (`pinned_from`).
+    # A revision's decisions kept from its parent (docs/living-plans.md#revisions): task index ->
+    # the parent decision's chain hash (`pinned_from`).
     pins: dict[int, str | None] = field(default_factory=dict)
 
 
@@ -230,10 +230,10 @@ def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
 def run_schedule(
     *, sessions: sessionmaker[Session], run_id: str
 ) -> tuple[Problem, Schedule] | None:
-    """A timed run's plan in time (SPEC 16), rebuilt from its stored decisions with
-    build_schedule: (its problem, its schedule); None for an untimed run (it has no times).
-    A task without a stored start (a revision's pin copied from a run before times were
-    stored) is placed as the graph placed it (app.domain.scheduling.progress), from the
+    """A timed run's plan in time (docs/schedules.md#reading-a-runs-schedule), rebuilt from its
+    stored decisions with build_schedule: (its problem, its schedule); None for an untimed run (it
+    has no times). A task without a stored start (a revision's pin copied from a run before times
+    were stored) is placed as the graph placed it (app.domain.scheduling.progress), from the
     stored robots. StateConflictError (409) while the run has not decided every task."""
     with sessions() as session:
         run = require_run(session, run_id)

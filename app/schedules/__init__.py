@@ -1,5 +1,5 @@
-"""Reading a schedule (SPEC 16): the same plan as JSON, CSV, iCalendar, a Gantt chart (SVG)
-and a terminal timeline.
+"""Reading a schedule (docs/schedules.md#reading-a-runs-schedule): the same plan as JSON, CSV,
+iCalendar, a Gantt chart (SVG) and a terminal timeline.
 
 Pure functions over domain objects (a `Problem` and the `Schedule` a solver made of it):
 they compute nothing a schedule does not already say, so every view shows the same times.

@@ -1,4 +1,4 @@
-"""A site's estimates (SPEC 17), recomputed from its outcome rows at every read.
+"""A site's estimates (docs/estimates.md#the-model), recomputed from its outcome rows at every read.
 
 Per robot and feature: the prior (the configured rate of the most recent run on the site
 naming the robot, created up to `as_of`), the successes and failures reported, the Beta

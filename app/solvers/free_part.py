@@ -1,7 +1,7 @@
 """What a solver actually decides: the free tasks on the available robots.
 
-Pins fix some tasks and unavailable robots take no new task (SPEC 10), so every solver
-works on a smaller problem: the success rows of the free tasks, the columns of the
+Pins fix some tasks and unavailable robots take no new task (docs/living-plans.md#pins-in-allocate),
+so every solver works on a smaller problem: the success rows of the free tasks, the columns of the
 available robots, loads that start from the pins, and the same cap bounds. Robot order
 among the available robots is the fleet's, so the robot-order tie-break carries over.
 Without pins it is the whole problem: the same matrix, no copy.
@@ -40,7 +40,7 @@ class FreePart:
     @property
     def eligible(self) -> np.ndarray:
         """E[free task, available robot]; all true unless a timed task's duration map
-        leaves robots out (SPEC 16)."""
+        leaves robots out (docs/schedules.md#the-model)."""
         e = self.problem.instance.eligible
         if not self.problem.pinned and not self.problem.unavailable:
             return e

@@ -26,7 +26,8 @@ class GreedySolver(Solver):
         s = part.success
         tracker = CapTracker(part.cap, part.initial_loads)
         # Robots by descending S per task (stable sort keeps robot order among ties); on a
-        # timed instance, robots a task's duration map leaves out rank last (SPEC 16).
+        # timed instance, robots a task's duration map leaves out rank last
+        # (docs/schedules.md#the-model).
         eligible = part.eligible
         key = s if eligible.all() else np.where(eligible, s, -1.0)
         ranked = np.argsort(-key, axis=1, kind="stable").tolist()

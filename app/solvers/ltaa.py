@@ -49,8 +49,9 @@ class LTAAOptions(SolverOptions):
     temperature: float | None = Field(None, ge=0.0, le=1.0)
     timeout: float | None = Field(None, gt=0.0)
     guidance: Literal["optimizer"] | None = None
-    # SPEC §14: 'contested' asks the LLM only where the trade-off verdict is close to its
-    # threshold (within llm_margin points) or guidance disagrees with the rule.
+    # docs/reasoners.md#llm_scope-ask-the-model-only-where-it-matters: 'contested' asks the LLM only
+    # where the trade-off verdict is close to its threshold (within llm_margin points) or guidance
+    # disagrees with the rule.
     llm_scope: Literal["all", "contested"] = "all"
     llm_margin: float = Field(DEFAULT_LLM_MARGIN, ge=0.0, le=100.0)
     # No api_key / base_url here: a request must not choose where the server sends its
@@ -89,7 +90,8 @@ def graph_context(
     )
     guide: Guidance | None = None
     if guidance == "optimizer" and problem.instance.timed:
-        # In time, the `schedule` solver's plan, followed in its order (SPEC 16).
+        # In time, the `schedule` solver's plan, followed in its order
+        # (docs/schedules.md#the-order-of-decisions).
         plan = plan if plan is not None else plan_guidance(problem)
         problem = guided_problem(problem, plan)
         guide = ScheduleGuidance(plan) if plan.robots else None
@@ -152,9 +154,9 @@ GRAPH_TIMES = "the LTAA graph's own times: decided in time order, each task plac
 def graph_times(
     problem: Problem, assignment: Sequence[int], decisions: Sequence[DecisionRecord]
 ) -> dict[str, Any]:
-    """On a timed instance, the schedule the graph made as it decided (SPEC 16), which the
-    list-scheduler hook then leaves alone; nothing untimed. Pins without a recorded start
-    are placed as the graph placed them."""
+    """On a timed instance, the schedule the graph made as it decided
+    (docs/schedules.md#runs-in-time), which the list-scheduler hook then leaves alone; nothing
+    untimed. Pins without a recorded start are placed as the graph placed them."""
     if not problem.instance.timed:
         return {}
     starts = {d.task_index: d.start for d in decisions if d.start is not None}

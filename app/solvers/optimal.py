@@ -7,9 +7,9 @@ optimum. Costs are integers: S scaled to an integer (1e-9 resolution on small
 instances), multiplied by a factor larger than any deviation difference, plus the
 deviation term R*|L - W| — so one solve gives "max success, then least deviation".
 
-On a timed instance a robot that a task's duration map omits cannot take it (SPEC 16):
-`eligible` then removes those arcs, and tasks group by success row and eligibility row.
-Without such pairs (every untimed instance) nothing changes.
+On a timed instance a robot that a task's duration map omits cannot take it
+(docs/schedules.md#the-model): `eligible` then removes those arcs, and tasks group by success row
+and eligibility row. Without such pairs (every untimed instance) nothing changes.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""`schedule`: the exact scheduler of SPEC 16 on OR-Tools CP-SAT, as an allocation method.
+"""`schedule`: the exact scheduler of docs/schedules.md#schedulers on OR-Tools CP-SAT, as an
+allocation method.
 
 On a timed instance it decides who and when together (see `schedule_search`), and its
 details say what is proven: `status` ("optimal" only when CP-SAT proved it), the

@@ -3,8 +3,8 @@
 `Solver.solve` calls `attach_schedule` with the details of the method's answer. Methods
 that schedule themselves (`schedule`) leave a `schedule` in their details and are left
 alone; for every other method the assignment is kept as it is and timed by the one serial
-list scheduler (SPEC 16), so every method has an expected success and a makespan on the
-same instance. Nothing is hidden: the details carry the rules the schedule breaks
+list scheduler (docs/schedules.md#schedulers), so every method has an expected success and a
+makespan on the same instance. Nothing is hidden: the details carry the rules the schedule breaks
 (`schedule_violations`, e.g. a deadline the assignment cannot meet), and an assignment
 that gives a task to a robot that cannot take it has no schedule (`schedule` None and
 `schedule_error` saying which task and robot).

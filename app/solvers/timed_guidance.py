@@ -1,15 +1,15 @@
-"""Optimizer guidance on a timed instance (SPEC 16 "The LTAA graph on time", SPEC 4): the
+"""Optimizer guidance on a timed instance (docs/schedules.md#guidance-in-time): the
 `schedule` solver's plan, solved once when the run starts.
 
 Who alone is not enough in time. The graph places each task when it decides it, at the
 earliest its robot and predecessors allow, so the times depend on the order of the
-decisions: SPEC 16's earliest-start order gives each robot the plan's tasks in another
-sequence than the plan's, and the guided makespan fell 20-55% short of the optimum on
-`baseline_timed`. So a guided run decides in the plan's order (by the plan's starts, ties
+decisions: the earliest-start order (docs/schedules.md#the-order-of-decisions) gives each robot the
+plan's tasks in another sequence than the plan's, and the guided makespan fell 20-55% short of the
+optimum on `baseline_timed`. So a guided run decides in the plan's order (by the plan's starts, ties
 in queue order; only ready tasks come up, so precedence holds): a robot that follows the
 plan gets the plan's tasks in the plan's sequence, each placed no later than the plan has
 it (by induction over the order: its predecessors and the robot's previous task end no
-later), and the makespan is the plan's. Unguided runs keep SPEC 16's order.
+later), and the makespan is the plan's. Unguided runs keep the earliest-start order.
 
 One plan per run, never re-solved. Where the run departs from it (a reasoner overrules
 the guidance, a review), the rest is still decided in the plan's order, which stays a valid
@@ -79,7 +79,7 @@ def plan_guidance(problem: Problem, *, time_limit_s: float = GUIDANCE_TIME_LIMIT
         )
     except DomainError:
         # No schedule exists (or none was found in time): no guidance, the graph decides
-        # by its own rule and in SPEC 16's order.
+        # by its own rule and in the earliest-start order.
         return GuidancePlan((), ())
     slots = outcome.schedule.slots  # one per task, in queue order
     budget = {

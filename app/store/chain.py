@@ -117,8 +117,8 @@ DECISION_FIELDS: dict[str, Normaliser] = {
 }
 # Hashed only when set, so decisions stored before the column existed keep their links.
 OPTIONAL_DECISION_FIELDS = frozenset({"review"})
-# SPEC 16, a timed run's decisions: hashed (and exported) only when set, as the pin columns,
-# so untimed decisions keep their links and their export lines.
+# docs/schedules.md#what-a-decision-records, a timed run's decisions: hashed (and exported) only
+# when set, as the pin columns, so untimed decisions keep their links and their export lines.
 TIME_FIELDS: dict[str, Normaliser] = {
     "start": _float,
     "end": _float,
@@ -146,8 +146,8 @@ ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "hard_invalid": _opt_str,
     "feedback": _opt_str,
 }
-# A revision's pinned decisions (SPEC 10) carry these; hashed only when set, so every link
-# written before they existed (and every decision the graph makes) keeps its hash.
+# A revision's pinned decisions (docs/living-plans.md#pins) carry these; hashed only when set, so
+# every link written before they existed (and every decision the graph makes) keeps its hash.
 PIN_FIELDS: dict[str, Normaliser] = {"pinned": _opt_bool, "pinned_from": _opt_str}
 EVENT_FIELDS: dict[str, Normaliser] = {"seq": _int, "kind": _str, "detail": _json}
 # Records made after a run finished (app.domain.annotations), chained like the events.

@@ -230,8 +230,9 @@ def _decision_chain_hash(session: Session, run_id: str, values: dict[str, Any]) 
 
 
 def _sequenced_prev(session: Session, run_id: str, seq: int) -> str | None:
-    """The link before a timed run's decision (SPEC 16): the run's decisions are chained in
-    the order the graph made them (`seq`), which is not task order."""
+    """The link before a timed run's decision (docs/schedules.md#the-chain-in-decision-order): the
+    run's decisions are chained in the order the graph made them (`seq`), which is not task
+    order."""
     row = session.execute(
         select(Decision.chain_hash)
         .where(Decision.run_id == run_id, Decision.seq < seq, Decision.pinned.is_(None))
@@ -272,7 +273,8 @@ def revision_chain_order(pinned: Sequence[int], decided: Sequence[int]) -> list[
 
 def sequenced_order(*, session: Session, run_id: str) -> list[int] | None:
     """A timed run's graph decisions (task indexes) in the order they were made and chained
-    (SPEC 16); None for a run whose decisions carry no order (chained in task order)."""
+    (docs/schedules.md#the-chain-in-decision-order); None for a run whose decisions carry no order
+    (chained in task order)."""
     rows = session.execute(
         select(Decision.task_index, Decision.seq)
         .where(Decision.run_id == run_id, Decision.pinned.is_(None))

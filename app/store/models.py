@@ -76,8 +76,8 @@ class Run(Base):
         String(255), nullable=True, unique=True, index=True
     )
     request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
-    # Revisions (SPEC 10): the run this one revises, its place in the lineage (0 = root),
-    # the revision that replaced this run, and the digest of the link to the parent (its
+    # Revisions (docs/living-plans.md#revisions): the run this one revises, its place in the lineage
+    # (0 = root), the revision that replaced this run, and the digest of the link to the parent (its
     # heads and the change set) that this run's chains start from (app.store.chain).
     revision_of: Mapped[str | None] = mapped_column(String(32), nullable=True, index=True)
     revision: Mapped[int] = mapped_column(Integer, default=0)
@@ -88,8 +88,8 @@ class Run(Base):
     graph_version: Mapped[str | None] = mapped_column(String(64), nullable=True)
     # How its hash chains are built (app.store.chain.SCHEMES); null: v1, from before.
     chain_scheme: Mapped[str | None] = mapped_column(String(32), nullable=True)
-    # The site it plans for (SPEC 17): its robots are (site, name); its execution reports
-    # feed that site's estimates (app.store.site_models).
+    # The site it plans for (docs/estimates.md#sites): its robots are (site, name); its execution
+    # reports feed that site's estimates (app.store.site_models).
     site: Mapped[str] = mapped_column(
         String(MAX_NAME_CHARS), default="default", server_default="default", index=True
     )
@@ -192,13 +192,14 @@ class Decision(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     # Tamper evidence: a hash over this row's content and the previous link of its run.
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
-    # A revision's pin (SPEC 10): copied from the parent's decision with this chain hash.
-    # Null on every decision the graph made; hashed only when set, so older links hold.
+    # A revision's pin (docs/living-plans.md#pins): copied from the parent's decision with this
+    # chain hash. Null on every decision the graph made; hashed only when set, so older links hold.
     pinned: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
     pinned_from: Mapped[str | None] = mapped_column(String(64), nullable=True)
-    # SPEC 16, a timed run (null otherwise): minutes from the plan's start, the task's zone,
-    # minutes travelled just before it, its place in the decision order (the chain order of
-    # a timed run) and how many minutes later it ends than an allowed robot's earliest end.
+    # docs/schedules.md#what-a-decision-records, a timed run (null otherwise): minutes from the
+    # plan's start, the task's zone, minutes travelled just before it, its place in the decision
+    # order (the chain order of a timed run) and how many minutes later it ends than an allowed
+    # robot's earliest end.
     start: Mapped[float | None] = mapped_column(Float, nullable=True)
     end: Mapped[float | None] = mapped_column(Float, nullable=True)
     zone: Mapped[str | None] = mapped_column(String(200), nullable=True)
@@ -208,8 +209,8 @@ class Decision(Base):
 
 
 class ExecutionReport(Base):
-    """Where the site says a decided task stands (SPEC 10): one row per run and task, moved
-    forward only (started -> done | failed)."""
+    """Where the site says a decided task stands (docs/living-plans.md#execution-reports): one row
+    per run and task, moved forward only (started -> done | failed)."""
 
     __tablename__ = "execution_reports"
     __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_execution_run_task"),)

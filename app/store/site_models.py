@@ -1,6 +1,6 @@
-"""The site's outcomes (SPEC 17): one row per task reported done or failed, written in the
-same transaction as the report, so the estimates of a site with 100,000 reports are one
-indexed aggregate rather than a walk over every run's record.
+"""The site's outcomes (docs/estimates.md#counting-each-report-once): one row per task reported done
+or failed, written in the same transaction as the report, so the estimates of a site with 100,000
+reports are one indexed aggregate rather than a walk over every run's record.
 
 The row is derived, never the record: `ltaa rebuild-estimates` recomputes the table from the
 execution-report events and annotations (app.sites.rebuild), and a test proves both agree.
@@ -74,7 +74,7 @@ class SiteReport(Base):
     reported_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
     received_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
     # started -> done with both times: the observed minutes (and their log); the planned
-    # minutes when the run's instance gave the task a duration (SPEC 16).
+    # minutes when the run's instance gave the task a duration (docs/schedules.md#the-model).
     minutes: Mapped[float | None] = mapped_column(Float, nullable=True)
     log_minutes: Mapped[float | None] = mapped_column(Float, nullable=True)
     planned_minutes: Mapped[float | None] = mapped_column(Float, nullable=True)

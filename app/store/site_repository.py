@@ -1,6 +1,6 @@
-"""Keyword-only data access for the site estimates (SPEC 17): the outcome rows written with
-each report, the aggregates the estimates are computed from, and the configured rates that
-serve as priors.
+"""Keyword-only data access for the site estimates (docs/estimates.md#counting-each-report-once):
+the outcome rows written with each report, the aggregates the estimates are computed from, and the
+configured rates that serve as priors.
 
 One derivation turns a reported task into its row (`outcome_row`), used both when a report
 arrives and when the table is rebuilt from the record, so the two cannot drift apart.
@@ -44,8 +44,8 @@ def _task_facts(request: Mapping[str, Any], task_index: int) -> Mapping[str, Any
 
 
 def planned_minutes(task: Mapping[str, Any], robot: str) -> float | None:
-    """The task's configured duration on this robot (SPEC 16: minutes, or minutes by
-    robot); None for an untimed task."""
+    """The task's configured duration on this robot (docs/schedules.md#the-model: minutes, or
+    minutes by robot); None for an untimed task."""
     duration = task.get("duration")
     if isinstance(duration, Mapping):
         duration = duration.get(robot)

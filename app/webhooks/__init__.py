@@ -1,4 +1,4 @@
-"""Webhooks: signed, durable notifications of run events (SPEC section 12, docs/webhooks.md).
+"""Webhooks: signed, durable notifications of run events (docs/webhooks.md).
 
 Layering: `app.runs` writes run events and calls `outbox.enqueue_for_event` in the same
 transaction; the dispatcher delivers; `app.api.routes.webhooks` manages subscriptions.

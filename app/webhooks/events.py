@@ -1,4 +1,5 @@
-"""The webhook event types (SPEC 12) and which run event kinds produce them."""
+"""The webhook event types (docs/webhooks.md#event-types-and-payloads) and which run event kinds
+produce them."""
 
 from __future__ import annotations
 

@@ -39,8 +39,9 @@ def _data(
     if kind in STATUS_OF_KIND:
         data["status"] = STATUS_OF_KIND[kind].value
     if kind == EventKind.COMPLETED:
-        # The run's expected success: the mean success of the stored decisions (SPEC 1),
-        # read in this transaction, so it is exactly what the completed run holds.
+        # The run's expected success: the mean success of the stored decisions
+        # (docs/allocation.md#success-and-balance), read in this transaction, so it is exactly what
+        # the completed run holds.
         count, total = session.execute(
             select(func.count(), func.coalesce(func.sum(Decision.expected_success), 0.0)).where(
                 Decision.run_id == run_id

@@ -1,4 +1,4 @@
-"""sites (SPEC 17): runs.site, and site_reports, the outcome rows the estimates read
+"""sites (docs/estimates.md#sites): runs.site, and site_reports, the outcome rows the estimates read
 
 Revision ID: 0010_sites
 Revises: 0008_yearlong

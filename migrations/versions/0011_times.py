@@ -1,4 +1,4 @@
-"""times (SPEC 16): a decision's place in time on a timed run
+"""times (docs/schedules.md#what-a-decision-records): a decision's place in time on a timed run
 
 Revision ID: 0011_times
 Revises: 0010_sites

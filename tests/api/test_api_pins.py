@@ -1,4 +1,4 @@
-"""`pinned` and `unavailable` on POST /allocate (SPEC 10 "Pins in /allocate")."""
+"""`pinned` and `unavailable` on POST /allocate (docs/living-plans.md#pins-in-allocate)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""POST /allocate on timed instances (SPEC 16): the schedule in every answer, the exact
-`schedule` solver against an exhaustive search, the 1,000-task path within its limit, and
+"""POST /allocate on timed instances (docs/api.md#plans-in-time): the schedule in every answer, the
+exact `schedule` solver against an exhaustive search, the 1,000-task path within its limit, and
 every schedule returned checked against the rules written out in tests/api/timed_checks.py."""
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ def success_matrix(body: dict[str, Any]) -> list[list[float]]:
 
 
 def checked(client: TestClient, body: dict[str, Any]) -> dict[str, Any]:
-    """POST /allocate, 200, and its schedule feasible by the test's own reading of SPEC 16."""
+    """POST /allocate, 200, and its schedule feasible by the test's own reading of
+    docs/schedules.md#a-schedule-and-its-check."""
     response = client.post("/allocate", json=body)
     assert response.status_code == 200, response.text
     answer: dict[str, Any] = response.json()

@@ -1,5 +1,5 @@
-"""Every bad timed input of SPEC 16 is a 422 naming the field and the task, never a 5xx:
-through POST /allocate, and through POST /runs (whose instance part is the same schema) on
+"""Every bad timed input of docs/api.md#plans-in-time is a 422 naming the field and the task, never
+a 5xx: through POST /allocate, and through POST /runs (whose instance part is the same schema) on
 SQLite and PostgreSQL, where nothing may be stored."""
 
 from __future__ import annotations

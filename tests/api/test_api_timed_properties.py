@@ -1,6 +1,6 @@
 """Random small timed sites through POST /allocate (hypothesis): never a 5xx; every schedule
-answered is feasible by the test's own reading of SPEC 16 exactly when the answer lists no
-violation; and what `schedule` calls optimal is the exhaustive optimum."""
+answered is feasible by the test's own reading of docs/schedules.md#a-schedule-and-its-check exactly
+when the answer lists no violation; and what `schedule` calls optimal is the exhaustive optimum."""
 
 from __future__ import annotations
 

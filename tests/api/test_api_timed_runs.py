@@ -1,6 +1,6 @@
-"""Durable runs on a timed instance (SPEC 16), on SQLite and PostgreSQL: the built-in timed
-scenario by name, times on assignments, in the trace and the export, the chain in decision
-order (verified online and offline), a replay with the same times, and bad timed input as a
+"""Durable runs on a timed instance (docs/schedules.md#runs-in-time), on SQLite and PostgreSQL: the
+built-in timed scenario by name, times on assignments, in the trace and the export, the chain in
+decision order (verified online and offline), a replay with the same times, and bad timed input as a
 422 naming the field and the task, with nothing stored."""
 
 from __future__ import annotations

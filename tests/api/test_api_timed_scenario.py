@@ -22,7 +22,8 @@ def test_allocate_plans_the_timed_scenario_by_name_from_its_own_start(client: Te
     assert sorted(str(t["task_id"]) for t in schedule["tasks"]) == sorted(
         str(t.id) for t in instance.tasks
     )
-    # What the service says it breaks is what the rules written from SPEC 16 find.
+    # What the service says it breaks is what the rules written from
+    # docs/schedules.md#a-schedule-and-its-check find.
     own = feasibility_errors(instance_to_dict(instance), schedule)
     assert bool(own) == bool(body["schedule_violations"]), (own, body["schedule_violations"])
 

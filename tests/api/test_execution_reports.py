@@ -1,6 +1,6 @@
-"""Execution reports (SPEC 10): forward only, idempotent, only for decided tasks, refused on
-a revised run, events while the run is unfinished and annotations after (verify stays ok);
-and what `pin: "reported"` makes of them."""
+"""Execution reports (docs/living-plans.md#execution-reports): forward only, idempotent, only for
+decided tasks, refused on a revised run, events while the run is unfinished and annotations after
+(verify stays ok); and what `pin: "reported"` makes of them."""
 
 from __future__ import annotations
 

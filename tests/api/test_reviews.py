@@ -1,7 +1,7 @@
-"""Supervisor reviews of decisions (SPEC 11), in process: the policy, the pause before a
-decision is stored, GET /reviews, resolutions (approve, override, conflicts, bad input),
-cancel, replay and metrics. The end-to-end tests (tests/e2e/test_reviews_e2e.py) kill the
-real server around the same steps."""
+"""Supervisor reviews of decisions (docs/reviews.md#which-decisions-wait-for-review), in process:
+the policy, the pause before a decision is stored, GET /reviews, resolutions (approve, override,
+conflicts, bad input), cancel, replay and metrics. The end-to-end tests
+(tests/e2e/test_reviews_e2e.py) kill the real server around the same steps."""
 
 from __future__ import annotations
 

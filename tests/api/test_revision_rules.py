@@ -1,5 +1,5 @@
-"""The revision rules of SPEC 10 through the API: queue building, rates, fleet, the cap,
-contradictions; and a 30-case bad-input battery for the two new endpoints."""
+"""The revision rules of docs/living-plans.md#revisions through the API: queue building, rates,
+fleet, the cap, contradictions; and a 30-case bad-input battery for the two new endpoints."""
 
 from __future__ import annotations
 

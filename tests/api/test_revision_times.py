@@ -1,5 +1,5 @@
-"""Time in living plans through the API (SPEC 16): `now` and `delay` on revisions, bad
-input refused with nothing stored."""
+"""Time in living plans through the API (docs/living-plans.md#a-revision-in-time): `now` and `delay`
+on revisions, bad input refused with nothing stored."""
 
 from __future__ import annotations
 
@@ -119,7 +119,8 @@ def test_a_late_report_moves_the_successors_in_the_runs_schedule(client: TestCli
     assert response.status_code == 200, response.text
     now = schedule(client, run_id)
     before, after = slots_of(planned), slots_of(now)
-    # Nobody changed robot; the reported tasks are where the site says; SPEC 16's rules hold.
+    # Nobody changed robot; the reported tasks are where the site says; the rules of
+    # docs/living-plans.md#a-revision-in-time hold.
     assert {t: s[0] for t, s in after.items()} == {t: s[0] for t, s in before.items()}
     rules = TimeRules(parent_tasks=TASKS, reports=history.reports, now=0.0)
     assert rules.broken(after) == []

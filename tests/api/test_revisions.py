@@ -1,4 +1,5 @@
-"""Revisions of completed runs through the API (SPEC 10): the plan, the record, the link."""
+"""Revisions of completed runs through the API (docs/living-plans.md#revisions): the plan, the
+record, the link."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""Learning from the site (SPEC 17) through the API: sites on runs, estimates that equal a
-posterior computed by hand from the reports sent (each counted once across a revision),
+"""Learning from the site (docs/estimates.md#sites) through the API: sites on runs, estimates that
+equal a posterior computed by hand from the reports sent (each counted once across a revision),
 learned and sampled runs that record their numbers, and bad input that stores nothing."""
 
 from __future__ import annotations

@@ -102,8 +102,9 @@ def test_solver_meets_the_contract(client: TestClient, solver: str, body: dict[s
         assert a["success"] == pytest.approx(instance.success[t, assignment[t]], abs=1e-12)
 
 
-# Pins (SPEC 10): on SMALL, "Weld seam" is fixed on alpha (its worse robot) and beta is
-# unavailable after taking "Sweep"; on baseline the heavy robot breaks down after task 17.
+# Pins (docs/living-plans.md#pins-in-allocate): on SMALL, "Weld seam" is fixed on alpha (its worse
+# robot) and beta is unavailable after taking "Sweep"; on baseline the heavy robot breaks down after
+# task 17.
 BASELINE_TASKS = [t.id for t in scenario("baseline").instance.tasks]
 PINNED_CASES: dict[str, dict[str, Any]] = {
     "small_pins": {

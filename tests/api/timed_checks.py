@@ -1,5 +1,6 @@
-"""SPEC 16 written out again for the tests, from the request body alone: a feasibility check
-of a returned schedule block, and an exhaustive search for the best makespan.
+"""docs/schedules.md#a-schedule-and-its-check written out again for the tests, from the request body
+alone: a feasibility check of a returned schedule block, and an exhaustive search for the best
+makespan.
 
 Nothing here calls the app: the rules are read from the request's tasks, robots and travel,
 so a mistake in app.domain.scheduling cannot vouch for itself.
@@ -35,7 +36,8 @@ class Site:
             for b in zones:
                 pair = given.get(a, {}).get(b, given.get(b, {}).get(a))
                 self.travel[a, b] = 0.0 if a == b else (math.inf if pair is None else pair)
-        for k in zones:  # a robot takes the quickest route (SPEC 16 travel, Floyd-Warshall)
+        # A robot takes the quickest route (docs/schedules.md#the-model: travel), Floyd-Warshall.
+        for k in zones:
             for a in zones:
                 for b in zones:
                     via = self.travel[a, k] + self.travel[k, b]
@@ -66,9 +68,9 @@ class Site:
 
 
 def feasibility_errors(body: dict[str, Any], schedule: dict[str, Any]) -> list[str]:
-    """Every SPEC 16 rule the schedule block breaks: one task each, eligibility, duration,
-    precedence, one task at a time with travel between zones (from the start zone after the
-    shift starts), release, deadline, shift."""
+    """Every docs/schedules.md#a-schedule-and-its-check rule the schedule block breaks: one task
+    each, eligibility, duration, precedence, one task at a time with travel between zones (from the
+    start zone after the shift starts), release, deadline, shift."""
     site = Site(body)
     rows = schedule["tasks"]
     errors: list[str] = []

@@ -1,4 +1,4 @@
-"""The supervisor console in a real headless Chromium against a real server (SPEC 13)."""
+"""The supervisor console in a real headless Chromium against a real server (README.md#console)."""
 
 from __future__ import annotations
 

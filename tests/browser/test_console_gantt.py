@@ -1,6 +1,7 @@
-"""The run page of a timed run shows its schedule as a Gantt chart (SPEC 16 "Reading a
-schedule"): server-rendered SVG, one lane per robot, the critical path marked; nothing
-changes on an untimed run; axe-clean; usable within 2 s at 1,000 tasks."""
+"""The run page of a timed run shows its schedule as a Gantt chart
+(docs/schedules.md#reading-a-runs-schedule): server-rendered SVG, one lane per
+robot, the critical path marked; nothing changes on an untimed run; axe-clean; usable within 2 s at
+1,000 tasks."""
 
 from __future__ import annotations
 

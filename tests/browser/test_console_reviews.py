@@ -1,4 +1,4 @@
-"""Reviews and sign-off from the console (SPEC 11 through SPEC 13's pages): a run whose
+"""Reviews and sign-off from the console (docs/reviews.md, README.md#console): a run whose
 review policy names one task pauses there, is resolved from the reviews page and goes on;
 a completed run is signed off from its page, which then shows the verified heads."""
 

@@ -1,4 +1,4 @@
-"""Revisions on the console's run page (SPEC 10 through SPEC 13's pages): the lineage with
+"""Revisions on the console's run page (docs/living-plans.md#in-the-console): the lineage with
 each revision's reason, changes and pins, and the revision against its parent as the JSON
 diff states it; a large revision's diff is fetched by the page after it loads."""
 

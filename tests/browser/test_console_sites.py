@@ -1,6 +1,6 @@
-"""The console's site page (SPEC 17) in a real browser: reached from the runs list and a run's
-page, each robot's learned rates with intervals and report counts as the API states them,
-the rates far from the configured ones marked, the reliability plot; axe-clean."""
+"""The console's site page (docs/estimates.md#the-site-page) in a real browser: reached from the
+runs list and a run's page, each robot's learned rates with intervals and report counts as the API
+states them, the rates far from the configured ones marked, the reliability plot; axe-clean."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""A guided timed run against the real server (SPEC 4 + 16): the run stores the `schedule`
-solver's plan once, before its first decision; SIGKILLed while reasoning about a decision
-in the middle and restarted, it reads that plan back (CP-SAT is not asked again: at a
+"""A guided timed run against the real server (docs/schedules.md#guidance-in-time): the run stores
+the `schedule` solver's plan once, before its first decision; SIGKILLed while reasoning about a
+decision in the middle and restarted, it reads that plan back (CP-SAT is not asked again: at a
 wall-clock limit it may return another plan) and ends with the schedule an uninterrupted
 guided run following the same plan makes."""
 

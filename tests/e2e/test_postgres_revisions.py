@@ -1,6 +1,6 @@
-"""Scale-out (SPEC 10): two API processes on one PostgreSQL database. A run held by one is
-revised through the other: the holder stops (fenced by the run's state, told by its lease
-heartbeat), and the revision is executed exactly once."""
+"""Scale-out (docs/living-plans.md#revisions): two API processes on one PostgreSQL database. A run
+held by one is revised through the other: the holder stops (fenced by the run's state, told by its
+lease heartbeat), and the revision is executed exactly once."""
 
 from __future__ import annotations
 

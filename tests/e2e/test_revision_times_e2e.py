@@ -1,11 +1,12 @@
-"""Time in living plans against the real server (SPEC 16, issue 22's acceptance): a timed
-`baseline_timed` run completes; the site reports tasks 0-10 started or done at given times,
-one of them 25 minutes late; the run's schedule moves what waits for it; then, with the
+"""Time in living plans against the real server (docs/living-plans.md#a-revision-in-time, issue 22's
+acceptance): a timed `baseline_timed` run completes; the site reports tasks 0-10 started or done at
+given times, one of them 25 minutes late; the run's schedule moves what waits for it; then, with the
 heavy robot down and one task delayed 30 minutes, `ltaa revise --now ... --delay ...`
 revises it over HTTP. The revision keeps the reported times, starts nothing before
-`now`, moves the successors, and the diff shows it: all checked here from SPEC 16's rules
-(tests/time_rules.py), not by the app's own check. A SIGKILL while the revision runs
-changes nothing: the revision restarted from its checkpoint plans the same schedule."""
+`now`, moves the successors, and the diff shows it: all checked here from the rules of
+docs/living-plans.md#time-in-living-plans (tests/time_rules.py), not by the app's own check. A
+SIGKILL while the revision runs changes nothing: the revision restarted from its checkpoint plans
+the same schedule."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""Revisions against the real server (SPEC 10): a run paused at task 18 is revised when the
-heavy robot fails; SIGKILLs right after the 202 and during the revision's own run change
-nothing: one revision, the plan an uninterrupted revision makes, a record that verifies."""
+"""Revisions against the real server (docs/living-plans.md#revisions): a run paused at task 18 is
+revised when the heavy robot fails; SIGKILLs right after the 202 and during the revision's own run
+change nothing: one revision, the plan an uninterrupted revision makes, a record that verifies."""
 
 from __future__ import annotations
 

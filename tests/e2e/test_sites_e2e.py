@@ -1,5 +1,5 @@
-"""Learning from the site (SPEC 17) on a real server: the estimates equal a posterior
-computed by hand from the reports sent, each counted once across a revision; `as_of` reads
+"""Learning from the site (docs/estimates.md#the-model) on a real server: the estimates equal a
+posterior computed by hand from the reports sent, each counted once across a revision; `as_of` reads
 the past; sites are separate; a learned run records its numbers and replays identically
 after 100 more reports; bad input is refused and stores nothing."""
 

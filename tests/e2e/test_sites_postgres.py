@@ -1,6 +1,6 @@
-"""SPEC 17 on PostgreSQL with two server processes: reports sent to either (the same report
-to both at once too) end up in one set of estimates, nothing counted twice; bad input is
-refused there as on SQLite, and stores nothing."""
+"""docs/estimates.md#counting-each-report-once on PostgreSQL with two server processes: reports sent
+to either (the same report to both at once too) end up in one set of estimates, nothing counted
+twice; bad input is refused there as on SQLite, and stores nothing."""
 
 from __future__ import annotations
 

@@ -1,7 +1,8 @@
-"""A timed run against the real server (SPEC 16 acceptance): the 36-task `baseline_timed`
-scenario completes with a schedule that keeps every rule of SPEC 16, checked here from the
-specification (not by the app's check_schedule); SIGKILLed while reasoning about its 18th
-decision and restarted, it gives the same schedule as an uninterrupted run."""
+"""A timed run against the real server (the acceptance of docs/schedules.md#runs-in-time): the
+36-task `baseline_timed` scenario completes with a schedule that keeps every rule of
+docs/schedules.md#a-schedule-and-its-check, checked here from those rules (not by the app's
+check_schedule); SIGKILLed while reasoning about its 18th decision and restarted, it gives the same
+schedule as an uninterrupted run."""
 
 from __future__ import annotations
 
@@ -42,8 +43,8 @@ def _schedule(server: Server, run_id: str) -> dict[str, Any]:
 
 
 def spec16_violations(schedule: dict[str, Any]) -> list[str]:
-    """Every rule of SPEC 16 "A schedule" the plan breaks, from the instance's own fields:
-    durations per robot, precedence (finish to start), one task at a time per robot with
+    """Every rule of docs/schedules.md#a-schedule-and-its-check the plan breaks, from the instance's
+    own fields: durations per robot, precedence (finish to start), one task at a time per robot with
     travel between zones (and from its start zone), release, deadline and shift."""
     inst = timed_scenario("baseline_timed").instance
     tasks = {str(t.id): t for t in inst.tasks}

@@ -1,5 +1,5 @@
-"""`ltaa revise --delay/--now` (SPEC 16): the delay change it sends, and the time moves it
-prints from a diff."""
+"""`ltaa revise --delay/--now` (docs/living-plans.md#the-diff-in-time): the delay change it sends,
+and the time moves it prints from a diff."""
 
 from __future__ import annotations
 

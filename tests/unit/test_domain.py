@@ -1,4 +1,4 @@
-"""The success model, metrics, cap and phases of SPEC §1."""
+"""The success model, metrics, cap and phases of docs/allocation.md."""
 
 from __future__ import annotations
 

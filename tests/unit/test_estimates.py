@@ -1,4 +1,5 @@
-"""The Bayesian arithmetic of SPEC 17 (app.domain.estimates), against scipy and by hand."""
+"""The Bayesian arithmetic of docs/estimates.md#the-model (app.domain.estimates), against scipy and
+by hand."""
 
 from __future__ import annotations
 

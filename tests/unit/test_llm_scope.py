@@ -1,5 +1,6 @@
-"""llm_scope 'contested' (SPEC §14): which decisions ask the LLM, and that the clear-cut
-ones answered by the rules reasoner change nothing but the bill."""
+"""llm_scope 'contested' (docs/reasoners.md#llm_scope-ask-the-model-only-where-it-matters): which
+decisions ask the LLM, and that the clear-cut ones answered by the rules reasoner change nothing but
+the bill."""
 
 from __future__ import annotations
 
@@ -82,7 +83,8 @@ def test_only_contested_decisions_reach_the_llm_and_the_rest_say_clear_cut() -> 
         else:
             assert attempt.reply.model is None
             assert attempt.reply.extra == {"reasoner": "rules", "why": "clear-cut"}
-    # SPEC: about a fifth of the baseline's balanced decisions are contested.
+    # docs/reasoners.md#llm_scope-ask-the-model-only-where-it-matters: about a fifth of the
+    # baseline's balanced decisions are contested.
     assert 0 < len(asked) <= 0.4 * 36
     # The same answers under 'all': the same allocation.
     everything, _ = run(problem(), ScriptedReasoner())

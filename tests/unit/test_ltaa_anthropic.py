@@ -62,7 +62,7 @@ def test_good_answers_are_accepted_at_attempt_1(api: FakeMessagesAPI) -> None:
     body = api.requests[0]
     assert body["messages"][0]["content"] == first.user_prompt
     assert body["system"] == first.system_prompt
-    assert body["temperature"] == 0.1  # SPEC: temperature 0.1
+    assert body["temperature"] == 0.1  # docs/reasoners.md#the-anthropic-reasoner-claude
     assert body["_headers"]["anthropic-version"] == SAMPLING_API_VERSION
 
 

@@ -1,5 +1,5 @@
-"""The LTAA graph on a timed instance (SPEC 16): the decision order, the time facts in the
-prompt, deadlines and shifts as hard rules, times on every decision, resume."""
+"""The LTAA graph on a timed instance (docs/schedules.md#runs-in-time): the decision order, the time
+facts in the prompt, deadlines and shifts as hard rules, times on every decision, resume."""
 
 from __future__ import annotations
 
@@ -45,9 +45,9 @@ def in_order(decisions: list[DecisionRecord]) -> list[DecisionRecord]:
 
 
 def check_order(problem: Problem, decisions: list[DecisionRecord]) -> None:
-    """Written from SPEC 16, apart from the app's scheduler: each decision is, of the tasks
-    whose predecessors are decided, one that could start earliest on some robot (ties:
-    queue order), and it starts at the earliest time its robot allows."""
+    """Written from docs/schedules.md#the-order-of-decisions, apart from the app's scheduler: each
+    decision is, of the tasks whose predecessors are decided, one that could start earliest on some
+    robot (ties: queue order), and it starts at the earliest time its robot allows."""
     inst = problem.instance
     tm = inst.timing
     free = {r: tm.shifts[r][0] for r in range(inst.n_robots)}
@@ -274,7 +274,7 @@ def test_guided_rules_in_time_reach_the_schedule_solvers_proven_optimum(proven: 
     mean = sum(d.expected_success for d in decisions) / len(decisions)
     assert mean == pytest.approx(best, abs=1e-9)
     assert [d.robot for d in sorted(decisions, key=lambda d: d.task_index)] == list(plan.robots)
-    # Decided in the plan's order, not SPEC 16's (kept for unguided runs), which gave
+    # Decided in the plan's order, not the earliest-start order (kept for unguided runs), which gave
     # 235-301 minutes here.
     order = [d.task_index for d in in_order(decisions)]
     unguided, _ = run(BASELINE)
@@ -291,7 +291,8 @@ def test_the_plans_order_gives_each_robot_the_plans_sequence_no_later(proven: Sc
     for t, p in placed.items():
         assert p.robot == plan.robots[t]
         assert p.start <= plan.starts[t] + 1e-9
-    # Without the plan's order (SPEC 16's), the same robots are placed later somewhere.
+    # Without the plan's order (the earliest-start order), the same robots are placed later
+    # somewhere.
     spec16 = TimedProgress.replay(BASELINE, dict(enumerate(plan.robots))).placed
     assert max(p.end for p in spec16.values()) > max(p.end for p in placed.values())
 
@@ -314,13 +315,13 @@ def test_guided_allocate_times_pins_without_a_start_as_the_graph_placed_them(
 ) -> None:
     """`/allocate` with `ltaa` and guidance: pins without a start are placed by the graph
     when they come up in the plan's order, and the answer's schedule says the same."""
-    # Pin the tasks the plan starts last, each on its plan's robot: in SPEC 16's order
+    # Pin the tasks the plan starts last, each on its plan's robot: in the earliest-start order
     # they would come up elsewhere, so a re-timing in that order would move them.
     last = sorted(range(36), key=lambda t: -proven.slots[t].start)[:6]
     problem = Problem.build(BASELINE.instance, pinned={t: proven.slots[t].robot for t in last})
     solution = get_solver("ltaa").solve(problem, seed=0, options={"guidance": "optimizer"})
     details = solution.details
     assert details["schedule_violations"] == []
-    # Re-timed in SPEC 16's order instead, the pins broke precedence and overlapped.
+    # Re-timed in the earliest-start order instead, the pins broke precedence and overlapped.
     decided = {d["task_index"] for d in details["decisions"]}
     assert decided.isdisjoint(last) and len(decided) == 30

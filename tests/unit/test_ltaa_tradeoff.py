@@ -1,4 +1,5 @@
-"""The trade-off rule (SPEC §4): every branch, every mode/phase threshold, tie-breaks."""
+"""The trade-off rule (docs/allocation.md#the-trade-off-rule): every branch, every mode/phase
+threshold, tie-breaks."""
 
 from __future__ import annotations
 

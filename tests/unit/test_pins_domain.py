@@ -1,4 +1,4 @@
-"""Pins and unavailable robots in the domain (SPEC 10 "Pins in /allocate")."""
+"""Pins and unavailable robots in the domain (docs/living-plans.md#pins-in-allocate)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
-"""Time in living plans (SPEC 16) on domain objects: a timed revision's Problem (reported
-times pinned, nothing before `now`, delays), an unrevised run's schedule re-timed by its
-reports, and the diff's time moves. Checked against the rules written out in
-tests/time_rules.py, not through the app's check_schedule alone."""
+"""Time in living plans (docs/living-plans.md#a-revision-in-time) on domain objects: a timed
+revision's Problem (reported times pinned, nothing before `now`, delays), an unrevised run's
+schedule re-timed by its reports, and the diff's time moves. Checked against the rules written out
+in tests/time_rules.py, not through the app's check_schedule alone."""
 
 from __future__ import annotations
 
@@ -156,7 +156,7 @@ def test_a_revision_pins_reported_times_plans_nothing_before_now_and_delays() ->
     plan = revise(p, reports, changes, at(now))
     names = p.robot_names
     robot_of = {t: names[p.planned.slots[t].robot] for t in reports}
-    # Started on the robot that broke down: not pinned, planned afresh (SPEC 10).
+    # Started on the robot that broke down: not pinned, planned afresh (docs/living-plans.md#pins).
     kept = {
         t: r for t, r in reports.items() if not (r.state == "started" and robot_of[t] == "heavy")
     }

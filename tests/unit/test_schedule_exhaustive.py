@@ -1,7 +1,8 @@
-"""CP-SAT's optimum equals an exhaustive search on small timed instances (SPEC 16).
+"""CP-SAT's optimum equals an exhaustive search on small timed instances
+(docs/schedules.md#schedulers).
 
-The search is written here, from SPEC 16, without the app's schedulers: every assignment
-within the cap, every order of each robot's tasks, each timed at its earliest (a task
+The search is written here, from docs/schedules.md#schedulers, without the app's schedulers: every
+assignment within the cap, every order of each robot's tasks, each timed at its earliest (a task
 starts once its predecessors have ended, its robot has finished the previous task and
 travelled, its release and shift allow; a pinned start is kept as it is). For a regular
 objective an optimal schedule is among these. It keeps the best (ES, then makespan) or,

@@ -1,4 +1,5 @@
-"""The one feasibility check (SPEC 16): each rule broken once, and nothing else reported.
+"""The one feasibility check (docs/schedules.md#a-schedule-and-its-check): each rule broken once,
+and nothing else reported.
 
 The site: zones A and B, 4 minutes apart. t0 (A, 5 min) -> t1 (B, 3 min, only robot r);
 t2 (B, 4 min, released at 2, deadline 60). Robot r starts in A, shift [0, 100]; robot s

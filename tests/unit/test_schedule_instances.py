@@ -1,4 +1,5 @@
-"""Timed instances (SPEC 16): what they accept, what they refuse and how they say it."""
+"""Timed instances (docs/schedules.md#the-model): what they accept, what they refuse and how they
+say it."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The shared serial list scheduler, earliest-finish dispatch, and the hook that gives every
-method's answer a schedule on a timed instance (SPEC 16)."""
+method's answer a schedule on a timed instance (docs/schedules.md#schedulers)."""
 
 from __future__ import annotations
 
@@ -105,8 +105,8 @@ def test_every_method_gets_a_list_schedule_on_a_timed_instance(name: str) -> Non
     schedule = solution.details["schedule"]
     assert schedule.assignment == solution.assignment
     assert solution.details["schedule_violations"] == check_schedule(problem, schedule)
-    # The LTAA graph decides in time order and keeps the times it gave (SPEC 16); every
-    # other method is timed by the list scheduler.
+    # The LTAA graph decides in time order and keeps the times it gave
+    # (docs/schedules.md#runs-in-time); every other method is timed by the list scheduler.
     timed_by = "LTAA graph's own times" if name == "ltaa" else "list scheduler"
     assert timed_by in solution.details["schedule_model"]
 

@@ -1,5 +1,5 @@
-"""The parent's writes are fenced by its state (SPEC 10): once a revision has superseded a
-run, a decision it was still computing is rolled back, never stored."""
+"""The parent's writes are fenced by its state (docs/living-plans.md#the-parent): once a revision
+has superseded a run, a decision it was still computing is rolled back, never stored."""
 
 from __future__ import annotations
 

@@ -56,7 +56,7 @@ EXAMPLES: dict[str, Example] = {
         },
     ),
     "timed": Example(
-        summary="Timed instance, exact schedule (SPEC 16)",
+        summary="Timed instance, exact schedule (docs/api.md#plans-in-time)",
         description="Durations (one number, or per robot), precedence (`after`), zones with "
         "travel minutes between them, a release, a deadline and shifts. The answer carries "
         "a `schedule` block; `schedule` proves its makespan (`status`, `bound`, `gap`), any "

@@ -1,4 +1,5 @@
-"""Supervisor reviews of decisions (SPEC 11): the queue of pending reviews, and resolving one."""
+"""Supervisor reviews of decisions (docs/reviews.md#resolving-a-review): the queue of pending
+reviews, and resolving one."""
 
 from __future__ import annotations
 

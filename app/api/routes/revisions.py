@@ -1,4 +1,4 @@
-"""Living plans (SPEC 10): execution reports, revisions, the lineage and the diff."""
+"""Living plans (docs/living-plans.md): execution reports, revisions, the lineage and the diff."""
 
 from __future__ import annotations
 
@@ -136,7 +136,8 @@ def list_revisions(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> list[
 def get_diff(caller: ClientDep, run_id: RunIdPath, runs: RunsDep) -> DiffOut:
     """A revision against its parent: tasks whose robot changed, added and removed tasks,
     fleet changes, expected success and balance before and after; on a timed revision
-    (SPEC 16) the tasks that moved in time and the makespan before and after."""
+    (docs/living-plans.md#the-diff-in-time) the tasks that moved in time and the makespan before and
+    after."""
     d = diff.diff(sessions=runs.sessions, run_id=run_id)
     return DiffOut(
         run_id=d.run_id,

@@ -1,5 +1,5 @@
-"""GET /runs/{id}/schedule (SPEC 16 "Reading a schedule"): a timed run's plan in time, as
-the schedule JSON block, CSV (one row per task) or iCalendar (one VEVENT per task), read
+"""GET /runs/{id}/schedule (docs/schedules.md#reading-a-runs-schedule): a timed run's plan in time,
+as the schedule JSON block, CSV (one row per task) or iCalendar (one VEVENT per task), read
 by app.schedules from the schedule rebuilt from the run's stored decisions and re-timed
 by its execution reports (app.plans.current).
 
@@ -57,7 +57,8 @@ def get_schedule(
     """A timed run's schedule, once every task is decided (409 for an untimed run): its
     decisions, with the tasks the site reported at their reported times and what waits
     for them moved (docs/living-plans.md)."""
-    # SPEC 16: the decisions re-timed by the site's execution reports (living plans).
+    # docs/living-plans.md#the-runs-current-schedule: the decisions re-timed by the site's execution
+    # reports (living plans).
     planned = current.current_schedule(sessions=runs.sessions, run_id=run_id)
     if planned is None:
         raise StateConflictError(

@@ -1,4 +1,5 @@
-"""Learning from the site (SPEC 17): the sites, and each site's estimates from its reports."""
+"""Learning from the site (docs/estimates.md#sites): the sites, and each site's estimates from its
+reports."""
 
 from __future__ import annotations
 

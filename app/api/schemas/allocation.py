@@ -91,8 +91,8 @@ class TaskIn(BaseModel):
     features: list[Name] = Field(
         max_length=100, description="Features the task needs; every robot must rate each one"
     )
-    # SPEC 16, all optional: a task with a duration makes the instance timed, and then
-    # every task needs one.
+    # docs/api.md#plans-in-time, all optional: a task with a duration makes the instance timed, and
+    # then every task needs one.
     duration: Duration | None = None
     after: list[TaskId] = Field(
         default_factory=list,
@@ -194,7 +194,8 @@ class InstanceRequest(BaseModel):
 
 
 class PinIn(BaseModel):
-    """A task fixed on a robot (SPEC 10): every solver keeps it there."""
+    """A task fixed on a robot (docs/living-plans.md#pins-in-allocate): every solver keeps it
+    there."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -302,7 +303,8 @@ class AllocateResponse(BaseModel):
     metrics: MetricsOut
     usage: UsageOut
     elapsed_ms: float
-    # SPEC 16, on timed instances only (absent otherwise, so untimed answers are unchanged).
+    # docs/api.md#plans-in-time, on timed instances only (absent otherwise, so untimed answers are
+    # unchanged).
     schedule: ScheduleOut | None = Field(
         None, description="Timed instances: when each task runs", exclude_if=_absent
     )
@@ -363,7 +365,7 @@ class TaskOut(BaseModel):
     name: str
     type: str
     features: list[str]
-    # SPEC 16, on a timed scenario only (left out of an untimed one's tasks)
+    # docs/api.md#plans-in-time, on a timed scenario only (left out of an untimed one's tasks)
     duration: float | dict[str, float] | None = None
     after: list[int | str] | None = None
     zone: str | None = None
@@ -384,7 +386,8 @@ class ScenarioOut(BaseModel):
     name: str
     description: str
     timed: bool = Field(
-        description="Its tasks have durations, zones and precedence (SPEC 16): every answer "
+        description="Its tasks have durations, zones and precedence (docs/api.md#plans-in-time): "
+        "every answer "
         "about it carries a schedule"
     )
     tasks: list[TaskOut]

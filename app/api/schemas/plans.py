@@ -1,4 +1,4 @@
-"""Bodies of the living-plan endpoints (SPEC 10): execution reports and revisions."""
+"""Bodies of the living-plan endpoints (docs/living-plans.md): execution reports and revisions."""
 
 from __future__ import annotations
 
@@ -81,15 +81,16 @@ class SetMode(_Strict):
 
 
 class UseLearned(_Strict):
-    """SPEC 17: these robots (default: every robot) plan with the site's learned rates now,
-    their configured rates the priors."""
+    """docs/estimates.md#using-the-estimates: these robots (default: every robot) plan with the
+    site's learned rates now, their configured rates the priors."""
 
     type: Literal["use_learned"]
     robots: list[Name] | None = Field(None, min_length=1, max_length=MAX_ROBOTS)
 
 
 class Delay(_Strict):
-    """SPEC 16: the task takes this many minutes longer, on every robot (timed runs only)."""
+    """docs/living-plans.md#a-revision-in-time: the task takes this many minutes longer, on every
+    robot (timed runs only)."""
 
     type: Literal["delay"]
     task_id: TaskId
@@ -132,7 +133,8 @@ class RevisionRequestIn(_Strict):
     model: Name | None = Field(None, description="Override the inherited model")
     rates: RateSource | None = Field(
         None,
-        description="SPEC 17: 'configured', 'learned' or 'sampled' (default: the parent's). "
+        description="'configured', 'learned' or 'sampled' (default: the parent's; "
+        "docs/estimates.md#using-the-estimates). "
         "Learned and sampled rates are the site's estimates when the revision is made",
     )
     durations: DurationSource | None = Field(
@@ -140,7 +142,8 @@ class RevisionRequestIn(_Strict):
     )
     now: RequestTime | None = Field(
         None,
-        description="SPEC 16, timed runs: the time the revision plans from (RFC 3339 with an "
+        description="Timed runs (docs/living-plans.md#a-revision-in-time): the time the revision "
+        "plans from (RFC 3339 with an "
         "offset; default: the request's arrival). Nothing unstarted is planned earlier; it may "
         "not be before the plan's start",
     )
@@ -205,8 +208,8 @@ class TaskMove(BaseModel):
 
 
 class ScheduleDiff(BaseModel):
-    """SPEC 16: the parent's current schedule (its decisions re-timed by its execution
-    reports) against the revision's."""
+    """docs/living-plans.md#the-runs-current-schedule: the parent's current schedule (its decisions
+    re-timed by its execution reports) against the revision's."""
 
     moves: list[TaskMove] = Field(description="Tasks whose start or end moved, queue order")
     makespan_before: PlanMinute
@@ -223,7 +226,9 @@ class DiffOut(BaseModel):
     before: SideMetrics
     after: SideMetrics
     schedule: ScheduleDiff | None = Field(
-        None, description="Timed runs only (SPEC 16): start/end moves and the makespans"
+        None,
+        description="Timed runs only (docs/living-plans.md#the-diff-in-time): start/end moves "
+        "and the makespans",
     )
 
 

@@ -1,5 +1,5 @@
-"""A timed run's decision in time (SPEC 16), on GET /runs/{id} assignments and in the
-trace: absent on untimed runs, so their answers are unchanged."""
+"""A timed run's decision in time (docs/schedules.md#what-a-decision-records), on GET /runs/{id}
+assignments and in the trace: absent on untimed runs, so their answers are unchanged."""
 
 from __future__ import annotations
 

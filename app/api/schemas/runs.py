@@ -53,8 +53,9 @@ REPLAY_PAIRING: list[dict[str, Any]] = [
 
 
 class ReviewPolicyIn(BaseModel):
-    """Which decisions wait for a supervisor (SPEC 11). A decision needs review when any
-    listed condition holds; the run pauses before the decision is stored."""
+    """Which decisions wait for a supervisor (docs/reviews.md#which-decisions-wait-for-review). A
+    decision needs review when any listed condition holds; the run pauses before the decision is
+    stored."""
 
     model_config = {"extra": "forbid"}
 
@@ -167,7 +168,8 @@ class RunRequest(InstanceRequest):
     )
     site: Name = Field(
         DEFAULT_SITE,
-        description="The site the run plans for (SPEC 17): its robots are (site, name), its "
+        description="The site the run plans for (docs/estimates.md#sites): its robots are "
+        "(site, name), its "
         "execution reports feed the site's estimates (GET /sites/{site}/estimates)",
     )
     rates: RateSource = Field(
@@ -183,7 +185,8 @@ class RunRequest(InstanceRequest):
     )
     objective: ObjectiveKind = Field(
         ObjectiveKind.SUCCESS_THEN_MAKESPAN,
-        description="Timed instances (SPEC 16): 'success_then_makespan' (default) or "
+        description="Timed instances (docs/api.md#plans-in-time): 'success_then_makespan' "
+        "(default) or "
         "'makespan'; the graph decides in time order either way, and the objective is "
         "what guidance optimises and the run records",
     )
@@ -261,7 +264,8 @@ class Page(BaseModel):
 
 
 class DecisionReviewOut(BaseModel):
-    """A supervisor's review of a decision (SPEC 11); covered by the decision's chain hash."""
+    """A supervisor's review of a decision (docs/reviews.md#resolving-a-review); covered by the
+    decision's chain hash."""
 
     action: ReviewAction
     reviewer: str = Field(description="The resolving API key's name")
@@ -288,7 +292,9 @@ class RunAssignment(DecisionTimes):
     fallback: bool
     review: DecisionReviewOut | None = None
     pinned: bool = Field(
-        False, description="Revisions: kept from the parent, not decided again (SPEC 10)"
+        False,
+        description="Revisions: kept from the parent, not decided again "
+        "(docs/living-plans.md#pins)",
     )
     pinned_from: str | None = Field(
         None, description="Of a pinned decision: the parent decision's chain hash"
@@ -346,9 +352,12 @@ class RunOut(BaseModel):
     signoffs: list[SignOffOut] = Field(
         default_factory=list, description="Sign-offs of the completed run, oldest first"
     )
-    site: str = Field(DEFAULT_SITE, description="The site the run plans for (SPEC 17)")
+    site: str = Field(
+        DEFAULT_SITE, description="The site the run plans for (docs/estimates.md#sites)"
+    )
     rates: RateSource = Field(
-        RateSource.CONFIGURED, description="Which success rates it plans with (SPEC 17)"
+        RateSource.CONFIGURED,
+        description="Which success rates it plans with (docs/estimates.md#using-the-estimates)",
     )
     durations: DurationSource = DurationSource.CONFIGURED
 

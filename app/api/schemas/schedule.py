@@ -1,4 +1,4 @@
-"""The schedule block of an answer on a timed instance (SPEC 16 "A schedule").
+"""The schedule block of an answer on a timed instance (docs/schedules.md#a-schedule-and-its-check).
 
 Its content is built by `app.schedules.schedule_json` (the one JSON view of a schedule,
 also what `ltaa schedule --format json` prints); these models only describe it for the

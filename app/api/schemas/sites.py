@@ -1,4 +1,4 @@
-"""Bodies of the /sites endpoints (SPEC 17): the sites and their estimates."""
+"""Bodies of the /sites endpoints (docs/estimates.md#sites): the sites and their estimates."""
 
 from __future__ import annotations
 
@@ -44,7 +44,8 @@ class FeatureEstimateOut(BaseModel):
 class DurationOut(BaseModel):
     task_type: str
     planned_minutes: float | None = Field(
-        description="Mean configured duration of the reported tasks (SPEC 16); null for "
+        description="Mean configured duration of the reported tasks "
+        "(docs/estimates.md#the-model); null for "
         "untimed runs"
     )
     observed: int = Field(description="started -> done pairs with both times")

@@ -1,4 +1,5 @@
-"""The time fields of an instance in a request (SPEC 16): minutes, durations, the plan's start.
+"""The time fields of an instance in a request (docs/api.md#plans-in-time): minutes, durations, the
+plan's start.
 
 Only each value's own shape is checked here (a number of minutes, a map of them, a date-time
 with an offset); what the fields mean together (every task timed, `after` naming known tasks

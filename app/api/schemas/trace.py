@@ -85,7 +85,9 @@ class DecisionOut(DecisionTimes):
     )
     review: DecisionReviewOut | None = None
     pinned: bool = Field(
-        False, description="Revisions: kept from the parent, not decided again (SPEC 10)"
+        False,
+        description="Revisions: kept from the parent, not decided again "
+        "(docs/living-plans.md#pins)",
     )
     pinned_from: str | None = Field(
         None, description="Of a pinned decision: the parent decision's chain hash"
@@ -136,7 +138,7 @@ class SignatureOut(BaseModel):
 
 
 class ParentLinkOut(BaseModel):
-    """A revision's link to the run it revised (SPEC 10)."""
+    """A revision's link to the run it revised (docs/living-plans.md#revisions)."""
 
     run_id: str = Field(description="The parent run")
     ok: bool = Field(

@@ -1,4 +1,5 @@
-"""Is a schedule feasible? The one check of SPEC 16 that every solver and test uses.
+"""Is a schedule feasible? The one check that every solver and test uses
+(docs/schedules.md#a-schedule-and-its-check).
 
 It reads only the decision (robot, start, end per task) and recomputes everything else
 from the problem, so a schedule's own derived fields (travel, zone) cannot vouch for
@@ -34,7 +35,7 @@ class Rule(StrEnum):
     NOT_BEFORE = "not_before"  # nothing without a fixed start begins before `not_before`
     PIN = "pin"  # pinned tasks keep their robot and, when fixed, their start
     UNAVAILABLE = "unavailable"  # an unavailable robot takes no new task
-    CAP = "cap"  # the workload cap of SPEC 1 (loads count tasks)
+    CAP = "cap"  # the workload cap of docs/allocation.md#the-workload-cap (loads count tasks)
 
 
 @dataclass(frozen=True)

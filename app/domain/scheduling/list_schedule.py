@@ -1,4 +1,4 @@
-"""The shared serial list scheduler (SPEC 16): any assignment -> a schedule.
+"""The shared serial list scheduler (docs/schedules.md#schedulers): any assignment -> a schedule.
 
 Every method that decides only *who* (greedy, the exact allocation solvers, the learners,
 LTAA) gets its *when* here, so all methods have a makespan on the same terms. Serial

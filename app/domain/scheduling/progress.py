@@ -1,5 +1,5 @@
 """The order in which the LTAA graph decides a timed instance's tasks, and what each
-choice would mean in time (SPEC 16 "The LTAA graph on time").
+choice would mean in time (docs/schedules.md#runs-in-time).
 
 The graph decides one task at a time. On a timed instance the next task is, among the
 tasks whose predecessors are all placed, the one that could start earliest on any robot

@@ -1,4 +1,4 @@
-"""A plan re-timed by what the site reported (SPEC 16 "Time in living plans").
+"""A plan re-timed by what the site reported (docs/living-plans.md#the-runs-current-schedule).
 
 Execution reports with times are the truth: a task reported started sits at its reported
 start, a task reported done (or failed) ends at its reported time, and a task that ran
@@ -27,7 +27,7 @@ from app.domain.scheduling.schedule import Schedule, build_schedule
 from app.domain.time_model import TimeModel
 
 # A task reported done at the very instant it was reported started ran for no measurable
-# time; a duration is positive (SPEC 16), so it counts as one second.
+# time; a duration is positive (docs/schedules.md#the-model), so it counts as one second.
 MIN_MINUTES = 1 / 60
 
 

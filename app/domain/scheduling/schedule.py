@@ -1,4 +1,5 @@
-"""A plan in time (SPEC 16 "A schedule"): when each task runs, on which robot, where.
+"""A plan in time (docs/schedules.md#a-schedule-and-its-check): when each task runs, on which robot,
+where.
 
 `build_schedule` is the one constructor: a robot and a start per task are the decision;
 everything else (ends, zones, travel before each task, the makespan, per-robot

@@ -1,5 +1,6 @@
-"""The nine LTAA nodes (SPEC §4). Each starts by checking for cancellation, and every side
-effect is an idempotent upsert: LangGraph re-runs an interrupted node from its top."""
+"""The nine LTAA nodes (docs/allocation.md#the-ltaa-graph). Each starts by checking for
+cancellation, and every side effect is an idempotent upsert: LangGraph re-runs an interrupted node
+from its top."""
 
 from app.graph.nodes.feedback import build_feedback
 from app.graph.nodes.finalize import finalize

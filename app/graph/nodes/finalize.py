@@ -45,7 +45,8 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
         confidence = (accepted.parsed or {}).get("confidence")
         text = {"text_attempt": accepted.attempt}
     elif dctx.timing:
-        # SPEC 16: in time, the fallback takes the allowed robot with the best success.
+        # docs/schedules.md#validation-in-time: in time, the fallback takes the allowed robot with
+        # the best success.
         robot = best_in_time(dctx)
         verdict = validate_text(fallback_answer(dctx, robot), dctx, ctx.quality_threshold)
         fallback, quality = True, verdict.quality

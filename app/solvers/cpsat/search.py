@@ -1,6 +1,7 @@
 """Solving a timed problem with CP-SAT: which model runs, in which stages, what is proven.
 
-Objectives (SPEC 16), lexicographic by construction (two solves, not a weighted sum):
+Objectives (docs/schedules.md#schedulers), lexicographic by construction (two solves, not a weighted
+sum):
 - `success_then_makespan`: stage 1 maximises expected success (ES) under the cap; stage 2
   holds ES at stage 1's value (an equality constraint) and minimises the makespan. Stage 1
   is skipped when the time-free allocation optimum (min-cost flow: its ES bounds every
