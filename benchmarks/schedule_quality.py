@@ -135,6 +135,7 @@ def measure_ltaa() -> list[dict[str, Any]]:
     from app.runs import service
     from app.runs.factory import make_worker
     from app.runs.spec import RunSpec
+    from app.store import decision_repository as decision_repo
     from app.store import repository as repo
     from app.store.db import make_engine, make_session_factory
     from app.store.migrate import upgrade_head
@@ -164,14 +165,18 @@ def measure_ltaa() -> list[dict[str, Any]]:
                 with sessions() as session:
                     stored = repo.get_run(session=session, run_id=run.id)
                     status = stored.status if stored is not None else "missing"
-                    result = stored.result if stored is not None else None
+                    ends = [
+                        d.end
+                        for d in decision_repo.decisions(session=session, run_id=run.id)
+                        if d.end is not None
+                    ]
                 rows.append(
                     {
                         "label": label,
                         "status": status,
                         "wall_s": wall,
                         "cpu_s": cpu,
-                        "makespan": _makespan(result),
+                        "makespan": max(ends) if ends else None,
                     }
                 )
                 print(f"{label}: {status} {wall:.1f} s", file=sys.stderr)
@@ -179,17 +184,6 @@ def measure_ltaa() -> list[dict[str, Any]]:
             worker.close()
             engine.dispose()
     return rows
-
-
-def _makespan(result: Any) -> float | None:
-    if not isinstance(result, dict):
-        return None
-    schedule = result.get("schedule")
-    return schedule.get("makespan") if isinstance(schedule, dict) else None
-
-
-def _pct(v: float | None) -> str:
-    return "-" if v is None else f"{100 * v:.1f}%"
 
 
 def run() -> Section:

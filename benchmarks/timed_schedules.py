@@ -335,8 +335,9 @@ def body(
     return (
         "\n\n".join(
             [
-                "CP-SAT (`schedule`, deterministic: one worker, seed 0, objective `success_then_makespan`, mode balanced, "
-                "generated sites with `seed=0`). Wall time includes building the models; CPU is "
+                "CP-SAT (`schedule`, deterministic: one worker, seed 0, objective "
+                "`success_then_makespan`, mode balanced, generated sites with `seed=0`). Wall "
+                "time includes building the models; CPU is "
                 "the process's; load avg is the 1-minute load average "
                 "(the larger of before and after the run) on this shared 2-core machine.",
                 cp_table,
