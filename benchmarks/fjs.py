@@ -109,9 +109,9 @@ def plain_model_makespan(shop: Shop, *, time_limit_s: float, workers: int = 2) -
     m = cp_model.CpModel()
     horizon = sum(max(op.values()) for job in shop.jobs for op in job)
     per_machine: list[list[cp_model.IntervalVar]] = [[] for _ in range(shop.n_machines)]
-    ends = []
+    ends: list[cp_model.IntVar] = []
     for j, job in enumerate(shop.jobs):
-        previous_end = None
+        previous_end: cp_model.IntVar | None = None
         for o, op in enumerate(job):
             start = m.new_int_var(0, horizon, f"s{j}_{o}")
             end = m.new_int_var(0, horizon, f"e{j}_{o}")
@@ -126,7 +126,8 @@ def plain_model_makespan(shop: Shop, *, time_limit_s: float, workers: int = 2) -
             if previous_end is not None:
                 m.add(start >= previous_end)
             previous_end = end
-        ends.append(previous_end)
+        if previous_end is not None:
+            ends.append(previous_end)
     for intervals in per_machine:
         m.add_no_overlap(intervals)
     makespan = m.new_int_var(0, horizon, "makespan")
