@@ -142,6 +142,11 @@ def targets(mk: list[dict[str, Any]], limits: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _loads(mk: list[dict[str, Any]], limits: dict[str, Any]) -> str:
+    loads = [r["load"] for r in mk] + [r["load"] for r in limits["runs"].values()]
+    return "-" if not loads else f"{min(loads):.1f}-{max(loads):.1f}"
+
+
 def body(
     mk: list[dict[str, Any]], limits: dict[str, Any], ltaa: list[dict[str, Any]], image: str
 ) -> str:
@@ -151,7 +156,7 @@ def body(
         "The `schedule` solver's search is deterministic: `time_limit_s` is a budget of "
         f"CP-SAT deterministic time ({DET_PER_S:g} units per second), one worker, seed 0, "
         "so these figures do not depend on how loaded the shared machine was; wall times "
-        "do (load average per run in the stored JSON, roughly 5-12 while these ran). "
+        f"do (the 1-minute load average was {_loads(mk, limits)} during these runs). "
         "Brandimarte's instances (committed copies of SchedulingLab/fjsp-instances, MIT: "
         "benchmarks/data/brandimarte) at `time_limit_s` 60, no workload cap; best known "
         "from the literature (optimal for Mk01, Mk03, Mk04, Mk08, Mk09). The plain model is "
