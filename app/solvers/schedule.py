@@ -48,9 +48,11 @@ class ScheduleSolver(Solver):
         "(durations, precedence, travel between zones, releases, deadlines, shifts, the "
         "workload cap); 'optimal' only when proven, else the bound and gap.",
         exact=True,
-        limits="exact (pairwise travel) while robots x tasks^2 <= 40,000; past that a "
-        "load-balancing assignment, dispatch and a large-neighbourhood search over the exact "
-        "model (never called optimal); time_limit_s <= 120",
+        limits="exact while its model has at most 20,000 literals (presence per task and "
+        "robot, travel order literals only where travel applies) and 5,000 intervals; past "
+        "that a load-balancing assignment, dispatch and a large-neighbourhood search over "
+        "the exact model (never called optimal); time_limit_s <= 120, a deterministic "
+        "budget (the same answer on any machine load)",
     )
     Options = ScheduleOptions
 
