@@ -1,7 +1,7 @@
 """Solving a timed problem with CP-SAT: which model runs, in which stages, what is proven.
 
-Objectives (docs/schedules.md#schedulers), lexicographic by construction (two solves, not a weighted
-sum):
+Objectives (docs/schedules.md#schedulers), lexicographic by construction (two solves,
+not a weighted sum):
 - `success_then_makespan`: stage 1 maximises expected success (ES) under the cap; stage 2
   holds ES at stage 1's value (an equality constraint) and minimises the makespan. Stage 1
   is skipped when the time-free allocation optimum (min-cost flow: its ES bounds every
@@ -9,8 +9,12 @@ sum):
   only the (task, robot) pairs that some ES-optimal allocation uses (`success_pairs`).
 - `makespan`: one solve, ES >= `min_expected_success` as a constraint.
 
-Paths: up to `EXACT_LIMIT` (robots x tasks^2), the exact model (`schedule_model`);
-past it the large-instance path (`large_schedule`), which never claims optimality.
+Paths: while the exact model's real size (`model_size`: presence literals, and travel
+order literals only where travel applies) is within `EXACT_LIMIT` and `EXACT_INTERVALS`,
+the exact model (`model.py`) in deterministic chunks; past it the large-instance path
+(`large.py`), which never claims optimality. The budget is deterministic
+(docs/schedules.md#deterministic-search) and a larger one continues a smaller one's
+search (docs/schedules.md#anytime).
 Every answer is re-timed (earliest times for its per-robot orders, never later than
 CP-SAT's) and must pass `check_schedule`. `status` is "optimal" only when CP-SAT proved the
 makespan stage OPTIMAL, ES is proven, and time values are whole at the model's scale.
@@ -204,7 +208,7 @@ def _chunks(
     finds a subset of what the longer run finds. (last status, best bound, model units)."""
     search, feasible, scale = setup.search, setup.feasible, setup.scale
     bound, status = float(floor), "UNKNOWN"
-    candidates = [large_candidates(setup, t) for t in range(problem_tasks(setup))]
+    candidates = [large_candidates(setup, t) for t in range(setup.problem.instance.n_tasks)]
     for edge in EXACT_CHUNKS:
         if search.remaining() <= 0.005:
             break
@@ -241,10 +245,6 @@ def _chunks(
             if best is not None:
                 search.mark(best.makespan)
     return status, bound
-
-
-def problem_tasks(setup: Setup) -> int:
-    return setup.problem.instance.n_tasks
 
 
 def _stage_success(setup: Setup, model: ScheduleModel, hint: Schedule | None) -> tuple[int, bool]:
