@@ -11,14 +11,24 @@ RUN python -m venv /opt/venv
 ENV PATH=/opt/venv/bin:$PATH
 # Dependencies first, in their own layer: they change far less often than the code.
 COPY pyproject.toml README.md ./
+# pip's own configuration, where the build's network needs one (a private index, a proxy
+# that re-signs TLS): a pip.conf and a CA bundle as build secrets, e.g.
+#   docker build --secret id=pip.conf,src=my-pip.conf --secret id=pip-ca,src=ca.crt .
+# (my-pip.conf naming `cert = /run/secrets/pip-ca`). Mounted for one step each, they land
+# in no layer and not in the image's history; without them pip uses PyPI and its own CAs.
 # Versions are pinned in pyproject.toml, which hadolint cannot see.
 # hadolint ignore=DL3013
-RUN mkdir -p app benchmarks && touch app/__init__.py benchmarks/__init__.py \
+RUN --mount=type=secret,id=pip.conf,target=/etc/pip.conf \
+    --mount=type=secret,id=pip-ca \
+    mkdir -p app benchmarks && touch app/__init__.py benchmarks/__init__.py \
     && pip install ".${EXTRAS:+[$EXTRAS]}" \
     && pip uninstall -y ltaa
 COPY app ./app
 COPY benchmarks ./benchmarks
-RUN pip install --no-deps .
+# The wheel carries the migrations (app/store/migrations): the app applies them as it starts.
+RUN --mount=type=secret,id=pip.conf,target=/etc/pip.conf \
+    --mount=type=secret,id=pip-ca \
+    pip install --no-deps .
 
 FROM python:3.11-slim
 ENV PATH=/opt/venv/bin:$PATH \
@@ -31,8 +41,6 @@ RUN groupadd --system --gid 10001 ltaa \
     && mkdir -p /data && chown 10001:10001 /data
 COPY --from=build /opt/venv /opt/venv
 WORKDIR /srv
-COPY alembic.ini ./
-COPY migrations ./migrations
 COPY scripts/serve.sh ./scripts/serve.sh
 USER 10001:10001
 VOLUME ["/data"]

@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 export LTAA_DATA_DIR ?= ./data
 
-.PHONY: run test lint lint-quick bench bench-llm screenshots bench-console migrate install clean
+.PHONY: run test lint lint-quick bench bench-llm screenshots bench-console migrate image-check install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -65,6 +65,11 @@ test: lint-quick
 		$(BIN)/python -m pytest -q --numprocesses=$(WORKERS) $(PYTEST_ARGS); tests=$$?; \
 	wait $$types; typed=$$?; echo "$(BIN)/mypy"; cat $$report; rm -f $$report; \
 	[ $$tests -eq 0 ] && [ $$typed -eq 0 ]
+
+# Outside CI (it takes minutes; root, buildah and debootstrap): build the image from the
+# Dockerfile and start it with its own CMD, without a Docker engine (docs/deployment.md).
+image-check:
+	sh scripts/image_check.sh
 
 bench: install
 	$(BIN)/ltaa bench

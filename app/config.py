@@ -8,6 +8,8 @@ from typing import Annotated, Literal
 from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+# MPXJ writes 10,000 activities as 23 MB of MSPDI (3 MB of XER): docs/exchange.md.
+DEFAULT_IMPORT_MAX_BYTES = 20 * 1024 * 1024
 DEFAULT_MAX_BODY_BYTES = 10 * 1024 * 1024  # 10,000 tasks with TEACh metadata fit comfortably
 # Seconds between a webhook's failed attempts (8 attempts over ~27.6 h, as Svix does): a
 # receiver down for a day still gets every event. Jitter of +-20% is added to each.
@@ -102,12 +104,15 @@ class Settings(BaseSettings):
     retired_public_keys_dir: Path | None = None
 
     max_body_bytes: int = Field(DEFAULT_MAX_BODY_BYTES, ge=1)
+    # POST /schedules/import: a site's MS Project or P6 file (docs/exchange.md); larger than
+    # a JSON request may be, as the files carry much the draft leaves out.
+    import_max_bytes: int = Field(DEFAULT_IMPORT_MAX_BYTES, ge=1)
 
-    # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.api.auth. A SecretStr so
+    # "KEY:ROLE,KEY:ROLE" (roles: client, supervisor), parsed by app.http.auth. A SecretStr so
     # repr(), model_dump() and validation errors never show a key.
     api_keys: SecretStr | None = None
     # Non-secret names of the keys above, by fingerprint: "key-3f2a9c1b=alice,..." (see
-    # app.api.auth). Unnamed keys are called by their fingerprint.
+    # app.http.auth). Unnamed keys are called by their fingerprint.
     api_key_names: str | None = None
     log_format: Literal["json", "text"] = "json"
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"

@@ -1,4 +1,4 @@
-"""The application factory: `uvicorn app.main:create_app --factory`."""
+"""The application factory (served as `uvicorn app.asgi:create_app --factory`: app/asgi.py)."""
 
 from __future__ import annotations
 
@@ -14,38 +14,24 @@ from fastapi import FastAPI
 from fastapi.concurrency import run_in_threadpool
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.auth import InsecureBindError, KeyRing, check_bind
-from app.api.deps import RunsContext
 from app.api.drain import drain_on_signal
-from app.api.errors import BodySizeLimit, install_error_handlers
 from app.api.openapi import install_openapi
-from app.api.rounding import RoundedJSONResponse
-from app.api.routes import (
-    admin,
-    allocate,
-    audit_keys,
-    catalog,
-    events,
-    health,
-    metrics,
-    reviews,
-    revisions,
-    runs,
-    schedules,
-    signoffs,
-    sites,
-    webhooks,
-)
-from app.api.routes.webhooks import WebhooksContext
+from app.api.routers import body_limits, mount_routers
 from app.config import Settings, get_settings
 from app.console import install as install_console
+from app.console.imports import CONSOLE_IMPORT_PATH
+from app.http.auth import InsecureBindError, KeyRing, check_bind
+from app.http.errors import BodySizeLimit, install_error_handlers
+from app.http.rounding import RoundedJSONResponse
 from app.observability.logs import configure_logging
 from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
+from app.runs.deps import RunsContext
 from app.runs.factory import make_worker
 from app.runs.worker import RunWorker
 from app.store.db import make_engine, make_session_factory
 from app.store.lock import listen_url
 from app.store.migrate import upgrade_head
+from app.webhooks.deps import WebhooksContext
 from app.webhooks.dispatcher import Dispatcher
 from app.webhooks.metrics import WebhookTablesCollector
 from app.webhooks.secret_box import SecretBox
@@ -166,26 +152,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.keyring = keyring
     app.state.metrics = Metrics()
     install_error_handlers(app)
-    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(
+        BodySizeLimit,
+        max_bytes=settings.max_body_bytes,
+        paths={
+            **body_limits(settings),
+            # The console's upload of a schedule file: the same limit as POST /schedules/import.
+            CONSOLE_IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES"),
+        },
+    )
     # Outermost, so rejected bodies (413) are timed too.
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
-    for module in (
-        health,
-        catalog,
-        allocate,
-        runs,
-        schedules,
-        revisions,
-        signoffs,
-        reviews,
-        events,
-        metrics,
-        webhooks,
-        sites,
-        admin,
-        audit_keys,
-    ):
-        app.include_router(module.router)
+    mount_routers(app)
     install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)
     return app

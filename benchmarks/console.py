@@ -3,6 +3,7 @@
 
     python -m benchmarks.console screenshots   # docs/img/console_*.png (make screenshots)
     python -m benchmarks.console bench         # the "Console" section of docs/benchmarks.md
+    python -m benchmarks.console import        # docs/img/console_import.png alone
 
 Both start the server as `make run` does (scripts/serve.sh) on a free loopback port and
 drive Debian's Chromium (/usr/bin/chromium) with Playwright.
@@ -142,7 +143,47 @@ def screenshots() -> list[Path]:
         )
         out.append(_site_screenshot(page, url))
         out.append(gantt_screenshot(page, url))
+        out.append(import_screenshot(page, url))
     return out
+
+
+def import_screenshot(page: Page, url: str) -> Path:
+    """The "Import a schedule" page (docs/exchange.md#the-console-page) after an MS Project
+    file of three linked tasks was uploaded with the rates of a site that has reports."""
+    from tests.exchange_files import small_mspdi
+
+    run_id = _start(url, {"scenario": "baseline", "mode": "balanced", "site": "level-3"})
+    _wait(url, run_id)
+    updates = [{"task_id": t, "state": s} for t in (0, 1, 2) for s in ("started", "done")]
+    httpx.post(
+        f"{url}/runs/{run_id}/execution",
+        json={"updates": updates},
+        headers=AS_CLIENT,
+        timeout=60,
+    ).raise_for_status()
+    page.set_viewport_size({"width": 1280, "height": 800})
+    page.goto(f"{url}/console/import")
+    page.get_by_label("Schedule file").set_input_files(
+        {"name": "level-3-fit-out.xml", "mimeType": "application/xml", "buffer": small_mspdi()}
+    )
+    page.get_by_label("Rates from a site").select_option("level-3")
+    with page.expect_navigation():
+        page.get_by_role("button", name="Import").click()
+    page.locator("#draft-tasks").wait_for()
+    path = IMG / "console_import.png"
+    page.screenshot(path=path, full_page=True)
+    return path
+
+
+def import_screenshot_alone() -> Path:
+    with (
+        tempfile.TemporaryDirectory(prefix="ltaa-console-") as tmp,
+        served(Path(tmp), {"LTAA_API_KEYS": KEYS}) as (url, _log),
+        _browser() as browser,
+    ):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        _sign_in(page, url)
+        return import_screenshot(page, url)
 
 
 def gantt_screenshot(page: Page, url: str) -> Path:
@@ -269,12 +310,14 @@ def main(argv: list[str]) -> None:
     if what == "screenshots":
         for path in screenshots():
             print(path)
+    elif what == "import":
+        print(import_screenshot_alone())
     elif what == "bench":
         text = bench()
         write_section(text)
         print(text)
     else:
-        raise SystemExit("usage: python -m benchmarks.console screenshots|bench")
+        raise SystemExit("usage: python -m benchmarks.console screenshots|import|bench")
 
 
 if __name__ == "__main__":

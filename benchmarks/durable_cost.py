@@ -217,26 +217,53 @@ def _rows(label: str, results: list[SizeResult]) -> list[list[str]]:
     return rows
 
 
-def report(after: list[SizeResult], before: list[SizeResult] | None) -> str:
+# What the rounds of issue 21 changed, and how the measure itself changed.
+_HISTORY = (
+    "Issue 21's third round changed how this is measured, not the code. On 2026-12-02 "
+    "the sizes were measured one after the other (three 1,000-task pairs, then one "
+    "10,000-task pair) and the 10,000-task durable run came out 12.0× the 1,000-task "
+    "one, the graph in memory 12.1×. Yet the same solve in one process, outside the "
+    "server, cost the same per task from the first thousand tasks to the last (7.96 "
+    "and 7.21 ms, no trend in between, garbage collection on or off alike), and "
+    "cProfile found every function's calls and time 10× at 10× the tasks. What moved "
+    "is the machine: on this shared 2-core host the same pair costs a fifth more or "
+    "less minutes apart (the last column), and twice as much on one day as on another "
+    "(3.45 ms a task in memory on 2026-12-02, 7.45 today), so a 10,000-task pair "
+    "measured in a slower spell than the 1,000-task pairs before it reads as growth. "
+    "The small pairs now bracket each large one, and the cost per task is also read "
+    "inside the large runs, where no drift between runs can enter."
+    + "\n\nWhat changed in issue 21's second round: a `rules` task's attempts are "
+    "written with its decision, in one transaction of two statements (four "
+    "transactions before: the prompt, the reply and the validation each had their "
+    "own); a reply that cost, or failed, is still written the moment it arrives, and "
+    "under a review policy nothing waits. A poll keeps each stored assignment as "
+    "rendered (a stored decision never changes; one with an execution report is "
+    "rendered every time), so it reads the page's task indexes and renders only the "
+    "decisions stored since the last poll: 60 ms of CPU a poll of a completed "
+    "1,000-task run became about 9. Its totals (workload, regret, usage) fold in only "
+    "the decisions and attempts stored since the last poll (the run's settled prefix is "
+    "kept: it never changes); aggregated in SQL they read every row's text, 30 ms a poll "
+    "of a completed 10,000-task run. The graph itself (both columns): a reply's robot "
+    "aliases and their patterns built once per fleet, an attempt's parsed reply "
+    "copied as JSON rather than by copy.deepcopy, the next task found without copying "
+    "the rest of the queue."
+    + "\n\nWhat changed in its first round: each recorder write carries its fence (run still "
+    "`running`; on PostgreSQL the lease) inside its one INSERT ... ON CONFLICT "
+    "statement, on a plain connection, instead of three statements in an ORM session; "
+    "a decision's chain link is computed from what the recorder wrote (read back only "
+    "after a restart); the SQLite checkpointer writes one checkpoint where each task "
+    "begins (and where the graph pauses for a review or ends) instead of one per "
+    "super-step plus every node's writes; a poll reads its totals as SQL aggregates "
+    "and its page as plain rows instead of every decision and attempt of the run.\n"
+)
+
+
+def _verdicts(after: list[SizeResult]) -> str:
     small, large = after[0], after[-1]
     scaling = large.durable.cpu / small.durable.cpu
     scaling_wall = large.durable.wall / small.durable.wall
     memory_scaling = large.memory.cpu / small.memory.cpu
-    headers = [
-        "code",
-        "tasks",
-        "in memory: CPU (wall)",
-        "durable, polled: CPU (wall)",
-        "polls (their CPU, est.)",
-        "durable / in-memory CPU",
-        "same, polls left out",
-        "load average (1 min)",
-        "each pair in order: ms of CPU a task (in memory / durable)",
-    ]
-    rows = _rows("this branch", after)
-    if before:
-        rows = _rows("before", before) + rows
-    verdicts = table(
+    return table(
         ["target", "measured", "verdict"],
         [
             [
@@ -254,6 +281,9 @@ def report(after: list[SizeResult], before: list[SizeResult] | None) -> str:
             ]
         ],
     )
+
+
+def _before_text(before: list[SizeResult] | None) -> str:
     label = os.environ.get("LTAA_BENCH_BEFORE_LABEL", "an older commit")
     before_text = (
         f'The "before" rows are {label}, measured by the same script in the same run (its '
@@ -269,6 +299,27 @@ def report(after: list[SizeResult], before: list[SizeResult] | None) -> str:
             f"{b_small.n_tasks:,}-task one ({b_large.durable.wall / b_small.durable.wall:.1f}× "
             "its wall time)."
         )
+    return before_text
+
+
+def report(after: list[SizeResult], before: list[SizeResult] | None) -> str:
+    large = after[-1]
+    headers = [
+        "code",
+        "tasks",
+        "in memory: CPU (wall)",
+        "durable, polled: CPU (wall)",
+        "polls (their CPU, est.)",
+        "durable / in-memory CPU",
+        "same, polls left out",
+        "load average (1 min)",
+        "each pair in order: ms of CPU a task (in memory / durable)",
+    ]
+    rows = _rows("this branch", after)
+    if before:
+        rows = _rows("before", before) + rows
+    verdicts = _verdicts(after)
+    before_text = _before_text(before)
     order = ", ".join(f"{n:,}" for n in SCHEDULE)
     return (
         "A `rules` run of a synthetic instance (seed 0, 4 robots, `balanced`) at each size, in "
@@ -294,42 +345,7 @@ def report(after: list[SizeResult], before: list[SizeResult] | None) -> str:
         + "\n\n"
         + before_text
         + "\n\n"
-        "Issue 21's third round changed how this is measured, not the code. On 2026-12-02 "
-        "the sizes were measured one after the other (three 1,000-task pairs, then one "
-        "10,000-task pair) and the 10,000-task durable run came out 12.0× the 1,000-task "
-        "one, the graph in memory 12.1×. Yet the same solve in one process, outside the "
-        "server, cost the same per task from the first thousand tasks to the last (7.96 "
-        "and 7.21 ms, no trend in between, garbage collection on or off alike), and "
-        "cProfile found every function's calls and time 10× at 10× the tasks. What moved "
-        "is the machine: on this shared 2-core host the same pair costs a fifth more or "
-        "less minutes apart (the last column), and twice as much on one day as on another "
-        "(3.45 ms a task in memory on 2026-12-02, 7.45 today), so a 10,000-task pair "
-        "measured in a slower spell than the 1,000-task pairs before it reads as growth. "
-        "The small pairs now bracket each large one, and the cost per task is also read "
-        "inside the large runs, where no drift between runs can enter."
-        + "\n\nWhat changed in issue 21's second round: a `rules` task's attempts are "
-        "written with its decision, in one transaction of two statements (four "
-        "transactions before: the prompt, the reply and the validation each had their "
-        "own); a reply that cost, or failed, is still written the moment it arrives, and "
-        "under a review policy nothing waits. A poll keeps each stored assignment as "
-        "rendered (a stored decision never changes; one with an execution report is "
-        "rendered every time), so it reads the page's task indexes and renders only the "
-        "decisions stored since the last poll: 60 ms of CPU a poll of a completed "
-        "1,000-task run became about 9. Its totals (workload, regret, usage) fold in only "
-        "the decisions and attempts stored since the last poll (the run's settled prefix is "
-        "kept: it never changes); aggregated in SQL they read every row's text, 30 ms a poll "
-        "of a completed 10,000-task run. The graph itself (both columns): a reply's robot "
-        "aliases and their patterns built once per fleet, an attempt's parsed reply "
-        "copied as JSON rather than by copy.deepcopy, the next task found without copying "
-        "the rest of the queue."
-        + "\n\nWhat changed in its first round: each recorder write carries its fence (run still "
-        "`running`; on PostgreSQL the lease) inside its one INSERT ... ON CONFLICT "
-        "statement, on a plain connection, instead of three statements in an ORM session; "
-        "a decision's chain link is computed from what the recorder wrote (read back only "
-        "after a restart); the SQLite checkpointer writes one checkpoint where each task "
-        "begins (and where the graph pauses for a review or ends) instead of one per "
-        "super-step plus every node's writes; a poll reads its totals as SQL aggregates "
-        "and its page as plain rows instead of every decision and attempt of the run.\n"
+        + _HISTORY
     )
 
 

@@ -201,12 +201,9 @@ def _verdict(ok: bool) -> str:
     return "met" if ok else "**missed**"
 
 
-def durable_part(
-    small: DurableMeasure,
-    large: DurableMeasure,
-    in_memory: tuple[tuple[float, float], tuple[float, float]],
-) -> str:
-    rows = []
+def _durable_rows(small: DurableMeasure, large: DurableMeasure) -> list[list[str]]:
+    """The wall-time and checkpoint-size targets, with their verdicts."""
+    rows: list[list[str]] = []
     for m, target in ((small, TARGET_SMALL_S), (large, TARGET_LARGE_S)):
         med = statistics.median(m.seconds)
         runs = ", ".join(
@@ -231,7 +228,11 @@ def durable_part(
                 _verdict(m.per_task <= TARGET_BYTES_PER_TASK),
             ]
         )
-    sizes = table(
+    return rows
+
+
+def _sizes_table(small: DurableMeasure, large: DurableMeasure) -> str:
+    return table(
         [
             "tasks",
             "checkpoint file as left",
@@ -252,6 +253,15 @@ def durable_part(
             for m in (small, large)
         ],
     )
+
+
+def durable_part(
+    small: DurableMeasure,
+    large: DurableMeasure,
+    in_memory: tuple[tuple[float, float], tuple[float, float]],
+) -> str:
+    rows = _durable_rows(small, large)
+    sizes = _sizes_table(small, large)
     warm = ", ".join(fmt_time(x) for x in small.warmup_seconds)
     l_med, l_cpu = statistics.median(large.seconds), statistics.median(large.cpu_seconds)
     with_regret, no_regret = in_memory

@@ -9,4 +9,4 @@ PORT="${PORT:-8000}"
 # (and names it, port included, in its start-up warning).
 export LTAA_HOST="$HOST" LTAA_PORT="$PORT"
 BIN="${LTAA_BIN:-}"
-exec "${BIN}uvicorn" app.main:create_app --factory --host "$HOST" --port "$PORT"
+exec "${BIN}uvicorn" app.asgi:create_app --factory --host "$HOST" --port "$PORT"

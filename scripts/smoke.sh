@@ -65,6 +65,17 @@ code=$(call POST /allocate "$cycle" "${CLIENT[@]}")
 check 'd["detail"][0]["loc"][:2] == ["body", "tasks"] and "cycle" in d["detail"][0]["msg"]' "422 names the cycle's task"
 echo "smoke: timed /allocate ok (schedule optimal, makespan 72; a cycle is 422)"
 
+# Teams (docs/allocation.md#teams): a beam two heavy robots lift, a panel a heavy and a careful
+# robot fix; the crane may do heavy work only. `optimal` answers whole teams.
+team='{"solver":"optimal","mode":"success_focused",
+ "tasks":[{"id":"beam","team":{"heavy":2}},{"id":"panel","team":{"heavy":1,"careful":1}},{"id":"sweep","features":["careful"]}],
+ "robots":[{"name":"crane","success":{"heavy":0.9,"careful":0.2},"skills":["heavy"]},{"name":"arm","success":{"heavy":0.3,"careful":0.95}},{"name":"lifter","success":{"heavy":0.8,"careful":0.4}}]}'
+code=$(call POST /allocate "$team" "${CLIENT[@]}")
+[ "$code" = 200 ] || fail "team /allocate optimal -> $code $(head -c 300 "$TMP/out")"
+check 'd["assignments"][0]["team"] == [{"robot": "crane", "feature": "heavy"}, {"robot": "lifter", "feature": "heavy"}] and d["assignments"][0]["robot"] == "crane"' "team answer: the beam's two members"
+check '[m["feature"] for m in d["assignments"][1]["team"]] == ["heavy", "careful"] and "team" not in d["assignments"][2] and sum(d["metrics"]["workload"].values()) == 5' "team answer: one member per unit, loads count units"
+echo "smoke: team /allocate ok (optimal forms the teams)"
+
 code=$(call POST /runs '{"scenario":"baseline","mode":"balanced","reasoner":"rules"}' "${CLIENT[@]}")
 [ "$code" = 202 ] || fail "POST /runs -> $code"
 run_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
@@ -153,6 +164,36 @@ check 'len(d["tasks"]) == 36 and d["makespan"] > 0 and d["critical_path"] and al
 [ "$(grep -c '^BEGIN:VEVENT' "$TMP/out")" = 36 ] || fail "the iCalendar has one VEVENT per task"
 [ "$(call GET "/runs/$run_id/schedule" '' "${CLIENT[@]}")" = 409 ] || fail "an untimed run's schedule should be 409"
 echo "smoke: plans in time ok (run $timed_id, schedule as JSON, CSV and iCalendar; untimed 409)"
+
+# Schedule files (docs/exchange.md): a small MS Project XML file imports to a draft (a typed link
+# kept, features from default_features), the timed run's plan exports as MSPDI, which imports back.
+cat > "$TMP/plan.xml" <<'XML'
+<?xml version="1.0" encoding="UTF-8"?>
+<Project xmlns="http://schemas.microsoft.com/project">
+  <Name>Smoke slab</Name><StartDate>2026-03-02T08:00:00</StartDate>
+  <Tasks>
+    <Task><UID>1</UID><Name>Formwork</Name><Duration>PT2H0M0S</Duration></Task>
+    <Task><UID>2</UID><Name>Pour</Name><Duration>PT1H30M0S</Duration>
+      <PredecessorLink><PredecessorUID>1</PredecessorUID><Type>1</Type><LinkLag>0</LinkLag></PredecessorLink></Task>
+    <Task><UID>3</UID><Name>Screed</Name><Duration>PT1H0M0S</Duration>
+      <PredecessorLink><PredecessorUID>2</PredecessorUID><Type>3</Type><LinkLag>200</LinkLag><LagFormat>7</LagFormat></PredecessorLink></Task>
+  </Tasks>
+</Project>
+XML
+# upload FILE QUERY -> body in $TMP/out, status echoed
+upload() { curl -sS -o "$TMP/out" -w '%{http_code}' -X POST -H 'content-type: application/xml' \
+             --data-binary "@$1" "${CLIENT[@]}" "$BASE_URL/schedules/import$2"; }
+[ "$(upload "$TMP/plan.xml" '?default_features=heavy')" = 200 ] || fail "POST /schedules/import -> $(head -c 300 "$TMP/out")"
+check '[t["duration"] for t in d["tasks"]] == [120, 90, 60] and d["tasks"][2]["after"] == [{"task": "2", "type": "SS", "lag": 20}] and d["source"]["format"] == "mspdi"' "the MSPDI draft: durations and an SS +20 link"
+[ "$(upload "$TMP/plan.xml" '?format=xer')" = 422 ] || fail "an XML file named xer should be 422"
+check 'd["detail"][0]["type"] == "wrong_format"' "the wrong format is named"
+[ "$(call GET "/runs/$timed_id/schedule?format=mspdi" '' "${CLIENT[@]}")" = 200 ] || fail "schedule as MSPDI"
+[ "$(grep -o '<Task>' "$TMP/out" | wc -l)" = 36 ] || fail "the MSPDI has one Task per task"
+grep -q '<Assignment>' "$TMP/out" || fail "the MSPDI has no Assignment"
+cp "$TMP/out" "$TMP/export.xml"
+[ "$(upload "$TMP/export.xml" '?features_field=Text1')" = 200 ] || fail "the export does not import back: $(head -c 300 "$TMP/out")"
+check 'len(d["tasks"]) == 36 and len(d["robots"]) >= 1' "the export imports back to its 36 tasks"
+echo "smoke: schedule files ok (MSPDI imported; run $timed_id exported as MSPDI and imported back)"
 # Webhooks: create (secret shown once), list, refuse a private target, delete. The event
 # subscribed to is never emitted by a smoke run, so nothing is sent anywhere.
 hook_url="https://hooks.example.com/ltaa-smoke-$$"

@@ -4,7 +4,6 @@ otherwise ask for a key the server never checks)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 from fastapi import FastAPI
@@ -22,6 +21,39 @@ def without_security(document: dict[str, Any]) -> dict[str, Any]:
     return document
 
 
+# Two answer models share a class name (a run's LLM attempt and a webhook delivery attempt),
+# so the document names each after its module. The modules moved into feature packages
+# (issue 28); the names stay those first published, so generated clients keep their types.
+PUBLISHED_NAMES = {
+    "app__runs__trace_schemas__AttemptOut": "app__api__schemas__trace__AttemptOut",
+    "app__webhooks__schemas__AttemptOut": "app__api__schemas__webhooks__AttemptOut",
+}
+_REF_PREFIX = "#/components/schemas/"
+
+
+def with_published_names(document: dict[str, Any]) -> dict[str, Any]:
+    schemas = document.get("components", {}).get("schemas", {})
+    for moved, published in PUBLISHED_NAMES.items():
+        if moved in schemas:
+            schemas[published] = schemas.pop(moved)
+    document["components"]["schemas"] = dict(sorted(schemas.items())) if schemas else schemas
+    _rename_refs(document)
+    return document
+
+
+def _rename_refs(node: Any) -> None:
+    if isinstance(node, dict):
+        ref = node.get("$ref")
+        if isinstance(ref, str) and ref.startswith(_REF_PREFIX):
+            name = ref.removeprefix(_REF_PREFIX)
+            node["$ref"] = _REF_PREFIX + PUBLISHED_NAMES.get(name, name)
+        for value in node.values():
+            _rename_refs(value)
+    elif isinstance(node, list):
+        for value in node:
+            _rename_refs(value)
+
+
 def install_openapi(app: FastAPI, *, open_access: bool) -> None:
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
@@ -33,20 +65,8 @@ def install_openapi(app: FastAPI, *, open_access: bool) -> None:
                 description=app.description,
                 routes=app.routes,
             )
+            document = with_published_names(document)
             app.openapi_schema = without_security(document) if open_access else document
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
-
-
-def header_schema(**string: Any) -> Callable[[dict[str, Any]], None]:
-    """json_schema_extra of an optional header: a string with these keywords. Optional
-    means not sent; a header has no null (`str | None` would document one, and a client
-    would send the text "null")."""
-
-    def edit(schema: dict[str, Any]) -> None:
-        kept: dict[str, Any] = {k: schema[k] for k in ("title", "description") if k in schema}
-        schema.clear()
-        schema.update(kept, type="string", **string)
-
-    return edit

@@ -19,7 +19,7 @@ from app.audit.pages import (
     run_or_missing,
 )
 from app.audit.signing import SignatureCheck, SigningKeys, check_signature
-from app.audit.snapshot import snapshot
+from app.audit.snapshot import Snapshot, snapshot
 from app.domain.annotations import AnnotationKind
 from app.domain.lifecycle import EventKind, RunStatus
 from app.store import chain
@@ -93,69 +93,10 @@ def verify_trace(
         seen = snapshot(session, run_id, revision_of)
         order = seen.order
 
-    decisions = chain.ChainCheck(
-        "decisions",
-        run_id,
-        first_key=0,
-        anchor=anchor,
-        order=order,
-        genesis_link=geneses["decisions"],
-    )
-    for chain_pass in seen.passes:
-        pages = decision_pages(
-            sessions, run_id, chain_pass.pinned, chain_pass.by_seq, last=chain_pass.last
-        )
-        for page in pages:
-            for d, attempts in page:
-
-                def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:
-                    digest = chain.attempts_digest(
-                        columns(a, chain.ATTEMPT_FIELDS) for a in attempts
-                    )
-                    return chain.decision_link(prev, chain.decision_columns(d), digest)
-
-                decisions.feed(d.task_index, d.chain_hash, link)
-
-    events = chain.ChainCheck(
-        "events", run_id, first_key=1, anchor=anchor, genesis_link=geneses["events"]
-    )
-    last_kind = None
-    for event_page in event_pages(sessions, run_id, last=seen.last_event):
-        for e in event_page:
-
-            def event_link(prev: str, e: RunEvent = e) -> str:
-                return chain.event_link(prev, columns(e, chain.EVENT_FIELDS))
-
-            events.feed(e.seq, e.chain_hash, event_link)
-            last_kind = e.kind
-
-    # The newest rows of a chain leave no gap when deleted; a completed run says where its
-    # chains end (n_tasks decisions, and its last event is the one that completed it).
-    complete = (
-        decisions.count == n_tasks if order is not None else decisions.last_key == n_tasks - 1
-    )
-    if status == RunStatus.COMPLETED and not complete:
-        last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
-        decisions.missing_tail(
-            f"the run completed with {n_tasks} tasks but its decisions "
-            f"end at {last}: the last decisions were deleted"
-        )
-    if status == RunStatus.COMPLETED and last_kind != EventKind.COMPLETED:
-        events.missing_tail(
-            "the run completed but its events do not end with the "
-            "'completed' event: the last events were deleted"
-        )
-    annotations = chain.ChainCheck("annotations", run_id, first_key=1)
-    signed: list[Any] = []
-    for annotation_page in annotation_pages(sessions, run_id, last=seen.last_annotation):
-        for a in annotation_page:
-            if a.kind == AnnotationKind.SIGNOFF:
-                signed.append((a.detail or {}).get("heads"))
-
-            def annotation_link(prev: str, a: RunAnnotation = a) -> str:
-                return chain.annotation_link(prev, columns(a, chain.ANNOTATION_FIELDS))
-
-            annotations.feed(a.seq, a.chain_hash, annotation_link)
+    decisions = _decision_chain(sessions, run_id, seen, anchor, geneses["decisions"])
+    events, last_kind = _event_chain(sessions, run_id, seen, anchor, geneses["events"])
+    _check_tails(status, n_tasks, order, decisions, events, last_kind)
+    annotations, signed = _annotation_chain(sessions, run_id, seen)
     heads_now = {"decisions": decisions.head, "events": events.head}
     chains_intact = decisions.first_break is None and events.first_break is None
     signature = None
@@ -179,6 +120,103 @@ def verify_trace(
         chain_scheme=scheme,
         signature=signature,
     )
+
+
+def _decision_chain(
+    sessions: sessionmaker[Session],
+    run_id: str,
+    seen: Snapshot,
+    anchor: str | None,
+    genesis: str | None,
+) -> chain.ChainCheck:
+    decisions = chain.ChainCheck(
+        "decisions",
+        run_id,
+        first_key=0,
+        anchor=anchor,
+        order=seen.order,
+        genesis_link=genesis,
+    )
+    for chain_pass in seen.passes:
+        pages = decision_pages(
+            sessions, run_id, chain_pass.pinned, chain_pass.by_seq, last=chain_pass.last
+        )
+        for page in pages:
+            for d, attempts in page:
+
+                def link(prev: str, d: Decision = d, attempts: list[Attempt] = attempts) -> str:
+                    digest = chain.attempts_digest(
+                        columns(a, chain.ATTEMPT_FIELDS) for a in attempts
+                    )
+                    return chain.decision_link(prev, chain.decision_columns(d), digest)
+
+                decisions.feed(d.task_index, d.chain_hash, link)
+    return decisions
+
+
+def _event_chain(
+    sessions: sessionmaker[Session],
+    run_id: str,
+    seen: Snapshot,
+    anchor: str | None,
+    genesis: str | None,
+) -> tuple[chain.ChainCheck, str | None]:
+    """The events' check and the kind of the last event."""
+    events = chain.ChainCheck("events", run_id, first_key=1, anchor=anchor, genesis_link=genesis)
+    last_kind = None
+    for event_page in event_pages(sessions, run_id, last=seen.last_event):
+        for e in event_page:
+
+            def event_link(prev: str, e: RunEvent = e) -> str:
+                return chain.event_link(prev, columns(e, chain.EVENT_FIELDS))
+
+            events.feed(e.seq, e.chain_hash, event_link)
+            last_kind = e.kind
+    return events, last_kind
+
+
+def _check_tails(
+    status: str,
+    n_tasks: int,
+    order: list[int] | None,
+    decisions: chain.ChainCheck,
+    events: chain.ChainCheck,
+    last_kind: str | None,
+) -> None:
+    """The newest rows of a chain leave no gap when deleted; a completed run says where its
+    chains end (n_tasks decisions, and its last event is the one that completed it)."""
+    complete = (
+        decisions.count == n_tasks if order is not None else decisions.last_key == n_tasks - 1
+    )
+    if status == RunStatus.COMPLETED and not complete:
+        last = "none" if decisions.last_key is None else f"task_index {decisions.last_key}"
+        decisions.missing_tail(
+            f"the run completed with {n_tasks} tasks but its decisions "
+            f"end at {last}: the last decisions were deleted"
+        )
+    if status == RunStatus.COMPLETED and last_kind != EventKind.COMPLETED:
+        events.missing_tail(
+            "the run completed but its events do not end with the "
+            "'completed' event: the last events were deleted"
+        )
+
+
+def _annotation_chain(
+    sessions: sessionmaker[Session], run_id: str, seen: Snapshot
+) -> tuple[chain.ChainCheck, list[Any]]:
+    """The annotations' check and the heads each sign-off signed."""
+    annotations = chain.ChainCheck("annotations", run_id, first_key=1)
+    signed: list[Any] = []
+    for annotation_page in annotation_pages(sessions, run_id, last=seen.last_annotation):
+        for a in annotation_page:
+            if a.kind == AnnotationKind.SIGNOFF:
+                signed.append((a.detail or {}).get("heads"))
+
+            def annotation_link(prev: str, a: RunAnnotation = a) -> str:
+                return chain.annotation_link(prev, columns(a, chain.ANNOTATION_FIELDS))
+
+            annotations.feed(a.seq, a.chain_hash, annotation_link)
+    return annotations, signed
 
 
 def check_parent_link(

@@ -12,14 +12,14 @@ from pydantic import ValidationError
 from rich.console import Console
 from rich.table import Table
 
-from app.api.allocation import allocate as run_allocation
-from app.api.errors import domain_error_body, validation_error_body
-from app.api.rounding import rounded
-from app.api.schemas.allocation import AllocateRequest, AllocateResponse
+from app.allocation.schemas import AllocateRequest, AllocateResponse
+from app.allocation.service import allocate as run_allocation
 from app.cli.root import cli, fail
 from app.config import get_settings
 from app.domain.errors import DomainError
 from app.domain.modes import Mode
+from app.http.errors import domain_error_body, validation_error_body
+from app.http.rounding import rounded
 
 
 @cli.command()

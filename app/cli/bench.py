@@ -1,16 +1,19 @@
-"""`ltaa bench` and `ltaa bench-llm`: the benchmark scripts that write docs/."""
+"""`ltaa bench` and `ltaa bench-llm`: the benchmark scripts that write docs/.
+
+The app never imports the `benchmarks` package (an import contract in pyproject.toml keeps
+it so: the product must not depend on its measuring scripts). Each command runs its script
+as `python -m benchmarks...` in a child process of this interpreter, with this process's
+environment and working directory, and relays what the script prints."""
 
 from __future__ import annotations
 
-from pathlib import Path
+import subprocess
+import sys
 from typing import Annotated
 
 import typer
 
 from app.cli.root import cli
-from app.config import get_settings
-from app.domain.errors import DomainError
-from app.domain.modes import Mode
 
 
 @cli.command()
@@ -21,67 +24,33 @@ def bench(
     ] = None,
 ) -> None:
     """Measure every method and write docs/benchmarks.md and docs/img/*.png."""
-    from benchmarks.report import main as write_report
-
-    write_report(section or None)
+    _run_benchmark("benchmarks.report", section or [])
 
 
-@cli.command("bench-llm")
-def bench_llm(
-    reasoner: Annotated[
-        str, typer.Option(help="The LLM reasoner to measure: 'openai' or 'anthropic'")
-    ] = "openai",
-    model: Annotated[
-        str | None, typer.Option(help="Model (default: LTAA_OPENAI_MODEL / the default model)")
-    ] = None,
-    scenario: Annotated[
-        list[str] | None, typer.Option(help="Only these scenarios (default: all four)")
-    ] = None,
-    mode: Annotated[list[Mode] | None, typer.Option(help="Only these modes (default: all)")] = None,
-    tasks: Annotated[
-        int | None, typer.Option(min=1, help="Only the first N tasks of each scenario")
-    ] = None,
-    out: Annotated[Path, typer.Option(help="Where the report goes")] = Path(
-        "docs/llm-benchmark.md"
-    ),
-    label: Annotated[
-        str | None,
-        typer.Option(help="Who produced the figures, for the report (default: the endpoint)"),
-    ] = None,
-) -> None:
+@cli.command(
+    "bench-llm",
+    context_settings={"allow_extra_args": True, "ignore_unknown_options": True},
+    add_help_option=False,
+)
+def bench_llm(ctx: typer.Context) -> None:
     """Run the 4 scenarios x 3 modes (scope all and contested, guided and unguided) with
-    the configured LLM reasoner and write docs/llm-benchmark.md. Every call goes to the
-    server the LTAA_* settings name, and costs what that server charges."""
-    from benchmarks import llm_live
+    the configured LLM reasoner and write docs/llm-benchmark.md (options: `ltaa bench-llm
+    --help`). Every call goes to the server the LTAA_* settings name, and costs what that
+    server charges."""
+    _run_benchmark("benchmarks.llm_live_cli", ctx.args)
 
-    settings = get_settings()
-    try:
-        make = llm_live.reasoner_factory(reasoner, settings=settings, model=model)
-    except DomainError as exc:  # a missing setting (DomainError is a ValueError too)
-        typer.echo(f"{exc.field}: {exc.message}", err=True)
-        raise typer.Exit(1) from None
-    except ValueError as exc:
-        typer.echo(str(exc), err=True)
-        raise typer.Exit(2) from None
-    endpoint, used_model = llm_live.server_of(reasoner, settings, model)
-    typer.echo(f"bench-llm: {reasoner} model {used_model} at {endpoint}", err=True)
 
-    def progress(cell: llm_live.LiveCell) -> None:
-        typer.echo(
-            f"  {cell.scenario}/{cell.mode} {cell.scope}"
-            f"{' guided' if cell.guided else ''}: {cell.llm_tasks}/{cell.n_tasks} tasks "
-            f"asked the model, {cell.tokens:,} tokens, {cell.seconds:.1f} s",
-            err=True,
-        )
-
-    cells = llm_live.run_cells(
-        make,
-        scenario_names=scenario,
-        modes=mode or llm_live.MODES,
-        n_tasks=tasks,
-        progress=progress,
-    )
-    text = llm_live.render(
-        cells, reasoner=reasoner, endpoint=endpoint, model=used_model, label=label
-    )
-    typer.echo(f"wrote {llm_live.write(text, out)}", err=True)
+def _run_benchmark(module: str, args: list[str]) -> None:
+    """`python -m module args` with this interpreter; its output relayed line by line to
+    stderr as it comes (the scripts report progress there), its exit status kept."""
+    with subprocess.Popen(
+        [sys.executable, "-m", module, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    ) as child:
+        assert child.stdout is not None
+        for line in child.stdout:
+            typer.echo(line, nl=False, err=True)
+    if child.returncode:
+        raise typer.Exit(child.returncode)

@@ -31,6 +31,17 @@ def _pct(x: float) -> str:
     return f"{x * 100:.1f}%"
 
 
+# Why a started/done pair taught no duration (the API's `left_out` reasons).
+_LEFT_OUT = {
+    "together_without_at": "sent together without at",
+    "zero_length": "no time between",
+}
+
+
+def _left_out(reasons: dict[str, int]) -> str:
+    return "; ".join(f"{n} {_LEFT_OUT.get(why, why)}" for why, n in reasons.items()) or "-"
+
+
 def _get(client: httpx.Client, path: str, **params: str) -> Any:
     answer = client.get(path, params=params)
     if answer.status_code != 200:
@@ -74,7 +85,8 @@ def print_estimates(body: dict[str, Any], console: Console) -> None:
     rows = [(r["robot"], d) for r in body["robots"] for d in r["durations"]]
     if rows:
         durations = Table(title="Durations (minutes): planned against observed (log-normal)")
-        for column in ("robot", "task type", "planned", "observed", "median seen", "estimate"):
+        columns = ("robot", "task type", "planned", "observed", "median seen", "estimate")
+        for column in (*columns, "left out"):
             durations.add_column(column)
         for robot, d in rows:
             durations.add_row(
@@ -86,6 +98,7 @@ def print_estimates(body: dict[str, Any], console: Console) -> None:
                 if d["observed_median_minutes"] is None
                 else f"{d['observed_median_minutes']:.1f}",
                 "-" if d["estimate_minutes"] is None else f"{d['estimate_minutes']:.1f}",
+                _left_out(d.get("left_out", {})),
             )
         console.print(durations)
 

@@ -155,6 +155,6 @@ def key_name(
     key: Annotated[str, typer.Argument(help="An API key of LTAA_API_KEYS (without :ROLE)")],
 ) -> None:
     """Print a key's fingerprint: its default name, and how LTAA_API_KEY_NAMES names it."""
-    from app.api.auth import key_fingerprint
+    from app.http.auth import key_fingerprint
 
     typer.echo(key_fingerprint(key))

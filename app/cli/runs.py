@@ -14,7 +14,6 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from app.api.errors import domain_error_body
 from app.cli.root import cli, fail
 from app.config import Settings, get_settings
 from app.domain.catalog import scenario as builtin_scenario
@@ -22,6 +21,7 @@ from app.domain.errors import DomainError
 from app.domain.lifecycle import ACTIVE, RunStatus
 from app.domain.modes import Mode
 from app.domain.problem import Problem
+from app.http.errors import domain_error_body
 from app.reasoners.scope import LLMScope
 from app.runs import service, views
 from app.runs.factory import make_worker

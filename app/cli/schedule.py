@@ -1,7 +1,8 @@
 """`ltaa schedule`: plan a timed instance with one method and print its schedule.
 
 The per-robot timeline by default (rich), or the schedule as JSON (the `schedule` block
-of POST /allocate's answer), CSV or iCalendar on stdout for a spreadsheet or a calendar.
+of POST /allocate's answer), CSV or iCalendar on stdout for a spreadsheet or a calendar, or
+MS Project XML (MSPDI, docs/exchange.md) for MS Project, ProjectLibre or P6.
 An instance file is read as an /allocate body's instance part and checked the same way;
 a built-in name is a timed scenario (`baseline_timed`).
 """
@@ -19,10 +20,8 @@ from pydantic import ValidationError
 from rich.console import Console
 from rich.markup import escape
 
-from app.api.allocation import build_problem, load_solver
-from app.api.errors import domain_error_body, validation_error_body
-from app.api.rounding import rounded
-from app.api.schemas.allocation import AllocateRequest
+from app.allocation.schemas import AllocateRequest
+from app.allocation.service import build_problem, load_solver
 from app.cli.allocate import parse_options, read_instance
 from app.cli.root import cli, fail
 from app.config import get_settings
@@ -33,6 +32,9 @@ from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.schedule import Schedule
+from app.exchange import write_mspdi
+from app.http.errors import domain_error_body, validation_error_body
+from app.http.rounding import rounded
 from app.schedules import render_timeline, schedule_csv, schedule_ics, schedule_json
 
 
@@ -41,6 +43,7 @@ class Format(StrEnum):
     JSON = "json"
     CSV = "csv"
     ICS = "ics"
+    MSPDI = "mspdi"
 
 
 @cli.command()
@@ -102,6 +105,15 @@ def schedule(
         typer.echo(json.dumps(rounded(schedule_json(problem, planned)), indent=2))
     elif output is Format.CSV:
         typer.echo(schedule_csv(problem, planned), nl=False)
+    elif output is Format.MSPDI:
+        # Minute 0 is now when the instance names no start, as for iCalendar.
+        xml = write_mspdi(
+            problem,
+            planned,
+            project_name=f"{Path(source).stem}: {method}",
+            start=datetime.now(UTC).replace(second=0, microsecond=0),
+        )
+        typer.echo(xml.decode("utf-8"), nl=False)
     elif output is Format.ICS:
         name = Path(source).stem
         typer.echo(

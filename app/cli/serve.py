@@ -25,7 +25,7 @@ def serve(
     settings = get_settings()
     apply_migrations(settings)
     uvicorn.run(
-        "app.main:create_app", factory=True, host=host or settings.host, port=port or settings.port
+        "app.asgi:create_app", factory=True, host=host or settings.host, port=port or settings.port
     )
 
 

@@ -9,14 +9,14 @@ from __future__ import annotations
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
-from app.api.auth import KeyRing
 from app.config import Settings
-from app.console import context, pages, reviews, signin, sites
+from app.console import context, imports, pages, reviews, signin, sites
+from app.http.auth import KeyRing
 
 
 def install(app: FastAPI, *, keyring: KeyRing, settings: Settings) -> None:
     app.state.console = context.Console.build(keyring=keyring, settings=settings)
-    # Read by app.api.deps for GET /runs/{id}/events only.
+    # Read by app.http.deps for GET /runs/{id}/events only.
     app.state.stream_cookie_auth = context.stream_cookie_auth
     app.add_exception_handler(context.SignInRequired, context.on_sign_in_required)
     app.add_exception_handler(context.CsrfRefused, context.on_csrf_refused)
@@ -26,7 +26,7 @@ def install(app: FastAPI, *, keyring: KeyRing, settings: Settings) -> None:
         StaticFiles(directory=context.HERE / "static"),
         name="console-static",
     )
-    for module in (signin, pages, reviews, sites):
+    for module in (signin, pages, reviews, sites, imports):
         app.include_router(module.router)
 
 

@@ -17,7 +17,6 @@ from app.domain.errors import RunNotFoundError
 from app.domain.metrics import balance_score, expected_success
 from app.domain.phases import detect_phase
 from app.domain.usage import Usage
-from app.graph.recorder import DecisionRecord
 from app.runs import records
 from app.runs.spec import RunSpec
 from app.store import decision_repository as decision_repo
@@ -88,37 +87,6 @@ def overview(*, sessions: sessionmaker[Session], run_id: str) -> RunOverview:
         if len(outline) == run.n_tasks
         else None,
     )
-
-
-@dataclass(frozen=True)
-class DecisionPage:
-    decisions: list[DecisionRecord]
-    attempts: dict[int, list[Attempt]]  # prompts and replies not loaded (attempt_detail)
-    offset: int
-    limit: int
-
-
-def decision_page(
-    *, sessions: sessionmaker[Session], run_id: str, offset: int, limit: int
-) -> DecisionPage:
-    with sessions() as session:
-        _require(session, run_id)
-        rows = decision_repo.decisions_window(
-            session=session, run_id=run_id, offset=offset, limit=limit
-        )
-        attempts = (
-            decision_repo.attempt_summaries_of_tasks(
-                session=session, run_id=run_id, first=rows[0].task_index, last=rows[-1].task_index
-            )
-            if rows
-            else {}
-        )
-        return DecisionPage(
-            decisions=[records.decision_record(d) for d in rows],
-            attempts=attempts,
-            offset=offset,
-            limit=limit,
-        )
 
 
 class AttemptNotFoundError(LookupError):

@@ -16,12 +16,12 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from fastapi.templating import Jinja2Templates
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.auth import Caller, KeyRing, Role
-from app.api.schemas.runs import RUN_ID_PATTERN
 from app.config import Settings
 from app.console import format as fmt
 from app.console import sessions
 from app.console.sessions import COOKIE, SignedIn
+from app.http.auth import Caller, KeyRing, Role
+from app.runs.schemas import RUN_ID_PATTERN
 from app.store import tombstones
 
 HERE = Path(__file__).resolve().parent
@@ -226,7 +226,7 @@ def on_csrf_refused(request: Request, exc: Exception) -> Response:
 
 
 def stream_cookie_auth(request: Request) -> Caller | None:
-    """For app.api.deps: the console's session as a caller of the read-only event stream."""
+    """For app.http.deps: the console's session as a caller of the read-only event stream."""
     signed = signed_in_or_none(request)
     if signed is None:
         return None

@@ -4,14 +4,12 @@ the reviews queue; and the run actions a supervisor may take from a run page."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Annotated, Any
+from typing import Annotated, Any, TypeVar
 
 from fastapi import APIRouter, Form, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import RedirectResponse, Response
 
-from app.api.audit import jsonl_trace
-from app.api.schemas.reviews import MAX_STATEMENT_CHARS
 from app.audit.verify import verify_trace
 from app.console import browse, views
 from app.console.context import (
@@ -28,11 +26,23 @@ from app.domain.errors import DomainError, RunNotFoundError, RunStateConflictErr
 from app.domain.lifecycle import ACTIVE, FINISHED, RunStatus
 from app.plans.revisions import RevisionConflictError
 from app.reviews import signoff
+from app.reviews.schemas import MAX_STATEMENT_CHARS
 from app.runs import service
 from app.runs import views as run_views
+from app.runs.trace import jsonl_trace
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 RUNS_PER_PAGE = 50
+T = TypeVar("T")
+
+
+async def _in_run(request: Request, run_id: str, read: Callable[..., T], /, **kwargs: Any) -> T:
+    """The shell of every run page and action: `read(**kwargs)` off the event loop (it
+    reads or writes the store), and a run that is not there is the console's own 404 page."""
+    try:
+        return await run_in_threadpool(read, **kwargs)
+    except RunNotFoundError:
+        raise no_run(request, run_id) from None
 
 
 def _status_filter(raw: str | None) -> RunStatus | None:
@@ -98,17 +108,16 @@ async def run_page(
     page: Annotated[int, Query(ge=1, le=1_000_000)] = 1,
     decision: Annotated[int | None, Query(ge=0, le=1_000_000)] = None,
 ) -> Response:
-    try:
-        view = await run_in_threadpool(
-            views.run_page,
-            sessions=sessions_of(request),
-            run_id=run_id,
-            page_number=page,
-            open_decision=decision,
-            cache_dir=console.settings.data_dir / "console-cache",
-        )
-    except RunNotFoundError:
-        raise no_run(request, run_id) from None
+    view = await _in_run(
+        request,
+        run_id,
+        views.run_page,
+        sessions=sessions_of(request),
+        run_id=run_id,
+        page_number=page,
+        open_decision=decision,
+        cache_dir=console.settings.data_dir / "console-cache",
+    )
     run = view.overview.run
     model = view.model or (console.settings.default_model if run.reasoner == "anthropic" else None)
     context = {
@@ -140,9 +149,7 @@ async def _part(
     """A part of a run page read on demand: drawn into the page (fragment=1), or a page of
     its own for a browser without script."""
     try:
-        context = await run_in_threadpool(fetch)
-    except RunNotFoundError:
-        raise no_run(request, run_id) from None
+        context = await _in_run(request, run_id, fetch)
     except (browse.AttemptNotFoundError, RevisionConflictError) as exc:
         raise PageNotFound(exc.message if isinstance(exc, DomainError) else str(exc)) from None
     # Without script, the part is a page of its own (part.html) around the same fragment.
@@ -263,9 +270,9 @@ async def _act(
     runs = request.app.state.runs
     command = service.cancel_run if action == "cancel" else service.resume_run
     try:
-        await run_in_threadpool(command, sessions=runs.sessions, worker=runs.worker, run_id=run_id)
-    except RunNotFoundError:
-        raise no_run(request, run_id) from None
+        await _in_run(
+            request, run_id, command, sessions=runs.sessions, worker=runs.worker, run_id=run_id
+        )
     except RunStateConflictError as exc:
         return console.refused(
             request,
@@ -302,15 +309,15 @@ async def sign_off(
     if not statement.strip():
         return refuse("A sign-off needs a statement.", 422)
     try:
-        await run_in_threadpool(
+        await _in_run(
+            request,
+            run_id,
             signoff.sign_off,
             sessions=sessions_of(request),
             run_id=run_id,
             signer=signed.name,
             statement=statement.strip(),
         )
-    except RunNotFoundError:
-        raise no_run(request, run_id) from None
     except RunStateConflictError as exc:
         return refuse(exc.message, 409)
     except DomainError as exc:

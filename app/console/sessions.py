@@ -15,7 +15,7 @@ from datetime import timedelta
 from sqlalchemy import delete
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.auth import ANONYMOUS, KeyRing, Role
+from app.http.auth import ANONYMOUS, KeyRing, Role
 from app.store.db import transaction
 from app.store.models import ConsoleSession, as_utc, utcnow
 

@@ -10,7 +10,6 @@ from fastapi import APIRouter, Form, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import RedirectResponse, Response
 
-from app.api.auth import Role
 from app.console import sessions
 from app.console.context import (
     ConsoleDep,
@@ -22,6 +21,7 @@ from app.console.context import (
     signed_in_or_none,
 )
 from app.console.sessions import COOKIE, LOGIN_CSRF_COOKIE
+from app.http.auth import Role
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 log = logging.getLogger("ltaa.console")

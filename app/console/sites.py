@@ -17,6 +17,12 @@ from app.sites import service
 
 router = APIRouter(prefix="/console", include_in_schema=False)
 
+# Why a started/done pair taught no duration, as the durations table says it.
+LEFT_OUT_REASONS = {
+    "together_without_at": "sent in one request without both times (at)",
+    "zero_length": "started and ended at the same time",
+}
+
 
 @router.get("/sites")
 async def sites_page(request: Request, console: ConsoleDep, signed: SignedInDep) -> Response:
@@ -62,5 +68,6 @@ async def site_page(
         "marked": marked,
         "rates_chart": rates_chart(rows) if rows else None,
         "reliability_chart": reliability_chart(bins),
+        "left_out_reasons": LEFT_OUT_REASONS,
     }
     return finish(request, console.render(request, "site.html", context, signed=signed))

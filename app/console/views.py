@@ -16,6 +16,7 @@ from app.domain.models import TaskId
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
 from app.plans import current, revisions
 from app.plans import diff as diffs
+from app.runs import views as run_views
 from app.schedules import gantt_svg
 from app.store.models import Attempt
 
@@ -122,7 +123,7 @@ def diff_view(*, sessions: sessionmaker[Session], run_id: str) -> DiffView:
 @dataclass(frozen=True)
 class RunPage:
     overview: browse.RunOverview
-    page: browse.DecisionPage
+    page: run_views.DecisionPage
     page_number: int
     pages: int
     open_decision: int | None
@@ -162,12 +163,15 @@ def run_page(
     if open_decision is not None and 0 <= open_decision < run.n_tasks:
         page_number = open_decision // DECISIONS_PER_PAGE + 1
     page_number = min(max(1, page_number), pages)
-    page = browse.decision_page(
-        sessions=sessions,
-        run_id=run_id,
-        offset=(page_number - 1) * DECISIONS_PER_PAGE,
-        limit=DECISIONS_PER_PAGE,
-    )
+    with sessions() as session:
+        page = run_views.decision_page(
+            session,
+            run_id,
+            offset=(page_number - 1) * DECISIONS_PER_PAGE,
+            limit=DECISIONS_PER_PAGE,
+            prompts=False,
+            from_task=True,
+        )
     cap = spec.problem.cap
     upper = None if cap.max_deviation is None else cap.upper
     # A first visit to a large run would wait for the exact optimum at every cap: the page

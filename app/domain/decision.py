@@ -51,6 +51,9 @@ class DecisionContext:
     # Tasks allocated before this one (pins and decisions), when the graph does not decide
     # in queue order (a timed instance); None: task_index of them.
     allocated: int | None = None
+    # docs/allocation.md#teams: per robot, may it take this task (skills, duration map)?
+    # Empty: every robot may. An ineligible robot is never in `feasible`.
+    eligible: tuple[bool, ...] = ()
 
     @property
     def labels(self) -> tuple[str, ...]:

@@ -1,8 +1,9 @@
 """Which robot may take which task, and the time arguments of a Problem, checked.
 
-A per-robot duration map that omits a robot makes that (task, robot) pair ineligible
-(docs/schedules.md#the-model). On top of the instance's own rules, a problem's pins and unavailable
-robots must leave every task a robot that may take it; a pinned start belongs to a pinned task.
+The rule itself is `Instance.eligible` (docs/allocation.md#teams): a robot's `skills`, and a
+per-robot duration map that omits a robot (docs/schedules.md#the-model). On top of the
+instance's own rules, a problem's pins and unavailable robots must leave every task a robot
+that may take it; a pinned start belongs to a pinned task; a team task is not pinned (yet).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ def check_time_arguments(
     without one, a pin on a robot that cannot take its task, or a task left without any
     available robot that can take it."""
     if not instance.timed:
+        check_pins_eligible(instance, pins, unavailable)
         for name, given in (
             ("objective", not objective.is_default),
             ("pinned_starts", bool(starts)),
@@ -41,27 +43,8 @@ def check_time_arguments(
         raise DomainError(
             "not_before", f"must be a non-negative number of minutes, got {not_before!r}"
         )
-    tasks, robots = instance.tasks, instance.robots
-    eligible = instance.eligible
-    for t, r in pins.items():
-        if not eligible[t, r]:
-            raise DomainError(
-                "pinned",
-                f"task {tasks[t].id!r} is pinned on robot '{robots[r].name}', which cannot take "
-                "it: its duration map does not name that robot",
-                code="ineligible_pin",
-            )
-    for t in range(instance.n_tasks):
-        if t in pins:
-            continue
-        if not any(eligible[t, r] and r not in unavailable for r in range(instance.n_robots)):
-            names = ", ".join(robots[r].name for r in range(instance.n_robots) if eligible[t, r])
-            raise DomainError(
-                "unavailable",
-                f"task {tasks[t].id!r} ({tasks[t].name}) can be taken only by {names}, and none "
-                "of them is available; make one available or pin the task",
-                code="no_robot_left",
-            )
+    check_pins_eligible(instance, pins, unavailable)
+    tasks = instance.tasks
     out: dict[int, float] = {}
     for t, start in sorted(starts.items()):
         if t not in pins:
@@ -77,3 +60,43 @@ def check_time_arguments(
             )
         out[t] = float(start)
     return out
+
+
+def check_pins_eligible(
+    instance: Instance, pins: Mapping[int, int], unavailable: frozenset[int]
+) -> None:
+    """A pin names a robot that may take its task, no team task is pinned, and every free
+    task keeps an available robot that may take it."""
+    tasks, robots = instance.tasks, instance.robots
+    for t in pins:
+        if tasks[t].team is not None:
+            raise DomainError(
+                "pinned",
+                f"task {tasks[t].id!r} is a team task, which cannot be pinned yet "
+                "(docs/allocation.md#teams); leave it free",
+                code="team_pin",
+            )
+    eligible = instance.eligible
+    if eligible.all():
+        return
+    why = "its duration map does not name that robot" if instance.timed else "its skills lack"
+    for t, r in pins.items():
+        if not eligible[t, r]:
+            reason = why if instance.timed else f"{why} a feature the task needs"
+            raise DomainError(
+                "pinned",
+                f"task {tasks[t].id!r} is pinned on robot '{robots[r].name}', which cannot take "
+                f"it: {reason}",
+                code="ineligible_pin",
+            )
+    for t in range(instance.n_tasks):
+        if t in pins:
+            continue
+        if not any(eligible[t, r] and r not in unavailable for r in range(instance.n_robots)):
+            names = ", ".join(robots[r].name for r in range(instance.n_robots) if eligible[t, r])
+            raise DomainError(
+                "unavailable",
+                f"task {tasks[t].id!r} ({tasks[t].name}) can be taken only by {names}, and none "
+                "of them is available; make one available or pin the task",
+                code="no_robot_left",
+            )

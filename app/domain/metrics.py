@@ -11,6 +11,7 @@ from enum import StrEnum
 import numpy as np
 
 from app.domain.models import Instance
+from app.domain.teams import Teams, team_success
 
 DEFAULT_TRIALS = 1000
 
@@ -22,11 +23,28 @@ class Severity(StrEnum):
     CRITICAL = "critical"
 
 
-def workload(assignment: Sequence[int], n_robots: int) -> list[int]:
+def workload(assignment: Sequence[int], n_robots: int, teams: Teams | None = None) -> list[int]:
+    """Tasks per robot; a team task counts once for each member (docs/allocation.md#teams)."""
     loads = [0] * n_robots
-    for r in assignment:
-        loads[r] += 1
+    for t, r in enumerate(assignment):
+        if teams and t in teams:
+            for member in teams[t]:
+                loads[member] += 1
+        else:
+            loads[r] += 1
     return loads
+
+
+def task_successes(
+    instance: Instance, assignment: Sequence[int], teams: Teams | None = None
+) -> np.ndarray:
+    """S per task: the robot's S(r, t), or a team's mean over its units."""
+    p = instance.success[np.arange(len(assignment)), np.asarray(assignment, dtype=int)]
+    if teams:
+        p = p.copy()
+        for t, members in teams.items():
+            p[t] = team_success(instance.tasks[t], instance.robots, members)
+    return p
 
 
 def max_abs_deviation(loads: Sequence[int], target: float) -> float:
@@ -58,18 +76,22 @@ def jain_index(loads: Sequence[int]) -> float:
     return sum(loads) ** 2 / (len(loads) * squares)
 
 
-def expected_success(instance: Instance, assignment: Sequence[int]) -> float:
+def expected_success(
+    instance: Instance, assignment: Sequence[int], teams: Teams | None = None
+) -> float:
+    if teams:
+        return float(np.mean(task_successes(instance, assignment, teams)))
     s = instance.success
     return float(np.mean([s[t, r] for t, r in enumerate(assignment)]))
 
 
-def feature_success(instance: Instance, assignment: Sequence[int]) -> dict[str, float]:
-    s = instance.success
+def feature_success(
+    instance: Instance, assignment: Sequence[int], teams: Teams | None = None
+) -> dict[str, float]:
+    s = task_successes(instance, assignment, teams)
     out: dict[str, float] = {}
     for feature in instance.features:
-        values = [
-            s[t, assignment[t]] for t, task in enumerate(instance.tasks) if feature in task.features
-        ]
+        values = [s[t] for t, task in enumerate(instance.tasks) if feature in task.features]
         out[feature] = float(np.mean(values))
     return out
 
@@ -82,10 +104,15 @@ class Completion:
 
 
 def simulate_completion(
-    instance: Instance, assignment: Sequence[int], *, seed: int, trials: int = DEFAULT_TRIALS
+    instance: Instance,
+    assignment: Sequence[int],
+    *,
+    seed: int,
+    trials: int = DEFAULT_TRIALS,
+    teams: Teams | None = None,
 ) -> Completion:
     """K seeded Monte-Carlo executions; each task succeeds with probability S."""
-    p = instance.success[np.arange(len(assignment)), np.asarray(assignment, dtype=int)]
+    p = task_successes(instance, assignment, teams)
     rng = np.random.default_rng(seed)
     rates = (rng.random((trials, p.size)) < p).mean(axis=1)
     mean = float(rates.mean())
@@ -125,20 +152,24 @@ def compute_metrics(
     seed: int = 0,
     trials: int = DEFAULT_TRIALS,
     scope: BalanceScope | None = None,
+    teams: Teams | None = None,
 ) -> Metrics:
     """Success over every task; balance, deviation, severity and Jain over `scope` (the
     available robots and their W, see Problem.balance_scope), or the whole fleet. The
-    workload lists every robot, including unavailable ones with their pins."""
-    loads = workload(assignment, instance.n_robots)
+    workload lists every robot, including unavailable ones with their pins. `teams`: the
+    members of each team task (docs/allocation.md#teams)."""
+    loads = workload(assignment, instance.n_robots, teams)
     counted = loads if scope is None else scope.loads(loads)
     w = instance.target_load if scope is None else scope.target
     return Metrics(
-        expected_success=expected_success(instance, assignment),
+        expected_success=expected_success(instance, assignment, teams),
         balance_score=balance_score(counted, w),
         max_deviation=max_abs_deviation(counted, w),
         imbalance_severity=severity(counted, w),
         workload={robot.name: load for robot, load in zip(instance.robots, loads, strict=True)},
-        feature_success=feature_success(instance, assignment),
+        feature_success=feature_success(instance, assignment, teams),
         jain_index=jain_index(counted),
-        simulated_completion=simulate_completion(instance, assignment, seed=seed, trials=trials),
+        simulated_completion=simulate_completion(
+            instance, assignment, seed=seed, trials=trials, teams=teams
+        ),
     )

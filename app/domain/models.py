@@ -18,6 +18,7 @@ from functools import cached_property
 import numpy as np
 
 from app.domain.errors import DomainError
+from app.domain.teams import check_skills, check_teams, skill_mask, unit_count, units_of
 from app.domain.time_model import TimeModel
 from app.domain.timing_rules import check_timing, has_time_fields
 
@@ -44,6 +45,8 @@ class Task:
     zone: str | None = None
     release: float | None = None  # earliest start, minutes from the plan's start
     deadline: float | None = None  # latest end, minutes from the plan's start
+    # docs/allocation.md#teams: {feature: count}, distinct robots at once; None: one robot.
+    team: Mapping[str, int] | None = dataclasses.field(default=None, hash=False)
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,8 @@ class Robot:
     description: str = ""
     zone: str | None = None  # where it starts (docs/schedules.md#the-model)
     available: tuple[float, float] | None = None  # its shift [start, end], minutes
+    # docs/allocation.md#teams: the features it may work on; None: any it rates (above 0 in a team)
+    skills: tuple[str, ...] | None = None
 
     @property
     def display(self) -> str:
@@ -79,6 +84,11 @@ class Instance:
         validate_instance(self.tasks, self.robots)
         if has_time_fields(self.tasks, self.robots, self.travel, self.start):
             model = check_timing(self.tasks, self.robots, self.travel, self.start)
+            if self.restricted_by_skills:
+                # One eligibility rule (docs/allocation.md#teams): what the skills forbid has
+                # no duration, so every scheduler reading the time model honours it too.
+                model = model.without(self._skill_mask)
+                _check_someone_takes_each(self.tasks, self.robots, model.eligibility())
             object.__setattr__(self, "_time_model", model)
 
     @property
@@ -94,15 +104,45 @@ class Instance:
         return self._time_model
 
     @cached_property
+    def _skill_mask(self) -> np.ndarray:
+        return skill_mask(self.tasks, self.robots)
+
+    @property
+    def restricted_by_skills(self) -> bool:
+        return any(robot.skills is not None for robot in self.robots)
+
+    @cached_property
     def eligible(self) -> np.ndarray:
-        """E[t, r]: may robot r take task t? Always true untimed; a per-robot duration map
-        that omits r makes (t, r) ineligible."""
-        if self._time_model is None:
-            mask = np.ones((self.n_tasks, self.n_robots), dtype=bool)
-        else:
+        """E[t, r]: may robot r take task t (a team task: cover one of its units)? The one
+        rule of docs/allocation.md#teams: the robots' skills, and on a timed instance the
+        duration map (one that omits r makes (t, r) ineligible). All true without either."""
+        if self._time_model is not None:
             mask = self._time_model.eligibility()
+        elif self.restricted_by_skills:
+            mask = self._skill_mask.copy()
+        else:
+            mask = np.ones((self.n_tasks, self.n_robots), dtype=bool)
         mask.setflags(write=False)
         return mask
+
+    @cached_property
+    def has_teams(self) -> bool:
+        return any(task.team is not None for task in self.tasks)
+
+    @cached_property
+    def units(self) -> tuple[tuple[str, ...], ...]:
+        """Per task, the features of its team's units in key order; () for one robot."""
+        return tuple(units_of(task) for task in self.tasks)
+
+    @cached_property
+    def loads_added(self) -> tuple[int, ...]:
+        """Per task, what it adds to the loads: its units, or 1 for a single-robot task."""
+        return tuple(unit_count(task) for task in self.tasks)
+
+    @cached_property
+    def n_units(self) -> int:
+        """The loads' total: tasks, with a team task counted once per unit."""
+        return sum(self.loads_added)
 
     @property
     def n_tasks(self) -> int:
@@ -114,7 +154,8 @@ class Instance:
 
     @property
     def target_load(self) -> float:
-        return self.n_tasks / self.n_robots
+        """W = total units / robots (n_tasks / n_robots without team tasks)."""
+        return self.n_units / self.n_robots
 
     @cached_property
     def features(self) -> tuple[str, ...]:
@@ -191,11 +232,16 @@ def validate_instance(tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
         for feature in task.features:
             missing = [r.name for r in robots if feature not in r.success]
             if missing:
+                where = "features" if task.team is None else f"team.{feature}"
+                named = "" if task.team is None else f"task {task.id!r}: "
                 raise DomainError(
-                    f"tasks.{i}.features",
-                    f"unknown feature '{feature}': not rated by robot(s) {', '.join(missing)}; "
+                    f"tasks.{i}.{where}",
+                    f"{named}unknown feature '{feature}': not rated by robot(s) "
+                    f"{', '.join(missing)}; "
                     "every robot must rate every feature a task needs",
                 )
+    check_skills(robots)
+    check_teams(tasks, robots)
 
 
 # Reasoners name robots in markdown ("**Decision**: Light Robot", "Light Robot: 12"), so a
@@ -227,3 +273,16 @@ def _check_robot_names(robots: Sequence[Robot]) -> None:
                     "must identify one robot each",
                 )
             owner[key] = i
+
+
+def _check_someone_takes_each(
+    tasks: Sequence[Task], robots: Sequence[Robot], eligible: np.ndarray
+) -> None:
+    for t, task in enumerate(tasks):
+        if not eligible[t].any():
+            raise DomainError(
+                f"tasks.{t}.duration",
+                f"task {task.id!r}: no eligible robot can take it: its duration map names only "
+                "robots whose skills lack a feature it needs "
+                f"({', '.join(repr(f) for f in task.features)}); name a robot with the skills",
+            )

@@ -23,7 +23,10 @@ from fractions import Fraction
 from functools import cached_property
 from types import MappingProxyType
 
+import numpy as np
+
 from app.domain.cap import WorkloadCap
+from app.domain.completion import completable
 from app.domain.eligibility import check_time_arguments
 from app.domain.errors import DomainError, InfeasibleCapError
 from app.domain.metrics import BalanceScope
@@ -78,8 +81,10 @@ class Problem:
             instance, pins, off, objective, dict(pinned_starts or {}), not_before
         )
         n_available = instance.n_robots - len(off)
+        # Loads count units (docs/allocation.md#teams): a team task once per member.
+        added = instance.loads_added
         balance_tasks = sum(1 for r in pins.values() if r not in off)
-        balance_tasks += instance.n_tasks - len(pins)
+        balance_tasks += instance.n_units - sum(added[t] for t in pins)
         if uncapped:
             max_deviation = None
         elif max_deviation is None:
@@ -126,6 +131,37 @@ class Problem:
                 loads[robot] += 1
         return tuple(loads)
 
+    @cached_property
+    def free_units(self) -> int:
+        """What the free tasks add to the loads: their count, a team task once per unit."""
+        added = self.instance.loads_added
+        return sum(added[t] for t in self.free_tasks)
+
+    def feasible_robots(
+        self, task_index: int, loads: Sequence[int], remaining_after: int, *, in_order: bool = True
+    ) -> list[int]:
+        """Robots that may take task `task_index` and keep the cap satisfiable. With
+        eligibility restrictions (docs/allocation.md#teams) only eligible robots, and when the
+        free tasks are placed in queue order (`in_order`) only those after whose choice every
+        later free task still gets an eligible robot within the cap."""
+        robots = self.cap.feasible_robots(loads, remaining_after)
+        eligible = self.instance.eligible
+        if eligible.all():
+            return robots
+        robots = [r for r in robots if eligible[task_index, r]]
+        if not in_order:
+            return robots
+        later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
+        rows = eligible[np.ix_(later, self.available)]
+        out = []
+        for r in robots:
+            after = list(loads)
+            after[r] += 1
+            balanced = [after[c] for c in self.available]
+            if completable(rows, balanced, self.cap.lower, self.cap.upper):
+                out.append(r)
+        return out
+
     def remaining_after(self, task_index: int) -> int:
         """Free tasks after `task_index` in the queue."""
         return len(self.free_tasks) - bisect.bisect_right(self.free_tasks, task_index)
@@ -165,7 +201,7 @@ class Problem:
     # -- validation ------------------------------------------------------------------------
 
     def _ensure_completable(self) -> None:
-        cap, free = self.cap, len(self.free_tasks)
+        cap, free = self.cap, self.free_units
         if cap.can_complete(self.initial_loads, free):
             return
         suggestion = smallest_completing_cap(cap, self.initial_loads, free)
@@ -192,7 +228,7 @@ class Problem:
                 f"the pins already put {loads[r]} tasks on robot '{names[r].name}', above the "
                 f"cap's {bounds}"
             )
-        free = len(self.free_tasks)
+        free = self.free_units
         short = sum(max(0, lo - loads[r]) for r in self.available)
         if short > free:
             return (

@@ -12,7 +12,7 @@ from typing import Any
 
 from app.domain.models import Instance, Robot, Task
 
-_TASK_TIME = ("duration", "after", "zone", "release", "deadline")
+_TASK_TIME = ("duration", "after", "zone", "release", "deadline", "team")
 
 
 def _task_dict(t: Task) -> dict[str, Any]:
@@ -40,6 +40,8 @@ def _robot_dict(r: Robot) -> dict[str, Any]:
         out["zone"] = r.zone
     if r.available is not None:
         out["available"] = list(r.available)
+    if r.skills is not None:  # docs/allocation.md#teams; absent keeps older forms unchanged
+        out["skills"] = list(r.skills)
     return out
 
 
@@ -74,6 +76,7 @@ def instance_from_dict(data: dict[str, Any]) -> Instance:
                 zone=t.get("zone"),
                 release=t.get("release"),
                 deadline=t.get("deadline"),
+                team=t.get("team"),
             )
             for t in data["tasks"]
         ),
@@ -85,6 +88,7 @@ def instance_from_dict(data: dict[str, Any]) -> Instance:
                 success=dict(r["success"]),
                 zone=r.get("zone"),
                 available=None if shift is None else (shift[0], shift[1]),
+                skills=None if r.get("skills") is None else tuple(r["skills"]),
             )
             for r, shift in zip(data["robots"], available, strict=True)
         ),

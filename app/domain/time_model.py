@@ -12,6 +12,7 @@ have no zone only when no task has one, and then nothing ever travels.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import math
 from collections.abc import Sequence
@@ -58,6 +59,14 @@ class TimeModel:
 
     def eligibility(self) -> np.ndarray:
         return np.array([[d is not None for d in row] for row in self.durations], dtype=bool)
+
+    def without(self, allowed: np.ndarray) -> TimeModel:
+        """The same model where the pairs `allowed` forbids (robots' skills) have no duration."""
+        durations = tuple(
+            tuple(d if allowed[t, r] else None for r, d in enumerate(row))
+            for t, row in enumerate(self.durations)
+        )
+        return dataclasses.replace(self, durations=durations)
 
     def travel(self, zone_from: int | None, zone_to: int | None) -> float:
         """Minutes from one zone to another; 0 when either end has no zone."""

@@ -22,7 +22,7 @@ from app.graph.pause import NodeHook
 from app.graph.state import GraphContext, LTAAState, Node
 
 # The node every task begins with: where a durable run's checkpoints are written
-# (app.graph.checkpoint_sparse), so a resume starts the task it was killed in again.
+# (app.graph.checkpoint._sparse), so a resume starts the task it was killed in again.
 TASK_START = "detect_phase"
 
 NODES: dict[str, Node] = {

@@ -87,4 +87,5 @@ def decision_context(
         release=release,
         deadline=deadline,
         allocated=allocated,
+        eligible=() if inst.eligible.all() else tuple(bool(x) for x in inst.eligible[t]),
     )

@@ -1,12 +1,19 @@
-"""Test-only crash points: hold a run at one node of one task, so an end-to-end test can
-SIGKILL (or SIGTERM) the server at a known place anywhere in the graph.
+"""The pause hook: an explicit test and operations hook that holds a run at one node of one
+task, so an end-to-end test can SIGKILL (or SIGTERM) the server at a known place anywhere
+in the graph (docs/operations.md#the-pause-hook-ltaa_test_pause).
+
+It is inert unless `LTAA_TEST_PAUSE` is set: app.runs.factory.pause_hook_from_settings then
+returns no hook and build_graph adds every node unwrapped; nothing here runs in a run. Set,
+the server warns at start-up, and each held run logs `PausePoint.message()`, which the
+tests wait for (tests/e2e/server.py). It stays in the product because the server process
+that is killed must install it; in-process tests pass `pause_hook(...)` to the worker.
 
 `<node>:before` holds the node before its body runs: this node has done nothing.
 `<node>:after` holds it once its body has run and its side effects are recorded, but
 before LangGraph takes the step's checkpoint: the window in which a crash makes the node
 run again from its top, which is where a non-idempotent side effect would show. (The
 worker's saver writes a checkpoint where each task begins, so a crash at either point
-re-runs the task's nodes from its start: app.graph.checkpoint_sparse.)
+re-runs the task's nodes from its start: app.graph.checkpoint._sparse.)
 
 A held run waits, polling `Recorder.check_cancelled`, until the process dies or the run is
 stopped (a cancel or the server draining raises RunCancelled out of the hold).

@@ -52,6 +52,7 @@ def _facts(ctx: DecisionContext) -> str:
         + (f" ({notes[r]})" if notes[r] else "")
         + f", load {ctx.loads[r]} (dev {ctx.loads[r] - ctx.target:+.1f})"
         + ("" if r in ctx.feasible else ", NOT allowed")
+        + (", cannot take this task" if ctx.eligible and not ctx.eligible[r] else "")
         for r in range(len(labels))
     ]
     if ctx.load_bounds is None:

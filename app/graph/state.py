@@ -137,7 +137,9 @@ def task_view(
         "balance": balance_of(problem, loads),
         "severity": severity_of(problem, loads),
         "weights": [weights.success, weights.balance],
-        "feasible": problem.cap.feasible_robots(loads, remaining),
+        # Eligible robots only (docs/allocation.md#teams); in queue order, only those after
+        # whose choice every later task keeps an eligible robot within the cap.
+        "feasible": problem.feasible_robots(task_index, loads, remaining, in_order=decided is None),
         "guided_robot": guided_robot,
         "guided_costs": list(guided_costs) if guided_costs is not None else None,
     }

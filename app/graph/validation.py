@@ -76,6 +76,12 @@ def hard_invalid_reason(parsed: ParsedResponse, ctx: DecisionContext) -> str | N
         )
     if parsed.robot not in ctx.feasible:
         allowed = ", ".join(labels[r] for r in ctx.feasible)
+        if ctx.eligible and not ctx.eligible[parsed.robot]:
+            # docs/allocation.md#teams: eligibility is a hard rule, like the cap.
+            return (
+                f"{labels[parsed.robot]} cannot take this task (its skills or the task's "
+                f"duration map rule it out); allowed now: {allowed}"
+            )
         if ctx.timing and not ctx.timing[parsed.robot].allowed:
             # docs/schedules.md#validation-in-time: a choice that misses the deadline or breaks a
             # shift is hard-invalid.

@@ -11,7 +11,7 @@ chains (and every sign-off over them) stay as they were.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from enum import StrEnum
@@ -24,12 +24,12 @@ from app.domain.annotations import AnnotationKind
 from app.domain.errors import DomainError, RunNotFoundError
 from app.domain.lifecycle import FINISHED
 from app.runs import lifecycle
-from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store import site_repository as site_repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.store.models import ExecutionReport, RequestKey, Run, as_utc, utcnow
 
 
@@ -127,100 +127,148 @@ def _report(
                 code="revised",
                 location="path",
             )
-        tasks = repo.queue_task_ids(run)
-        decided = {d.task_id: d.task_index for d in decision_repo.decided_task_ids(session, run_id)}
-        stored = {r.task_id: r for r in repo.execution_reports(session=session, run_id=run_id)}
-        changed: list[dict[str, Any]] = []
-        outcomes: list[site_repo.Reported] = []
-        pending: dict[str, ExecutionState] = {}
-        for i, update in enumerate(updates):
-            field = f"updates.{i}.task_id"
-            if update.task_id not in tasks:
-                raise DomainError(
-                    field, f"task '{update.task_id}' is not in run '{run_id}'", code="unknown_task"
-                )
-            if update.task_id not in decided:
-                raise ExecutionConflictError(
-                    field,
-                    f"task '{update.task_id}' has not been decided yet in run '{run_id}'; "
-                    "report only decided tasks",
-                    code="undecided",
-                )
-            row = stored.get(update.task_id)
-            current = pending.get(update.task_id) or (
-                ExecutionState(row.state) if row is not None else None
-            )
-            if not allowed(current, update.state):
-                raise ExecutionConflictError(
-                    f"updates.{i}.state",
-                    f"task '{update.task_id}' is {current}; execution states move forward "
-                    f"only (started -> done | failed), not {current} -> {update.state}",
-                    code="backwards",
-                )
-            if current == update.state:
-                continue
-            pending[update.task_id] = update.state
-            # Stored in UTC: SQLite keeps no offset, so 09:30+05:00 would read back as 09:30Z.
-            at = as_utc(update.at).astimezone(UTC) if update.at is not None else utcnow()
-            started = row.started_at if row is not None else None
-            if update.state in FINAL and started is not None and at < as_utc(started):
-                sent = at.isoformat() if update.at is not None else f"now ({at.isoformat()})"
-                raise DomainError(
-                    f"updates.{i}.at",
-                    f"task '{update.task_id}' started at {as_utc(started).isoformat()}; it "
-                    f"cannot be {update.state} earlier, at {sent}",
-                    code="before_started",
-                )
-            changed.append(
-                {
-                    "task_id": update.task_id,
-                    "task_index": decided[update.task_id],
-                    "state": update.state.value,
-                    "at": at.isoformat(),
-                }
-            )
-            if row is None:
-                row = ExecutionReport(
-                    run_id=run_id,
-                    task_index=decided[update.task_id],
-                    task_id=update.task_id,
-                    state=update.state.value,
-                )
-                session.add(row)
-                stored[update.task_id] = row
-            row.state = update.state.value
-            if update.state == ExecutionState.STARTED:
-                row.started_at = at
-            else:
-                row.ended_at = at
-                outcomes.append(
-                    site_repo.Reported(
-                        row.task_index, update.task_id, update.state.value, at, row.started_at
-                    )
-                )
+        changed, outcomes = _apply_updates(session, run, updates)
         if changed:
-            detail = {"updates": changed}
-            if run.status in FINISHED:
-                record: Any = lifecycle.record_annotation(
-                    session, run_id=run_id, kind=AnnotationKind.EXECUTION_REPORTED, detail=detail
-                )
-            else:
-                record = lifecycle.record_event(
-                    session, run_id=run_id, kind=EventKind.EXECUTION_REPORTED, detail=detail
-                )
-            if outcomes:
-                # The site's outcome rows (docs/estimates.md#counting-each-report-once), received
-                # when the record says: the rebuild from the record reads the same time.
-                session.flush()
-                site_repo.record_outcomes(
-                    session=session, run=run, reported=outcomes, received_at=record.created_at
-                )
+            _record_reports(session, run, changed, outcomes)
         if idempotency is not None:
             session.add(
                 RequestKey(key=idempotency.key, request_digest=idempotency.digest, run_id=run_id)
             )
         session.flush()
         return current_states(session, run_id, [u.task_id for u in updates])
+
+
+def _apply_updates(
+    session: Session, run: Run, updates: Sequence[Update]
+) -> tuple[list[dict[str, Any]], list[site_repo.Reported]]:
+    """Check each update in order and write it to the run's report rows; (the changes the
+    record will say, the final outcomes the site learns from). A repeat changes nothing."""
+    run_id = run.id
+    tasks = repo.queue_task_ids(run)
+    decided = {d.task_id: d.task_index for d in decision_repo.decided_task_ids(session, run_id)}
+    stored = {r.task_id: r for r in repo.execution_reports(session=session, run_id=run_id)}
+    changed: list[dict[str, Any]] = []
+    outcomes: list[site_repo.Reported] = []
+    pending: dict[str, ExecutionState] = {}
+    started_here: dict[str, bool] = {}  # task id -> its `started` here carried `at`
+    for i, update in enumerate(updates):
+        _check_task(i, update, run_id, tasks, decided)
+        row = stored.get(update.task_id)
+        current = pending.get(update.task_id) or (
+            ExecutionState(row.state) if row is not None else None
+        )
+        if not allowed(current, update.state):
+            raise ExecutionConflictError(
+                f"updates.{i}.state",
+                f"task '{update.task_id}' is {current}; execution states move forward "
+                f"only (started -> done | failed), not {current} -> {update.state}",
+                code="backwards",
+            )
+        if current == update.state:
+            continue
+        pending[update.task_id] = update.state
+        at = _report_time(i, update, row)
+        changed.append(
+            {
+                "task_id": update.task_id,
+                "task_index": decided[update.task_id],
+                "state": update.state.value,
+                "at": at.isoformat(),
+                **_server_clock(update),
+            }
+        )
+        if row is None:
+            row = ExecutionReport(
+                run_id=run_id,
+                task_index=decided[update.task_id],
+                task_id=update.task_id,
+                state=update.state.value,
+            )
+            session.add(row)
+            stored[update.task_id] = row
+        row.state = update.state.value
+        if update.state == ExecutionState.STARTED:
+            row.started_at = at
+            started_here[update.task_id] = update.at is not None
+        else:
+            row.ended_at = at
+            outcomes.append(
+                site_repo.Reported(
+                    row.task_index,
+                    update.task_id,
+                    update.state.value,
+                    at,
+                    row.started_at,
+                    together_without_at=site_repo.together_without_at(
+                        started_here, update.task_id, at_sent=update.at is not None
+                    ),
+                )
+            )
+    return changed, outcomes
+
+
+def _check_task(
+    i: int, update: Update, run_id: str, tasks: Collection[str], decided: Mapping[str, int]
+) -> None:
+    field = f"updates.{i}.task_id"
+    if update.task_id not in tasks:
+        raise DomainError(
+            field, f"task '{update.task_id}' is not in run '{run_id}'", code="unknown_task"
+        )
+    if update.task_id not in decided:
+        raise ExecutionConflictError(
+            field,
+            f"task '{update.task_id}' has not been decided yet in run '{run_id}'; "
+            "report only decided tasks",
+            code="undecided",
+        )
+
+
+def _report_time(i: int, update: Update, row: ExecutionReport | None) -> datetime:
+    """When the update happened (now if it says not), never before the task started."""
+    # Stored in UTC: SQLite keeps no offset, so 09:30+05:00 would read back as 09:30Z.
+    at = as_utc(update.at).astimezone(UTC) if update.at is not None else utcnow()
+    started = row.started_at if row is not None else None
+    if update.state in FINAL and started is not None and at < as_utc(started):
+        sent = at.isoformat() if update.at is not None else f"now ({at.isoformat()})"
+        raise DomainError(
+            f"updates.{i}.at",
+            f"task '{update.task_id}' started at {as_utc(started).isoformat()}; it "
+            f"cannot be {update.state} earlier, at {sent}",
+            code="before_started",
+        )
+    return at
+
+
+def _record_reports(
+    session: Session,
+    run: Run,
+    changed: list[dict[str, Any]],
+    outcomes: list[site_repo.Reported],
+) -> None:
+    """An event of an unfinished run's record, an annotation of a finished one."""
+    detail = {"updates": changed}
+    if run.status in FINISHED:
+        record: Any = lifecycle.record_annotation(
+            session, run_id=run.id, kind=AnnotationKind.EXECUTION_REPORTED, detail=detail
+        )
+    else:
+        record = lifecycle.record_event(
+            session, run_id=run.id, kind=EventKind.EXECUTION_REPORTED, detail=detail
+        )
+    if outcomes:
+        # The site's outcome rows (docs/estimates.md#counting-each-report-once), received
+        # when the record says: the rebuild from the record reads the same time.
+        session.flush()
+        site_repo.record_outcomes(
+            session=session, run=run, reported=outcomes, received_at=record.created_at
+        )
+
+
+def _server_clock(update: Update) -> dict[str, str]:
+    """What the record adds to an update sent without `at`: its time is the server's, so
+    the rebuild of the site's rows (app.sites.rebuild) can tell, as the report did."""
+    return {} if update.at is not None else dict(site_repo.SERVER_CLOCK)
 
 
 def current_states(session: Session, run_id: str, task_ids: Sequence[str]) -> dict[str, str]:

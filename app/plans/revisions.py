@@ -34,14 +34,15 @@ from app.plans.revision_times import ReportedTimes
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, records, review_gate
-from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
+from app.runs.service import insert_run
 from app.runs.spec import RunSpec
 from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, run_for_key
 from app.store.models import ExecutionReport, Run, as_utc, utcnow
 
 REVISABLE = frozenset(
@@ -151,55 +152,11 @@ def _create(
     prior_strength: float,
 ) -> tuple[Run, bool]:
     with transaction(sessions) as session:
-        parent = _lock(session, parent_id)
-        if parent.superseded_by is not None:
-            head = head_of(session, parent)
-            raise RevisionConflictError(
-                f"run '{parent_id}' was already revised; revise the head of its revisions, "
-                f"run '{head}' (POST /runs/{head}/revisions)",
-                code="already_revised",
-            )
-        status = RunStatus(parent.status)
-        if status not in REVISABLE:
-            raise RevisionConflictError(
-                f"run '{parent_id}' is {status.value}; only a queued, running, interrupted, "
-                "awaiting review or completed run can be revised (start a new run instead)"
-            )
-        parent_spec = RunSpec.from_json(parent.request)
-        rows = decision_repo.decisions(session=session, run_id=parent_id)
-        decided = {
-            r.task_index: ParentDecision(records.decision_record(r), r.chain_hash) for r in rows
-        }
+        parent, status = _revisable_parent(session, parent_id)
         reports = {
             r.task_index: r for r in repo.execution_reports(session=session, run_id=parent_id)
         }
-        execution = {t: r.state for t, r in reports.items()}
-        times = {
-            t: ReportedTimes(
-                r.state,
-                None if r.started_at is None else as_utc(r.started_at),
-                None if r.ended_at is None else as_utc(r.ended_at),
-            )
-            for t, r in reports.items()
-        }
-        budget = parent_spec.token_budget
-        if budget is not None:
-            budget = max(0, budget - lineage_tokens(session, parent))
-        plan = plan_revision(
-            parent_spec=parent_spec,
-            decided=decided,
-            execution=execution,
-            changes=request.changes,
-            pin=request.pin,
-            reasoner=request.reasoner,
-            model=request.model,
-            parent_id=parent_id,
-            token_budget=budget,
-            reports=times,
-            now=request.now,
-            # Whole seconds, as a run's default start: minutes read cleanly.
-            arrival=utcnow().replace(microsecond=0),
-        )
+        plan = _plan(session, parent, request, reports)
         spec, learned = revision_spec(
             session=session,
             spec=plan.spec,
@@ -208,83 +165,152 @@ def _create(
             durations=request.durations,
             strength=prior_strength,
         )
-        heads = chain_heads(session, parent_id).as_dict()
-        run_id = uuid.uuid4().hex
-        revision_no = parent.revision + 1
-        link = {
-            "parent": parent_id,
-            "parent_heads": heads,
-            "changes": [dict(c) for c in request.changes],
-            "pin": request.pin if isinstance(request.pin, str) else dict(request.pin),
-            "reason": request.reason,
-        }
-        detail = {
-            **link,
-            "revision": revision_no,
-            "parent_status": status.value,
-            "pinned": plan.pinned_task_ids,
-            # The site's reports on pinned tasks, carried to the revision (_carry_execution).
-            "execution": _carried(plan.pinned_rows, reports),
-            "added_tasks": plan.added_tasks,
-            "removed_tasks": plan.removed_tasks,
-            "fleet_changes": plan.fleet_changes + learned,
-            "reasoner": spec.reasoner,
-            "mode": spec.mode,
-            "tasks": plan.problem.instance.n_tasks,
-            "robots": plan.problem.instance.n_robots,
-            "max_deviation": plan.problem.cap.max_deviation,
-            **spec.site_detail(),
-            **_time_detail(plan),
-        }
-        run = lifecycle.new_run(
-            session,
-            run_id=run_id,
-            request=spec.to_json(),
-            reasoner=spec.reasoner,
-            mode=spec.mode,
-            max_deviation=plan.problem.cap.max_deviation,
-            n_tasks=plan.problem.instance.n_tasks,
-            n_robots=plan.problem.instance.n_robots,
-            resumes=0,
-            cancel_requested=False,
-            idempotency_key=idempotency.key if idempotency else None,
-            request_digest=idempotency.digest if idempotency else None,
-            revision_of=parent_id,
-            revision=revision_no,
-            chain_anchor=chain.revision_anchor(chain.revision_link(link)),
-            chain_scheme=chain.SCHEME_V2,
-            site=spec.site,
-            first_event=EventKind.REVISED,
-            created=detail,
+        run = _new_revision(
+            session, parent, status, request, plan, spec, learned, reports, idempotency
         )
-        for values in plan.pinned_rows:
-            decision_repo.upsert_decision(session=session, run_id=run_id, values=values)
-        _carry_execution(session, run_id, plan.pinned_rows, reports)
-        parent.superseded_by = run_id
-        active = status not in FINISHED
-        if active:
-            if status == RunStatus.AWAITING_REVIEW:
-                # Its pending decision was never stored, so it is not pinned; a later
-                # resolution of that review is a 409.
-                review_gate.close_pending(session, parent_id, "the run was revised")
-            # The other process holding it (PostgreSQL) stops at its next heartbeat.
-            parent.cancel_requested = True
-            lifecycle.move(
-                session,
-                parent,
-                RunStatus.SUPERSEDED,
-                event=EventKind.SUPERSEDED,
-                detail={"by": run_id, "reason": request.reason},
-            )
-        else:
-            lifecycle.record_annotation(
-                session,
-                run_id=parent_id,
-                kind=AnnotationKind.SUPERSEDED_BY,
-                detail={"by": run_id, "reason": request.reason},
-            )
+        active = _stop_parent(session, parent, status, run.id, request.reason)
         session.flush()
     return run, active
+
+
+def _revisable_parent(session: Session, parent_id: str) -> tuple[Run, RunStatus]:
+    """The parent, locked, if it may be revised now."""
+    parent = _lock(session, parent_id)
+    if parent.superseded_by is not None:
+        head = head_of(session, parent)
+        raise RevisionConflictError(
+            f"run '{parent_id}' was already revised; revise the head of its revisions, "
+            f"run '{head}' (POST /runs/{head}/revisions)",
+            code="already_revised",
+        )
+    status = RunStatus(parent.status)
+    if status not in REVISABLE:
+        raise RevisionConflictError(
+            f"run '{parent_id}' is {status.value}; only a queued, running, interrupted, "
+            "awaiting review or completed run can be revised (start a new run instead)"
+        )
+    return parent, status
+
+
+def _plan(
+    session: Session,
+    parent: Run,
+    request: RevisionRequest,
+    reports: Mapping[int, ExecutionReport],
+) -> RevisionPlan:
+    """The revision planned from what the parent committed and the site reported."""
+    parent_spec = RunSpec.from_json(parent.request)
+    rows = decision_repo.decisions(session=session, run_id=parent.id)
+    decided = {r.task_index: ParentDecision(records.decision_record(r), r.chain_hash) for r in rows}
+    times = {
+        t: ReportedTimes(
+            r.state,
+            None if r.started_at is None else as_utc(r.started_at),
+            None if r.ended_at is None else as_utc(r.ended_at),
+        )
+        for t, r in reports.items()
+    }
+    budget = parent_spec.token_budget
+    if budget is not None:
+        budget = max(0, budget - lineage_tokens(session, parent))
+    return plan_revision(
+        parent_spec=parent_spec,
+        decided=decided,
+        execution={t: r.state for t, r in reports.items()},
+        changes=request.changes,
+        pin=request.pin,
+        reasoner=request.reasoner,
+        model=request.model,
+        parent_id=parent.id,
+        token_budget=budget,
+        reports=times,
+        now=request.now,
+        # Whole seconds, as a run's default start: minutes read cleanly.
+        arrival=utcnow().replace(microsecond=0),
+    )
+
+
+def _new_revision(
+    session: Session,
+    parent: Run,
+    status: RunStatus,
+    request: RevisionRequest,
+    plan: RevisionPlan,
+    spec: RunSpec,
+    learned: list[dict[str, Any]],
+    reports: Mapping[int, ExecutionReport],
+    idempotency: Idempotency | None,
+) -> Run:
+    """The revision's row, its chain anchor linked to the parent's heads, and its pins."""
+    parent_id = parent.id
+    heads = chain_heads(session, parent_id).as_dict()
+    run_id = uuid.uuid4().hex
+    revision_no = parent.revision + 1
+    link = {
+        "parent": parent_id,
+        "parent_heads": heads,
+        "changes": [dict(c) for c in request.changes],
+        "pin": request.pin if isinstance(request.pin, str) else dict(request.pin),
+        "reason": request.reason,
+    }
+    detail = {
+        **link,
+        "revision": revision_no,
+        "parent_status": status.value,
+        "pinned": plan.pinned_task_ids,
+        # The site's reports on pinned tasks, carried to the revision (_carry_execution).
+        "execution": _carried(plan.pinned_rows, reports),
+        "added_tasks": plan.added_tasks,
+        "removed_tasks": plan.removed_tasks,
+        "fleet_changes": plan.fleet_changes + learned,
+        **_time_detail(plan),
+    }
+    run = insert_run(
+        session,
+        run_id=run_id,
+        spec=spec,
+        problem=plan.problem,
+        idempotency=idempotency,
+        created=detail,
+        first_event=EventKind.REVISED,
+        revision_of=parent_id,
+        revision=revision_no,
+        chain_anchor=chain.revision_anchor(chain.revision_link(link)),
+    )
+    for values in plan.pinned_rows:
+        decision_repo.upsert_decision(session=session, run_id=run_id, values=values)
+    _carry_execution(session, run_id, plan.pinned_rows, reports)
+    return run
+
+
+def _stop_parent(
+    session: Session, parent: Run, status: RunStatus, run_id: str, reason: str
+) -> bool:
+    """Mark the parent superseded by the revision; whether it was still active."""
+    parent.superseded_by = run_id
+    active = status not in FINISHED
+    if active:
+        if status == RunStatus.AWAITING_REVIEW:
+            # Its pending decision was never stored, so it is not pinned; a later
+            # resolution of that review is a 409.
+            review_gate.close_pending(session, parent.id, "the run was revised")
+        # The other process holding it (PostgreSQL) stops at its next heartbeat.
+        parent.cancel_requested = True
+        lifecycle.move(
+            session,
+            parent,
+            RunStatus.SUPERSEDED,
+            event=EventKind.SUPERSEDED,
+            detail={"by": run_id, "reason": reason},
+        )
+    else:
+        lifecycle.record_annotation(
+            session,
+            run_id=parent.id,
+            kind=AnnotationKind.SUPERSEDED_BY,
+            detail={"by": run_id, "reason": reason},
+        )
+    return active
 
 
 def _time_detail(plan: RevisionPlan) -> dict[str, Any]:

@@ -22,10 +22,10 @@ from app.domain.review import (
     ReviewState,
 )
 from app.runs import lifecycle
-from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import EventKind, RunStatus
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.store.models import Review, as_utc, utcnow
 
 

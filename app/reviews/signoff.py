@@ -20,10 +20,10 @@ from app.audit.verify import verify_trace
 from app.domain.annotations import AnnotationKind
 from app.domain.errors import DomainError, RunStateConflictError, refuse_nul
 from app.runs import lifecycle
-from app.runs.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.runs.lifecycle import RunStatus
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
 from app.store.models import utcnow
 from app.store.tombstones import missing_run
 

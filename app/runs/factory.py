@@ -37,13 +37,13 @@ def sqlite_checkpointer(settings: Settings) -> Checkpointer:
     # nothing committed; only an OS crash could lose the last steps. Checkpoints are
     # written where a task begins (and where the graph pauses or ends), not at each of its
     # 7+ super-steps: a resume decides the killed task again from its start, every node's
-    # side effects being idempotent and every LLM reply recorded (checkpoint_sparse).
+    # side effects being idempotent and every LLM reply recorded (app.graph.checkpoint._sparse).
     saver = open_sqlite_saver(path, compact=True, synchronous="NORMAL", boundary=(TASK_START,))
     return saver, saver.conn.close
 
 
 def postgres_checkpointer(settings: Settings) -> Checkpointer:
-    from app.graph.checkpoint_postgres import open_postgres_saver
+    from app.graph.checkpoint.postgres import open_postgres_saver
 
     return open_postgres_saver(settings.db_url, max_connections=settings.max_concurrent_runs)
 

@@ -87,13 +87,7 @@ def check_integrity(
         (d for d in decisions if d.task_index not in pins),
         key=lambda d: (place.get(d.task_index, len(free)), d.task_index),
     )
-    if stored_pins != pins:
-        missing = sorted(set(pins) - set(stored_pins))
-        wrong = sorted(t for t, r in stored_pins.items() if pins[t] != r)
-        problems.append(
-            f"pinned tasks missing {missing[:10]} or on another robot {wrong[:10]} "
-            "in the stored decisions"
-        )
+    problems += _pin_problems(pins, stored_pins)
     indices = [d.task_index for d in graph_made]
     contiguous = indices == free[: len(indices)]
     if not contiguous:
@@ -101,44 +95,14 @@ def check_integrity(
             f"decision task indices are not the first {len(indices)} free tasks: {indices[:10]}"
         )
     start = list(initial_loads) if initial_loads is not None else [0] * n_robots
-    loads = list(start)
-    for d in graph_made:
-        loads[d.robot] += 1
-        if d.loads_after != loads:
-            problems.append(
-                f"task {d.task_index}: stored loads_after {d.loads_after} but the "
-                f"decisions so far give {loads}"
-            )
-            break
-
+    loads = _replayed_loads(graph_made, start, problems)
     cp_index = checkpoint.get("task_index") if checkpoint else None
     cp_loads = list(checkpoint["loads"]) if checkpoint and "loads" in checkpoint else None
     loads_consistent = True
     if cp_index is not None:
-        # Free tasks before the checkpoint's task: what the graph had stored by then.
-        position = place.get(cp_index, bisect.bisect_left(free, cp_index))
-        lag = len(graph_made) - position
-        if lag not in (0, 1):
-            problems.append(
-                f"checkpoint is at task {cp_index} but {len(graph_made)} decisions are stored"
-            )
-        if cp_loads is not None:
-            expected = list(start)
-            for d in graph_made[: min(position, len(graph_made))]:
-                expected[d.robot] += 1
-            # The checkpoint may already count the current task (after update_workload),
-            # whose decision is stored only by the next node: its robot is then the
-            # checkpoint's own `robot`.
-            current = graph_made[position] if position < len(graph_made) else None
-            robot = current.robot if current is not None else (checkpoint or {}).get("robot")
-            counted = expected.copy()
-            if isinstance(robot, int) and 0 <= robot < n_robots:
-                counted[robot] += 1
-            loads_consistent = cp_loads in (expected, counted)
-            if not loads_consistent:
-                problems.append(
-                    f"checkpoint loads {cp_loads} disagree with the stored decisions ({expected})"
-                )
+        loads_consistent = _checkpoint_agrees(
+            checkpoint or {}, cp_index, cp_loads, graph_made, free, place, start, n_robots, problems
+        )
     resume_at = free[len(graph_made)] if len(graph_made) < len(free) else n_tasks
     w = target if target is not None else n_tasks / n_robots
     counted_loads = [loads[r] for r in balance_robots] if balance_robots is not None else loads
@@ -156,6 +120,74 @@ def check_integrity(
         problems=problems,
         pinned=len(pins),
     )
+
+
+def _pin_problems(pins: Mapping[int, int], stored_pins: Mapping[int, int]) -> list[str]:
+    if stored_pins == pins:
+        return []
+    missing = sorted(set(pins) - set(stored_pins))
+    wrong = sorted(t for t, r in stored_pins.items() if pins[t] != r)
+    return [
+        f"pinned tasks missing {missing[:10]} or on another robot {wrong[:10]} "
+        "in the stored decisions"
+    ]
+
+
+def _replayed_loads(
+    graph_made: Sequence[DecisionRecord], start: Sequence[int], problems: list[str]
+) -> list[int]:
+    """The loads the graph's decisions give, each checked against its stored loads_after."""
+    loads = list(start)
+    for d in graph_made:
+        loads[d.robot] += 1
+        if d.loads_after != loads:
+            problems.append(
+                f"task {d.task_index}: stored loads_after {d.loads_after} but the "
+                f"decisions so far give {loads}"
+            )
+            break
+    return loads
+
+
+def _checkpoint_agrees(
+    checkpoint: Mapping[str, Any],
+    cp_index: int,
+    cp_loads: list[int] | None,
+    graph_made: Sequence[DecisionRecord],
+    free: Sequence[int],
+    place: Mapping[int, int],
+    start: Sequence[int],
+    n_robots: int,
+    problems: list[str],
+) -> bool:
+    """Whether the checkpoint's loads agree with the stored decisions (a lag of one task is
+    consistent); problems gets what disagrees."""
+    # Free tasks before the checkpoint's task: what the graph had stored by then.
+    position = place.get(cp_index, bisect.bisect_left(free, cp_index))
+    lag = len(graph_made) - position
+    if lag not in (0, 1):
+        problems.append(
+            f"checkpoint is at task {cp_index} but {len(graph_made)} decisions are stored"
+        )
+    if cp_loads is None:
+        return True
+    expected = list(start)
+    for d in graph_made[: min(position, len(graph_made))]:
+        expected[d.robot] += 1
+    # The checkpoint may already count the current task (after update_workload),
+    # whose decision is stored only by the next node: its robot is then the
+    # checkpoint's own `robot`.
+    current = graph_made[position] if position < len(graph_made) else None
+    robot = current.robot if current is not None else checkpoint.get("robot")
+    counted = expected.copy()
+    if isinstance(robot, int) and 0 <= robot < n_robots:
+        counted[robot] += 1
+    consistent = cp_loads in (expected, counted)
+    if not consistent:
+        problems.append(
+            f"checkpoint loads {cp_loads} disagree with the stored decisions ({expected})"
+        )
+    return consistent
 
 
 def checked_for_resume(

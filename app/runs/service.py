@@ -3,33 +3,33 @@
 from __future__ import annotations
 
 import uuid
-from datetime import UTC, datetime
+from collections.abc import Mapping
 from typing import Any
 
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.allocation.service import resolve_instance
 from app.config import Settings
-from app.domain.catalog import instance_of
 from app.domain.errors import RunStateConflictError
 from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
-from app.domain.models import Instance
 from app.domain.objective import Objective
 from app.domain.problem import Problem
 from app.domain.serialize import instance_to_dict
+from app.domain.teams import refuse_teams
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, review_gate
-from app.runs.idempotency import Idempotency, run_for_key
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay import REPLAY, replay_spec, validate_replay
-from app.runs.spec import RunOrder, RunSpec
+from app.runs.spec import RunOrder, RunSpec, copied_parameters, repeated_parameters
 from app.runs.views import require_run
 from app.runs.worker import RunWorker
 from app.store import chain
 from app.store import site_repository as site_repo
 from app.store.db import transaction
+from app.store.idempotency import Idempotency, run_for_key
 from app.store.models import Run, utcnow
 
 
@@ -54,33 +54,51 @@ def create_run(
         )
     run_id = uuid.uuid4().hex
     with transaction(sessions) as session:
-        run = lifecycle.new_run(
+        run = insert_run(
             session,
             run_id=run_id,
-            request=spec.to_json(),
-            reasoner=spec.reasoner,
-            mode=spec.mode,
-            max_deviation=problem.cap.max_deviation,
-            n_tasks=problem.instance.n_tasks,
-            n_robots=problem.instance.n_robots,
-            resumes=0,
-            cancel_requested=False,
-            idempotency_key=idempotency.key if idempotency else None,
-            chain_scheme=chain.SCHEME_V2,
-            request_digest=idempotency.digest if idempotency else None,
-            site=spec.site,
-            created={
-                "reasoner": spec.reasoner,
-                "mode": spec.mode,
-                "tasks": problem.instance.n_tasks,
-                "robots": problem.instance.n_robots,
-                "max_deviation": problem.cap.max_deviation,
-                **({"replay_of": spec.replay_of} if spec.replay_of else {}),
-                **spec.site_detail(),
-            },
+            spec=spec,
+            problem=problem,
+            idempotency=idempotency,
+            created={"replay_of": spec.replay_of} if spec.replay_of else {},
         )
     worker.submit(run_id)
     return run
+
+
+def insert_run(
+    session: Session,
+    *,
+    run_id: str,
+    spec: RunSpec,
+    problem: Problem,
+    idempotency: Idempotency | None,
+    created: Mapping[str, Any],
+    first_event: EventKind = EventKind.CREATED,
+    **row: Any,
+) -> Run:
+    """A queued run's row for `spec` and its first event, whose detail is `created` and
+    what the spec shows of itself (RunSpec.created_detail): for a new run (create_run) and
+    for a revision (app.plans.revisions, `revised`, with its row's revision columns)."""
+    return lifecycle.new_run(
+        session,
+        run_id=run_id,
+        request=spec.to_json(),
+        reasoner=spec.reasoner,
+        mode=spec.mode,
+        max_deviation=problem.cap.max_deviation,
+        n_tasks=problem.instance.n_tasks,
+        n_robots=problem.instance.n_robots,
+        resumes=0,
+        cancel_requested=False,
+        idempotency_key=idempotency.key if idempotency else None,
+        request_digest=idempotency.digest if idempotency else None,
+        chain_scheme=chain.SCHEME_V2,
+        site=spec.site,
+        first_event=first_event,
+        created={**created, **spec.created_detail(problem)},
+        **row,
+    )
 
 
 def create_or_replay_run(
@@ -128,6 +146,11 @@ def submit_run(
     )
 
 
+_TEAM_USE = (
+    "plan team tasks with POST /allocate and solver 'optimal', 'dp', 'brute_force' or 'greedy'"
+)
+
+
 def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Settings) -> RunSpec:
     """What a run will do: a replay copies its source; any other run takes the order's
     instance and parameters, with the server's defaults where the order left them out."""
@@ -139,7 +162,7 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
             replay_of=order.replay_of,
             sent=_sent_for_replay(order),
         )
-    instance = order_instance(order)
+    instance = resolve_instance(order)
     # An explicit `"max_deviation": null` means no cap; leaving it out means the mode's.
     problem = Problem.build(
         instance,
@@ -148,6 +171,7 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         uncapped="max_deviation" in order.sent and order.max_deviation is None,
         objective=Objective(order.objective, order.min_expected_success),
     )
+    refuse_teams(instance.tasks, "the LTAA graph", _TEAM_USE)
     scope: dict[str, Any] = {}
     if order.llm_scope is not None:
         scope["llm_scope"] = order.llm_scope
@@ -155,42 +179,20 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         scope["llm_margin"] = float(order.llm_margin)
     spec = RunSpec.for_instance(
         instance,
+        **copied_parameters(order),
         mode=problem.mode.value,
         max_deviation=problem.cap.max_deviation,
         cap_explicit="max_deviation" in order.sent,
-        seed=order.seed,
         reasoner=reasoner,
-        quality_threshold=order.quality_threshold,
-        max_retries=order.max_retries,
-        model=order.model,
-        temperature=order.temperature,
-        guidance=order.guidance,
         token_budget=order.token_budget
         if order.token_budget is not None
         else settings.run_token_budget,
         review=review_gate.policy_for(order.review, instance),
-        site=order.site,
-        rates=order.rates.value,
-        durations=order.durations.value,
         objective=problem.objective.kind.value,
         min_expected_success=problem.objective.min_expected_success,
         **scope,
     )
     return learned_spec(spec, sessions=sessions, settings=settings)
-
-
-def order_instance(order: RunOrder) -> Instance:
-    """The instance a run order names: a built-in scenario (the timed ones of
-    docs/schedules.md#asking-for-one, such as `baseline_timed`, included), or its own tasks and
-    robots (a timed instance without `start` starts at the request's arrival)."""
-    return instance_of(
-        order.scenario,
-        order.tasks,
-        order.robots,
-        travel=order.travel,
-        start=order.start,
-        arrival=datetime.now(UTC).replace(microsecond=0),
-    )
 
 
 def learned_spec(
@@ -214,38 +216,14 @@ def learned_spec(
     )
 
 
-# The fields a replay may repeat (each must equal its source's), as a run spec stores them.
-_REPEATABLE = (
-    "max_deviation",
-    "quality_threshold",
-    "max_retries",
-    "guidance",
-    "seed",
-    "model",
-    "temperature",
-    "token_budget",
-    "llm_scope",
-    "llm_margin",
-    "review",
-    "site",
-    "rates",
-    "durations",
-)
-
-
 def _sent_for_replay(order: RunOrder) -> dict[str, Any]:
     """What a replay request sent explicitly (each must match the original run), keyed by
     request field, valued as a run spec stores it; omitted fields are copied."""
     values: dict[str, Any] = {}
     named = [f for f in ("scenario", "tasks", "robots") if getattr(order, f) is not None]
     if named:
-        values[named[0]] = instance_to_dict(order_instance(order))
-    if "mode" in order.sent:
-        values["mode"] = order.mode.value
-    for name in _REPEATABLE:
-        if name in order.sent:
-            values[name] = getattr(order, name)
-    return values
+        values[named[0]] = instance_to_dict(resolve_instance(order))
+    return values | repeated_parameters(order)
 
 
 def resume_run(*, sessions: sessionmaker[Session], worker: RunWorker, run_id: str) -> Run:

@@ -7,6 +7,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime
+from enum import Enum
 from functools import cached_property
 from typing import Any, Generic, TypeVar
 
@@ -24,6 +25,67 @@ from app.reasoners.scope import DEFAULT_LLM_MARGIN, LLMScope
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
 DEFAULT_MAX_RETRIES = 3
+
+
+@dataclass(frozen=True)
+class RunParameter:
+    """One parameter a POST /runs body may name besides its instance: the request schema
+    (RunRequest.to_order), the run order, the run spec (app.runs.service.spec_for), the run
+    row and its `created` event, and a replay's check of what it repeats all read this
+    table, so a new parameter is added here once."""
+
+    name: str
+    # The spec stores the order's value as sent (an enum by its value); otherwise the run
+    # service resolves it (a server default, the mode's cap, the review policy...).
+    copied: bool = True
+    # A replay may name it, and must then send its source's value (app.runs.replay).
+    repeatable: bool = True
+    # Shown in the run's first event (`created`, or `revised`) and kept in its row.
+    shown: bool = False
+
+
+RUN_PARAMETERS: tuple[RunParameter, ...] = (
+    RunParameter("reasoner", copied=False, repeatable=False, shown=True),
+    RunParameter("mode", copied=False, shown=True),
+    RunParameter("max_deviation", copied=False),
+    RunParameter("quality_threshold"),
+    RunParameter("max_retries"),
+    RunParameter("guidance"),
+    RunParameter("seed"),
+    RunParameter("model"),
+    RunParameter("temperature"),
+    RunParameter("token_budget", copied=False),
+    RunParameter("llm_scope", copied=False),
+    RunParameter("llm_margin", copied=False),
+    RunParameter("review", copied=False),
+    RunParameter("site"),
+    RunParameter("rates"),
+    RunParameter("durations"),
+    RunParameter("objective", copied=False, repeatable=False),
+    RunParameter("min_expected_success", copied=False, repeatable=False),
+)
+# A run order's fields that name its instance (and, for a replay, its source run).
+ORDER_INSTANCE_FIELDS = ("scenario", "tasks", "robots", "travel", "start", "replay_of")
+
+
+def stored(value: Any) -> Any:
+    """A parameter's value as a run spec stores it (JSON: an enum by its value)."""
+    return value.value if isinstance(value, Enum) else value
+
+
+def copied_parameters(order: RunOrder) -> dict[str, Any]:
+    """The order's parameters that its run spec takes as sent."""
+    return {p.name: stored(getattr(order, p.name)) for p in RUN_PARAMETERS if p.copied}
+
+
+def repeated_parameters(order: RunOrder) -> dict[str, Any]:
+    """What a replay request named of the parameters a replay may repeat, as a run spec
+    stores them (each must equal its source's)."""
+    return {
+        p.name: stored(getattr(order, p.name))
+        for p in RUN_PARAMETERS
+        if p.repeatable and p.name in order.sent
+    }
 
 
 @dataclass(frozen=True)
@@ -151,6 +213,18 @@ class RunSpec:
             "robots": estimates.with_rates(robots, planned),
         }
         return replace(self, instance_data=data, learned=record)
+
+    def created_detail(self, problem: Problem) -> dict[str, Any]:
+        """What the run's first event says of it: the parameters the table shows, the
+        instance's size, the cap it runs with, its site and learned numbers."""
+        shown = {p.name: getattr(self, p.name) for p in RUN_PARAMETERS if p.shown}
+        return {
+            **shown,
+            "tasks": problem.instance.n_tasks,
+            "robots": problem.instance.n_robots,
+            "max_deviation": problem.cap.max_deviation,
+            **self.site_detail(),
+        }
 
     def site_detail(self) -> dict[str, Any]:
         """What a run's first event says of its site and the learned numbers it plans with."""

@@ -201,24 +201,64 @@ def run_trace(
 ) -> Trace:
     with sessions() as session:
         run = require_run(session, run_id)
-        page = decision_repo.decisions_slice(
-            session=session, run_id=run_id, offset=offset, limit=limit
-        )
-        attempts = (
-            decision_repo.attempts_of_tasks(
-                session=session, run_id=run_id, first=page[0].task_index, last=page[-1].task_index
-            )
-            if page
-            else {}
-        )
+        page = decision_page(session, run_id, offset=offset, limit=limit)
         return Trace(
             run=run,
             events=repo.events(session=session, run_id=run_id),
-            decisions=[records.decision_record(d) for d in page],
-            attempts=attempts,
+            decisions=page.decisions,
+            attempts=page.attempts,
             total=decision_repo.decision_count(session=session, run_id=run_id),
-            pins=pins_of(page),
+            pins=page.pins,
         )
+
+
+@dataclass(frozen=True)
+class DecisionPage:
+    """One page of a run's decisions in task order, with their attempts by task."""
+
+    decisions: list[DecisionRecord]
+    attempts: dict[int, list[Attempt]]
+    offset: int
+    limit: int | None
+    # A revision's decisions kept from its parent: task index -> the parent's chain hash.
+    pins: dict[int, str | None]
+
+
+def decision_page(
+    session: Session,
+    run_id: str,
+    *,
+    offset: int,
+    limit: int | None,
+    prompts: bool = True,
+    from_task: bool = False,
+) -> DecisionPage:
+    """The one read of a page of decisions: the trace's (GET /runs/{id}/trace, the export)
+    and the console's. `prompts=False` leaves the attempts' prompts and reply unloaded (a
+    page shows them on demand); `from_task` reads the decisions of task indexes from
+    `offset` on (the console's pages are task ranges) instead of skipping `offset` rows."""
+    if from_task:
+        assert limit is not None, "a task range needs its length"
+        rows = decision_repo.decisions_window(
+            session=session, run_id=run_id, offset=offset, limit=limit
+        )
+    else:
+        rows = decision_repo.decisions_slice(
+            session=session, run_id=run_id, offset=offset, limit=limit
+        )
+    read = decision_repo.attempts_of_tasks if prompts else decision_repo.attempt_summaries_of_tasks
+    attempts = (
+        read(session=session, run_id=run_id, first=rows[0].task_index, last=rows[-1].task_index)
+        if rows
+        else {}
+    )
+    return DecisionPage(
+        decisions=[records.decision_record(d) for d in rows],
+        attempts=attempts,
+        offset=offset,
+        limit=limit,
+        pins=pins_of(rows),
+    )
 
 
 def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:

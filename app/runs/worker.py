@@ -26,7 +26,7 @@ from app.audit.signing import SigningKeys, sign_run
 from app.config import Settings
 from app.domain.errors import DomainError
 from app.graph.builder import build_graph
-from app.graph.checkpoint_sparse import TaskBoundaryMixin
+from app.graph.checkpoint import TaskBoundaryMixin
 from app.graph.execution import GraphEndedEarly
 from app.graph.pause import NodeHook
 from app.graph.recorder import RunCancelled

@@ -23,8 +23,8 @@ from app.store.db import transaction
 from app.store.models import Decision, ExecutionReport, Run, RunAnnotation, RunEvent
 
 
-def _reports_of(session: Session, run: Run) -> Iterator[tuple[datetime, dict[str, Any]]]:
-    """(received at, update) of every state change reported to the run, in order."""
+def _reports_of(session: Session, run: Run) -> Iterator[tuple[datetime, list[dict[str, Any]]]]:
+    """(received at, updates) of every request reporting state changes to the run, in order."""
     records: list[tuple[datetime, int, dict[str, Any]]] = []
     for kind, model in (
         (EventKind.EXECUTION_REPORTED.value, RunEvent),
@@ -38,8 +38,12 @@ def _reports_of(session: Session, run: Run) -> Iterator[tuple[datetime, dict[str
         records.extend((created, seq, detail) for created, seq, detail in rows)
     # Events come before annotations: a run's reports become annotations once it finished.
     for created, _, detail in sorted(records, key=lambda r: (r[0], r[1])):
-        for update in detail.get("updates", []):
-            yield created, update
+        yield created, list(detail.get("updates", []))
+
+
+def _server_clock(update: dict[str, Any]) -> bool:
+    """The update was sent without `at` (records written before the mark have none)."""
+    return all(update.get(k) == v for k, v in site_repo.SERVER_CLOCK.items())
 
 
 def rows_from_record(session: Session) -> list[dict[str, Any]]:
@@ -56,22 +60,31 @@ def rows_from_record(session: Session) -> list[dict[str, Any]]:
                 select(ExecutionReport).where(ExecutionReport.run_id == run.id)
             )
         }
-        for received, update in _reports_of(session, run):
-            index = int(update["task_index"])
-            if update["state"] not in site_repo.FINAL_STATES or index not in decisions:
-                continue
-            reported = site_repo.Reported(
-                task_index=index,
-                task_id=str(update["task_id"]),
-                state=str(update["state"]),
-                at=datetime.fromisoformat(update["at"]),
-                started_at=started.get(index),
-            )
-            out.append(
-                site_repo.outcome_row(
-                    run=run, reported=reported, decision=decisions[index], received_at=received
+        for received, updates in _reports_of(session, run):
+            # One record per request: the same rule as the report's (app.plans.reports).
+            started_here = {
+                str(u["task_id"]): not _server_clock(u) for u in updates if u["state"] == "started"
+            }
+            for update in updates:
+                index = int(update["task_index"])
+                if update["state"] not in site_repo.FINAL_STATES or index not in decisions:
+                    continue
+                task_id = str(update["task_id"])
+                reported = site_repo.Reported(
+                    task_index=index,
+                    task_id=task_id,
+                    state=str(update["state"]),
+                    at=datetime.fromisoformat(update["at"]),
+                    started_at=started.get(index),
+                    together_without_at=site_repo.together_without_at(
+                        started_here, task_id, at_sent=not _server_clock(update)
+                    ),
                 )
-            )
+                out.append(
+                    site_repo.outcome_row(
+                        run=run, reported=reported, decision=decisions[index], received_at=received
+                    )
+                )
         session.expunge_all()  # one run's rows at a time in memory
     return sorted(out, key=lambda r: (r["run_id"], r["task_index"]))
 

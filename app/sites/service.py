@@ -9,7 +9,8 @@ such tasks were reported done, by tenth.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from datetime import datetime
 
 from sqlalchemy.orm import Session, sessionmaker
@@ -53,6 +54,9 @@ class FeatureEstimate:
 class DurationRow:
     task_type: str
     estimate: DurationEstimate
+    # reason -> started/done pairs whose outcome counts but whose times taught nothing
+    # (site_repo.Unmeasured; docs/estimates.md, "Durations only from times the site gave")
+    left_out: Mapping[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -134,10 +138,15 @@ def site_estimates(
                 )
             )
         durations = [
-            DurationRow(kind, _duration(totals, name, kind, strength))
+            DurationRow(
+                kind,
+                _duration(totals, name, kind, strength),
+                dict(sorted(totals.left_out.get((name, kind), {}).items())),
+            )
             for kind in sorted(
                 {k for r, k in totals.durations if r == name}
                 | {k for r, k in totals.planned if r == name}
+                | {k for r, k in totals.left_out if r == name}
             )
         ]
         robots.append(
@@ -181,3 +190,21 @@ def _reliability(totals: site_repo.SiteTotals) -> list[ReliabilityBin]:
 def list_sites(*, sessions: sessionmaker[Session]) -> list[site_repo.SiteSummary]:
     with sessions() as session:
         return site_repo.sites(session=session)
+
+
+class SiteNotFoundForImport(SiteNotFoundError):
+    """`?site=` of POST /schedules/import names no site: a 404 on the query parameter."""
+
+    location = "query"
+
+
+def site_rates(
+    *, sessions: sessionmaker[Session], site: str, strength: float
+) -> dict[str, dict[str, float]]:
+    """{robot: {feature: learned rate}}: the posterior means an imported draft's robots take
+    (app.exchange.rates.fill_rates; docs/exchange.md#rates-from-a-site)."""
+    try:
+        e = site_estimates(sessions=sessions, site=site, strength=strength)
+    except SiteNotFoundError:
+        raise SiteNotFoundForImport(site) from None
+    return {r.robot: {f.feature: f.posterior.mean for f in r.features} for r in e.robots}

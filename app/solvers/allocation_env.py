@@ -21,7 +21,7 @@ The last two let the network see what the rest of the queue offers each robot.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -41,9 +41,12 @@ class AllocationEnv(gym.Env[np.ndarray, np.int64]):
         success: np.ndarray,
         cap: WorkloadCap,
         initial_loads: Sequence[int] | None = None,
+        feasible: Callable[[int, Sequence[int]], list[int]] | None = None,
     ) -> None:
         """`success` and `cap` over the tasks and robots to decide (a FreePart's); every
-        episode starts from `initial_loads` (the pins' loads), zeros by default."""
+        episode starts from `initial_loads` (the pins' loads), zeros by default. `feasible`
+        (task, loads) -> robots replaces the cap's count where eligibility restricts
+        (`FreePart.feasible_robots`, docs/allocation.md#teams)."""
         super().__init__()
         self.success = np.asarray(success, dtype=float)
         self.cap = cap
@@ -61,6 +64,7 @@ class AllocationEnv(gym.Env[np.ndarray, np.int64]):
         self._t = 0
         self._loads = list(self._start)
         self._masks: dict[tuple[int, ...], np.ndarray] = {}
+        self._feasible = feasible
 
     @property
     def loads(self) -> list[int]:
@@ -73,7 +77,9 @@ class AllocationEnv(gym.Env[np.ndarray, np.int64]):
         mask = self._masks.get(key)
         if mask is None:
             mask = np.zeros(self.n_robots, dtype=bool)
-            if self._t < self.n_tasks:
+            if self._t < self.n_tasks and self._feasible is not None:
+                mask[self._feasible(self._t, self._loads)] = True
+            elif self._t < self.n_tasks:
                 mask[self.cap.feasible_robots(self._loads, self.n_tasks - self._t - 1)] = True
             self._masks[key] = mask
         return mask.copy()

@@ -26,11 +26,13 @@ class SolverInfo:
 
 @dataclass
 class Solution:
-    """One robot index per task, in queue order."""
+    """One robot index per task, in queue order; a team task's is the member covering its
+    first unit, and `teams` lists every member (docs/allocation.md#teams)."""
 
     assignment: list[int]
     usage: Usage = field(default_factory=Usage)
     details: dict[str, Any] = field(default_factory=dict)
+    teams: dict[int, tuple[int, ...]] = field(default_factory=dict)  # task -> robot per unit
 
 
 class SolverOptions(BaseModel):
@@ -39,9 +41,14 @@ class SolverOptions(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+# The methods that plan team tasks (docs/allocation.md#teams); the others refuse them.
+TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy")
+
+
 class Solver(ABC):
     info: ClassVar[SolverInfo]
     Options: ClassVar[type[SolverOptions]] = SolverOptions
+    forms_teams: ClassVar[bool] = False  # can it plan tasks with a `team`?
 
     def __init__(self, *, settings: ReasonerSettings | None = None) -> None:
         # The server's settings, for methods that call out (the `ltaa` reasoners); the
@@ -63,13 +70,44 @@ class Solver(ABC):
     def solve(
         self, problem: Problem, *, seed: int = 0, options: Mapping[str, Any] | None = None
     ) -> Solution:
+        self.check_supported(problem)
         solution = self._solve(problem, seed=seed, options=self.parse_options(options))
         if problem.instance.timed:  # untimed answers are exactly what they always were
             attach_schedule(problem, solution.assignment, solution.details)
         return solution
+
+    def check_supported(self, problem: Problem) -> None:
+        """Refuse, with a sentence naming the field and the methods to use, an instance this
+        method cannot plan (docs/allocation.md#teams)."""
+        instance = problem.instance
+        if not instance.has_teams:
+            return
+        t = next(i for i, task in enumerate(instance.tasks) if task.team is not None)
+        task = instance.tasks[t]
+        if instance.timed:
+            raise DomainError(
+                f"tasks.{t}.team",
+                f"task {task.id!r} needs a team on a timed instance, which no method schedules "
+                "yet (docs/allocation.md#teams); drop the durations to plan the teams "
+                f"untimed with {_listed(TEAM_METHODS)}",
+                code="unsupported_field",
+            )
+        if not self.forms_teams:
+            raise DomainError(
+                f"tasks.{t}.team",
+                f"task {task.id!r} needs a team, and solver '{self.info.name}' plans one robot "
+                f"per task; use {_listed(TEAM_METHODS)} for team tasks "
+                "(docs/allocation.md#teams)",
+                code="unsupported_field",
+            )
 
     @abstractmethod
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution: ...
 
 
 SolverFactory = Callable[[], Solver]
+
+
+def _listed(names: tuple[str, ...]) -> str:
+    quoted = [f"'{n}'" for n in names]
+    return ", ".join(quoted[:-1]) + f" or {quoted[-1]}"

@@ -11,6 +11,8 @@ from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
 from app.solvers.free_part import FreePart
 from app.solvers.tiebreak import integer_weights, weight_scale
+from app.solvers.unit_search import enumerate_all
+from app.solvers.units import UnitView, needs_units
 
 MAX_ASSIGNMENTS = 3**12
 
@@ -23,7 +25,13 @@ class BruteForceSolver(Solver):
         limits=f"robots^tasks <= 3^12 = {MAX_ASSIGNMENTS:,} assignments",
     )
 
+    forms_teams = True
+
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        if needs_units(problem):  # teams or eligibility: each task's own choices
+            view = UnitView.of(problem)
+            choices, count = enumerate_all(view, MAX_ASSIGNMENTS, f"3^12 = {MAX_ASSIGNMENTS:,}")
+            return view.solution(choices, {"enumerated": count})
         # Only the free tasks on the available robots are enumerated; pins are fixed.
         part = FreePart.of(problem)
         s, cap = part.success, part.cap

@@ -10,6 +10,8 @@ from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
 from app.solvers.free_part import FreePart
 from app.solvers.tiebreak import better, deviation_units, integer_weights, weight_scale
+from app.solvers.unit_search import dynamic_programme
+from app.solvers.units import UnitView, needs_units
 
 MAX_STATES = 400_000
 
@@ -34,7 +36,13 @@ class DynamicProgrammingSolver(Solver):
         limits=f"at most {MAX_STATES:,} (task, load-vector) states, about C(tasks+robots, robots)",
     )
 
+    forms_teams = True
+
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        if needs_units(problem):  # teams or eligibility: each task's own choices
+            view = UnitView.of(problem)
+            teams, states = dynamic_programme(view, MAX_STATES)
+            return view.solution(teams, {"states": states})
         # The free tasks on the available robots, loads starting from the pins.
         part = FreePart.of(problem)
         s, cap = part.success, part.cap

@@ -126,7 +126,8 @@ class DQNSolver(Solver):
         success = part.success
 
         def environment() -> Any:
-            return allocation_env.AllocationEnv(success, part.cap, part.initial_loads)
+            feasible = None if part.eligible.all() else part.feasible_robots
+            return allocation_env.AllocationEnv(success, part.cap, part.initial_loads, feasible)
 
         with _borrowed_global_state(torch):
             env = environment()

@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from app.domain.cap import WorkloadCap
+from app.domain.completion import completable
 from app.domain.problem import Problem
 
 
@@ -47,6 +48,23 @@ class FreePart:
         rows = np.asarray(self.problem.free_tasks, dtype=np.int64)
         cols = np.asarray(self.problem.available, dtype=np.int64)
         return e[np.ix_(rows, cols)]
+
+    def feasible_robots(self, t: int, loads: Sequence[int]) -> list[int]:
+        """Columns that may take free task t from `loads` and keep the cap satisfiable; on an
+        instance with eligibility restrictions (docs/allocation.md#teams) only eligible ones
+        after which every later free task still gets an eligible robot."""
+        robots = self.cap.feasible_robots(loads, self.n_tasks - t - 1)
+        e = self.eligible
+        if e.all():
+            return robots
+        lo, hi = self.cap.lower, self.cap.upper
+        out = []
+        for c in robots:
+            after = list(loads)
+            after[c] += 1
+            if e[t, c] and completable(e[t + 1 :], after, lo, hi):
+                out.append(c)
+        return out
 
     @property
     def n_tasks(self) -> int:

@@ -10,6 +10,8 @@ from app.domain.cap import CapTracker
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
 from app.solvers.free_part import FreePart
+from app.solvers.unit_greedy import greedy_units
+from app.solvers.units import UnitView, needs_units
 
 
 class GreedySolver(Solver):
@@ -21,7 +23,11 @@ class GreedySolver(Solver):
         limits="any size within the request limits",
     )
 
+    forms_teams = True
+
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        if needs_units(problem):  # teams or eligibility: only choices a completion admits
+            return greedy_units(UnitView.of(problem))
         part = FreePart.of(problem)  # pinned tasks stay put; unavailable robots are not columns
         s = part.success
         tracker = CapTracker(part.cap, part.initial_loads)

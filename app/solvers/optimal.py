@@ -9,7 +9,9 @@ deviation term R*|L - W| — so one solve gives "max success, then least deviati
 
 On a timed instance a robot that a task's duration map omits cannot take it
 (docs/schedules.md#the-model): `eligible` then removes those arcs, and tasks group by success row
-and eligibility row. Without such pairs (every untimed instance) nothing changes.
+and eligibility row; robots' `skills` (docs/allocation.md#teams) remove arcs the same way.
+Without such pairs nothing changes. An instance with team tasks is solved by the flow over
+task units of `app.solvers.unit_flow` instead (each robot at most once per task).
 """
 
 from __future__ import annotations
@@ -26,28 +28,10 @@ from app.domain.errors import InfeasibleCapError
 from app.domain.problem import Problem
 from app.solvers.base import Solution, Solver, SolverInfo
 from app.solvers.free_part import FreePart
+from app.solvers.tiebreak import deviation_arcs as _deviation_arcs
 from app.solvers.tiebreak import deviation_factor, integer_weights, weight_scale
-
-
-def _deviation_arcs(load_from: int, load_to: int, r: int, n: int) -> list[tuple[int, int]]:
-    """(capacity, unit cost) arcs for raising a load from load_from to load_to.
-
-    Marginal cost of the k -> k+1 step is |R(k+1) - n| - |Rk - n|: -R below the target,
-    +R above, something between at the crossing. Convex, so min-cost flow fills in order.
-    Counted in closed form (at most three arcs): the step-by-step count was O(load range)
-    per flow, so a run's per-decision regret cost O(n) each, O(n^2) over the run.
-    """
-    arcs: dict[int, int] = {}
-    below = min(load_to, n // r) - load_from  # steps with R(k+1) <= n
-    if below > 0:
-        arcs[-r] = below
-    if n % r and load_from <= n // r < load_to:  # the one step across the target
-        k = n // r
-        arcs[r * (2 * k + 1) - 2 * n] = 1
-    above = load_to - max(load_from, -(-n // r))  # steps with Rk >= n
-    if above > 0:
-        arcs[r] = above
-    return sorted(((cap, cost) for cost, cap in arcs.items()), key=lambda a: a[1])
+from app.solvers.unit_flow import best_units
+from app.solvers.units import UnitView
 
 
 @dataclass(frozen=True)
@@ -184,7 +168,12 @@ class OptimalSolver(Solver):
         limits="any size within the request limits",
     )
 
+    forms_teams = True
+
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
+        if problem.instance.has_teams:  # docs/allocation.md#teams: the flow over task units
+            view = UnitView.of(problem)
+            return view.solution(best_units(view), {"model": "min-cost flow over task units"})
         part = FreePart.of(problem)  # the free tasks on the available robots, from the pins
         choices, _ = best_completion(part.success, part.cap, part.initial_loads, part.eligible)
         return Solution(part.assignment(choices))

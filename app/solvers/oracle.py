@@ -36,7 +36,16 @@ class CompletionOracle:
         self._part = FreePart.of(problem)
         self._success = problem.instance.success
         # Classes once per run: each query is then a flow over classes, not over tasks.
-        self._classes = TaskClasses.of(self._part.success)
+        # With eligibility restrictions (docs/allocation.md#teams) classes also share their
+        # eligibility row, and the flow has no arc to a robot a class may not go to.
+        eligible = self._part.eligible
+        self._eligible = None if eligible.all() else eligible
+        self._classes = TaskClasses.of(self._part.success, self._eligible)
+        self._allowed = None
+        if self._eligible is not None:
+            of_task = self._classes.of_task
+            first = [int(np.argmax(of_task == c)) for c in range(len(self._classes.rows))]
+            self._allowed = self._eligible[first]
         self._cache: dict[tuple[int, tuple[int, ...]], tuple[np.ndarray, float]] = {}
 
     def _position(self, task_index: int) -> int:
@@ -56,7 +65,9 @@ class CompletionOracle:
         if key not in self._cache:
             classes = self._classes
             try:
-                x = class_allocation(classes.rows, classes.counts(position), self._part.cap, key[1])
+                x = class_allocation(
+                    classes.rows, classes.counts(position), self._part.cap, key[1], self._allowed
+                )
             except InfeasibleCapError:
                 return None
             self._cache[key] = (x, float((x * classes.rows).sum()))
@@ -78,7 +89,10 @@ class CompletionOracle:
         pinned = self._problem.pinned.get(task_index)
         if pinned is not None:
             return 0.0 if robot == pinned else None
-        if robot in self._problem.unavailable:
+        if (
+            robot in self._problem.unavailable
+            or not self._problem.instance.eligible[task_index, robot]
+        ):
             return None
         before = self.value(task_index, loads)
         after_loads = list(loads)

@@ -66,7 +66,7 @@ class StateSpace:
 
 def enumerate_states(part: FreePart) -> StateSpace:
     """States over the free tasks and available robots; loads start from the pins."""
-    cap, n, r = part.cap, part.n_tasks, part.n_robots
+    n, r = part.n_tasks, part.n_robots
     start: Loads = part.initial_loads
     placed = sum(start)
     ids: dict[Loads, int] = {start: 0}
@@ -74,7 +74,7 @@ def enumerate_states(part: FreePart) -> StateSpace:
     moves: list[list[tuple[int, int]]] = []
     for loads in order:  # grows while iterating: breadth-first, so ids follow task order
         t = sum(loads) - placed
-        robots = cap.feasible_robots(loads, n - t - 1) if t < n else []
+        robots = part.feasible_robots(t, loads) if t < n else []
         row = []
         for robot in robots:
             child = (*loads[:robot], loads[robot] + 1, *loads[robot + 1 :])

@@ -41,3 +41,24 @@ def deviation_units(loads: Sequence[int], n_tasks: int) -> int:
 def better(value: int, dev: int, best_value: int, best_dev: int) -> bool:
     """Is (value, dev) strictly preferable to the incumbent? Ties keep the incumbent."""
     return value > best_value or (value == best_value and dev < best_dev)
+
+
+def deviation_arcs(load_from: int, load_to: int, r: int, n: int) -> list[tuple[int, int]]:
+    """(capacity, unit cost) arcs for raising a load from load_from to load_to.
+
+    Marginal cost of the k -> k+1 step is |R(k+1) - n| - |Rk - n|: -R below the target,
+    +R above, something between at the crossing. Convex, so min-cost flow fills in order.
+    Counted in closed form (at most three arcs): the step-by-step count was O(load range)
+    per flow, so a run's per-decision regret cost O(n) each, O(n^2) over the run.
+    """
+    arcs: dict[int, int] = {}
+    below = min(load_to, n // r) - load_from  # steps with R(k+1) <= n
+    if below > 0:
+        arcs[-r] = below
+    if n % r and load_from <= n // r < load_to:  # the one step across the target
+        k = n // r
+        arcs[r * (2 * k + 1) - 2 * n] = 1
+    above = load_to - max(load_from, -(-n // r))  # steps with Rk >= n
+    if above > 0:
+        arcs[r] = above
+    return sorted(((cap, cost) for cost, cap in arcs.items()), key=lambda a: a[1])

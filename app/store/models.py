@@ -24,7 +24,14 @@ from sqlalchemy import (
     UniqueConstraint,
 )
 from sqlalchemy import event as orm_event
-from sqlalchemy.orm import DeclarativeBase, Mapped, ORMExecuteState, Session, mapped_column
+from sqlalchemy.orm import (
+    DeclarativeBase,
+    Mapped,
+    ORMExecuteState,
+    Session,
+    declared_attr,
+    mapped_column,
+)
 
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_NAME_CHARS
@@ -124,9 +131,15 @@ class ArchivedRun(Base):
     archived_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
-class RunEvent(Base):
-    __tablename__ = "run_events"
-    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_run_events_run_seq"),)
+class _SeqChained:
+    """The columns of a row in one run's `seq`-ordered hash chain (app.store.chain): the
+    events while it runs, the annotations after. The unique (run_id, seq) is what keeps a
+    re-executed node from appending the same link twice."""
+
+    @declared_attr.directive
+    @classmethod
+    def __table_args__(cls) -> tuple[Any, ...]:
+        return (UniqueConstraint("run_id", "seq", name=f"uq_{cls.__tablename__}_run_seq"),)  # type: ignore[attr-defined]
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
@@ -138,26 +151,23 @@ class RunEvent(Base):
     chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
-class RunAnnotation(Base):
+class RunEvent(_SeqChained, Base):
+    __tablename__ = "run_events"
+
+
+class RunAnnotation(_SeqChained, Base):
     """A record made about a run after it finished (app.domain.annotations): append-only,
     hash-chained per run in `seq` order like the events."""
 
     __tablename__ = "run_annotations"
-    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_run_annotations_run_seq"),)
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    run_id: Mapped[str] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
-    seq: Mapped[int] = mapped_column(Integer)
-    kind: Mapped[str] = mapped_column(String(32))
-    detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    chain_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
     # The Idempotency-Key of the POST that made it (keys are global, as for runs), and a
     # digest of that request, so a retry returns this row and a reused key is refused.
+    # After the chain's columns (sort_order), where the migrations put them.
     idempotency_key: Mapped[str | None] = mapped_column(
-        String(255), nullable=True, unique=True, index=True
+        String(255), nullable=True, unique=True, index=True, sort_order=1
     )
-    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True, sort_order=1)
 
 
 class Decision(Base):

@@ -45,6 +45,7 @@ class SiteReport(Base):
             "task_type",
             "predicted_bin",
             "success",
+            "unmeasured",  # grouped on too: before received_at, so the group is a prefix
             "received_at",
             "log_minutes",
             "planned_minutes",
@@ -78,3 +79,6 @@ class SiteReport(Base):
     minutes: Mapped[float | None] = mapped_column(Float, nullable=True)
     log_minutes: Mapped[float | None] = mapped_column(Float, nullable=True)
     planned_minutes: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # Why a started -> done pair gives no duration (app.store.site_repository.Unmeasured);
+    # null when it gives one, or when no `started` was reported.
+    unmeasured: Mapped[str | None] = mapped_column(String(40), nullable=True)

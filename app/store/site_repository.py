@@ -14,6 +14,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from enum import StrEnum
 from typing import Any
 
 from sqlalchemy import Select, delete, func, select
@@ -27,6 +28,16 @@ FINAL_STATES = ("done", "failed")
 BINS = 10
 
 
+class Unmeasured(StrEnum):
+    """Why a started -> done (or failed) pair teaches no duration (docs/estimates.md,
+    "Durations only from times the site gave"); its outcome still counts."""
+
+    # Both in one request, not both with `at`: the times are the server's clock reading
+    # the request twice, microseconds apart, not the site's.
+    TOGETHER_WITHOUT_AT = "together_without_at"
+    ZERO_LENGTH = "zero_length"  # the site gave the same time to both
+
+
 @dataclass(frozen=True)
 class Reported:
     """A task reported done or failed on a run: what its outcome row is made of."""
@@ -36,6 +47,22 @@ class Reported:
     state: str
     at: datetime  # when the site says it ended
     started_at: datetime | None
+    # Its `started` came in the same request, and not both carried `at`.
+    together_without_at: bool = False
+
+
+# How an execution-report record marks an update sent without `at`: its time is the
+# server's clock, which the rule below needs to know when the rows are rebuilt.
+SERVER_CLOCK = {"clock": "server"}
+
+
+def together_without_at(started_here: Mapping[str, bool], task_id: str, *, at_sent: bool) -> bool:
+    """Whether a final update teaches no duration because its `started` came in the same
+    request and not both carry `at` (docs/estimates.md, "Durations only from times the
+    site gave"). `started_here`: task id -> whether its `started` in that request had `at`."""
+    if task_id not in started_here:
+        return False  # started in an earlier request (or never): two receipts, two times
+    return not (started_here[task_id] and at_sent)
 
 
 def _task_facts(request: Mapping[str, Any], task_index: int) -> Mapping[str, Any]:
@@ -63,10 +90,13 @@ def outcome_row(
 ) -> dict[str, Any]:
     task = _task_facts(run.request, reported.task_index)
     ended, started = as_utc(reported.at), reported.started_at
-    minutes = None
-    if started is not None:
+    minutes, unmeasured = None, None
+    if started is not None and reported.together_without_at:
+        unmeasured = Unmeasured.TOGETHER_WITHOUT_AT.value
+    elif started is not None:
         span = (ended - as_utc(started)).total_seconds() / 60.0
         minutes = span if span > 0 else None  # a zero-length task says nothing of duration
+        unmeasured = None if span > 0 else Unmeasured.ZERO_LENGTH.value
     predicted = float(decision.expected_success)
     features = json.dumps(sorted(task.get("features", [])))
     return {
@@ -86,6 +116,7 @@ def outcome_row(
         "minutes": minutes,
         "log_minutes": None if minutes is None else math.log(minutes),
         "planned_minutes": planned_minutes(task, decision.robot_name),
+        "unmeasured": unmeasured,
     }
 
 
@@ -126,6 +157,8 @@ class SiteTotals:
     outcomes: dict[tuple[str, str], Counts] = field(default_factory=dict)  # (robot, feature)
     durations: dict[tuple[str, str], LogStats] = field(default_factory=dict)  # (robot, type)
     planned: dict[tuple[str, str], tuple[float, int]] = field(default_factory=dict)  # sum, n
+    # (robot, type) -> reason -> started/done pairs that taught no duration
+    left_out: dict[tuple[str, str], dict[str, int]] = field(default_factory=dict)
     reliability: dict[int, tuple[int, int, float]] = field(default_factory=dict)  # bin: n, ok, Σp
     robot_reports: dict[str, int] = field(default_factory=dict)
     reports: int = 0
@@ -141,6 +174,7 @@ _GROUP = (
     SiteReport.task_type,
     SiteReport.predicted_bin,
     SiteReport.success,
+    SiteReport.unmeasured,
 )
 
 
@@ -174,7 +208,9 @@ def site_totals(*, session: Session, site: str, as_of: datetime | None = None) -
     )
     row: Any
     for row in groups:
-        robot, feature_set, task_type, bin_, ok, n, n_dur, s1, s2, planned, n_planned, p, _ = row
+        robot, feature_set, task_type, bin_, ok, why, n, n_dur, s1, s2, planned, n_planned, p, _ = (
+            row
+        )
         features = named[feature_set]
         totals.reports += n
         totals.robot_reports[robot] = totals.robot_reports.get(robot, 0) + n
@@ -183,6 +219,9 @@ def site_totals(*, session: Session, site: str, as_of: datetime | None = None) -
             key = (robot, feature)
             totals.outcomes[key] = totals.outcomes.get(key, Counts()) + one
         kind = (robot, task_type)
+        if why is not None:
+            reasons = totals.left_out.setdefault(kind, {})
+            reasons[why] = reasons.get(why, 0) + n
         if n_dur:
             totals.durations[kind] = totals.durations.get(kind, LogStats()) + LogStats(
                 n_dur, float(s1 or 0.0), float(s2 or 0.0)

@@ -10,8 +10,8 @@ from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
-from app.api.auth import ApiKeysError, InsecureBindError, Role, parse_api_keys
 from app.config import Settings, get_settings
+from app.http.auth import ApiKeysError, InsecureBindError, Role, parse_api_keys
 from app.main import create_app
 from tests.api.conftest import ClientFactory
 from tests.polling import wait_until
@@ -37,6 +37,7 @@ CLIENT_ENDPOINTS = [
     ("GET", "/runs/{id}/revisions"),
     ("GET", "/runs/{id}/diff"),
     ("GET", "/runs/{id}/schedule"),
+    ("POST", "/schedules/import"),
     ("GET", "/sites"),
     ("GET", "/sites/{site}/estimates"),
 ]

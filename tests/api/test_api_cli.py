@@ -152,7 +152,7 @@ def test_serve_migrates_then_runs_the_factory(
     assert result.exit_code == 0, result.output
     assert migrated == [f"sqlite:///{tmp_path.as_posix()}/cli-data/ltaa.db"]
     assert served == {
-        "app": "app.main:create_app",
+        "app": "app.asgi:create_app",
         "factory": True,
         "host": "127.0.0.1",
         "port": 8123,

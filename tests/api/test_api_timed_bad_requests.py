@@ -89,6 +89,8 @@ INSTANCE_CASES: list[tuple[str, dict[str, Any], list[Any], list[str]]] = [
     ("negative_duration", {"tasks": with_task(1, duration=-5)},
      ["body", "tasks", 1, "duration"], []),
     ("zero_duration", {"tasks": with_task(1, duration=0)}, ["body", "tasks", 1, "duration"], []),
+    ("empty_duration_map", {"tasks": with_task(1, duration={})},
+     ["body", "tasks", 1, "duration"], ["at least one robot"]),
     ("duration_text", {"tasks": with_task(1, duration="15")}, ["body", "tasks", 1, "duration"], []),
     (
         "release_too_large",

@@ -12,10 +12,10 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
-from app.api.auth import KeyRing, Role
 from app.console import charts
 from app.console.frontier import MAX_CAPS, compute_frontier, frontier
 from app.domain.catalog import scenario
+from app.http.auth import KeyRing, Role
 from app.runs.spec import RunSpec
 from tests.api.conftest import ClientFactory
 from tests.polling import eventually, wait_until

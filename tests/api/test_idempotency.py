@@ -14,8 +14,8 @@ import pytest
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
-from app.runs.idempotency import request_digest
 from app.store.db import make_engine, make_session_factory
+from app.store.idempotency import request_digest
 from app.store.models import Run
 from tests.api.conftest import ClientFactory
 from tests.e2e.server import Server

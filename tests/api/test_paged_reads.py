@@ -8,10 +8,10 @@ import json
 from fastapi.testclient import TestClient
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.api.rounding import round_number, rounded
 from app.config import Settings
 from app.domain.models import Instance, Robot, Task
 from app.graph.recorder import DecisionRecord
+from app.http.rounding import round_number, rounded
 from app.runs import records
 from app.runs.spec import RunSpec
 from app.store import decision_repository as decision_repo

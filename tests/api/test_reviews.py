@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
-from app.api.auth import key_fingerprint
+from app.http.auth import key_fingerprint
 from tests.api.conftest import ClientFactory
 from tests.polling import wait_until
 from tests.sse import parse_events

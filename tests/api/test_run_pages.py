@@ -1,4 +1,4 @@
-"""GET /runs/{id} keeps each stored assignment as rendered (app.api.run_pages): the answers
+"""GET /runs/{id} keeps each stored assignment as rendered (app.runs.pages): the answers
 are the bytes the whole RunOut renders to, page by page, while the run grows and after an
 execution report changes one assignment."""
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from fastapi.testclient import TestClient
 
-from app.api.rounding import RoundedJSONResponse
-from app.api.routes.runs import _assignment, _run_head
+from app.http.rounding import RoundedJSONResponse
 from app.runs import views
+from app.runs.endpoints import _assignment, _run_head
 from tests.api.conftest import ClientFactory
 from tests.api.test_revisions import BASELINE, wait_allocated, wait_status
 from tests.polling import eventually

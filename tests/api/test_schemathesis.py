@@ -72,6 +72,12 @@ open_schema.app = APP
 # Requests generated from the schema are sent both as they are and to the run the fixture
 # stored, so GET /runs/{id}, its trace and events are answered with bodies too, not only 404s.
 RUN_PATHS = r"\{run_id\}"
+# The run tests take only those paths. Written as an exclusion: with the [[operations]]
+# sections of schemathesis.toml in the config, schemathesis 4 adds an include filter of
+# its own that matches every operation, and include filters are OR-ed, so
+# `include(path_regex=RUN_PATHS)` selected all of them (the other 21 operations ran a
+# second time under this test, 29 of its 54 CPU-s). Exclusions apply first, whatever else.
+NOT_RUN_PATHS = r"^(?!.*\{run_id\})"
 # POST /admin/backup writes a copy of the store (inside LTAA_BACKUP_DIR): generated paths
 # would be refused or litter the test's directory. tests/api/test_backup.py covers it.
 WRITES_FILES = r"^/admin/backup$"
@@ -109,7 +115,14 @@ def app_settings(settings: Settings, keys: SecretStr | None) -> Settings:
 
 
 @pytest.fixture
-def app_under_test(app_settings: Settings) -> Iterator[FastAPI]:
+def app_under_test(app_settings: Settings, migrated_store: Path) -> Iterator[FastAPI]:
+    store = app_settings.data_dir / "ltaa.db"
+    # Not the completed store of `stored_run` (which the run tests request before this).
+    if app_settings.db_url == f"sqlite:///{store.as_posix()}" and not store.exists():
+        # The app's lifespan finds the store at head and migrates nothing
+        # (tests/api/conftest.py: migrated_store).
+        store.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(migrated_store, store)
     APP.app = create_app(app_settings)
     try:
         yield APP.app
@@ -167,7 +180,7 @@ def test_api_without_keys_conforms_to_its_schema(
     case.call_and_validate()
 
 
-@schema.include(path_regex=RUN_PATHS).exclude(path_regex=WRITES_FILES).parametrize()
+@schema.exclude(path_regex=NOT_RUN_PATHS).exclude(path_regex=WRITES_FILES).parametrize()
 @HYPOTHESIS
 def test_run_endpoints_conform_to_their_schema(
     case: schemathesis.Case, stored_run: str, app_under_test: FastAPI
@@ -179,3 +192,14 @@ def test_run_endpoints_conform_to_their_schema(
     case.call_and_validate(
         headers=AUTH, excluded_checks=[schemathesis.checks.negative_data_rejection]
     )
+
+
+def test_the_run_tests_and_the_others_split_the_operations_between_them() -> None:
+    def labels(selected: Any) -> set[str]:
+        return {result.ok().label for result in selected.get_all_operations()}
+
+    run_tests = labels(schema.exclude(path_regex=NOT_RUN_PATHS).exclude(path_regex=WRITES_FILES))
+    others = labels(schema.exclude(path_regex=RUN_PATHS).exclude(path_regex=WRITES_FILES))
+    every = labels(schema.exclude(path_regex=WRITES_FILES))
+    assert run_tests and all("{run_id}" in label for label in run_tests)
+    assert run_tests.isdisjoint(others) and run_tests | others == every

@@ -13,8 +13,8 @@ import pytest
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
-from app.api.auth import key_fingerprint
 from app.config import Settings
+from app.http.auth import key_fingerprint
 from app.store import chain
 from tests.api.conftest import ClientFactory
 from tests.offline_check import check_offline

@@ -225,3 +225,73 @@ def test_the_console_site_page_marks_the_rates_far_from_configured(client: TestC
     assert 'id="far-from-configured"' in page.text and "heavy · heavy" in page.text
     assert client.get("/console/sites").status_code == 200
     assert client.get("/console/sites/nowhere").status_code == 404
+
+
+def _durations(client: TestClient, site: str) -> list[dict[str, Any]]:
+    body = client.get(f"/sites/{site}/estimates").json()
+    return [d for r in body["robots"] for d in r["durations"]]
+
+
+def test_durations_come_only_from_times_the_site_gave(client: TestClient) -> None:
+    # docs/estimates.md, "Durations only from times the site gave".
+    run_id = completed_run(client, S1)
+    # Started and done in one request without `at`: the outcome counts, no duration.
+    send(client, run_id, [{"task_id": 0, "state": "started"}, {"task_id": 0, "state": "done"}])
+    # One of the two without `at`, in one request: the server's clock, so no duration either.
+    send(
+        client,
+        run_id,
+        [
+            {"task_id": 1, "state": "started", "at": "2026-12-01T08:00:00Z"},
+            {"task_id": 1, "state": "failed"},
+        ],
+    )
+    # Both with `at`, 20 minutes apart, in one request: 20 minutes.
+    send(
+        client,
+        run_id,
+        [
+            {"task_id": 2, "state": "started", "at": "2026-12-01T08:00:00Z"},
+            {"task_id": 2, "state": "done", "at": "2026-12-01T08:20:00Z"},
+        ],
+    )
+    assert client.get("/sites/s1/estimates").json()["reports"] == 3  # every outcome counts
+    durations = _durations(client, "s1")
+    assert sum(d["observed"] for d in durations) == 1
+    medians = [d["observed_median_minutes"] for d in durations if d["observed"]]
+    assert medians == [20.0]
+    left_out = [d["left_out"] for d in durations if d["left_out"]]
+    assert sum(n for reasons in left_out for n in reasons.values()) == 2
+    assert all(set(reasons) == {"together_without_at"} for reasons in left_out)
+    # The record says which times were the server's: the rebuilt rows agree.
+    sessions = client.app.state.runs.sessions  # type: ignore[attr-defined]
+    comparison = rebuild.compare(sessions=sessions)
+    assert comparison.agree and comparison.stored == 3, comparison
+    assert rebuild.rebuild(sessions=sessions) == 3
+    assert _durations(client, "s1") == durations
+    page = client.get("/console/sites/s1").text
+    assert "sent in one request without both times (at)" in page
+
+
+def test_a_pair_sent_in_two_requests_without_at_teaches_a_duration(client: TestClient) -> None:
+    run_id = completed_run(client, S1)
+    send(client, run_id, [{"task_id": 0, "state": "started"}])
+    send(client, run_id, [{"task_id": 0, "state": "done"}])
+    # The two receipts are two readings of the clock: the time between them is observed.
+    (row,) = [d for d in _durations(client, "s1") if d["observed"] or d["left_out"]]
+    assert (row["observed"], row["left_out"]) == (1, {})
+    assert row["observed_median_minutes"] > 0
+    sessions = client.app.state.runs.sessions  # type: ignore[attr-defined]
+    assert rebuild.compare(sessions=sessions).agree
+
+
+def test_a_pair_given_the_same_time_is_left_out_as_zero_length(client: TestClient) -> None:
+    run_id = completed_run(client, S1)
+    at = "2026-12-01T08:00:00Z"
+    send(
+        client,
+        run_id,
+        [{"task_id": 0, "state": "started", "at": at}, {"task_id": 0, "state": "done", "at": at}],
+    )
+    (row,) = [d for d in _durations(client, "s1") if d["observed"] or d["left_out"]]
+    assert (row["observed"], row["left_out"]) == (0, {"zero_length": 1})

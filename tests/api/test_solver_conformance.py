@@ -153,8 +153,8 @@ def _pinned_cases() -> list[Any]:
 def _instance_of(body: dict[str, Any]) -> Any:
     if "scenario" in body:
         return scenario(body["scenario"]).instance
-    from app.api.allocation import resolve_instance
-    from app.api.schemas.allocation import InstanceRequest
+    from app.allocation.schemas import InstanceRequest
+    from app.allocation.service import resolve_instance
 
     return resolve_instance(
         InstanceRequest.model_validate({k: body[k] for k in ("tasks", "robots")})
@@ -204,3 +204,48 @@ def test_solver_honours_pins(client: TestClient, solver: str, body: dict[str, An
             instance, get_solver("optimal").solve(problem).assignment, trials=1
         ).expected_success
         assert metrics.expected_success == pytest.approx(optimum, abs=1e-9)
+
+
+# docs/allocation.md#teams: skills restrict who may take what. The rates make the forbidden
+# robots tempting (alpha is the best at careful work, but careful is not among its skills).
+RESTRICTED: dict[str, Any] = {
+    "tasks": SMALL["tasks"],
+    "robots": [
+        {
+            "name": "alpha",
+            "success": {"heavy": 0.9, "careful": 0.99, "dexterous": 0.5},
+            "skills": ["heavy", "dexterous"],
+        },
+        {
+            "name": "beta",
+            "success": {"heavy": 0.95, "careful": 0.6, "dexterous": 0.8},
+            "skills": ["careful", "dexterous"],
+        },
+        {"name": "gamma", "success": {"heavy": 0.3, "careful": 0.3, "dexterous": 0.3}},
+    ],
+}
+
+
+@pytest.mark.parametrize("solver", solver_names())
+@pytest.mark.parametrize("mode", ["success_focused", "aggressive_balance"])
+def test_solver_honours_skills(client: TestClient, solver: str, mode: str) -> None:
+    request = {
+        **RESTRICTED,
+        "mode": mode,
+        "solver": solver,
+        "seed": 3,
+        "options": FAST_OPTIONS.get(solver, {}),
+    }
+    response = client.post("/allocate", json=request)
+    assert response.status_code == 200, response.text
+    data = response.json()
+    skills = {r["name"]: set(r.get("skills", r["success"])) for r in RESTRICTED["robots"]}
+    for task, a in zip(RESTRICTED["tasks"], data["assignments"], strict=True):
+        assert set(task["features"]) <= skills[a["robot"]], (task, a["robot"])
+    instance = _instance_of(RESTRICTED)
+    problem = Problem.build(instance, Mode(mode))
+    assert problem.cap.respected_by(list(data["metrics"]["workload"].values()))
+    if solver in ("brute_force", "dp", "optimal"):
+        best = get_solver("optimal").solve(problem).assignment
+        optimum = compute_metrics(instance, best, trials=1).expected_success
+        assert data["metrics"]["expected_success"] == pytest.approx(optimum, abs=1e-9)

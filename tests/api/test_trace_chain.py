@@ -17,11 +17,11 @@ from fastapi.testclient import TestClient
 from sqlalchemy import create_engine
 from sqlalchemy.orm import sessionmaker
 
-from app.api.rounding import rounded
 from app.audit import pages as record_pages
 from app.audit.export import trace_record
 from app.audit.verify import verify_trace
 from app.config import Settings
+from app.http.rounding import rounded
 from app.runs import records
 from app.store import chain
 from app.store import decision_repository as decision_repo

@@ -4,6 +4,7 @@ with SIGKILL."""
 
 from __future__ import annotations
 
+import codecs
 import os
 import random
 import signal
@@ -61,6 +62,13 @@ def free_port() -> int:
     raise RuntimeError(f"no free loopback port in {ports} after 200 draws")
 
 
+# The longest pause between two polls of a server (polls back off to it from 10 ms): a GET
+# /runs/{id} costs the server CPU, taken from the run it watches. 0.25 s for a state that
+# stays (a run finished, or held at a pause point: the awaited log line stays logged);
+# 0.05 s where the test acts on a moving run at a progress threshold.
+SETTLED_POLL_S = 0.25
+TRANSIENT_POLL_S = 0.05
+
 # What uvicorn logs once it listens, and what it logs when another process holds the port.
 LISTENING = "Uvicorn running on http://127.0.0.1:{port} "
 PORT_TAKEN = "address already in use"
@@ -75,6 +83,31 @@ def pause_setting(point: PausePoint) -> str:
 
 class PortTaken(Exception):
     """Another process bound the server's port between free_port() and the server's bind."""
+
+
+class LogReader:
+    """What a server has logged since `start` bytes into its log file, read incrementally:
+    each call reads only what was appended since the last one (a SIGKILL suite's log holds
+    eleven starts, and a poll at 10 Hz used to re-read all of it each time)."""
+
+    def __init__(self, path: Path, start: int) -> None:
+        self._path = path
+        self._offset = start
+        self._decode = codecs.getincrementaldecoder("utf-8")(errors="replace").decode
+        self.text = ""
+
+    def read(self) -> str:
+        """Everything logged since `start` (appending what is new)."""
+        with self._path.open("rb") as f:
+            f.seek(self._offset)
+            new = f.read()
+        self._offset += len(new)
+        self.text += self._decode(new)
+        return self.text
+
+    def count(self, text: str) -> int:
+        self.read()
+        return self.text.count(text)
 
 
 class Server:
@@ -102,6 +135,7 @@ class Server:
         self.proc: subprocess.Popen[bytes] | None = None
         self.log = data_dir / f"server-{self.port}.log"
         self._log_start = 0  # where the latest start's output begins in `log`
+        self._logged = LogReader(self.log, 0)
 
     @property
     def url(self) -> str:
@@ -140,6 +174,7 @@ class Server:
             "PORT": str(self.port),
         }
         self._log_start = self.log.stat().st_size if self.log.exists() else 0
+        self._logged = LogReader(self.log, self._log_start)
         with self.log.open("ab") as log:
             # The script `make run` and the Docker image use; it execs uvicorn, so this
             # process is the server and SIGKILL reaches it directly.
@@ -182,7 +217,7 @@ class Server:
 
     def logged(self) -> str:
         """What the server has logged since it was last started."""
-        return self.log.read_bytes()[self._log_start :].decode(errors="replace")
+        return self._logged.read()
 
     def kill(self) -> None:
         """SIGKILL: no shutdown hooks, no flushing — a crash."""
@@ -209,17 +244,23 @@ class Server:
         *,
         headers: dict[str, str] | None = None,
         page: int | None = None,
+        interval: float = SETTLED_POLL_S,
     ) -> dict[str, Any]:
         """The run's state (GET /runs/{id}) once `predicate` holds for it. `page`: at most
         that many assignments per poll (the `limit` query parameter); polling a run of
-        hundreds of tasks for its progress need not serialise all of them 20 times a second."""
+        hundreds of tasks for its progress need not serialise all of them at each poll.
+
+        `interval`: the longest pause between polls (they start 10 ms apart and back off).
+        The default suits a state the run stays in (finished, held at a pause point,
+        blocked); a caller that acts on a moving run at a progress threshold (a kill at
+        task n) passes TRANSIENT_POLL_S, or the run may be far past it, or done."""
         params = {} if page is None else {"limit": page}
         with self.client() as c:
             state: dict[str, Any] = eventually(
                 lambda: c.get(f"/runs/{run_id}", headers=headers, params=params).json(),
                 until=predicate,
                 timeout=timeout,
-                interval=0.05,
+                interval=interval,
                 what=f"run {run_id} satisfied {getattr(predicate, '__name__', predicate)}",
             )
         return state
@@ -230,13 +271,13 @@ class Server:
 
         def seen() -> int:
             assert self.proc is not None and self.proc.poll() is None, self._log_tail()
-            return self.logged().count(text)
+            return self._logged.count(text)
 
         eventually(
             seen,
             until=lambda n: n >= count,
             timeout=timeout,
-            interval=0.05,
+            interval=SETTLED_POLL_S,
             what=f"the server logged {text!r} {count} time(s)",
             context=self._log_tail,
         )

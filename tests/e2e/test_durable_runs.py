@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from app.graph.pause import PausePoint
-from tests.e2e.server import Server
+from tests.e2e.server import TRANSIENT_POLL_S, Server
 
 pytestmark = pytest.mark.e2e
 
@@ -100,7 +100,7 @@ def test_three_sigkills_during_a_500_task_run(tmp_path: Path) -> None:
     # Progress is polled with a one-assignment page: the full 500 at 20 Hz would cost the
     # server more than the run; the states compared are read whole once the runs completed.
     for point in kill_points:
-        server.wait_for(run_id, _allocated(point), page=1)
+        server.wait_for(run_id, _allocated(point), page=1, interval=TRANSIENT_POLL_S)
         server.kill()
         server = Server(data).start()
     try:

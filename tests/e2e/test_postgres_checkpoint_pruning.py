@@ -8,7 +8,7 @@ from typing import Any
 import psycopg
 import pytest
 
-from app.graph.checkpoint_postgres import PrunedPostgresSaver, libpq_url, open_postgres_saver
+from app.graph.checkpoint.postgres import PrunedPostgresSaver, libpq_url, open_postgres_saver
 from tests.e2e.postgres import fresh_database
 from tests.unit.test_checkpoint_pruning import CONFIG, STEPS, Crash, _graph
 

@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
 from app.domain.catalog import scenario
-from app.graph.checkpoint_postgres import open_postgres_saver
+from app.graph.checkpoint.postgres import open_postgres_saver
 from app.runs import service
 from app.runs.factory import make_worker
 from app.runs.ownership import LeaseOwnership

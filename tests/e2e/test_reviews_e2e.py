@@ -13,8 +13,8 @@ from typing import Any
 import httpx
 import pytest
 
-from app.api.auth import key_fingerprint
 from app.graph.pause import PausePoint
+from app.http.auth import key_fingerprint
 from app.reasoners.rules import compose_answer
 from tests.e2e.postgres import fresh_database, query
 from tests.e2e.server import Server

@@ -15,7 +15,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.e2e.server import Server
+from tests.e2e.server import TRANSIENT_POLL_S, Server
 from tests.polling import eventually
 from tests.sse import parse_events
 
@@ -73,7 +73,7 @@ def test_sigterm_interrupts_runs_at_a_node_boundary_and_the_next_start_resumes_t
     with server.client() as c:
         running = c.post("/runs", json=body).json()["id"]
         queued = c.post("/runs", json=body).json()["id"]
-    server.wait_for(running, lambda s: s["progress"]["allocated"] >= 20)
+    server.wait_for(running, lambda s: s["progress"]["allocated"] >= 20, interval=TRANSIENT_POLL_S)
     seen: list[str] = []
     watcher = threading.Thread(target=watch, args=(f"{server.url}/runs/{running}/events", seen))
     watcher.start()

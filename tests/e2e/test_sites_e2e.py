@@ -156,6 +156,9 @@ def test_the_cli_shows_a_sites_estimates_from_a_real_server(server: Server) -> N
     with server.client() as c:
         done = run(server, c, site="cli-site")
         report(c, done["id"], {"0": "failed", "1": "done"})
+        together = [{"task_id": 2, "state": "started"}, {"task_id": 2, "state": "done"}]
+        sent = c.post(f"/runs/{done['id']}/execution", json={"updates": together})
+        assert sent.status_code == 200, sent.text
     runner = CliRunner()
     env = {"COLUMNS": "240"}
     listed = runner.invoke(cli, ["estimates", "--url", server.url], env=env)
@@ -163,7 +166,9 @@ def test_the_cli_shows_a_sites_estimates_from_a_real_server(server: Server) -> N
     assert "cli-site" in listed.output
     shown = runner.invoke(cli, ["estimates", "cli-site", "--url", server.url], env=env)
     assert shown.exit_code == 0, shown.output
-    assert "Site cli-site: 2 report(s)" in shown.output and "dexterous" in shown.output
+    assert "Site cli-site: 3 report(s)" in shown.output and "dexterous" in shown.output
+    # Task 2's pair came in one request without `at`: its outcome counts, its times do not.
+    assert "1 sent together without at" in shown.output, shown.output
     missing = runner.invoke(cli, ["estimates", "elsewhere", "--url", server.url], env=env)
     assert missing.exit_code == 1 and "404" in missing.output
     bad = runner.invoke(

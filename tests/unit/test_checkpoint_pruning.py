@@ -11,8 +11,12 @@ import pytest
 from langgraph.checkpoint.base import BaseCheckpointSaver
 from langgraph.graph import END, START, StateGraph
 
-from app.graph.checkpoint import WAL_SIZE_LIMIT, CompactSqliteSaver, open_sqlite_saver
-from app.graph.checkpoint_pruning import PruneSchedule
+from app.graph.checkpoint import (
+    WAL_SIZE_LIMIT,
+    CompactSqliteSaver,
+    PruneSchedule,
+    open_sqlite_saver,
+)
 
 STEPS = 120
 

@@ -1,4 +1,4 @@
-"""The task-boundary saver (app.graph.checkpoint_sparse): one checkpoint per task on disk;
+"""The task-boundary saver (app.graph.checkpoint._sparse): one checkpoint per task on disk;
 a crash at any node, before or after its body, resumes at the start of the task it was in
 and ends with an uninterrupted run's decisions, no LLM call paid twice; a review's pause
 survives a new process."""

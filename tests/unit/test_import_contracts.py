@@ -55,3 +55,40 @@ def test_a_new_import_cycle_breaks_the_contracts(tmp_path: Path) -> None:
     assert result.returncode != 0
     assert f"{_acyclic_contract()} BROKEN" in " ".join(result.stdout.split())
     assert "cycle_a" in result.stdout and "cycle_b" in result.stdout
+
+
+def _contract_named(start: str) -> str:
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
+    (name,) = [c["name"] for c in config["contracts"] if c["name"].startswith(start)]
+    return str(name)
+
+
+def test_a_feature_importing_endpoints_or_the_app_importing_benchmarks_breaks_them(
+    tmp_path: Path,
+) -> None:
+    # The slices' contracts fail too: a feature importing another feature's endpoints (only
+    # app.api mounts them), and an app module importing the benchmarks.
+    import shutil
+
+    shutil.copytree(ROOT / "app", tmp_path / "app", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    (tmp_path / "benchmarks").mkdir()
+    (tmp_path / "benchmarks" / "__init__.py").write_text("")
+    (tmp_path / "benchmarks" / "report.py").write_text("")
+    (tmp_path / "app" / "sites" / "peek.py").write_text("from app.runs import endpoints\n")
+    (tmp_path / "app" / "cli" / "measure.py").write_text("from benchmarks import report\n")
+    result = subprocess.run(
+        [sys.executable, "-c", LINT_IMPORTS, "--no-cache", "--no-logo"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tmp_path)},
+    )
+    assert result.returncode != 0
+    out = " ".join(result.stdout.split())
+    assert f"{_contract_named('A feature')} BROKEN" in out
+    assert f"{_contract_named('The app never imports the benchmarks')} BROKEN" in out
+    assert "app.sites.peek" in result.stdout and "app.cli.measure" in result.stdout

@@ -8,8 +8,8 @@ import hashlib
 import pytest
 from pydantic import SecretStr
 
-from app.api.auth import ApiKeysError, KeyRing, Role, key_fingerprint, parse_key_names
 from app.config import Settings
+from app.http.auth import ApiKeysError, KeyRing, Role, key_fingerprint, parse_key_names
 
 ALICE_KEY = "sup:er:visor-key-with-colons-01"  # keys may contain colons
 SITE_KEY = "site-app-key-0123456789abcdef"

@@ -136,6 +136,12 @@ def test_confidence_justification() -> None:
         ("I would rather not choose.", CTX, "no parseable decision"),
         (section(GOOD, "Decision", "Tower Crane"), CTX, "unknown robot"),
         (GOOD, replace(CTX, feasible=(0, 1)), "workload cap infeasible"),
+        # docs/allocation.md#teams: the Heavy Robot's skills rule the task out
+        (
+            GOOD,
+            replace(CTX, feasible=(0, 1), eligible=(True, True, False)),
+            "Heavy Robot cannot take this task",
+        ),
     ],
 )
 def test_hard_invalids_score_zero(text: str, ctx: DecisionContext, why: str) -> None:

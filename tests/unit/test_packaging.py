@@ -28,7 +28,7 @@ def test_make_run_docker_and_compose_start_the_same_script() -> None:
     assert "sh scripts/serve.sh" in run_recipe
     assert "command:" not in compose  # compose keeps the image's command
     serve = (ROOT / "scripts" / "serve.sh").read_text()
-    assert "app.main:create_app --factory" in serve
+    assert "app.asgi:create_app --factory" in serve
     # The app migrates as it starts (under PostgreSQL's advisory lock): a second, separate
     # `alembic upgrade head` before it would race another replica's start for nothing.
     commands = [line for line in serve.splitlines() if not line.lstrip().startswith("#")]
@@ -44,3 +44,14 @@ def test_the_licence_is_an_spdx_expression_with_its_file() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["license"] == "MIT"
     assert all((ROOT / name).is_file() for name in project["license-files"])
+
+
+def test_make_image_check_runs_the_image_check_script() -> None:
+    # The image check itself takes minutes and root (outside CI): here, that the target
+    # runs it and the script parses; tests/e2e/test_installed_wheel.py serves the wheel.
+    makefile = (ROOT / "Makefile").read_text()
+    recipe = makefile.split("\nimage-check:", 1)[1].split("\n\n", 1)[0]
+    assert "sh scripts/image_check.sh" in recipe
+    script = ROOT / "scripts" / "image_check.sh"
+    parsed = subprocess.run(["sh", "-n", str(script)], capture_output=True, text=True)
+    assert parsed.returncode == 0, parsed.stderr

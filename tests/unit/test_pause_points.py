@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from typing import Any
 
 import pytest
 from langgraph.checkpoint.memory import InMemorySaver
@@ -88,3 +89,25 @@ def test_a_held_run_stops_at_the_point_and_leaves_on_cancel(
     thread.join(timeout=5)
     assert not thread.is_alive()
     assert len(outcome) == 1 and isinstance(outcome[0], RunCancelled)
+
+
+def _node_function(graph: Any, name: str) -> object:
+    """The function LangGraph runs for a node (its RunnableCallable's `func`)."""
+    return getattr(graph.builder.nodes[name].runnable, "func", None)
+
+
+def test_the_hook_is_inert_unless_set(caplog: pytest.LogCaptureFixture) -> None:
+    from app.runs.factory import pause_hook_from_settings
+
+    with caplog.at_level(logging.WARNING, logger="ltaa.runs"):
+        assert pause_hook_from_settings(Settings(test_pause=None)) is None
+    assert "LTAA_TEST_PAUSE" not in caplog.text
+    graph = build_graph(node_hook=None)
+    # Every node is the graph's own function, unwrapped.
+    assert {name: _node_function(graph, name) for name in NODES} == NODES
+    with caplog.at_level(logging.WARNING, logger="ltaa.runs"):
+        hook = pause_hook_from_settings(Settings(test_pause="3:reason:before"))
+    assert hook is not None and "LTAA_TEST_PAUSE is set" in caplog.text
+    held = build_graph(node_hook=hook)
+    assert _node_function(held, "reason") is not NODES["reason"]
+    assert _node_function(held, "validate") is NODES["validate"]

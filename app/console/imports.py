@@ -1,0 +1,198 @@
+"""GET/POST /console/import and POST /console/import/run (docs/exchange.md#the-console-page):
+a site's MS Project or P6 file uploaded, its draft shown (tasks, links, robots and their
+rates, what was skipped and why, the source), and the draft started as a run.
+
+Over app.exchange (the readers), app.sites (a site's learned rates) and app.runs (the run
+service POST /runs calls), like the other pages. A run plans `after` as plain
+finish-to-start ids today: a draft with a typed link (another type, or a lag) is shown
+with that said and is not offered to start, since planning it would plan another schedule
+than the file's; a draft whose links are all plain is sent with them as plain ids.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Form, Request, UploadFile
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import RedirectResponse, Response
+
+from app.console.context import ConsoleDep, CsrfDep, SignedInDep, finish, sessions_of
+from app.domain.errors import DomainError
+from app.domain.estimates import DEFAULT_SITE
+from app.domain.models import MAX_NAME_CHARS
+from app.domain.serialize import instance_from_dict
+from app.exchange import (
+    Draft,
+    ExchangeError,
+    fill_rates,
+    plain_request,
+    read_schedule,
+    typed_links,
+)
+from app.runs import service as run_service
+from app.runs.spec import RunOrder
+from app.sites import service as site_service
+
+CONSOLE_IMPORT_PATH = "/console/import"
+router = APIRouter(prefix="/console", include_in_schema=False)
+# A started draft comes back as the hidden form field the page wrote: a run request's size.
+MAX_DRAFT_CHARS = 10 * 1024 * 1024
+
+
+def _sites(request: Request) -> list[str]:
+    return [s.site for s in site_service.list_sites(sessions=sessions_of(request))]
+
+
+@router.get("/import")
+async def import_page(request: Request, console: ConsoleDep, signed: SignedInDep) -> Response:
+    sites = await run_in_threadpool(_sites, request)
+    context = {"title": "Import a schedule", "sites": sites, "form": {}}
+    return finish(request, console.render(request, "import.html", context, signed=signed))
+
+
+def _unrated(draft: Draft) -> list[str]:
+    """The features of the draft's tasks that no robot has a rate for: a run would refuse
+    them."""
+    rated = {f for r in draft.robots for f in r["success"]}
+    return sorted({f for t in draft.tasks for f in t["features"]} - rated)
+
+
+def _read(data: bytes, form: dict[str, str], rates_of: Any) -> Draft:
+    kind = form["format"]
+    draft = read_schedule(
+        data,
+        format="mspdi" if kind == "mspdi" else "xer" if kind == "xer" else None,
+        features_field=form["features_field"] or None,
+        default_features=form["default_features"] or None,
+    )
+    if form["site"]:
+        draft = fill_rates(draft, rates_of(form["site"]), site=form["site"])
+    return draft
+
+
+@router.post("/import")
+async def import_file(
+    request: Request,
+    console: ConsoleDep,
+    signed: CsrfDep,
+    file: UploadFile,
+    format_: Annotated[str, Form(alias="format", max_length=10)] = "",
+    features_field: Annotated[str, Form(max_length=200)] = "",
+    default_features: Annotated[str, Form(max_length=2000)] = "",
+    site: Annotated[str, Form(max_length=MAX_NAME_CHARS)] = "",
+) -> Response:
+    """The uploaded file's draft, shown: nothing is stored until "Start a run"."""
+    form = {
+        "format": format_ if format_ in ("mspdi", "xer") else "",
+        "features_field": features_field.strip(),
+        "default_features": default_features.strip(),
+        "site": site.strip(),
+    }
+
+    def refuse(message: str, status_code: int) -> Response:
+        return console.refused(
+            request,
+            title="Not imported",
+            message=message,
+            retry=CONSOLE_IMPORT_PATH,
+            signed=signed,
+            status_code=status_code,
+        )
+
+    limit = console.settings.import_max_bytes
+    data = await file.read(limit + 1)
+    if len(data) > limit:
+        return refuse(
+            f"The file is larger than {limit:,} bytes (LTAA_IMPORT_MAX_BYTES): raise the "
+            "limit for a file that size.",
+            413,
+        )
+
+    def rates_of(name: str) -> dict[str, dict[str, float]]:
+        return site_service.site_rates(
+            sessions=sessions_of(request), site=name, strength=console.settings.prior_strength
+        )
+
+    try:
+        draft = await run_in_threadpool(_read, data, form, rates_of)
+        sites = await run_in_threadpool(_sites, request)
+    except ExchangeError as exc:
+        where = f"{exc.field}: " if exc.field and exc.field != "links" else ""
+        return refuse(f"{file.filename or 'The file'} was not imported: {where}{exc.message}.", 422)
+    except site_service.SiteNotFoundError as exc:
+        return refuse(f"Site '{form['site']}': {exc.message}.", 404)
+    context = _draft_context(draft, form, file.filename or "", sites)
+    return finish(request, console.render(request, "import.html", context, signed=signed))
+
+
+def _draft_context(
+    draft: Draft, form: dict[str, str], filename: str, sites: list[str]
+) -> dict[str, Any]:
+    typed = typed_links(draft)
+    unrated = _unrated(draft)
+    startable = not typed and not unrated
+    return {
+        "title": "Import a schedule",
+        "sites": sites,
+        "form": form,
+        "filename": filename,
+        "draft": draft,
+        "typed": typed,
+        "unrated": unrated,
+        "startable": startable,
+        "request_json": json.dumps(plain_request(draft)) if startable else "",
+    }
+
+
+def _order(request_json: str, site: str) -> RunOrder:
+    try:
+        instance = instance_from_dict(json.loads(request_json))
+    except DomainError:
+        raise  # the instance's own checks: the field and the problem
+    except (ValueError, KeyError, TypeError, AttributeError):
+        raise DomainError("draft", "it is not a run request; import the file again") from None
+    sent = {"tasks", "robots"} | ({"start"} if instance.start is not None else set())
+    return RunOrder(
+        tasks=instance.tasks,
+        robots=instance.robots,
+        start=instance.start,
+        site=site or DEFAULT_SITE,
+        sent=frozenset(sent | ({"site"} if site else set())),
+    )
+
+
+@router.post("/import/run")
+async def start_run(
+    request: Request,
+    console: ConsoleDep,
+    signed: CsrfDep,
+    draft: Annotated[str, Form(max_length=MAX_DRAFT_CHARS)],
+    site: Annotated[str, Form(max_length=MAX_NAME_CHARS)] = "",
+) -> Response:
+    """The draft as POST /runs takes it (links as plain ids), started; then its run page."""
+
+    def submit() -> str:
+        order = _order(draft, site.strip())
+        run, _ = run_service.submit_run(
+            sessions=sessions_of(request),
+            worker=request.app.state.runs.worker,
+            settings=console.settings,
+            order=order,
+            idempotency=None,
+        )
+        return run.id
+
+    try:
+        run_id = await run_in_threadpool(submit)
+    except DomainError as exc:
+        return console.refused(
+            request,
+            title="Run not started",
+            message=f"The draft was not started: {exc.field}: {exc.message}.",
+            retry=CONSOLE_IMPORT_PATH,
+            signed=signed,
+            status_code=exc.status_code if 400 <= exc.status_code < 500 else 422,
+        )
+    return RedirectResponse(f"/console/runs/{run_id}", status_code=303)
