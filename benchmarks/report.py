@@ -22,6 +22,7 @@ SECTIONS = [
     "benchmarks.adaptation",
     "benchmarks.site_learning",
     "benchmarks.timed_schedules",
+    "benchmarks.schedule_quality",
 ]
 
 

@@ -82,11 +82,19 @@ def construction_site(
     seed: int = 0,
     delivery_every: int = 60,
     light_pours: bool = True,
+    zones: tuple[int, int] | None = None,
+    minutes_scale: float = 1.0,
 ) -> Instance:
     """A timed instance of `n_tasks` tasks and `n_robots` robots. `light_pours=False`
-    leaves light robots out of the pours' duration maps (they cannot take them)."""
+    leaves light robots out of the pours' duration maps (they cannot take them). `zones`
+    = (floors, zones per floor) fixes the layout (default: by size); (2, 2) is a site of
+    4 zones with travel of 2-9 minutes between them. `minutes_scale` scales the trades'
+    base minutes (0.125: tasks of about 7 minutes, as long as the travel)."""
     rng = random.Random(seed)
     layout = Layout.for_tasks(n_tasks)
+    if zones is not None:
+        packages = math.ceil(n_tasks / len(TRADES))
+        layout = Layout(zones[0], zones[1], math.ceil(packages / (zones[0] * zones[1])))
     robots = tuple(_robot(i, rng, layout) for i in range(n_robots))
     tasks: list[Task] = []
     pour_below: dict[tuple[int, int, int], str] = {}
@@ -102,7 +110,7 @@ def construction_site(
                             name=f"{trade.name} {zone_name(f, z)} #{p}",
                             features=trade.features,
                             type=trade.name,
-                            duration=_durations(trade, robots, rng, light_pours),
+                            duration=_durations(trade, robots, rng, light_pours, minutes_scale),
                             after=() if previous is None else (previous,),
                             zone=zone_name(f, z),
                             release=delivery_every * f if trade.name == "pour" and f else None,
@@ -132,12 +140,17 @@ def _robot(i: int, rng: random.Random, layout: Layout) -> Robot:
 
 
 def _durations(
-    trade: Trade, robots: tuple[Robot, ...], rng: random.Random, light_pours: bool
+    trade: Trade,
+    robots: tuple[Robot, ...],
+    rng: random.Random,
+    light_pours: bool,
+    minutes_scale: float = 1.0,
 ) -> dict[str, float]:
     out: dict[str, float] = {}
     for robot in robots:
         if trade.name == "pour" and not light_pours and robot.name.startswith("light"):
             continue
         pace = sum(REFERENCE_RATE / robot.success[f] for f in trade.features) / len(trade.features)
-        out[robot.name] = max(1, round(trade.base_minutes * pace * rng.uniform(0.8, 1.2)))
+        minutes = trade.base_minutes * minutes_scale * pace * rng.uniform(0.8, 1.2)
+        out[robot.name] = max(1, round(minutes))
     return out

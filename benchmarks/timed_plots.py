@@ -47,3 +47,31 @@ def makespan_figure(
         fontsize=10,
     )
     return save(fig, name, directory)
+
+
+def gap_figure(
+    trajectories: Mapping[str, Sequence[Sequence[float]]],
+    limits: Sequence[float],
+    det_per_s: float,
+    name: str,
+    directory: Path = IMG,
+) -> str:
+    """Gap to the proven bound against the time limit, one line per site: each point the
+    answer of a run with that limit (read off the trajectory of the longest run)."""
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    for i, (label, points) in enumerate(trajectories.items()):
+        xs, ys = [], []
+        for limit in limits:
+            reached = [p for p in points if p[0] <= limit * det_per_s + 1e-6]
+            if reached:
+                makespan, bound = reached[-1][3], reached[-1][4]
+                xs.append(limit)
+                ys.append(100 * max(0.0, (makespan - bound) / makespan) if makespan else 0.0)
+        ax.plot(xs, ys, marker="o", color=PALETTE[i % len(PALETTE)], label=label)
+    ax.set_xscale("log")
+    ax.set_xticks(list(limits), [f"{v:g}" for v in limits])
+    ax.set_xlabel("time_limit_s (deterministic budget)")
+    ax.set_ylabel("gap to the proven bound (%)")
+    ax.legend(fontsize=8)
+    ax.set_title("Gap against the time limit (never worse with more time)", fontsize=10)
+    return save(fig, name, directory)

@@ -378,6 +378,20 @@ class AllocateResponse(BaseModel):
     model: str | None = Field(
         None, description="`schedule`: which CP-SAT model ran", exclude_if=_absent
     )
+    bound_source: str | None = Field(
+        None,
+        description="`schedule`: what gives `bound` ('proven optimal', 'CP-SAT search', "
+        "'critical path (shortest durations)', 'heads and tails over the robots able', a "
+        "load bound); docs/schedules.md#bounds",
+        exclude_if=_absent,
+    )
+    search: dict[str, Any] | None = Field(
+        None,
+        description="`schedule`: the deterministic budget the search had and used, its "
+        "workers and seed, and `wall_cut` (true when the wall-clock safety net stopped it); "
+        "docs/schedules.md#deterministic-search",
+        exclude_if=_absent,
+    )
 
 
 class SolverOut(BaseModel):

@@ -198,6 +198,8 @@ def _timed_fields(problem: Problem, details: dict[str, Any]) -> dict[str, Any]:
             "bound": details["bound"],
             "gap": details["gap"],
             "model": details["model"],
+            "bound_source": details.get("bound_source"),
+            "search": details.get("budget"),
         }
     if schedule is None:
         out["schedule_error"] = details.get("schedule_error")

@@ -37,7 +37,7 @@ class HintEntry(BaseModel):
 
 class ScheduleOptions(SolverOptions):
     time_limit_s: float = Field(default=10.0, gt=0, le=120)
-    workers: int = Field(default=2, ge=1, le=16)
+    workers: int = Field(default=1, ge=1, le=16)
     hint: list[HintEntry] | None = None
 
 
@@ -48,9 +48,11 @@ class ScheduleSolver(Solver):
         "(durations, precedence, travel between zones, releases, deadlines, shifts, the "
         "workload cap); 'optimal' only when proven, else the bound and gap.",
         exact=True,
-        limits="exact (pairwise travel) while robots x tasks^2 <= 40,000; past that a "
-        "load-balancing assignment, dispatch and a large-neighbourhood search over the exact "
-        "model (never called optimal); time_limit_s <= 120",
+        limits="exact while its model has at most 20,000 literals (presence per task and "
+        "robot, travel order literals only where travel applies) and 5,000 intervals; past "
+        "that a load-balancing assignment, dispatch and a large-neighbourhood search over "
+        "the exact model (never called optimal); time_limit_s <= 120, a deterministic "
+        "budget (the same answer on any machine load)",
     )
     Options = ScheduleOptions
 

@@ -17,8 +17,11 @@ order (precedence-respecting; the times are placed as the graph chose), and the 
 robot remains the advice. Re-planning would guide better after a departure but CP-SAT
 stops at a wall-clock limit, so a re-plan is not reproducible; with one stored plan a run
 resumed after a crash decides in the same order with the same advice
-(docs/schedules.md, "Runs in time"). The durable runs store the plan as the run's
-`guidance_planned` event and read it back on resume (app.runs.records).
+(docs/schedules.md, "Runs in time"). The plan itself is solved on a deterministic budget
+(`GUIDANCE_TIME_LIMIT_S` of deterministic time, one worker, seed 0), so the same run plans
+the same on a quiet and on a loaded machine; the event records that budget. The durable
+runs store the plan as the run's `guidance_planned` event and read it back on resume
+(app.runs.records).
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ from app.domain.errors import DomainError
 from app.domain.problem import Problem
 
 GUIDANCE_TIME_LIMIT_S = 5.0
+# The wall-clock safety net of the guidance plan, far above what its deterministic budget
+# takes even on a loaded machine: a plan cut by the wall clock would depend on the load.
+GUIDANCE_WALL_CAP_S = 300.0
 
 
 @dataclass(frozen=True)
@@ -42,15 +48,22 @@ class GuidancePlan:
 
     robots: tuple[int, ...]
     starts: tuple[float, ...]
+    # How it was solved: the budget (`time_limit_s`, deterministic units, workers, seed,
+    # whether the wall-clock cap cut it), the model, status and makespan. Empty: not known.
+    budget: Mapping[str, Any] = dataclasses.field(default_factory=dict, compare=False)
 
     def as_json(self) -> dict[str, Any]:
-        return {"robots": list(self.robots), "starts": list(self.starts)}
+        out: dict[str, Any] = {"robots": list(self.robots), "starts": list(self.starts)}
+        if self.budget:
+            out["budget"] = dict(self.budget)
+        return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> GuidancePlan:
         return cls(
             tuple(int(r) for r in data.get("robots") or ()),
             tuple(float(s) for s in data.get("starts") or ()),
+            dict(data.get("budget") or {}),
         )
 
 
@@ -61,13 +74,21 @@ def plan_guidance(problem: Problem, *, time_limit_s: float = GUIDANCE_TIME_LIMIT
     from app.solvers.cpsat.search import solve_schedule
 
     try:
-        outcome = solve_schedule(problem, time_limit_s=time_limit_s, workers=1)
+        outcome = solve_schedule(
+            problem, time_limit_s=time_limit_s, workers=1, seed=0, wall_cap_s=GUIDANCE_WALL_CAP_S
+        )
     except DomainError:
         # No schedule exists (or none was found in time): no guidance, the graph decides
         # by its own rule and in the earliest-start order.
         return GuidancePlan((), ())
     slots = outcome.schedule.slots  # one per task, in queue order
-    return GuidancePlan(tuple(s.robot for s in slots), tuple(float(s.start) for s in slots))
+    budget = {
+        **outcome.budget,
+        "model": outcome.model,
+        "status": outcome.status,
+        "makespan": outcome.makespan,
+    }
+    return GuidancePlan(tuple(s.robot for s in slots), tuple(float(s.start) for s in slots), budget)
 
 
 def guided_problem(problem: Problem, plan: GuidancePlan) -> Problem:

@@ -100,7 +100,11 @@ def test_200_tasks_answer_within_the_limit_with_the_optimal_success() -> None:
     started = time.perf_counter()
     outcome = solve_schedule(problem, time_limit_s=6)
     elapsed = time.perf_counter() - started
-    assert elapsed < 6 + 5, f"{elapsed:.1f} s for a 6 s limit"
+    # The limit is a deterministic budget (docs/schedules.md#deterministic-search): the
+    # wall clock only caps it, however loaded the machine.
+    budget = outcome.budget
+    assert elapsed < budget["wall_cap_s"] + 5, f"{elapsed:.1f} s for a 6 s limit"
+    assert budget["deterministic_used"] <= budget["deterministic_budget"] + 0.6
     assert outcome.status == "feasible" and "LNS" in outcome.model
     assert check_schedule(problem, outcome.schedule) == []
     assert outcome.expected_success == pytest.approx(optimal_es(problem), abs=1e-12)

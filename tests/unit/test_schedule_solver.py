@@ -155,4 +155,10 @@ def test_1000_tasks_on_20_robots_answer_within_the_limit_with_a_bound() -> None:
     assert "large-instance path" in str(details["model"])
     assert 0 < details["bound"] <= details["objective_value"]
     assert 0 <= details["gap"] < 1
-    assert elapsed < 1 + 5, f"{elapsed:.1f} s for a 1 s limit"
+    # A deterministic budget (docs/schedules.md#deterministic-search): the wall clock only
+    # caps it, however loaded the machine. The bounds (the LP's modelled cost: 0.4 units
+    # at 20,000 pairs) and a first assignment always run, so a 1 s budget (0.35 units)
+    # is overrun by at most their cost.
+    budget = details["budget"]
+    assert elapsed < budget["wall_cap_s"] + 5, f"{elapsed:.1f} s for a 1 s limit"
+    assert budget["deterministic_used"] <= budget["deterministic_budget"] + 0.5

@@ -30,36 +30,95 @@ from app.solvers.free_part import FreePart
 from app.solvers.optimal import best_completion
 from app.solvers.tiebreak import integer_weights, weight_scale
 
+# CP-SAT's deterministic time per second of `time_limit_s`: measured on this machine's
+# models (one worker), a unit of deterministic time took 2.8-3.7 s of CPU (Brandimarte
+# Mk06, Mk10; 1,000 x 20 neighbourhoods). The budget is in these units, so the same request searches
+# the same way on a quiet and on a loaded machine (docs/schedules.md#deterministic-search).
+DET_PER_S = 0.35
+# The wall-clock safety net: a call stops after this many times its time limit (plus a
+# constant for building the models), whatever its deterministic budget says.
+# Generous: on this shared machine (load 10-15 on 2 cores) a deterministic unit took up
+# to 10x its quiet wall time, and a cut search is no longer the deterministic answer.
+WALL_CAP_FACTOR = 10.0
+WALL_CAP_EXTRA_S = 10.0
+
 
 @dataclass
 class Search:
-    """One call's budget: every CP-SAT run takes what is left of `time_limit_s`."""
+    """One call's budget in deterministic time: every CP-SAT run takes what it is given of
+    it, and `charge` books the Python work around the runs at a modelled, load-free cost.
+    The wall clock only caps the call (`wall_cut` says when it did)."""
 
     time_limit_s: float
     workers: int
     seed: int
     started: float = field(default_factory=time.perf_counter)
     stages: list[dict[str, Any]] = field(default_factory=list)
+    spent: float = 0.0  # deterministic units used so far
+    wall_cut: bool = False
+    # After each stage that improved: (the least budget, in deterministic units, whose run
+    # reaches this point; units spent; wall seconds; best makespan; bound). A smaller
+    # budget's answer is the last point it reaches (docs/schedules.md#anytime).
+    trajectory: list[tuple[float, float, float, float, float]] = field(default_factory=list)
+    needed: float = 0.0  # the least budget whose run has done everything done so far
+    wall_cap_s: float | None = None  # default: WALL_CAP_FACTOR x time_limit_s + extra
+
+    @property
+    def budget(self) -> float:
+        return self.time_limit_s * DET_PER_S
 
     def remaining(self) -> float:
-        return self.time_limit_s - (time.perf_counter() - self.started)
+        """Deterministic units left (0 once the wall-clock cap has cut the call)."""
+        if self.wall_left() <= 0:
+            self.wall_cut = True
+            return 0.0
+        return self.budget - self.spent
+
+    def fits(self, units: float) -> bool:
+        return units <= self.remaining() + 1e-9
+
+    def charge(self, units: float) -> None:
+        self.spent += units
+
+    @property
+    def cap(self) -> float:
+        if self.wall_cap_s is not None:
+            return self.wall_cap_s
+        return WALL_CAP_FACTOR * self.time_limit_s + WALL_CAP_EXTRA_S
+
+    def wall_left(self) -> float:
+        return self.cap - (time.perf_counter() - self.started)
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
+
+    def solver(self, units: float) -> cp_model.CpSolver:
+        """A CP-SAT solver that searches deterministically for `units` at most."""
+        solver = cp_model.CpSolver()
+        solver.parameters.max_deterministic_time = max(0.01, units)
+        solver.parameters.max_time_in_seconds = max(0.05, self.wall_left())
+        solver.parameters.num_workers = self.workers
+        solver.parameters.random_seed = self.seed
+        if self.workers > 1:
+            # Parallel workers in deterministic batches: the same answer every run.
+            solver.parameters.interleave_search = True
+        return solver
+
+    def book(self, solver: cp_model.CpSolver) -> None:
+        self.spent += solver.deterministic_time
+        if solver.wall_time >= solver.parameters.max_time_in_seconds - 0.01:
+            self.wall_cut = True
 
     def run(
         self,
         model: cp_model.CpModel,
         name: str,
-        seconds: float,
+        units: float,
         *,
         disjunctive: bool = False,
         light_presolve: bool = False,
     ) -> tuple[cp_model.CpSolver, str]:
-        solver = cp_model.CpSolver()
-        solver.parameters.max_time_in_seconds = max(0.05, seconds)
-        solver.parameters.num_workers = self.workers
-        solver.parameters.random_seed = self.seed
+        solver = self.solver(units)
         if disjunctive:
             # Measured on the 36-task timed instance: with these two the bound closes in
             # seconds; without them it stalls ~5% below the optimum.
@@ -71,17 +130,54 @@ class Search:
             solver.parameters.cp_model_probing_level = 0
             solver.parameters.max_presolve_iterations = 1
         status = solver.status_name(solver.solve(model))
+        self.book(solver)
         found = status in ("OPTIMAL", "FEASIBLE")
         self.stages.append(
             {
                 "stage": name,
                 "status": status,
                 "wall_s": round(solver.wall_time, 3),
+                "deterministic_time": round(solver.deterministic_time, 3),
                 "objective": solver.objective_value if found else None,
                 "bound": solver.best_objective_bound,
             }
         )
         return solver, status
+
+    def summary(self) -> dict[str, Any]:
+        """What the answer reports about its budget: the deterministic units it had and
+        used, the search's settings, and whether the wall-clock cap cut it."""
+        return {
+            "time_limit_s": self.time_limit_s,
+            "deterministic_budget": round(self.budget, 3),
+            "deterministic_used": round(self.spent, 3),
+            "workers": self.workers,
+            "seed": self.seed,
+            "interleave_search": self.workers > 1,
+            "wall_cap_s": self.cap,
+            "wall_cut": self.wall_cut,
+        }
+
+    def need(self, units: float) -> None:
+        """Book that a run reaches what follows only with a budget of `units` or more."""
+        self.needed = max(self.needed, units)
+
+    def mark(self, makespan: float, bound: float | None = None) -> None:
+        """A point of the trajectory (bound None: the last one's)."""
+        if bound is None:
+            bound = self.trajectory[-1][4] if self.trajectory else 0.0
+        point = (round(self.needed, 4), round(self.spent, 4), round(self.elapsed(), 3))
+        self.trajectory.append((*point, makespan, bound))
+
+
+# The modelled deterministic cost of building a CP-SAT model in Python, per variable and
+# constraint (measured: ~4 microseconds each on a quiet core, booked as 4e-6 units).
+BUILD_COST_PER_ITEM = 4e-6
+
+
+def model_cost(model: cp_model.CpModel) -> float:
+    proto = model.proto
+    return BUILD_COST_PER_ITEM * (len(proto.variables) + len(proto.constraints))
 
 
 class SuccessWeights:
@@ -172,6 +268,28 @@ def assignment_schedules(problem: Problem, robots: list[int]) -> list[Schedule]:
         list_schedule(problem, robots),
         dispatch_schedule(problem, groups, quotas_of(robots, groups)),
     ]
+
+
+def free_dispatch(problem: Problem, pairs: set[tuple[int, int]] | None) -> Schedule:
+    """Earliest-finish dispatch with every allowed robot open to every task (one class per
+    set of robots able, no quotas): ValueError/DomainError when it cannot place a task."""
+    tm = problem.instance.timing
+    sets: dict[frozenset[int], int] = {}
+    classes = []
+    for t in range(tm.n_tasks):
+        pin = problem.pinned.get(t)
+        able = frozenset(
+            [pin]
+            if pin is not None
+            else [
+                r
+                for r in tm.eligible_robots(t)
+                if r not in problem.unavailable and (pairs is None or (t, r) in pairs)
+            ]
+        )
+        classes.append(sets.setdefault(able, len(sets)))
+    quotas = {(c, r): tm.n_tasks for able, c in sets.items() for r in able}
+    return dispatch_schedule(problem, classes, quotas)
 
 
 def makespan_floor(problem: Problem, pairs: set[tuple[int, int]] | None = None) -> float:

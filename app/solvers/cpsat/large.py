@@ -4,25 +4,26 @@ called optimal.
 Measured here (2 shared cores): at 1,000 tasks x 20 robots a full scheduling model, even
 without travel literals, found no schedule in 60 s, hint included; its bound stayed at
 half of what a load relaxation proves. What makes such plans long is load: the success
-objective pushes the best robots up to the cap. So the path decides in four steps:
+objective pushes the best robots up to the cap. The path runs a fixed sequence of stages,
+each with a fixed deterministic budget, so a larger `time_limit_s` runs the smaller one's
+stages first and then more LNS (docs/schedules.md#anytime):
 
-1. Bound and assign: the LP relaxation of the assignment (`load_bound`, HiGHS) and the
-   `AssignmentModel` (ES held at its target, or above the floor; the cap; per robot:
-   shift start + work + one entry into each zone it visits <= T; minimise T). Both bounds
-   on T are lower bounds on the makespan; the larger (or the chains') is the `bound`.
-   With `FOLLOW_MIN_S` or more left it gets `ASSIGNMENT_SHARE` of the time, else all.
-2. Time: the assignment (and the time-free optimum, already in hand) by the list
-   scheduler and by earliest-finish dispatch within its per-class quotas.
-3. Sequence, when `SEQUENCING_SHARE` of the time left is at least `SEQUENCING_MIN_S`:
-   the exact model with pairwise travel on the best assignment so far, each task fixed
-   to its robot: CP-SAT improves the per-robot orders and start times, hinted with the
-   best schedule (at 200 x 20 it proves that assignment's optimum in under a second; at
-   1,000 x 20 it improves nothing in 10 s).
-4. Improve, until the time limit: the large-neighbourhood search (`lns`) over the exact
-   model from the best schedule so far.
+1. Bound: the floors of `bounds` (critical path, heads and tails over the robots able)
+   and the LP relaxation of the assignment (`load_bound`, HiGHS: deterministic).
+2. Assign: the `AssignmentModel` (ES held at its target, or above the floor; the cap; per
+   robot: shift start + work + one entry into each zone it visits <= T; minimise T) for
+   `ASSIGN_UNITS`; its bound on T is one more floor. Then time it: the assignment (and
+   the time-free optimum, already in hand) by the list scheduler and by earliest-finish
+   dispatch within its per-class quotas.
+3. Sequence, for `SEQUENCE_UNITS`: the exact model on the best assignment so far, each
+   task fixed to its robot: CP-SAT improves the per-robot orders and start times, hinted
+   with the best schedule (at 200 x 20 it proves that assignment's optimum in under a
+   second).
+4. Improve, until the budget: the large-neighbourhood search (`lns`) over the exact model
+   from the best schedule so far, in whole slices.
 
 `details["model"]` names the steps that ran (and the LNS's neighbourhoods and
-improvements).
+improvements), `bound_source` the floor that bounds the bound.
 
 With `success_then_makespan`, the ES target must already be reached by a feasible
 schedule of the time-free optimum (else: a DomainError that says what to change); the
@@ -33,7 +34,8 @@ from __future__ import annotations
 
 from app.domain.errors import DomainError
 from app.solvers.cpsat.assignment_model import AssignmentModel
-from app.solvers.cpsat.common import assignment_schedules, makespan_floor, none_found
+from app.solvers.cpsat.bounds import best_bound, bound_floors
+from app.solvers.cpsat.common import assignment_schedules, model_cost, none_found
 from app.solvers.cpsat.lns import improve
 from app.solvers.cpsat.load_bound import load_lower_bound
 from app.solvers.cpsat.model import ScheduleModel, Travel
@@ -45,16 +47,20 @@ LARGE_MODEL = (
 )
 SEQUENCING_MODEL = ", CP-SAT sequencing of the best assignment"
 LNS_MODEL = ", LNS over the exact model"
-SEQUENCING_SHARE = 0.2  # of the time left; the LNS gets the rest
-LP_MIN_S = 2.0  # below this the chains' bound has to do
-LP_SHARE = 0.25  # of the time left, at most, for the LP bound
-SEQUENCING_MIN_S = 3.0  # below this, building the sequencing model costs more than it gains
-FOLLOW_MIN_S = 2.0  # below this the assignment takes all the time left
-ASSIGNMENT_SHARE = 0.25  # of the time left, when the LNS (and sequencing) follow
+LOAD_LP = "load (LP relaxation of the assignment)"
+ASSIGNMENT_BOUND = "load with zone entries (CP-SAT assignment)"
+# Deterministic units for the assignment and for sequencing it: small, so that from a
+# time limit of about a second on every run starts with the same stages (at 1,000 x 20
+# the assignment, hinted with the time-free optimum, is feasible at once; the LNS
+# improves what it leaves).
+ASSIGN_UNITS = 0.3
+SEQUENCE_UNITS = 0.5
+SEQUENCE_BUILD = 0.1  # room kept for building the sequencing model
+LP_COST_PER_PAIR = 2e-5  # the LP's modelled cost in deterministic units, per (task, robot)
 
 
 def solve_large(setup: Setup) -> ScheduleOutcome:
-    problem, search, feasible, scale = setup.problem, setup.search, setup.feasible, setup.scale
+    problem, search, feasible = setup.problem, setup.search, setup.feasible
     if setup.es_floor is None and setup.es_target is None:
         raise DomainError(
             "tasks",
@@ -69,16 +75,44 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
         feasible.keep(lambda es: es == target)
     tm = problem.instance.timing
     candidates = [_candidates(setup, t) for t in range(tm.n_tasks)]
-    lp_bound = 0.0
-    if search.remaining() >= LP_MIN_S:
-        lp_bound = load_lower_bound(
-            problem,
-            candidates,
-            setup.weights,
-            es_target=setup.es_target,
-            es_floor=setup.es_floor,
-            time_limit_s=search.remaining() * LP_SHARE,
-        )
+    floors = bound_floors(problem, setup.pairs)
+    floors[LOAD_LP] = load_lower_bound(
+        problem,
+        candidates,
+        setup.weights,
+        es_target=setup.es_target,
+        es_floor=setup.es_floor,
+        time_limit_s=max(0.1, search.wall_left() / 4),
+    )
+    search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
+    ran = _assign(setup, candidates, floors)
+    best = feasible.best()
+    if best is not None:
+        search.mark(best.makespan, min(best.makespan, max(floors.values())))
+    # Sequencing, then the LNS, only when the sequencing fits whole: every budget that
+    # runs them runs the same stages before them.
+    if search.fits(SEQUENCE_UNITS + SEQUENCE_BUILD):
+        search.need(search.spent + SEQUENCE_UNITS + SEQUENCE_BUILD)
+        if _sequence(setup, SEQUENCE_UNITS):
+            ran += SEQUENCING_MODEL
+            search.mark(feasible.best().makespan)  # type: ignore[union-attr]
+        report = improve(setup, candidates)
+        if report is not None:
+            ran += (
+                f"{LNS_MODEL} ({report.neighbourhoods} neighbourhoods, {report.improved} improved)"
+            )
+    best = feasible.best()
+    if best is None:
+        raise none_found(search.time_limit_s, ran)
+    bound, source = best_bound(floors, best.makespan, False)
+    result = outcome(setup, best, "feasible", ran, bound, source)
+    result.bounds = floors
+    return result
+
+
+def _assign(setup: Setup, candidates: list[list[int]], floors: dict[str, float]) -> str:
+    """Step 2: the load-balancing assignment and its schedules; what ran."""
+    problem, search, feasible, scale = setup.problem, setup.search, setup.feasible, setup.scale
     assign = AssignmentModel(problem, scale, candidates, setup.weights)
     if setup.es_target is not None:
         assign.model.add(assign.es == setup.es_target)
@@ -88,33 +122,22 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     seed_plan = feasible.best()
     if seed_plan is not None:
         assign.hint(seed_plan.assignment)
-    follow = search.remaining() >= FOLLOW_MIN_S
-    share = search.remaining() * (ASSIGNMENT_SHARE if follow else 1.0)
-    solver, status = search.run(assign.model, "assignment", share, light_presolve=True)
+    search.charge(model_cost(assign.model))
+    search.need(search.spent + ASSIGN_UNITS)
+    units = min(ASSIGN_UNITS, max(0.01, search.remaining()))
+    solver, status = search.run(assign.model, "assignment", units, light_presolve=True)
     if status == "INFEASIBLE":
         raise DomainError(
             "max_deviation",
             "CP-SAT proved no assignment meets the workload cap at this expected success",
             code="no_schedule",
         )
-    load_bound = lp_bound
     if status in ("OPTIMAL", "FEASIBLE"):
         for schedule in assignment_schedules(problem, assign.read(solver)):
             feasible.offer(schedule)
     if scale.exact:
-        load_bound = max(load_bound, scale.minutes(solver.best_objective_bound))
-    ran = LARGE_MODEL
-    if follow and search.remaining() * SEQUENCING_SHARE >= SEQUENCING_MIN_S:
-        _sequence(setup, search.remaining() * SEQUENCING_SHARE)
-        ran += SEQUENCING_MODEL
-    report = improve(setup, candidates)
-    if report is not None:
-        ran += f"{LNS_MODEL} ({report.neighbourhoods} neighbourhoods, {report.improved} improved)"
-    best = feasible.best()
-    if best is None:
-        raise none_found(search.time_limit_s, ran)
-    bound = min(best.makespan, max(makespan_floor(problem, setup.pairs), load_bound))
-    return outcome(setup, best, "feasible", ran, bound)
+        floors[ASSIGNMENT_BOUND] = scale.minutes(solver.best_objective_bound)
+    return LARGE_MODEL
 
 
 def _candidates(setup: Setup, t: int) -> list[int]:
@@ -130,12 +153,13 @@ def _candidates(setup: Setup, t: int) -> list[int]:
     ]
 
 
-def _sequence(setup: Setup, seconds: float) -> None:
-    """Step 3: better orders and times for the best assignment so far."""
+def _sequence(setup: Setup, units: float) -> bool:
+    """Step 3: better orders and times for the best assignment so far (False: nothing to
+    sequence)."""
     problem, search, feasible = setup.problem, setup.search, setup.feasible
     best = feasible.best()
     if best is None:
-        return
+        return False
     robots = best.assignment
     travel = Travel.PAIRS if problem.instance.timing.has_travel else Travel.NONE
     fixed = {(t, r) for t, r in enumerate(robots)}
@@ -143,6 +167,8 @@ def _sequence(setup: Setup, seconds: float) -> None:
     model.model.add(model.makespan <= setup.scale.up(best.makespan))
     model.model.minimize(model.makespan)
     model.hint(robots, [s.start for s in best.slots])
-    solver, status = search.run(model.model, "sequencing", seconds, light_presolve=True)
+    search.charge(model_cost(model.model))
+    solver, status = search.run(model.model, "sequencing", units, light_presolve=True)
     if status in ("OPTIMAL", "FEASIBLE"):
         feasible.offer_times(*model.read(solver))
+    return True

@@ -28,18 +28,18 @@ from app.domain.errors import DomainError
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.list_schedule import sequence_schedule
 from app.domain.scheduling.schedule import EPS, Schedule, StepKind
+from app.solvers.cpsat.common import model_cost
 from app.solvers.cpsat.lns_model import Neighbourhood
 from app.solvers.cpsat.outcome import Setup
 
-SLICE_S = 1.5  # CP-SAT per neighbourhood: a few dozen tasks solve or stall by then
-MIN_SLICE_S = 0.3  # less than this left: stop (building the model alone takes ~0.1 s)
+SLICE = 0.5  # deterministic units of CP-SAT per neighbourhood (~1.5 s of CPU here)
 # Measured at 1,000 x 20: 40 tasks across all robots (times after the window floating)
 # took 1-2 s to solve, 40 tasks on 3-5 robots (the rest fixed) 0.03-0.1 s. Each kind of
 # neighbourhood keeps its own size, grown while CP-SAT solves it fast and to optimality,
 # shrunk when it does not.
 START_SIZE = {"window": 30, "robots": 40}
 MIN_SIZE, MAX_SIZE = 6, 250
-FAST_S, SLOW_S = 0.3, 0.8
+FAST, SLOW = 0.3, 0.8  # deterministic units
 GROW, SHRINK = 1.2, 0.8
 ROBOTS_SHARE = 0.5
 
@@ -71,13 +71,20 @@ def improve(
     candidates: Sequence[Sequence[int]],
     start: Schedule | None = None,
     seconds: float | None = None,
+    slice_units: float = SLICE,
 ) -> LnsReport | None:
-    """Run LNS from `start` (default: the best schedule so far) for `seconds` (default: until
-    the call's time limit); None if there is nothing to start from or no time."""
+    """Run LNS from `start` (default: the best schedule so far) for `seconds` of budget
+    (default: all that is left); None if there is nothing to start from or no time.
+
+    Deterministic: the neighbourhoods, their sizes and CP-SAT's seeds follow from the seed
+    and the answers alone, and a neighbourhood runs only when its whole slice (and its
+    modelled build cost) fits in the budget, so a larger budget runs the same
+    neighbourhoods first and then more (docs/schedules.md#anytime)."""
     search, feasible = setup.search, setup.feasible
     current = start or feasible.best()
-    until = search.remaining() - (seconds if seconds is not None else search.remaining())
-    if current is None or search.remaining() < MIN_SLICE_S:
+    limit = search.remaining() if seconds is None else min(search.remaining(), seconds)
+    stop_at = search.spent + limit
+    if current is None or limit < slice_units:
         return None
     problem = setup.problem
     began = time.perf_counter()
@@ -90,21 +97,25 @@ def improve(
     ]
     report = LnsReport(start_makespan=current.makespan, end_makespan=current.makespan)
     size = {kind: float(n) for kind, n in START_SIZE.items()}
-    while search.remaining() - until >= MIN_SLICE_S and movable:
+    build = 0.0  # the last neighbourhood's modelled build cost: the next one's estimate
+    while (
+        movable and search.spent + build + slice_units <= stop_at + 1e-9 and search.remaining() > 0
+    ):
+        search.need(search.spent + build + slice_units)
         kind = "robots" if rng.random() < ROBOTS_SHARE else "window"
         free, robots = _choose(rng, current, movable, int(size[kind]), kind, candidates)
         allowed = candidates
         if robots is not None:  # an exchange among these robots only
             allowed = [[r for r in c if r in robots] for c in candidates]
         hood = Neighbourhood(setup, current, free, allowed, ancestors, kind == "window")
-        status, solver = _solve(
-            hood.model, setup, min(SLICE_S, search.remaining() - until - 0.1), rng
-        )
+        build = model_cost(hood.model)
+        search.charge(build)
+        status, solver = _solve(hood.model, setup, rng, slice_units)
         report.neighbourhoods += 1
-
-        if status == "OPTIMAL" and solver.wall_time < FAST_S:
+        used = solver.deterministic_time
+        if status == "OPTIMAL" and used < FAST * slice_units / SLICE:
             size[kind] = min(MAX_SIZE, size[kind] * GROW)
-        elif status != "OPTIMAL" or solver.wall_time > SLOW_S:
+        elif status != "OPTIMAL" or used > SLOW * slice_units / SLICE:
             size[kind] = max(MIN_SIZE, size[kind] * SHRINK)
         if status not in ("OPTIMAL", "FEASIBLE"):
             continue
@@ -116,6 +127,7 @@ def improve(
             feasible.offer(schedule)
             current = schedule
             report.improved += 1
+            search.mark(current.makespan)
     report.wall_s = time.perf_counter() - began
     report.end_makespan = current.makespan
     search.stages.append(report.stage())
@@ -162,16 +174,17 @@ def _choose(
 
 
 def _solve(
-    model: cp_model.CpModel, setup: Setup, seconds: float, rng: random.Random
+    model: cp_model.CpModel, setup: Setup, rng: random.Random, units: float
 ) -> tuple[str, cp_model.CpSolver]:
-    solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = max(0.05, seconds)
-    solver.parameters.num_workers = setup.search.workers
+    search = setup.search
+    solver = search.solver(units)
     solver.parameters.random_seed = rng.randrange(1 << 30)
     # A small model: probing and repeated presolve cost more than they save here.
     solver.parameters.cp_model_probing_level = 0
     solver.parameters.max_presolve_iterations = 1
-    return solver.status_name(solver.solve(model)), solver
+    status = solver.status_name(solver.solve(model))
+    search.book(solver)
+    return status, solver
 
 
 def _retimed(setup: Setup, robots: list[int], starts: list[float]) -> Schedule | None:

@@ -25,6 +25,10 @@ class ScheduleOutcome:
     expected_success_bound: float  # the time-free optimum: no schedule does better
     wall_s: float
     stages: list[dict[str, Any]] = field(default_factory=list)
+    bound_source: str = ""  # which relaxation (or the search) gives `bound`
+    bounds: dict[str, float] = field(default_factory=dict)  # every floor computed, minutes
+    budget: dict[str, Any] = field(default_factory=dict)
+    trajectory: list[tuple[float, float, float, float, float]] = field(default_factory=list)
 
     def details(self) -> dict[str, Any]:
         return {
@@ -38,6 +42,10 @@ class ScheduleOutcome:
             "expected_success_bound": self.expected_success_bound,
             "wall_s": self.wall_s,
             "stages": self.stages,
+            "bound_source": self.bound_source,
+            "bounds": {k: round(v, 6) for k, v in self.bounds.items()},
+            "budget": self.budget,
+            "trajectory": [list(p) for p in self.trajectory],
             "schedule": self.schedule,
         }
 
@@ -58,7 +66,11 @@ class Setup:
     pairs: set[tuple[int, int]] | None  # the only pairs stage 2 may use, when known
 
 
-def outcome(setup: Setup, best: Schedule, status: str, model: str, bound: float) -> ScheduleOutcome:
+def outcome(
+    setup: Setup, best: Schedule, status: str, model: str, bound: float, source: str = ""
+) -> ScheduleOutcome:
+    search = setup.search
+    search.mark(best.makespan, bound)
     gap = 0.0 if best.makespan <= 0 else max(0.0, (best.makespan - bound) / best.makespan)
     return ScheduleOutcome(
         schedule=best,
@@ -70,6 +82,9 @@ def outcome(setup: Setup, best: Schedule, status: str, model: str, bound: float)
         gap=gap,
         expected_success=setup.weights.mean(setup.weights.of(best.assignment)),
         expected_success_bound=setup.weights.mean(setup.es_bound),
-        wall_s=setup.search.elapsed(),
-        stages=setup.search.stages,
+        wall_s=search.elapsed(),
+        stages=search.stages,
+        bound_source=source,
+        budget=search.summary(),
+        trajectory=search.trajectory,
     )
