@@ -80,3 +80,18 @@ def machine() -> str:
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}"
     )
+
+
+def write_section(title: str, text: str) -> None:
+    """Replace (or append) the section of docs/benchmarks.md that starts with `title`,
+    leaving every other section as it is: the console and exchange benchmarks run on their
+    own, apart from `make bench`."""
+    path = DOCS / "benchmarks.md"
+    report = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
+    start = report.find(title)
+    if start >= 0:
+        end = report.find("\n## ", start + len(title))
+        report = report[:start] + text + ("" if end < 0 else report[end:])
+    else:
+        report = report.rstrip("\n") + "\n\n" + text
+    path.write_text(report, encoding="utf-8")

@@ -28,7 +28,7 @@ from playwright.sync_api import Browser, Page, sync_playwright
 
 from app.domain.catalog import scenario
 from app.domain.serialize import instance_to_dict
-from benchmarks.common import DOCS, IMG, machine, synthetic_instance
+from benchmarks.common import IMG, machine, synthetic_instance, write_section
 from benchmarks.load import served
 
 CHROMIUM = "/usr/bin/chromium"
@@ -292,19 +292,6 @@ def bench() -> str:
     )
 
 
-def write_section(text: str) -> None:
-    """Replace (or append) only this section of docs/benchmarks.md."""
-    path = DOCS / "benchmarks.md"
-    report = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    start = report.find(SECTION_TITLE)
-    if start >= 0:
-        end = report.find("\n## ", start + len(SECTION_TITLE))
-        report = report[:start] + text + ("" if end < 0 else report[end:])
-    else:
-        report = report.rstrip("\n") + "\n\n" + text
-    path.write_text(report, encoding="utf-8")
-
-
 def main(argv: list[str]) -> None:
     what = argv[0] if argv else "screenshots"
     if what == "screenshots":
@@ -314,7 +301,7 @@ def main(argv: list[str]) -> None:
         print(import_screenshot_alone())
     elif what == "bench":
         text = bench()
-        write_section(text)
+        write_section(SECTION_TITLE, text)
         print(text)
     else:
         raise SystemExit("usage: python -m benchmarks.console screenshots|import|bench")

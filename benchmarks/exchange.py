@@ -28,7 +28,7 @@ from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.domain.scheduling.list_schedule import list_schedule
 from app.exchange import read_mspdi, read_xer, write_mspdi
-from benchmarks.common import DOCS, machine
+from benchmarks.common import machine, write_section
 from benchmarks.timed_instances import construction_site
 
 SECTION_TITLE = "## Schedule files: MSPDI and XER at 10,000 tasks"
@@ -169,19 +169,6 @@ def _mpxj_version() -> str:
     return version("mpxj")
 
 
-def write_section(text: str) -> None:
-    """Replace (or append) only this section of docs/benchmarks.md."""
-    path = DOCS / "benchmarks.md"
-    report = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    start = report.find(SECTION_TITLE)
-    if start >= 0:
-        end = report.find("\n## ", start + len(SECTION_TITLE))
-        report = report[:start] + text + ("" if end < 0 else report[end:])
-    else:
-        report = report.rstrip("\n") + "\n\n" + text
-    path.write_text(report, encoding="utf-8")
-
-
 def main(argv: list[str]) -> None:
     if argv[:1] == ["--mpxj"]:
         _mpxj_main(Path(argv[1]))
@@ -189,7 +176,7 @@ def main(argv: list[str]) -> None:
     # An optional directory keeps MPXJ's files between runs (writing them is the slow part).
     with tempfile.TemporaryDirectory() as scratch:
         text = bench(Path(argv[0]) if argv else Path(scratch))
-    write_section(text)
+    write_section(SECTION_TITLE, text)
     print(text)
 
 
