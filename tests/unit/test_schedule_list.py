@@ -18,6 +18,7 @@ from app.domain.scheduling.feasibility import Rule, check_schedule
 from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
 from app.solvers.cpsat.common import task_classes, time_free_optimum
 from app.solvers.registry import get_solver
+from app.solvers.timed import attach_schedule
 from benchmarks.timed_instances import construction_site
 from tests.unit.timed_support import robot, task, two_zone_site
 
@@ -116,12 +117,19 @@ def test_untimed_answers_carry_no_schedule() -> None:
     assert solution.details == {}
 
 
-def test_a_method_that_picks_an_ineligible_robot_gets_no_schedule_and_says_why() -> None:
+def test_an_assignment_with_an_ineligible_robot_gets_no_schedule_and_says_why() -> None:
     inst = Instance(
         tasks=(task(0, duration={"weak": 5}), task(1, duration=5)),
         robots=(robot("strong", 0.9), robot("weak", 0.4)),
     )
-    solution = get_solver("dp").solve(Problem.build(inst, Mode.SUCCESS_FOCUSED))
-    assert solution.assignment == [0, 0]  # dp knows nothing of eligibility yet
-    assert solution.details["schedule"] is None
-    assert "'strong' cannot take task 0" in solution.details["schedule_error"]
+    problem = Problem.build(inst, Mode.SUCCESS_FOCUSED)
+    # Every method honours eligibility now (docs/allocation.md#teams): dp gives task 0 to
+    # the only robot with a duration for it, and gets a schedule.
+    solution = get_solver("dp").solve(problem)
+    assert solution.assignment[0] == 1
+    assert solution.details["schedule"] is not None
+    # The shared list scheduler still refuses an assignment that breaks the rule, and says why.
+    details: dict[str, object] = {}
+    attach_schedule(problem, [0, 0], details)
+    assert details["schedule"] is None
+    assert "'strong' cannot take task 0" in str(details["schedule_error"])
