@@ -25,6 +25,18 @@ def test_the_import_contracts_are_kept() -> None:
     assert "0 broken" in result.stdout
 
 
+def _lint_copy(tree: Path) -> subprocess.CompletedProcess[str]:
+    """lint-imports over a broken copy of the app in `tree` (only that copy on the path)."""
+    return subprocess.run(
+        [sys.executable, "-c", LINT_IMPORTS, "--no-cache", "--no-logo"],
+        cwd=tree,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tree)},
+    )
+
+
 def _acyclic_contract() -> str:
     """This project's acyclic-siblings contract, as pyproject.toml states it."""
     import tomllib
@@ -44,14 +56,7 @@ def test_a_new_import_cycle_breaks_the_contracts(tmp_path: Path) -> None:
     shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
     (tmp_path / "app" / "domain" / "cycle_a.py").write_text("from app.domain import cycle_b\n")
     (tmp_path / "app" / "domain" / "cycle_b.py").write_text("from app.domain import cycle_a\n")
-    result = subprocess.run(
-        [sys.executable, "-c", LINT_IMPORTS, "--no-cache", "--no-logo"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tmp_path)},
-    )
+    result = _lint_copy(tmp_path)
     assert result.returncode != 0
     assert f"{_acyclic_contract()} BROKEN" in " ".join(result.stdout.split())
     assert "cycle_a" in result.stdout and "cycle_b" in result.stdout
@@ -79,14 +84,7 @@ def test_a_feature_importing_endpoints_or_the_app_importing_benchmarks_breaks_th
     (tmp_path / "benchmarks" / "report.py").write_text("")
     (tmp_path / "app" / "sites" / "peek.py").write_text("from app.runs import endpoints\n")
     (tmp_path / "app" / "cli" / "measure.py").write_text("from benchmarks import report\n")
-    result = subprocess.run(
-        [sys.executable, "-c", LINT_IMPORTS, "--no-cache", "--no-logo"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tmp_path)},
-    )
+    result = _lint_copy(tmp_path)
     assert result.returncode != 0
     out = " ".join(result.stdout.split())
     assert f"{_contract_named('A feature')} BROKEN" in out
