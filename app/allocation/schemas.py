@@ -27,6 +27,7 @@ from app.allocation.teams import (
     task_features,
 )
 from app.allocation.timing import Duration, Minutes, PositiveMinutes, Shift, WallClock
+from app.domain.links import Link
 from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS, Robot, Task
 from app.domain.modes import Mode
@@ -67,6 +68,41 @@ TaskId = Annotated[
     PlainValidator(_task_id, json_schema_input_type=int | str),
     Field(description="Integer or string, unique in the queue"),
 ]
+
+
+class LinkIn(BaseModel):
+    """A typed link (docs/schedules.md#links): this task's start (FS, SS) or end (FF, SF)
+    comes at least `lag` minutes after the predecessor's end (FS, FF) or start (SS, SF)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    task: TaskId
+    type: Literal["FS", "SS", "FF", "SF"] = Field("FS", description="Default FS")
+    lag: float = Field(0, description="Minutes; negative for a lead. Default 0")
+
+
+def _after_entry(value: object) -> int | str | Link:
+    # The link's type and lag are checked by the domain with the rest of the links
+    # (app/domain/links.py), so a bad one is named `tasks.4.after.1.type` wherever an
+    # instance comes from (a request, a stored run, the console's draft).
+    if isinstance(value, dict):
+        extra = sorted(set(value) - {"task", "type", "lag"})
+        if extra or "task" not in value:
+            raise PydanticCustomError(
+                "link_shape",
+                'a link is {{"task": id, "type": "FS" | "SS" | "FF" | "SF", "lag": minutes}}; '
+                "{what}",
+                {"what": f"unknown key {extra[0]!r}" if extra else "'task' is missing"},
+            )
+        return Link(_task_id(value["task"]), value.get("type", "FS"), value.get("lag", 0))
+    return _task_id(value)
+
+
+AfterEntry = Annotated[
+    int | str | Link,
+    PlainValidator(_after_entry, json_schema_input_type=int | str | LinkIn),
+    Field(description="A task id (finish to start, no lag) or a typed link"),
+]
 Probability = Annotated[StrictFloat, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
 MAX_SEED = 2**32 - 1
 
@@ -101,10 +137,11 @@ class TaskIn(BaseModel):
     # docs/api.md#plans-in-time, all optional: a task with a duration makes the instance timed, and
     # then every task needs one.
     duration: Duration | None = None
-    after: list[TaskId] = Field(
+    after: list[AfterEntry] = Field(
         default_factory=list,
         max_length=MAX_TASKS,
-        description="Task ids that must end before this task starts (finish to start)",
+        description="Task ids that must end before this task starts (finish to start), or "
+        'typed links {"task", "type": FS|SS|FF|SF, "lag"} (docs/schedules.md#links)',
     )
     zone: Name | None = Field(None, description="Where the task is done (see `travel`)")
     release: Minutes | None = Field(None, description="Earliest start, minutes from `start`")

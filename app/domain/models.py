@@ -18,6 +18,7 @@ from functools import cached_property
 import numpy as np
 
 from app.domain.errors import DomainError
+from app.domain.links import Link
 from app.domain.teams import check_skills, check_teams, skill_mask, unit_count, units_of
 from app.domain.time_model import TimeModel
 from app.domain.timing_rules import check_timing, has_time_fields
@@ -41,7 +42,8 @@ class Task:
     type: str = "Custom"
     # docs/schedules.md#the-model, all optional. hash=False: a per-robot map is not hashable.
     duration: Duration | None = dataclasses.field(default=None, hash=False)
-    after: tuple[TaskId, ...] = ()  # finish-to-start: starts once each of these has ended
+    # Plain ids: finish-to-start, no lag; a Link: typed, with a lag (docs/schedules.md#links).
+    after: tuple[TaskId | Link, ...] = ()
     zone: str | None = None
     release: float | None = None  # earliest start, minutes from the plan's start
     deadline: float | None = None  # latest end, minutes from the plan's start

@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from datetime import datetime
 from typing import Any
 
+from app.domain.links import Link
 from app.domain.models import Instance, Robot, Task
 
 _TASK_TIME = ("duration", "after", "zone", "release", "deadline", "team")
@@ -24,7 +25,7 @@ def _task_dict(t: Task) -> dict[str, Any]:
         if isinstance(value, Mapping):
             value = dict(value)
         elif isinstance(value, tuple):
-            value = list(value)
+            value = [v.to_dict() if isinstance(v, Link) else v for v in value]
         out[key] = value
     return out
 
@@ -61,6 +62,13 @@ def _duration(value: Any) -> Any:
     return dict(value) if isinstance(value, Mapping) else value
 
 
+def _after(entry: Any) -> Any:
+    """A link object as a Link (checked with the instance); a plain id as it is."""
+    if isinstance(entry, Mapping) and set(entry) <= {"task", "type", "lag"} and "task" in entry:
+        return Link(entry["task"], entry.get("type", "FS"), entry.get("lag", 0))
+    return entry
+
+
 def instance_from_dict(data: dict[str, Any]) -> Instance:
     start = data.get("start")
     available = [r.get("available") for r in data["robots"]]
@@ -72,7 +80,7 @@ def instance_from_dict(data: dict[str, Any]) -> Instance:
                 type=t.get("type", "Custom"),
                 features=tuple(t["features"]),
                 duration=_duration(t.get("duration")),
-                after=tuple(t.get("after", ())),
+                after=tuple(_after(a) for a in t.get("after", ())),
                 zone=t.get("zone"),
                 release=t.get("release"),
                 deadline=t.get("deadline"),

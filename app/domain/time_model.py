@@ -22,12 +22,15 @@ from functools import cached_property
 
 import numpy as np
 
+from app.domain.links import Arc, earliest_start
+
 
 @dataclass(frozen=True)
 class TimeModel:
     # durations[t][r]: minutes robot r takes for task t; None: r cannot take t.
     durations: tuple[tuple[float | None, ...], ...]
-    predecessors: tuple[tuple[int, ...], ...]  # task indexes each task waits for
+    # Per task its incoming links (predecessor index, type, lag): docs/schedules.md#links.
+    links: tuple[tuple[Arc, ...], ...]
     release: tuple[float, ...]
     deadline: tuple[float, ...]  # math.inf when none
     zones: tuple[str, ...]  # every zone in use, in first-seen order
@@ -82,6 +85,33 @@ class TimeModel:
         return any(m > 0 for row in self.travel_minutes for m in row)
 
     @cached_property
+    def predecessors(self) -> tuple[tuple[int, ...], ...]:
+        """Per task the indexes of the tasks it waits for, each once, whatever the links'
+        types: placing a task after these is what every scheduler does."""
+        return tuple(tuple(dict.fromkeys(a.pred for a in arcs)) for arcs in self.links)
+
+    @cached_property
+    def typed(self) -> bool:
+        """Is any link other than a plain finish-to-start with no lag?"""
+        return any(not a.plain for arcs in self.links for a in arcs)
+
+    def ready(
+        self, task: int, duration: float, starts: Sequence[float], ends: Sequence[float]
+    ) -> float:
+        """The earliest start the task's links allow on a robot taking `duration` minutes,
+        its predecessors at `starts`/`ends` (0 without any; release not included)."""
+        return earliest_start(self.links[task], duration, starts, ends)
+
+    @cached_property
+    def successor_links(self) -> tuple[tuple[tuple[int, Arc], ...], ...]:
+        """Per task the links out of it: (successor index, the successor's arc)."""
+        out: list[list[tuple[int, Arc]]] = [[] for _ in range(self.n_tasks)]
+        for t, arcs in enumerate(self.links):
+            for a in arcs:
+                out[a.pred].append((t, a))
+        return tuple(tuple(x) for x in out)
+
+    @cached_property
     def successors(self) -> tuple[tuple[int, ...], ...]:
         out: list[list[int]] = [[] for _ in range(self.n_tasks)]
         for t, preds in enumerate(self.predecessors):
@@ -98,16 +128,23 @@ class TimeModel:
         return tuple(order)
 
     @cached_property
-    def earliest_finish(self) -> tuple[float, ...]:
-        """Per task: release and predecessors on their shortest durations, robots ignored.
-
-        A lower bound on the task's end in any schedule: the chain rule of
-        docs/schedules.md#the-model."""
+    def earliest(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Per task lower bounds on its start and its end in any schedule: release and links
+        on the shortest durations, robots ignored (the chain rule of
+        docs/schedules.md#the-model). A link bounding a task's end (FF, SF) bounds its start
+        by that less its longest duration, since the robot is not known."""
+        starts = [0.0] * self.n_tasks
         finish = [0.0] * self.n_tasks
         for t in self.order:
-            ready = max((finish[p] for p in self.predecessors[t]), default=0.0)
-            finish[t] = max(ready, self.release[t]) + self.shortest(t)
-        return tuple(finish)
+            longest = max(d for d in self.durations[t] if d is not None)
+            start = max(self.ready(t, longest, starts, finish), self.release[t])
+            finish[t] = max(self.ready(t, 0.0, starts, finish), start + self.shortest(t))
+            starts[t] = max(start, finish[t] - longest)
+        return tuple(starts), tuple(finish)
+
+    @property
+    def earliest_finish(self) -> tuple[float, ...]:
+        return self.earliest[1]
 
 
 def topological_order(predecessors: Sequence[Sequence[int]]) -> list[int] | None:
@@ -130,38 +167,6 @@ def topological_order(predecessors: Sequence[Sequence[int]]) -> list[int] | None
             if waiting[s] == 0:
                 heapq.heappush(ready, s)
     return order if len(order) == n else None
-
-
-def find_cycle(predecessors: Sequence[Sequence[int]]) -> list[int]:
-    """One precedence cycle as task indexes [a, b, ..., a] (each waits for the next's
-    predecessor...): a depth-first search for a back edge. Empty if acyclic."""
-    n = len(predecessors)
-    state = [0] * n  # 0 new, 1 on the current path, 2 done
-    for root in range(n):
-        if state[root]:
-            continue
-        path: list[int] = []
-        stack: list[tuple[int, int]] = [(root, 0)]
-        while stack:
-            node, i = stack.pop()
-            if i == 0:
-                state[node] = 1
-                path.append(node)
-            preds = predecessors[node]
-            if i < len(preds):
-                stack.append((node, i + 1))
-                nxt = preds[i]
-                if state[nxt] == 1:
-                    cycle = path[path.index(nxt) :]
-                    # path runs task -> predecessor; reverse so it reads "a before b"
-                    cycle.reverse()
-                    return [*cycle, cycle[0]]
-                if state[nxt] == 0:
-                    stack.append((nxt, 0))
-            else:
-                state[node] = 2
-                path.pop()
-    return []
 
 
 def unbounded(value: float | None) -> float:

@@ -16,7 +16,8 @@ from datetime import datetime
 from typing import Any, Protocol
 
 from app.domain.errors import DomainError
-from app.domain.time_model import TimeModel, find_cycle, unbounded
+from app.domain.links import Link, check_links
+from app.domain.time_model import TimeModel, unbounded
 
 
 # What the rules read of a task and a robot (app.domain.models builds an Instance from
@@ -29,7 +30,7 @@ class Task(Protocol):
     @property
     def duration(self) -> float | Mapping[str, float] | None: ...
     @property
-    def after(self) -> tuple[int | str, ...]: ...
+    def after(self) -> tuple[int | str | Link, ...]: ...
     @property
     def zone(self) -> str | None: ...
     @property
@@ -85,7 +86,7 @@ def check_timing(
     _require_durations(tasks, robots, travel, start)
     names = [r.name for r in robots]
     durations = tuple(_durations(i, t, names) for i, t in enumerate(tasks))
-    predecessors = _predecessors(tasks)
+    links = check_links([t.id for t in tasks], [t.after for t in tasks], [_label(t) for t in tasks])
     release = tuple(
         0.0 if t.release is None else _minutes(f"tasks.{i}.release", t.release, "a release")
         for i, t in enumerate(tasks)
@@ -107,7 +108,7 @@ def check_timing(
     matrix = _travel_matrix(zones, travel, tasks, robots, task_zone, robot_zone)
     model = TimeModel(
         durations=durations,
-        predecessors=predecessors,
+        links=links,
         release=release,
         deadline=deadline,
         zones=zones,
@@ -182,39 +183,6 @@ def _durations(i: int, task: Task, names: Sequence[str]) -> tuple[float | None, 
         )
         for name in names
     )
-
-
-def _predecessors(tasks: Sequence[Task]) -> tuple[tuple[int, ...], ...]:
-    index = {str(t.id): k for k, t in enumerate(tasks)}
-    out: list[tuple[int, ...]] = []
-    for i, t in enumerate(tasks):
-        if isinstance(t.after, str | bytes) or not isinstance(t.after, Sequence):
-            raise DomainError(f"tasks.{i}.after", "must be a list of task ids")
-        preds: list[int] = []
-        for j, ref in enumerate(t.after):
-            k = index.get(str(ref))
-            if k is None:
-                raise DomainError(
-                    f"tasks.{i}.after.{j}",
-                    f"{_label(t)} waits for unknown task id {ref!r}; no task in the queue has it",
-                    code="unknown_task",
-                )
-            if k in preds:
-                raise DomainError(
-                    f"tasks.{i}.after.{j}", f"{_label(t)} lists task {ref!r} twice; once is enough"
-                )
-            preds.append(k)
-        out.append(tuple(preds))
-    cycle = find_cycle(out)
-    if cycle:
-        chain = " -> ".join(repr(tasks[k].id) for k in cycle)
-        raise DomainError(
-            f"tasks.{cycle[1]}.after",
-            f"precedence cycle: {chain} (each must end before the next starts); remove one "
-            "of these 'after' entries",
-            code="precedence_cycle",
-        )
-    return tuple(out)
 
 
 def _shift(i: int, robot: Robot) -> tuple[float, float]:
@@ -378,13 +346,14 @@ def _check_deadline_chains(model: TimeModel, tasks: Sequence[Task]) -> None:
 def _check_shifts_fit(model: TimeModel, tasks: Sequence[Task], robots: Sequence[Robot]) -> None:
     """Some robot that may take the task must be able to do it inside its shift, between
     the task's earliest start (release, predecessors) and its deadline."""
-    finish = model.earliest_finish
+    starts, finish = model.earliest
     for t in range(model.n_tasks):
-        earliest = finish[t] - model.shortest(t)
+        earliest = starts[t]
         fits = False
         for r in model.eligible_robots(t):
             a, b = model.shifts[r]
-            if max(earliest, a) + model.duration(t, r) <= min(model.deadline[t], b) + 1e-9:
+            end = max(max(earliest, a) + model.duration(t, r), finish[t])
+            if end <= min(model.deadline[t], b) + 1e-9:
                 fits = True
                 break
         if fits:

@@ -58,10 +58,10 @@ def dispatch_schedule(
         return [r for r in robots_of.get(classes[t], []) if left[classes[t], r] > 0]
 
     def best(t: int) -> tuple[float, float, int]:
-        ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
-        ready = max(ready, tm.release[t], problem.not_before)
+        floor = max(tm.release[t], problem.not_before)
         options = []
         for r in choices(t):
+            ready = max(tm.ready(t, tm.duration(t, r), starts, ends), floor)
             s = lines[r].earliest(tm, t, r, ready)
             options.append((s + tm.duration(t, r), s, r))
         if not options:

@@ -7,7 +7,7 @@ themselves. Every broken rule is reported, each as a Violation naming the rule, 
 and the robot, with a sentence a supervisor can act on; an empty list means feasible.
 
 A task with a pinned start (reported started or done) is a fact: its own release,
-deadline, shift, predecessors and (as a robot's first task) the way from the start zone
+deadline, shift, links and (as a robot's first task) the way from the start zone
 are not held against the plan; the plan must keep it at its start, on its robot, and fit
 everything else around it (overlap, travel to and from it, successors).
 """
@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
+from app.domain.links import broken, gap
 from app.domain.metrics import workload
 from app.domain.problem import Problem
 from app.domain.scheduling.schedule import EPS, Schedule
@@ -26,7 +27,7 @@ class Rule(StrEnum):
     COMPLETE = "complete"  # one slot per task, in queue order
     ELIGIBILITY = "eligibility"  # the robot may take the task (its duration map names it)
     DURATION = "duration"  # end - start is the robot's duration for the task
-    PRECEDENCE = "precedence"  # a task starts after each task it waits for has ended
+    PRECEDENCE = "precedence"  # each link of docs/schedules.md#links holds (FS: start after end)
     OVERLAP = "overlap"  # a robot does one task at a time
     TRAVEL = "travel"  # ... and travels between zones in between (from its start zone)
     RELEASE = "release"
@@ -59,6 +60,7 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
         ]
     out: list[Violation] = []
     tasks, robots = instance.tasks, instance.robots
+    starts, ends = [s.start for s in slots], [s.end for s in slots]
 
     def task(t: int) -> str:
         return f"task {tasks[t].id!r} ({tasks[t].name})"
@@ -125,14 +127,10 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
             )
         if pin is None and r in problem.unavailable:
             add(Rule.UNAVAILABLE, f"{task(t)} is a new task on unavailable robot '{name}'", t, r)
-        for p in tm.predecessors[t] if fixed is None else ():
-            if s.start < slots[p].end - EPS:
-                add(
-                    Rule.PRECEDENCE,
-                    f"{task(t)} starts at {s.start:g}, before {task(p)} ends at {slots[p].end:g}",
-                    t,
-                    r,
-                )
+        for arc in tm.links[t] if fixed is None else ():
+            if gap(arc, s.start, s.end, starts, ends) < -EPS:
+                said = broken(arc, (s.start, s.end), starts, ends, task(arc.pred))
+                add(Rule.PRECEDENCE, f"{task(t)} {said}", t, r)
     out.extend(_check_robots(problem, schedule))
     loads = workload([s.robot for s in slots if 0 <= s.robot < tm.n_robots], tm.n_robots)
     if not problem.cap.respected_by(loads):

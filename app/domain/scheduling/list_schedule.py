@@ -4,7 +4,7 @@ Every method that decides only *who* (greedy, the exact allocation solvers, the 
 LTAA) gets its *when* here, so all methods have a makespan on the same terms. Serial
 schedule generation: among the tasks whose predecessors are placed, the one that can
 start earliest (ties: queue order) goes next, appended to its robot's timeline at the
-earliest time its predecessors have ended, its robot is free and has travelled, its
+earliest time its links allow (docs/schedules.md#links), its robot is free and has travelled, its
 release and `not_before` allow. Tasks with a pinned start are facts (reported started or
 done): they sit at their times from the outset and the others are placed around them.
 
@@ -84,7 +84,7 @@ def list_schedule(problem: Problem, assignment: Sequence[int]) -> Schedule:
     waiting = [sum(1 for p in tm.predecessors[t] if not done[p]) for t in range(n)]
 
     def ready_time(t: int) -> float:
-        ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
+        ready = tm.ready(t, tm.duration(t, assignment[t]), starts, ends)
         return max(ready, tm.release[t], problem.not_before)
 
     def estimate(t: int) -> float:
@@ -142,7 +142,7 @@ def sequence_schedule(problem: Problem, sequences: Sequence[Sequence[int]]) -> S
                 if fixed is None and not all(done[p] for p in tm.predecessors[t]):
                     break
                 if fixed is None:
-                    ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
+                    ready = tm.ready(t, tm.duration(t, r), starts, ends)
                     ready = max(ready, tm.release[t], problem.not_before)
                     start = max(ready, free[r] + tm.travel_to_task(zone[r], t))
                 else:

@@ -4,9 +4,9 @@ choice would mean in time (docs/schedules.md#runs-in-time).
 The graph decides one task at a time. On a timed instance the next task is, among the
 tasks whose predecessors are all placed, the one that could start earliest on any robot
 that may take it (ties: queue order), given the robots' timelines as decided so far;
-the chosen robot appends it to its timeline at the earliest time its predecessors have
-ended, the robot is free and has travelled there, and its release and `not_before`
-allow. It is the list scheduler's rule (app.domain.scheduling.list_schedule) with the
+the chosen robot appends it to its timeline at the earliest time its links allow
+(docs/schedules.md#links), the robot is free and has travelled there, and its release and
+`not_before` allow. It is the list scheduler's rule (app.domain.scheduling.list_schedule) with the
 robot chosen at each step instead of given up front, so the graph's times are the list
 schedule of its own assignment placed in its own order.
 
@@ -71,13 +71,14 @@ class TimedProgress:
         n = tm.n_tasks
         self.placed: dict[int, Placement] = {}
         self.decided = 0  # free tasks placed (the graph's decisions)
+        self._starts = [0.0] * n
         self._ends = [0.0] * n
         self._lines = [Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
         for t, start in sorted(problem.pinned_starts.items(), key=lambda item: item[1]):
             r = problem.pinned[t]
             end = start + tm.duration(t, r)
             self._lines[r].fixed.append((start, end, t))
-            self._ends[t] = end
+            self._starts[t], self._ends[t] = start, end
             self.placed[t] = Placement(r, start, end, 0.0, -1)
         self._waiting = [
             sum(1 for p in tm.predecessors[t] if p not in self.placed) for t in range(n)
@@ -95,15 +96,18 @@ class TimedProgress:
             return (pinned,)
         return (r for r in self.problem.available if self.tm.durations[task][r] is not None)
 
-    def ready_time(self, task: int) -> float:
+    def ready_time(self, task: int, robot: int) -> float:
+        """When the task's links, release and `not_before` let `robot` start it."""
         tm = self.tm
-        ready = max((self._ends[p] for p in tm.predecessors[task]), default=0.0)
+        ready = tm.ready(task, tm.duration(task, robot), self._starts, self._ends)
         return max(ready, tm.release[task], self.problem.not_before)
 
     def _estimate(self, task: int) -> float:
-        ready = self.ready_time(task)
         return min(
-            (self._lines[r].earliest(self.tm, task, r, ready) for r in self._candidates(task)),
+            (
+                self._lines[r].earliest(self.tm, task, r, self.ready_time(task, r))
+                for r in self._candidates(task)
+            ),
             default=math.inf,
         )
 
@@ -146,7 +150,6 @@ class TimedProgress:
         """Per robot of the fleet: when it would start and end the task, and whether that
         meets the task's deadline and the robot's shift."""
         tm = self.tm
-        ready = self.ready_time(task)
         deadline = tm.deadline[task]
         allowed_robots = set(self._candidates(task))
         out = []
@@ -159,7 +162,7 @@ class TimedProgress:
                     TimeOption(r, line.free, travel, math.inf, math.inf, -math.inf, False, why)
                 )
                 continue
-            start = line.earliest(tm, task, r, ready)
+            start = line.earliest(tm, task, r, self.ready_time(task, r))
             end = start + duration
             slack = deadline - end
             why = ""
@@ -183,14 +186,14 @@ class TimedProgress:
         tm = self.tm
         line = self._lines[robot]
         travel = tm.travel_to_task(line.zone, task)
-        start = line.earliest(tm, task, robot, self.ready_time(task))
+        start = line.earliest(tm, task, robot, self.ready_time(task, robot))
         line.place(tm, task, robot, start)
         end = start + tm.duration(task, robot)
         free = task not in self.problem.pinned
         placement = Placement(robot, start, end, travel, self.decided if free else -1)
         heapq.heappop(self._heap)  # `task` is the heap's top: current() said so
         self.placed[task] = placement
-        self._ends[task] = end
+        self._starts[task], self._ends[task] = start, end
         if free:
             self.decided += 1
         for s in tm.successors[task]:

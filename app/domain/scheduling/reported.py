@@ -96,7 +96,7 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
                 t = queue[cursor[r]]
                 if not all(done[p] for p in tm.predecessors[t]):
                     break
-                ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
+                ready = tm.ready(t, tm.duration(t, r), starts, ends)
                 ready = max(ready, tm.release[t], problem.not_before)
                 _pass_earlier_facts(tm, lines[r], position, t)
                 start = lines[r].earliest(tm, t, r, ready)

@@ -23,8 +23,11 @@ from datetime import datetime, timedelta
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
+from app.domain.links import allowed_start
+
 if TYPE_CHECKING:
     from app.domain.problem import Problem
+    from app.domain.time_model import TimeModel
 
 EPS = 1e-6  # minutes: equal within this, as solver times come back as scaled integers
 
@@ -222,8 +225,10 @@ def _explain_start(
     if t in problem.pinned_starts:
         steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, "pinned start"))
         return None
-    for p in tm.predecessors[t]:
-        if abs(slots[p].end - s.start) <= EPS:
+    # What each link lets the task start at (docs/schedules.md#links): a binding one explains it.
+    allowed = _link_starts(tm, slots, t)
+    for at, p in allowed:
+        if abs(at - s.start) <= EPS:
             return p
     q = previous[t]
     ready = (slots[q].end if q is not None else tm.shifts[s.robot][0]) + s.travel
@@ -246,7 +251,7 @@ def _explain_start(
         steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, cause))
         return None
     # Nothing binds: the solver left slack. The latest of the other causes explains the rest.
-    ends = [(slots[p].end, p) for p in tm.predecessors[t]]
+    ends = list(allowed)
     if q is not None:
         ends.append((slots[q].end + s.travel, q))
     if not ends or max(ends)[0] < limit:
@@ -257,3 +262,11 @@ def _explain_start(
     if via == q and s.travel > 0:
         steps.append(Step(StepKind.TRAVEL, when - s.travel, when, t, s.robot, "travel"))
     return via
+
+
+def _link_starts(tm: TimeModel, slots: Sequence[Slot], t: int) -> list[tuple[float, int]]:
+    """(the start each of task t's links allows, its predecessor)."""
+    d = slots[t].end - slots[t].start
+    return [
+        (allowed_start(a, d, slots[a.pred].start, slots[a.pred].end), a.pred) for a in tm.links[t]
+    ]

@@ -21,6 +21,7 @@ from collections import Counter
 
 import numpy as np
 
+from app.domain.links import tail_through
 from app.domain.problem import Problem
 
 CRITICAL_PATH = "critical path (shortest durations)"
@@ -34,22 +35,29 @@ def bound_floors(problem: Problem, pairs: set[tuple[int, int]] | None = None) ->
     n = tm.n_tasks
     options = [_options(problem, t, pairs) for t in range(n)]
     shortest = np.array([min(tm.duration(t, r) for r in options[t]) for t in range(n)])
-    heads = np.zeros(n)
+    longest = [max(tm.duration(t, r) for r in options[t]) for t in range(n)]
+    heads, ends = np.zeros(n), np.zeros(n)
     for t in tm.order:
         fixed = problem.pinned_starts.get(t)
         if fixed is not None:
-            heads[t] = fixed
+            heads[t], ends[t] = fixed, fixed + shortest[t]
             continue
         there = min(tm.shifts[r][0] + tm.travel_to_task(tm.robot_zone[r], t) for r in options[t])
-        ready = max((heads[p] + shortest[p] for p in tm.predecessors[t]), default=0.0)
+        # docs/schedules.md#links: the longest duration bounds a start, the shortest an end
+        ready = tm.ready(t, longest[t], heads, ends)
         heads[t] = max(ready, tm.release[t], problem.not_before, there)
+        ends[t] = max(tm.ready(t, shortest[t], heads, ends) + shortest[t], heads[t] + shortest[t])
     tails = np.zeros(n)
     for t in reversed(tm.order):
         tails[t] = max(
-            (shortest[s] + tails[s] for s in tm.successors[t] if s not in problem.pinned_starts),
+            (
+                tail_through(arc, longest[t], shortest[s], tails[s])
+                for s, arc in tm.successor_links[t]
+                if s not in problem.pinned_starts
+            ),
             default=0.0,
         )
-    out = {CRITICAL_PATH: float(np.max(heads + shortest + tails, initial=0.0))}
+    out = {CRITICAL_PATH: float(np.max(ends + tails, initial=0.0))}
     free = np.array([t not in problem.pinned_starts for t in range(n)])
     sets = Counter(frozenset(o) for t, o in enumerate(options) if free[t])
     groups = [frozenset(r for o in sets for r in o)]

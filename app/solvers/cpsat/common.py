@@ -297,6 +297,7 @@ def makespan_floor(problem: Problem, pairs: set[tuple[int, int]] | None = None) 
     allowed pair): chains of shortest durations from the releases (and `not_before`), fixed
     tasks' ends, and the work spread over the robots."""
     tm = problem.instance.timing
+    begin = [0.0] * tm.n_tasks  # lower bounds on the starts, for links from a start
     finish = [0.0] * tm.n_tasks
     work, robots = 0.0, set()
     for t in tm.order:
@@ -311,14 +312,16 @@ def makespan_floor(problem: Problem, pairs: set[tuple[int, int]] | None = None) 
             ]
         )
         shortest = min(tm.duration(t, r) for r in options)
+        longest = max(tm.duration(t, r) for r in options)
         work += shortest
         robots.update(options)
         fixed = problem.pinned_starts.get(t)
         if fixed is not None:
-            finish[t] = fixed + shortest
+            begin[t], finish[t] = fixed, fixed + shortest
             continue
-        ready = max((finish[p] for p in tm.predecessors[t]), default=0.0)
-        finish[t] = max(ready, tm.release[t], problem.not_before) + shortest
+        # docs/schedules.md#links: the longest duration bounds a start, the shortest an end
+        begin[t] = max(tm.ready(t, longest, begin, finish), tm.release[t], problem.not_before)
+        finish[t] = max(tm.ready(t, shortest, begin, finish) + shortest, begin[t] + shortest)
     return max(max(finish, default=0.0), work / max(1, len(robots)))
 
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from ortools.sat.python import cp_model
 
 from app.domain.errors import DomainError
+from app.domain.links import ancestors_through
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.list_schedule import sequence_schedule
 from app.domain.scheduling.schedule import EPS, Schedule, StepKind
@@ -224,6 +225,6 @@ def _ancestor_masks(setup: Setup) -> list[int]:
     for t in tm.order:
         if t in problem.pinned_starts:
             continue
-        for p in tm.predecessors[t]:
-            masks[t] |= masks[p] | (1 << p)
+        for arc in tm.links[t]:
+            masks[t] |= ancestors_through(arc, masks[arc.pred])
     return masks

@@ -27,7 +27,7 @@ from itertools import pairwise
 from ortools.sat.python import cp_model
 
 from app.domain.scheduling.schedule import Schedule
-from app.solvers.cpsat.model import add_after
+from app.solvers.cpsat.model import add_after, add_link
 from app.solvers.cpsat.outcome import Setup
 
 
@@ -197,12 +197,12 @@ class Neighbourhood:
         add_after(self.model, self.problem, self.scale, self.start, self.end, (r, t, u), when)
 
     def _add_precedence(self) -> None:
-        for t, preds in enumerate(self.tm.predecessors):
+        for t, arcs in enumerate(self.tm.links):
             if t in self.problem.pinned_starts:
                 continue
-            for p in preds:
-                if t not in self.frozen or p not in self.frozen:
-                    self.model.add(self.start[t] >= self.end[p])
+            for arc in arcs:
+                if t not in self.frozen or arc.pred not in self.frozen:
+                    add_link(self.model, self.scale, arc, t, (self.start, self.end))
 
     def _add_cap(self) -> None:
         cap, m = self.problem.cap, self.model

@@ -29,6 +29,7 @@ from enum import StrEnum
 
 from ortools.sat.python import cp_model
 
+from app.domain.links import Arc, ancestors_through
 from app.domain.problem import Problem
 from app.solvers.cpsat.common import SuccessWeights, makespan_floor
 from app.solvers.cpsat.time_scale import TimeScale
@@ -134,7 +135,9 @@ class ScheduleModel:
         total = sum(
             max(up(tm.duration(t, r)) for r in self.candidates[t]) for t in range(tm.n_tasks)
         )
-        horizon = up(anchor) + total + tm.n_tasks * up(longest_travel)
+        # A positive lag is a wait no robot fills (docs/schedules.md#links).
+        lags = sum(up(a.lag) for arcs in tm.links for a in arcs if a.lag > 0)
+        horizon = up(anchor) + total + tm.n_tasks * up(longest_travel) + lags
         shift_ends = [b for _, b in tm.shifts]
         if all(math.isfinite(b) for b in shift_ends):
             horizon = min(horizon, max(self.scale.down(b) for b in shift_ends))
@@ -177,11 +180,11 @@ class ScheduleModel:
             self.end.append(end)
 
     def _add_precedence(self) -> None:
-        for t, preds in enumerate(self.tm.predecessors):
+        for t, arcs in enumerate(self.tm.links):
             if t in self.problem.pinned_starts:
                 continue  # a fact: what it waited for is the report's business
-            for p in preds:
-                self.model.add(self.start[t] >= self.end[p])
+            for arc in arcs:
+                add_link(self.model, self.scale, arc, t, (self.start, self.end))
 
     def _add_cap(self) -> None:
         cap = self.problem.cap
@@ -197,8 +200,8 @@ class ScheduleModel:
         for t in tm.order:
             if t in self.problem.pinned_starts:
                 continue
-            for p in tm.predecessors[t]:
-                masks[t] |= masks[p] | (1 << p)
+            for arc in tm.links[t]:
+                masks[t] |= ancestors_through(arc, masks[arc.pred])
         return masks
 
     def _add_energy(self, r: int, entries: list[tuple[int, cp_model.IntVar]]) -> None:
@@ -326,3 +329,19 @@ def add_after(
         return
     free = max(up(fixed + tm.duration(t, r)), up(tm.shifts[r][0]))
     model.add(start[u] >= free + move).only_enforce_if(when)
+
+
+def add_link(
+    model: cp_model.CpModel,
+    scale: TimeScale,
+    arc: Arc,
+    t: int,
+    times: tuple[Sequence[cp_model.LinearExprT], Sequence[cp_model.LinearExprT]],
+) -> None:
+    """Task t's link `arc` (docs/schedules.md#links) over the start and end variables
+    `times`: its start (FS, SS) or end (FF, SF) at least the lag after the predecessor's end
+    (FS, FF) or start (SS, SF); the lag rounded up, the safe side (`TimeScale`)."""
+    start, end = times
+    before = start[arc.pred] if arc.from_start else end[arc.pred]
+    after = end[t] if arc.to_end else start[t]
+    model.add(after >= before + scale.up(arc.lag))

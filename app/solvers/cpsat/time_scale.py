@@ -52,6 +52,7 @@ def _time_values(problem: Problem) -> Iterable[float]:
     for row in tm.travel_minutes:
         yield from row
     yield from tm.release
+    yield from (a.lag for arcs in tm.links for a in arcs)
     yield from (d for d in tm.deadline if math.isfinite(d))
     for a, b in tm.shifts:
         yield a
