@@ -7,7 +7,6 @@ rates for them (tests/site_support.py).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
@@ -30,19 +29,18 @@ TASKS: list[dict[str, Any]] = [
     },
 ]
 ROBOTS = ["heavy", "light"]
-# A start-to-start link with a lag: what a typed-link file says that /runs cannot plan yet.
-TYPED: Mapping[object, Sequence[Any]] = {
-    1: [],
-    2: [{"task": 1, "type": "SS", "lag": 20}],
-    3: [2],
-}
+# A start-to-start link with a lag (docs/schedules.md#links): task 2 starts 20 min after 1 does.
+TYPED_AFTER: list[Any] = [{"task": 1, "type": "SS", "lag": 20}]
 
 
 def small_mspdi(*, typed: bool = False, name: str = "Level 3 fit-out") -> bytes:
     """Three tasks in a chain, planned on heavy then light; `typed`: the second link a
     start-to-start with a 20-minute lag."""
+    tasks = [dict(t) for t in TASKS]
+    if typed:
+        tasks[1]["after"] = TYPED_AFTER
     request = {
-        "tasks": TASKS,
+        "tasks": tasks,
         "robots": [
             {"name": r, "success": {"heavy": 0.9, "careful": 0.9, "dexterous": 0.9}} for r in ROBOTS
         ],
@@ -50,4 +48,4 @@ def small_mspdi(*, typed: bool = False, name: str = "Level 3 fit-out") -> bytes:
     }
     problem = Problem.build(instance_from_dict(request), Mode.BALANCED, uncapped=True)
     schedule = list_schedule(problem, [0, 1, 1])
-    return write_mspdi(problem, schedule, project_name=name, links=TYPED if typed else None)
+    return write_mspdi(problem, schedule, project_name=name)

@@ -48,12 +48,11 @@ def files() -> dict[str, bytes]:
 
 def plan_of(draft: Draft) -> tuple[Problem, Schedule]:
     """A plan of a draft as a caller would make it: rates filled in, each task on the first
-    robot the file assigned it. The domain plans finish-to-start links for now (typed links
-    in the solvers are another change), so the plan's times honour `after` as FS; the
-    writer is handed the draft's typed links beside it."""
+    robot the file assigned it, its typed links honoured (docs/schedules.md#links). A team
+    is planned as one robot here (the list scheduler's assignment is one robot a task)."""
     features = sorted({f for t in draft.tasks for f in t["features"]})
     request: dict[str, Any] = {
-        "tasks": [{**t, "after": [a["task"] for a in t["after"]]} for t in draft.tasks],
+        "tasks": [{k: v for k, v in t.items() if k != "team"} for t in draft.tasks],
         "robots": [{**r, "success": dict.fromkeys(features, 0.9)} for r in draft.robots],
         "start": draft.start,
     }

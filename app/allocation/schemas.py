@@ -10,6 +10,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PlainSerializer,
     PlainValidator,
     StrictFloat,
     StrictStr,
@@ -101,6 +102,7 @@ def _after_entry(value: object) -> int | str | Link:
 AfterEntry = Annotated[
     int | str | Link,
     PlainValidator(_after_entry, json_schema_input_type=int | str | LinkIn),
+    PlainSerializer(lambda v: v.to_dict() if isinstance(v, Link) else v, return_type=Any),
     Field(description="A task id (finish to start, no lag) or a typed link"),
 ]
 Probability = Annotated[StrictFloat, Field(ge=0.0, le=1.0, allow_inf_nan=False)]

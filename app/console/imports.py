@@ -3,10 +3,8 @@ a site's MS Project or P6 file uploaded, its draft shown (tasks, links, robots a
 rates, what was skipped and why, the source), and the draft started as a run.
 
 Over app.exchange (the readers), app.sites (a site's learned rates) and app.runs (the run
-service POST /runs calls), like the other pages. A run plans `after` as plain
-finish-to-start ids today: a draft with a typed link (another type, or a lag) is shown
-with that said and is not offered to start, since planning it would plan another schedule
-than the file's; a draft whose links are all plain is sent with them as plain ids.
+service POST /runs calls), like the other pages. The draft is started as the file has it,
+typed links and lags included (docs/schedules.md#links).
 """
 
 from __future__ import annotations
@@ -27,9 +25,7 @@ from app.exchange import (
     Draft,
     ExchangeError,
     fill_rates,
-    plain_request,
     read_schedule,
-    typed_links,
 )
 from app.runs import service as run_service
 from app.runs.spec import RunOrder
@@ -130,19 +126,17 @@ async def import_file(
 def _draft_context(
     draft: Draft, form: dict[str, str], filename: str, sites: list[str]
 ) -> dict[str, Any]:
-    typed = typed_links(draft)
     unrated = _unrated(draft)
-    startable = not typed and not unrated
+    startable = not unrated
     return {
         "title": "Import a schedule",
         "sites": sites,
         "form": form,
         "filename": filename,
         "draft": draft,
-        "typed": typed,
         "unrated": unrated,
         "startable": startable,
-        "request_json": json.dumps(plain_request(draft)) if startable else "",
+        "request_json": json.dumps(draft.request()) if startable else "",
     }
 
 
@@ -171,7 +165,7 @@ async def start_run(
     draft: Annotated[str, Form(max_length=MAX_DRAFT_CHARS)],
     site: Annotated[str, Form(max_length=MAX_NAME_CHARS)] = "",
 ) -> Response:
-    """The draft as POST /runs takes it (links as plain ids), started; then its run page."""
+    """The draft as POST /runs takes it, started; then its run page."""
 
     def submit() -> str:
         order = _order(draft, site.strip())

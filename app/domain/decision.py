@@ -48,6 +48,9 @@ class DecisionContext:
     zone: str | None = None  # the task's zone, on a timed instance with zones
     release: float = 0.0
     deadline: float | None = None
+    # docs/schedules.md#links: the task's links in words, when any is typed (else empty: the
+    # robots' starts already say what plain links allow).
+    links: tuple[str, ...] = ()
     # Tasks allocated before this one (pins and decisions), when the graph does not decide
     # in queue order (a timed instance); None: task_index of them.
     allocated: int | None = None

@@ -126,6 +126,19 @@ def describe(arc: Arc) -> str:
     return f"{article} {arc.type} link, lag {arc.lag:+g} min"
 
 
+def explain(arc: Arc, pred: str) -> str:
+    """The link in words, as the graph's prompt shows it: "starts at least 20 min after
+    'pour' starts (SS +20)"."""
+    when = (
+        f"at least {arc.lag:g} min after"
+        if arc.lag > 0
+        else "no earlier than"
+        if arc.lag == 0
+        else f"up to {-arc.lag:g} min before"
+    )
+    return f"{_WORDS[arc.type[1]]} {when} {pred} {_WORDS[arc.type[0]]} ({arc.type} {arc.lag:+g})"
+
+
 def broken(
     arc: Arc, times: tuple[float, float], starts: Sequence[float], ends: Sequence[float], pred: str
 ) -> str:

@@ -11,7 +11,6 @@ from __future__ import annotations
 from app.exchange.errors import ExchangeError
 from app.exchange.model import Draft
 from app.exchange.mspdi_write import write_mspdi
-from app.exchange.plain import plain_request, typed_links
 from app.exchange.rates import fill_rates
 from app.exchange.read import detect_format, read_mspdi, read_schedule, read_xer
 
@@ -20,10 +19,8 @@ __all__ = [
     "ExchangeError",
     "detect_format",
     "fill_rates",
-    "plain_request",
     "read_mspdi",
     "read_schedule",
     "read_xer",
-    "typed_links",
     "write_mspdi",
 ]

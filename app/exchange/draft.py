@@ -6,9 +6,10 @@ The rules, the same for every format (docs/exchange.md says why each is so):
 - milestones (zero duration) are skipped and their links bridged;
 - release and deadline count continuous minutes from the project's start (the plan's
   clock), while durations are the file's working minutes: the caveat `source` states;
-- robots are the resources assigned to imported tasks, by name, with no rates yet;
-- every item not imported is listed in `skipped` with why, and a cycle of links no
-  schedule can meet refuses the whole file.
+- robots are the resources assigned to imported tasks, by name, with no rates yet; a task
+  with several assigned resources and one feature is a team of that many robots;
+- every item not imported is listed in `skipped` with why, and a cycle of links refuses
+  the whole file (docs/schedules.md#links).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from collections.abc import Sequence
 from datetime import UTC, datetime
 from typing import Any
 
-from app.exchange.links import bridge_milestones, refuse_positive_cycles
+from app.exchange.links import bridge_milestones, refuse_cycles
 from app.exchange.model import Activity, Draft, Link, ReadProject
 
 CAVEAT = (
@@ -116,9 +117,7 @@ def build_draft(
             skipped.append(_link_item(link, label, why))
         else:
             final.append(link)
-    refuse_positive_cycles(
-        final, {a.key: float(a.duration or 0) for a in tasks}, {a.key: a.id for a in tasks}
-    )
+    refuse_cycles(final, {a.key: a.id for a in tasks})
     after: dict[str, list[dict[str, Any]]] = {a.key: [] for a in tasks}
     # In the file's task order, so the same project read from either format gives the same
     # lists whatever order each file keeps its links in.
@@ -198,19 +197,9 @@ def _task(
     if resources:
         task["planned_robots"] = resources
     if len(resources) > 1 and len(features) == 1:
-        skipped.append(
-            {
-                "kind": "team",
-                "id": a.id,
-                "name": a.name,
-                "why": (
-                    f"{len(resources)} resources are assigned to one feature: a team of "
-                    f"{len(resources)} robots, which the service cannot plan yet (teams "
-                    "are issue 30); imported as a one-robot task, the resources kept in "
-                    "planned_robots"
-                ),
-            }
-        )
+        # docs/allocation.md#teams: several robots at once on the one feature, in the shape
+        # a request sends; planning a team in time is the planners' business.
+        task["team"] = {features[0]: len(resources)}
     for kind, why in a.notes:
         skipped.append({"kind": kind, "id": a.id, "name": a.name, "why": why})
     return task

@@ -84,11 +84,10 @@ def write_mspdi(
     *,
     project_name: str = "LTAA plan",
     start: datetime | None = None,
-    links: Mapping[object, Sequence[Any]] | None = None,
 ) -> bytes:
-    """The plan as MSPDI. `start` is minute 0 when the schedule has none (ValueError when
-    neither gives one). `links` maps a task id to its `after` entries when they are not the
-    task's own (typed links the caller holds beside the domain's finish-to-start ones)."""
+    """The plan as MSPDI, each task's links with their types and lags
+    (docs/schedules.md#links). `start` is minute 0 when the schedule has none (ValueError
+    when neither gives one)."""
     origin = schedule.start or start
     if origin is None:
         raise ValueError("an MS Project file needs the plan's start as a date-time")
@@ -120,7 +119,7 @@ def write_mspdi(
     ]
     for number, (slot, uid) in enumerate(zip(schedule.slots, uids, strict=True), start=1):
         task = tasks[slot.task]
-        entries = links.get(task.id, ()) if links is not None else task.after
+        entries = task.after
         out.append(
             f"<Task><UID>{uid}</UID><ID>{number}</ID><Name>{_text(task.name)}</Name>"
             f"<Active>1</Active><Manual>0</Manual><Type>0</Type><IsNull>0</IsNull>"

@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from app.domain.decision import DecisionContext
+from app.domain.links import explain
 from app.domain.modes import strategic_weights
 from app.domain.phases import Phase
 from app.domain.problem import Problem
@@ -53,12 +54,15 @@ def decision_context(
     zone: str | None = None
     release = 0.0
     deadline: float | None = None
+    links: tuple[str, ...] = ()
     if timing:
         tm = inst.timing
         zone_index = tm.task_zone[t]
         zone = None if zone_index is None else tm.zones[zone_index]
         release = tm.release[t]
         deadline = None if math.isinf(tm.deadline[t]) else tm.deadline[t]
+        if any(not a.plain for a in tm.links[t]):
+            links = tuple(explain(a, repr(str(inst.tasks[a.pred].name))) for a in tm.links[t])
     return DecisionContext(
         task_index=t,
         total_tasks=inst.n_tasks,
@@ -86,6 +90,7 @@ def decision_context(
         zone=zone,
         release=release,
         deadline=deadline,
+        links=links,
         allocated=allocated,
         eligible=() if inst.eligible.all() else tuple(bool(x) for x in inst.eligible[t]),
     )

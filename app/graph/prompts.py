@@ -104,6 +104,7 @@ def _time_facts(ctx: DecisionContext) -> list[str]:
         f"Time (minutes from the plan's start; {where}release {_minutes(ctx.release)}, "
         f"{deadline}):",
         *rows,
+        *(["Links (the starts above honour them): " + "; ".join(ctx.links)] if ctx.links else []),
         "A robot that misses the deadline or ends after its shift is not allowed. In the "
         "Trade-Off Summary, say how many minutes later your robot ends than the earliest end.",
     ]

@@ -105,36 +105,50 @@ def _change_index(changes: Sequence[Mapping[str, Any]], task_id: str) -> int:
     )
 
 
+def _link(entry: Any) -> tuple[str, str, float]:
+    """(predecessor id, type, lag) of an `after` entry: a plain id or a link object."""
+    if isinstance(entry, Mapping):
+        return str(entry["task"]), str(entry.get("type", "FS")), float(entry.get("lag", 0))
+    return str(entry), "FS", 0.0
+
+
 def _inherit_after(
     queue: list[dict[str, Any]], parent_tasks: Sequence[Mapping[str, Any]], removed: Sequence[str]
 ) -> None:
-    """Replace each removed task in an `after` list by what the removed task waited for."""
+    """Replace each removed task in an `after` list by what the removed task waited for.
+    Typed links compose as a bridged milestone's do (docs/schedules.md#links): q -X?-> gone
+    -?Z-> s becomes q -XZ-> s with the lags added; plain ones stay plain ids."""
     if not removed:
         return
-    waits = {str(t["id"]): [str(a) for a in t.get("after", ())] for t in parent_tasks}
+    waits = {str(t["id"]): [_link(a) for a in t.get("after", ())] for t in parent_tasks}
     gone = set(removed)
     original = {str(t["id"]): t["id"] for t in parent_tasks}
 
-    def resolve(task_id: str, seen: set[str]) -> list[str]:
+    def resolve(link: tuple[str, str, float], seen: set[str]) -> list[tuple[str, str, float]]:
+        task_id, kind, lag = link
         if task_id not in gone:
-            return [task_id]
-        out: list[str] = []
-        for p in waits.get(task_id, []):
+            return [link]
+        out: list[tuple[str, str, float]] = []
+        for p, first, more in waits.get(task_id, []):
             if p not in seen:
                 seen.add(p)
-                out.extend(resolve(p, seen))
+                out.extend(resolve((p, first[0] + kind[1], more + lag), seen))
         return out
 
     for task in queue:
-        after = [str(a) for a in task.get("after", ())]
-        if not gone & set(after):
+        after = [_link(a) for a in task.get("after", ())]
+        if not gone & {a[0] for a in after}:
             continue
-        kept: list[str] = []
+        kept: dict[tuple[str, str], float] = {}
         for a in after:
-            for p in resolve(a, {a}):
-                if p not in kept:
-                    kept.append(p)
-        task["after"] = [original.get(p, p) for p in kept]
+            for p, kind, lag in resolve(a, {a[0]}):
+                kept[p, kind] = max(lag, kept.get((p, kind), lag))
+        task["after"] = [
+            original.get(p, p)
+            if (kind, lag) == ("FS", 0.0)
+            else {"task": original.get(p, p), "type": kind, "lag": lag}
+            for (p, kind), lag in kept.items()
+        ]
 
 
 def plan_times(

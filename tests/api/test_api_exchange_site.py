@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from fastapi.testclient import TestClient
 
-from app.exchange import plain_request, read_mspdi
+from app.exchange import read_mspdi
 from tests.api.test_revisions import completed_run, wait_status
 from tests.api.test_sites import S1, assignments, outcomes
 from tests.exchange_files import small_mspdi
@@ -38,7 +38,7 @@ def test_site_rates_fill_the_drafts_robots_and_the_draft_runs(client: TestClient
 
     draft = read_mspdi(small_mspdi())
     draft.robots[:] = body["robots"]
-    started = client.post("/runs", json={**plain_request(draft), "site": "s1"})
+    started = client.post("/runs", json={**draft.request(), "site": "s1"})
     assert started.status_code == 202, started.text
     state = wait_status(client, started.json()["id"], "completed")
     assert len(state["assignments"]) == 3

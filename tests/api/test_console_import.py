@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
-from app.exchange import plain_request, read_mspdi
+from app.exchange import read_mspdi
 from tests.api.conftest import ClientFactory
 from tests.exchange_files import small_mspdi
 
@@ -36,7 +36,7 @@ def _upload(client: TestClient, data: bytes, **form: str) -> Any:
 def test_the_forms_need_the_sessions_token(client: TestClient) -> None:
     refused = _upload(client, small_mspdi(), csrf_token="guess")
     assert refused.status_code == 403
-    draft = json.dumps(plain_request(read_mspdi(small_mspdi())))
+    draft = json.dumps(read_mspdi(small_mspdi()).request())
     start = client.post("/console/import/run", data={"draft": draft}, follow_redirects=False)
     assert start.status_code == 403
     assert client.get("/runs").json() == []
@@ -48,7 +48,7 @@ def test_the_forms_need_the_sessions_token(client: TestClient) -> None:
         ("not json", "draft: it is not a run request"),
         (json.dumps({"tasks": [{"id": "1"}], "robots": []}), "draft: it is not a run request"),
         # No robot rates the features: what the page says before it offers a start.
-        (json.dumps(plain_request(read_mspdi(small_mspdi()))), "rate at least one feature"),
+        (json.dumps(read_mspdi(small_mspdi()).request()), "rate at least one feature"),
     ],
 )
 def test_a_tampered_or_unplannable_draft_starts_nothing(

@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.exchange import plain_request, read_mspdi
+from app.exchange import read_mspdi
 from tests.e2e.server import Server
 from tests.exchange_files import small_mspdi
 
@@ -93,18 +93,24 @@ def test_a_file_imports_with_site_rates_runs_and_exports_back(server: Server) ->
         seeded = c.post("/runs", json={"scenario": "baseline", "reasoner": "rules", "site": "e2e"})
         assert seeded.status_code == 202, seeded.text
         server.wait_for(seeded.json()["id"], lambda s: s["status"] == "completed")
-        answer = c.post("/schedules/import", params={"site": "e2e"}, content=small_mspdi())
+        answer = c.post(
+            "/schedules/import", params={"site": "e2e"}, content=small_mspdi(typed=True)
+        )
         assert answer.status_code == 200, answer.text
         draft = answer.json()
         assert all(r["success"] for r in draft["robots"])
         assert c.post("/schedules/import", params={"site": "nowhere"}, content=small_mspdi()
                       ).status_code == 404  # fmt: skip
-        plain = read_mspdi(small_mspdi())
-        plain.robots[:] = draft["robots"]
-        created = c.post("/runs", json={**plain_request(plain), "site": "e2e"})
+        assert draft["tasks"][1]["after"] == [{"task": "1", "type": "SS", "lag": 20}]
+        local = read_mspdi(small_mspdi(typed=True))
+        local.robots[:] = draft["robots"]
+        created = c.post("/runs", json={**local.request(), "site": "e2e"})
         assert created.status_code == 202, created.text
         run_id = created.json()["id"]
         server.wait_for(run_id, lambda s: s["status"] == "completed")
+        # The durable run honours the start-to-start link (docs/schedules.md#links).
+        planned = {str(a["task_id"]): a for a in c.get(f"/runs/{run_id}").json()["assignments"]}
+        assert planned["2"]["start"] >= planned["1"]["start"] + 20 - 1e-6
         exported = c.get(f"/runs/{run_id}/schedule", params={"format": "mspdi"})
         assert exported.status_code == 200
         assert exported.headers["content-type"].startswith("application/vnd.ms-project+xml")

@@ -111,19 +111,18 @@ def test_a_cycle_no_schedule_can_meet_is_refused_naming_it() -> None:
         assert f"{uid} (FS" in caught.value.message
 
 
-def test_a_cycle_that_can_be_met_is_kept() -> None:
-    # Start together, each within 0 minutes of the other: two start-to-start links, lag 0.
+def test_every_cycle_is_refused_even_one_whose_lags_leave_room() -> None:
+    # Two start-to-start links, lag 0, say "start together": a schedule exists, but a plan
+    # places each task after its predecessors, and P6 and MS Project refuse such a file
+    # themselves; /allocate refuses the same cycle (docs/schedules.md#links).
     data = mspdi(task(1, links=link(2, kind=3)) + task(2, links=link(1, kind=3)))
-    draft = read_mspdi(data)
-    assert [t["after"] for t in draft.tasks] == [
-        [{"task": "2", "type": "SS", "lag": 0}],
-        [{"task": "1", "type": "SS", "lag": 0}],
-    ]
-    # A positive lag round the same pair is not.
-    with pytest.raises(ExchangeError, match="cycle"):
-        read_mspdi(
-            mspdi(task(1, links=link(2, kind=3, lag_tenths=10)) + task(2, links=link(1, kind=3)))
-        )
+    with pytest.raises(ExchangeError) as caught:
+        read_mspdi(data)
+    assert caught.value.code == "link_cycle"
+    assert "1 (SS +0 min)" in caught.value.message and "2 (SS +0 min)" in caught.value.message
+    # A task linked to itself is the shortest cycle.
+    with pytest.raises(ExchangeError, match="cycle: 1 .FS"):
+        read_mspdi(mspdi(task(1, links=link(1)) + task(2)))
 
 
 def test_cross_project_and_dangling_links_are_skipped_with_why() -> None:
