@@ -25,7 +25,10 @@ class Site:
         self.robots: list[dict[str, Any]] = body["robots"]
         self.names = [r["name"] for r in self.robots]
         self.index = {str(t["id"]): i for i, t in enumerate(self.tasks)}
-        self.preds = [[self.index[str(p)] for p in t.get("after", [])] for t in self.tasks]
+        # Per task its links (predecessor, type, lag): a plain id is FS with no lag
+        # (docs/schedules.md#links).
+        self.links = [[self._link(a) for a in t.get("after", [])] for t in self.tasks]
+        self.preds = [[p for p, _, _ in links] for links in self.links]
         zones = sorted(
             {t["zone"] for t in self.tasks if t.get("zone")}
             | {r["zone"] for r in self.robots if r.get("zone")}
@@ -43,6 +46,12 @@ class Site:
                     via = self.travel[a, k] + self.travel[k, b]
                     if via < self.travel[a, b]:
                         self.travel[a, b] = via
+
+    def _link(self, entry: Any) -> tuple[int, str, float]:
+        if isinstance(entry, dict):
+            kind, lag = entry.get("type", "FS"), float(entry.get("lag", 0))
+            return self.index[str(entry["task"])], kind, lag
+        return self.index[str(entry)], "FS", 0.0
 
     def duration(self, t: int, r: int) -> float | None:
         d = self.tasks[t]["duration"]
@@ -85,9 +94,15 @@ def feasibility_errors(body: dict[str, Any], schedule: dict[str, Any]) -> list[s
             continue
         if abs(row["end"] - row["start"] - d) > EPS:
             errors.append(f"{row['task_id']}: runs {row['end'] - row['start']}, takes {d}")
-        for p in site.preds[t]:
-            if row["start"] < rows[p]["end"] - EPS:
-                errors.append(f"{row['task_id']}: starts before {rows[p]['task_id']} ends")
+        for p, kind, lag in site.links[t]:
+            # FS start >= end(p) + lag, SS start >= start(p) + lag, FF end >= end(p) + lag,
+            # SF end >= start(p) + lag
+            theirs = rows[p]["start"] if kind[0] == "S" else rows[p]["end"]
+            mine = row["start"] if kind[1] == "S" else row["end"]
+            if mine < theirs + lag - EPS:
+                errors.append(
+                    f"{row['task_id']}: breaks its {kind} {lag:+g} from {rows[p]['task_id']}"
+                )
         if row["start"] < site.release(t) - EPS:
             errors.append(f"{row['task_id']}: starts before its release")
         if row["end"] > site.deadline(t) + EPS:
@@ -126,39 +141,49 @@ def loads_within_cap(body: dict[str, Any], answer: dict[str, Any]) -> bool:
 def earliest_makespan(site: Site, robots: Sequence[int], orders: Sequence[Sequence[int]]) -> float:
     """The makespan of each task at its earliest start given the robots and each robot's
     order (a semi-active schedule: for fixed orders, starting earlier never hurts), or inf
-    when the orders contradict precedence or a deadline or shift cannot be met."""
+    when no times keep the orders, the links, the deadlines and shifts.
+
+    Every rule but the deadlines and shift ends is a lower bound "start(v) >= start(u) + w"
+    (a link, the robot's previous task and the travel) or a floor (release, shift start
+    and the way from the start zone), so the earliest starts are the longest paths, found
+    by relaxing until nothing moves (Bellman-Ford); still moving after n rounds means a
+    positive cycle: the orders contradict the links."""
     n = len(robots)
-    previous: dict[int, int] = {}
+    dur: list[float] = []
+    for t in range(n):
+        d = site.duration(t, robots[t])
+        if d is None:
+            return math.inf
+        dur.append(d)
+    edges: list[tuple[int, int, float]] = []  # start[v] >= start[u] + w
+    for t in range(n):
+        for p, kind, lag in site.links[t]:
+            w = (dur[p] if kind[0] == "F" else 0.0) + lag - (dur[t] if kind[1] == "F" else 0.0)
+            edges.append((p, t, w))
+    start = [site.release(t) for t in range(n)]
     for order in orders:
         for q, t in itertools.pairwise(order):
-            previous[t] = q
-    end: dict[int, float] = {}
-    while len(end) < n:
-        ready = [
-            t
-            for t in range(n)
-            if t not in end
-            and all(p in end for p in site.preds[t])
-            and (t not in previous or previous[t] in end)
-        ]
-        if not ready:
-            return math.inf  # a robot's order waits on a task that waits on it
-        for t in ready:
-            r, zone = robots[t], site.tasks[t].get("zone")
-            d = site.duration(t, r)
-            if d is None:
-                return math.inf
-            a, b = site.shift(r)
-            if t in previous:
-                q = previous[t]
-                start = end[q] + site.moves(site.tasks[q].get("zone"), zone)
-            else:
-                start = a + site.moves(site.robots[r].get("zone") or zone, zone)
-            start = max([start, site.release(t), *(end[p] for p in site.preds[t])])
-            if start + d > min(site.deadline(t), b) + EPS:
-                return math.inf
-            end[t] = start + d
-    return max(end.values())
+            move = site.moves(site.tasks[q].get("zone"), site.tasks[t].get("zone"))
+            edges.append((q, t, dur[q] + move))
+        if order:
+            first, r = order[0], robots[order[0]]
+            zone = site.tasks[first].get("zone")
+            way = site.moves(site.robots[r].get("zone") or zone, zone)
+            start[first] = max(start[first], site.shift(r)[0] + way)
+    for _ in range(n + 1):
+        moved = False
+        for u, v, w in edges:
+            if start[u] + w > start[v] + EPS:
+                start[v] = start[u] + w
+                moved = True
+        if not moved:
+            break
+    else:
+        return math.inf
+    for t in range(n):
+        if start[t] + dur[t] > min(site.deadline(t), site.shift(robots[t])[1]) + EPS:
+            return math.inf
+    return max((start[t] + dur[t] for t in range(n)), default=0.0)
 
 
 def _orders(robots: Sequence[int], n_robots: int) -> Iterator[list[list[int]]]:

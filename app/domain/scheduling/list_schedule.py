@@ -152,5 +152,43 @@ def sequence_schedule(problem: Problem, sequences: Sequence[Sequence[int]]) -> S
                 cursor[r] += 1
                 progress = True
     if not all(done):
-        raise ValueError("the robot orders contradict the precedence: no task can go next")
+        if not tm.typed:
+            raise ValueError("the robot orders contradict the precedence: no task can go next")
+        # A lead (a negative lag) lets a robot do a successor before its predecessor, which
+        # placing in order cannot: the least times that keep every rule instead.
+        starts, ends = _least_times(problem, sequences, assignment)
     return build_schedule(problem, assignment, starts, ends)
+
+
+def _least_times(
+    problem: Problem, sequences: Sequence[Sequence[int]], assignment: Sequence[int]
+) -> tuple[list[float], list[float]]:
+    """The earliest times of fixed per-robot orders when links run against an order
+    (docs/schedules.md#links): every rule but the deadlines and shift ends is a lower bound
+    on a start, so raising each start to what the others ask until nothing moves reaches
+    the least times (Bellman-Ford over the orders); still moving after n + 1 rounds means
+    a cycle no times can keep (ValueError)."""
+    tm = problem.instance.timing
+    n = tm.n_tasks
+    starts = [0.0] * n
+    ends = [0.0] * n
+    for _ in range(n + 1):
+        moved = False
+        for r, seq in enumerate(sequences):
+            free, zone = tm.shifts[r][0], tm.robot_zone[r]
+            for t in seq:
+                fixed = problem.pinned_starts.get(t)
+                d = tm.duration(t, r)
+                if fixed is None:
+                    ready = tm.ready(t, d, starts, ends)
+                    ready = max(ready, tm.release[t], problem.not_before)
+                    start = max(ready, free + tm.travel_to_task(zone, t), starts[t])
+                else:
+                    start = fixed
+                if abs(start - starts[t]) > EPS or ends[t] != start + d:
+                    moved = True
+                starts[t], ends[t] = start, start + d
+                free, zone = max(free, ends[t]), tm.task_zone[t]
+        if not moved:
+            return starts, ends
+    raise ValueError("the robot orders contradict the links: no times keep them all")

@@ -89,13 +89,15 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
     queues = [[t for t in seq if t not in fixed] for seq in orders]
     cursor = [0] * len(queues)
     progress = True
+    forced = False
     while progress:
         progress = False
         for r, queue in enumerate(queues):
             while cursor[r] < len(queue):
                 t = queue[cursor[r]]
-                if not all(done[p] for p in tm.predecessors[t]):
+                if not all(done[p] for p in tm.predecessors[t]) and not forced:
                     break
+                forced = False
                 ready = tm.ready(t, tm.duration(t, r), starts, ends)
                 ready = max(ready, tm.release[t], problem.not_before)
                 _pass_earlier_facts(tm, lines[r], position, t)
@@ -104,6 +106,11 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
                 starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
                 cursor[r] += 1
                 progress = True
+        if not progress and tm.typed and not all(done):
+            # A lead let the plan put a successor before its predecessor on one robot:
+            # the first robot's next task goes now, with the links placed so far, so the
+            # view keeps the order and the check names any link it breaks.
+            forced = progress = True
     if not all(done):
         # Only when the planned orders contradict the precedence: facts wait for nothing.
         raise ValueError("the robot orders contradict the precedence: no task can go next")
