@@ -28,7 +28,7 @@ from app.allocation.teams import (
     task_features,
 )
 from app.allocation.timing import Duration, Minutes, PositiveMinutes, Shift, WallClock
-from app.domain.links import Link
+from app.domain.links import MAX_LAG, Link
 from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS, Robot, Task
 from app.domain.modes import Mode
@@ -79,7 +79,9 @@ class LinkIn(BaseModel):
 
     task: TaskId
     type: Literal["FS", "SS", "FF", "SF"] = Field("FS", description="Default FS")
-    lag: float = Field(0, description="Minutes; negative for a lead. Default 0")
+    lag: float = Field(
+        0, ge=-MAX_LAG, le=MAX_LAG, description="Minutes; negative for a lead. Default 0"
+    )
 
 
 def _after_entry(value: object) -> int | str | Link:

@@ -4,7 +4,9 @@ The per-robot timeline by default (rich), or the schedule as JSON (the `schedule
 of POST /allocate's answer), CSV or iCalendar on stdout for a spreadsheet or a calendar, or
 MS Project XML (MSPDI, docs/exchange.md) for MS Project, ProjectLibre or P6.
 An instance file is read as an /allocate body's instance part and checked the same way;
-a built-in name is a timed scenario (`baseline_timed`).
+a built-in name is a timed scenario (`baseline_timed`). Anything else, with `--format`
+json, csv, ics or mspdi, is a run id on the server at `--url`: its current schedule as GET
+/runs/{id}/schedule answers it (`ltaa schedule RUN --format mspdi` for MS Project).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
+import httpx
 import typer
 from pydantic import ValidationError
 from rich.console import Console
@@ -23,7 +26,8 @@ from rich.markup import escape
 from app.allocation.schemas import AllocateRequest
 from app.allocation.service import build_problem, load_solver
 from app.cli.allocate import parse_options, read_instance
-from app.cli.root import cli, fail
+from app.cli.reviews import ApiFailed, make_client
+from app.cli.root import _URL, cli, fail
 from app.config import get_settings
 from app.domain import catalog
 from app.domain.errors import DomainError
@@ -77,9 +81,18 @@ def schedule(
         typer.Option("--option", "-o", help="Solver option KEY=VALUE (VALUE as JSON); repeatable"),
     ] = None,
     output: Annotated[Format, typer.Option("--format", help="What to print")] = Format.TEXT,
+    url: _URL = "http://127.0.0.1:8000",
+    key: Annotated[
+        str | None,
+        typer.Option("--key", envvar="LTAA_API_KEY", help="A client API key", show_default=False),
+    ] = None,
 ) -> None:
-    """Plan a timed instance and print when each robot does what."""
+    """Plan a timed instance and print when each robot does what (or print a server run's
+    schedule: RUN with --format json, csv, ics or mspdi)."""
     as_json = output is Format.JSON
+    if output is not Format.TEXT and _is_run(source):
+        _print_run(source, output, url, key)
+        return
     options = parse_options(option or [])
     if time_limit is not None:
         options["time_limit_s"] = time_limit
@@ -166,6 +179,27 @@ def _problem(
         max_deviation,
         objective=Objective(objective, min_expected_success),
     )
+
+
+def _is_run(source: str) -> bool:
+    return not Path(source).is_file() and source not in catalog.timed_scenarios()
+
+
+def _print_run(run_id: str, output: Format, url: str, key: str | None) -> None:
+    """A server run's current schedule in `output`'s format, as the server writes it."""
+    try:
+        with make_client(url, key) as client:
+            answer = client.get(f"/runs/{run_id}/schedule", params={"format": output.value})
+        if answer.status_code != 200:
+            raise ApiFailed(answer)
+    except (ApiFailed, httpx.HTTPError) as exc:
+        known = ", ".join(catalog.timed_scenarios())
+        message = (
+            f"'{run_id}' is neither a file nor a timed scenario ({known}), and the server at "
+            f"{url} has no schedule for a run of that id ({exc})"
+        )
+        fail(_error("source", message, "unknown_source"), output is Format.JSON)
+    typer.echo(answer.text, nl=False)
 
 
 def _error(field: str, message: str, type_: str) -> dict[str, Any]:

@@ -27,6 +27,7 @@ from app.domain.errors import DomainError
 
 LinkType = Literal["FS", "SS", "FF", "SF"]
 LINK_TYPES: tuple[str, ...] = ("FS", "SS", "FF", "SF")
+MAX_LAG = 10_000_000  # minutes either way, as every other time field
 _WORDS = {"S": "starts", "F": "ends"}
 
 

@@ -115,6 +115,16 @@ def test_a_file_imports_with_site_rates_runs_and_exports_back(server: Server) ->
         assert exported.status_code == 200
         assert exported.headers["content-type"].startswith("application/vnd.ms-project+xml")
         back = c.post("/schedules/import", content=exported.content).json()
+    # The command line prints the same file for the run's id, read from the server.
+    printed = CliRunner().invoke(
+        cli, ["schedule", run_id, "--format", "mspdi", "--url", server.url]
+    )
+    assert printed.exit_code == 0, printed.output
+    assert printed.stdout == exported.text
+    unknown = CliRunner().invoke(
+        cli, ["schedule", "no-such-run", "--format", "mspdi", "--url", server.url]
+    )
+    assert unknown.exit_code == 1 and "no schedule for a run of that id" in unknown.output
     assert [(t["id"], t["duration"], t["features"]) for t in back["tasks"]] == [
         (t["id"], t["duration"], t["features"]) for t in draft["tasks"]
     ]
