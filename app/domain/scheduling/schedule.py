@@ -201,7 +201,11 @@ def _critical_path(
         return ()
     steps: list[Step] = []
     t: int | None = max(range(len(slots)), key=lambda k: (slots[k].end, -k))
-    while t is not None:
+    seen: set[int] = set()
+    # A lead can explain a task by one that starts after it (docs/schedules.md#links),
+    # so the walk stops at a task it has passed already.
+    while t is not None and t not in seen:
+        seen.add(t)
         s = slots[t]
         steps.append(Step(StepKind.TASK, s.start, s.end, t, s.robot, "works"))
         t = _explain_start(problem, slots, previous, t, steps)
