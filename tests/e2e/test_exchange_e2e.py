@@ -124,7 +124,8 @@ def test_a_file_imports_with_site_rates_runs_and_exports_back(server: Server) ->
     unknown = CliRunner().invoke(
         cli, ["schedule", "no-such-run", "--format", "mspdi", "--url", server.url]
     )
-    assert unknown.exit_code == 1 and "no schedule for a run of that id" in unknown.output
+    said = " ".join(unknown.output.split())  # rich wraps the line on the terminal's width
+    assert unknown.exit_code == 1 and "no schedule for a run of that id (404" in said
     assert [(t["id"], t["duration"], t["features"]) for t in back["tasks"]] == [
         (t["id"], t["duration"], t["features"]) for t in draft["tasks"]
     ]
