@@ -64,6 +64,12 @@ code=$(call POST /allocate "$cycle" "${CLIENT[@]}")
 [ "$code" = 422 ] || fail "a precedence cycle should be 422, got $code"
 check 'd["detail"][0]["loc"][:2] == ["body", "tasks"] and "cycle" in d["detail"][0]["msg"]' "422 names the cycle's task"
 echo "smoke: timed /allocate ok (schedule optimal, makespan 72; a cycle is 422)"
+# A typed link (docs/schedules.md#links): wiring starts 5 minutes after framing starts.
+typed=$(printf '%s' "$timed" | sed 's/"after":\["frame"\]/"after":[{"task":"frame","type":"SS","lag":5}]/')
+code=$(call POST /allocate "$typed" "${CLIENT[@]}")
+[ "$code" = 200 ] || fail "typed-link /allocate schedule -> $code $(head -c 300 "$TMP/out")"
+check 'd["status"] == "optimal" and d["schedule_violations"] == [] and d["schedule"]["tasks"][2]["start"] >= d["schedule"]["tasks"][1]["start"] + 5' "typed link: wire starts 5 min after frame starts"
+echo "smoke: typed-link /allocate ok"
 
 # Teams (docs/allocation.md#teams): a beam two heavy robots lift, a panel a heavy and a careful
 # robot fix; the crane may do heavy work only. `optimal` answers whole teams.
