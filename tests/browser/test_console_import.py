@@ -1,8 +1,8 @@
 """The console's "Import a schedule" page (docs/exchange.md#the-console-page) in a real
 browser against a real server: reached from the navigation, a file uploaded with a site's
 rates, its tasks, links, robots and skipped items shown as the API answers them, "Start a
-run" planning it; a draft with a typed link says it cannot be planned yet and offers no
-start; a wrong file is refused with why; axe-clean."""
+run" planning it; a draft with a typed link is shown with its type and lag and starts a run
+that honours it; a wrong file is refused with why; axe-clean."""
 
 from __future__ import annotations
 
@@ -84,7 +84,6 @@ def test_a_file_imported_with_a_sites_rates_starts_a_run(
     expect(page.locator("#draft-robots caption")).to_contain_text(f"site {site}")
     expect(page.locator("#draft-skipped")).to_contain_text("Everything in the file was imported")
     expect(page.locator("#source")).to_contain_text("Level 3 fit-out")
-    expect(page.locator("#typed-note")).to_have_count(0)
     assert _serious_violations(page) == []
 
     with page.expect_navigation():
@@ -98,19 +97,23 @@ def test_a_file_imported_with_a_sites_rates_starts_a_run(
     assert sorted(str(a["task_id"]) for a in state["assignments"]) == ["1", "2", "3"]
 
 
-def test_a_typed_link_is_shown_and_not_offered_to_start(
+def test_a_typed_link_is_shown_and_its_run_honours_it(
     page: Page, server: Server, site: str
 ) -> None:
     sign_in(page, server, then="/console/import")
     _upload(page, small_mspdi(typed=True), "typed.xml", site)
-    note = page.locator("#typed-note")
-    expect(note).to_contain_text("Typed links cannot be planned yet")
-    expect(note.locator("li")).to_have_text("1 → 2: SS +20 min")
     expect(page.locator("#draft-tasks tbody tr").nth(1).locator("td").nth(3)).to_have_text(
         "1 SS +20 min"
     )
-    expect(page.get_by_role("button", name="Start a run")).to_have_count(0)
     assert _serious_violations(page) == []
+    with page.expect_navigation():
+        page.get_by_role("button", name="Start a run").click()
+    run_id = page.url.rsplit("/", 1)[-1]
+    wait_status(server, run_id)
+    with server.client() as c:
+        rows = c.get(f"/runs/{run_id}/schedule", headers=HEADERS).json()["tasks"]
+    starts = {str(r["task_id"]): r["start"] for r in rows}
+    assert starts["2"] >= starts["1"] + 20  # docs/schedules.md#links: SS +20
 
 
 def test_without_rates_or_with_a_wrong_file_nothing_starts(page: Page, server: Server) -> None:
