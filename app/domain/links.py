@@ -23,11 +23,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
+import numpy as np
+from numpy.typing import NDArray
+
 from app.domain.errors import DomainError
 
 LinkType = Literal["FS", "SS", "FF", "SF"]
 LINK_TYPES: tuple[str, ...] = ("FS", "SS", "FF", "SF")
 MAX_LAG = 10_000_000  # minutes either way, as every other time field
+# Start or end times per task index: a list, or an array (the bounds keep theirs in numpy).
+Times = Sequence[float] | NDArray[np.float64]
 _WORDS = {"S": "starts", "F": "ends"}
 
 
@@ -74,14 +79,12 @@ def allowed_start(arc: Arc, duration: float, pred_start: float, pred_end: float)
     return point + arc.lag - (duration if arc.to_end else 0.0)
 
 
-def required(arc: Arc, starts: Sequence[float], ends: Sequence[float]) -> float:
+def required(arc: Arc, starts: Times, ends: Times) -> float:
     """The time the successor's bound point (start or end) may not precede."""
     return allowed_start(arc, 0.0, starts[arc.pred], ends[arc.pred])
 
 
-def earliest_start(
-    arcs: Sequence[Arc], duration: float, starts: Sequence[float], ends: Sequence[float]
-) -> float:
+def earliest_start(arcs: Sequence[Arc], duration: float, starts: Times, ends: Times) -> float:
     """The earliest start a task's links allow, taking `duration` minutes, its
     predecessors placed at `starts`/`ends` (0 when it has none; callers add release)."""
     best = 0.0

@@ -50,6 +50,11 @@ class Task:
     # docs/allocation.md#teams: {feature: count}, distinct robots at once; None: one robot.
     team: Mapping[str, int] | None = dataclasses.field(default=None, hash=False)
 
+    @property
+    def after_ids(self) -> tuple[TaskId, ...]:
+        """The ids of the tasks it waits for, whatever its links' types."""
+        return tuple(a.task if isinstance(a, Link) else a for a in self.after)
+
 
 @dataclass(frozen=True)
 class Robot:

@@ -22,7 +22,7 @@ from functools import cached_property
 
 import numpy as np
 
-from app.domain.links import Arc, earliest_start
+from app.domain.links import Arc, Times, earliest_start
 
 
 @dataclass(frozen=True)
@@ -95,9 +95,7 @@ class TimeModel:
         """Is any link other than a plain finish-to-start with no lag?"""
         return any(not a.plain for arcs in self.links for a in arcs)
 
-    def ready(
-        self, task: int, duration: float, starts: Sequence[float], ends: Sequence[float]
-    ) -> float:
+    def ready(self, task: int, duration: float, starts: Times, ends: Times) -> float:
         """The earliest start the task's links allow on a robot taking `duration` minutes,
         its predecessors at `starts`/`ends` (0 without any; release not included)."""
         return earliest_start(self.links[task], duration, starts, ends)

@@ -57,7 +57,7 @@ def test_no_inspection_before_the_work_it_inspects() -> None:
     timed = timed_scenario("baseline_timed").instance
     by_id = {t.id: t for t in timed.tasks}
     check = by_id[500]  # OpenProgressCheck
-    inspected = {by_id[i].type for i in check.after}
+    inspected = {by_id[i].type for i in check.after_ids}
     assert inspected == {"ObjectInteraction"} and len(check.after) >= 5
     assert by_id[501].after == (500,) and by_id[502].after == (501,)
     assert all(by_id[i].type == "ProgressCheck" for i in (500, 501, 502))
@@ -75,7 +75,7 @@ def test_generated_sites_follow_the_trades_and_the_floors() -> None:
     by_id = {t.id: t for t in inst.tasks}
     trades = [t.name for t in TRADES]
     for task in inst.tasks:
-        for before in task.after:
+        for before in task.after_ids:
             earlier = by_id[before]
             if task.zone == earlier.zone:  # the previous trade of the same package
                 assert trades.index(task.type) == trades.index(earlier.type) + 1
