@@ -325,3 +325,30 @@ def test_guided_allocate_times_pins_without_a_start_as_the_graph_placed_them(
     # Re-timed in the earliest-start order instead, the pins broke precedence and overlapped.
     decided = {d["task_index"] for d in details["decisions"]}
     assert decided.isdisjoint(last) and len(decided) == 30
+
+
+def test_typed_links_reach_the_prompt_and_the_graphs_times() -> None:
+    # docs/schedules.md#links: screed starts 20 min after the pour starts, trowel ends 10
+    # min after screed ends; the graph's times honour both and its prompt says them.
+    from app.domain.links import Link
+
+    inst = Instance(
+        tasks=(
+            task("pour", duration=40),
+            task("screed", duration=30, after=(Link("pour", "SS", 20),)),
+            task("trowel", duration=15, after=(Link("screed", "FF", 10), "pour")),
+        ),
+        robots=(robot("r"), robot("s"), robot("u")),
+    )
+    problem = Problem.build(inst, Mode.SUCCESS_FOCUSED)
+    rec, final = run(problem)
+    assert final["done"]
+    schedule = schedule_of(problem, rec.decisions())
+    assert check_schedule(problem, schedule) == []
+    assert schedule.slots[1].start >= schedule.slots[0].start + 20
+    assert schedule.slots[2].end >= schedule.slots[1].end + 10
+    prompts = {a.task_index: a.user_prompt for a in rec.attempts() if a.tier == 0}
+    assert "starts at least 20 min after 'tpour' starts (SS +20)" in prompts[1]
+    assert "ends at least 10 min after 'tscreed' ends (FF +10)" in prompts[2]
+    assert "no earlier than 'tpour' ends (FS +0)" in prompts[2]
+    assert "Links" not in prompts[0]
