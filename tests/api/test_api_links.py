@@ -204,3 +204,26 @@ def test_a_late_start_and_a_delay_move_ss_and_ff_successors_as_their_links_say(
     assert after["trowel"][1] == 95  # FF +10 from the pour's new end
     moves = client.get(f"/runs/{revision}/diff").json()["schedule"]["moves"]
     assert {m["task_id"] for m in moves} == {"pour", "trowel"}
+
+
+def test_a_removed_task_hands_its_links_on_as_a_bridged_milestone(client: TestClient) -> None:
+    # pour -SS+20-> screed -FF+10-> trowel; screed removed: trowel's end is at least 30
+    # after the pour starts (SF +30), not after anything screed would have done.
+    tasks = copy.deepcopy(LIVING)
+    tasks[2]["after"] = [{"task": "screed", "type": "FF", "lag": 10}]
+    run = {"tasks": tasks, "robots": ROBOTS, "start": START, "reasoner": "rules"}
+    parent = completed_run(client, {**run, "mode": "success_focused"})
+    assert rows_of(client.get(f"/runs/{parent}/schedule").json())["trowel"] == (45, 60)
+    revised = client.post(
+        f"/runs/{parent}/revisions",
+        json={"reason": "no screed", "changes": [{"type": "remove_tasks", "task_ids": ["screed"]}]},
+    )
+    assert revised.status_code == 202, revised.text
+    revision = revised.json()["id"]
+    wait_status(client, revision, "completed")
+    after = rows_of(client.get(f"/runs/{revision}/schedule").json())
+    assert set(after) == {"pour", "trowel"}
+    # The revision plans from its arrival (no `now` sent): the times relative to the pour.
+    zero = after["pour"][0]
+    assert after["pour"][1] - zero == pytest.approx(40)
+    assert (after["trowel"][0] - zero, after["trowel"][1] - zero) == pytest.approx((15, 30))
