@@ -86,10 +86,18 @@ def required(arc: Arc, starts: Times, ends: Times) -> float:
 
 def earliest_start(arcs: Sequence[Arc], duration: float, starts: Times, ends: Times) -> float:
     """The earliest start a task's links allow, taking `duration` minutes, its
-    predecessors placed at `starts`/`ends` (0 when it has none; callers add release)."""
+    predecessors placed at `starts`/`ends` (0 when it has none; callers add release).
+    `allowed_start` for each link, written out: every scheduler calls this per task."""
     best = 0.0
-    for arc in arcs:
-        at = allowed_start(arc, duration, starts[arc.pred], ends[arc.pred])
+    for pred, kind, lag in arcs:
+        if kind == "FS":
+            at = ends[pred] + lag
+        elif kind == "SS":
+            at = starts[pred] + lag
+        elif kind == "FF":
+            at = ends[pred] + lag - duration
+        else:
+            at = starts[pred] + lag - duration
         if at > best:
             best = at
     return best
