@@ -22,6 +22,7 @@ from app.domain.problem import Problem
 from app.domain.scheduling.dispatch import dispatch_schedule
 from app.domain.scheduling.feasibility import Rule, check_schedule
 from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
+from app.domain.scheduling.reported import retime
 from app.domain.scheduling.schedule import build_schedule
 from app.domain.serialize import instance_from_dict, instance_to_dict
 from app.solvers.cpsat.bounds import CRITICAL_PATH, bound_floors
@@ -253,3 +254,25 @@ def test_cp_sat_matches_the_exhaustive_search_with_typed_links(
     listed = list_schedule(problem, solution.assignment)
     assert not [v for v in check_schedule(problem, listed) if v.rule is Rule.PRECEDENCE]
     assert listed.makespan >= bound_floors(problem)[CRITICAL_PATH] - 1e-6
+
+
+def test_a_lead_lets_a_robot_do_the_successor_first_and_fixed_orders_keep_it() -> None:
+    # 0 released at 1 (1 min); 1 (1 min) may start 2 min before 0 ends (FS -2): one robot
+    # does 1 at 0 and 0 at 1, a makespan of 2 that placing in link order (3) misses.
+    inst = Instance(
+        tasks=(task(0, duration=1, release=1), task(1, duration=1, after=(Link(0, "FS", -2),))),
+        robots=(robot("r"),),
+    )
+    problem = Problem.build(inst, Mode.SUCCESS_FOCUSED)
+    assert list_schedule(problem, [0, 0]).makespan == 3
+    ordered = sequence_schedule(problem, [[1, 0]])
+    assert [(s.start, s.end) for s in ordered.slots] == [(1, 2), (0, 1)]
+    assert check_schedule(problem, ordered) == []
+    solution = get_solver("schedule").solve(problem, options={"time_limit_s": 10})
+    assert solution.details["schedule"].makespan == 2
+    # The critical path stops where the lead turns it back, and the reported view keeps
+    # the robot's order.
+    assert ordered.critical_path
+    again = retime(problem, ordered, {})
+    assert [(s.start, s.end) for s in again.slots] == [(1, 2), (0, 1)]
+    assert check_schedule(problem, again) == []
