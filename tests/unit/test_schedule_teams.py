@@ -13,11 +13,17 @@ least the floor.
 
 from __future__ import annotations
 
+import csv
+import io
 import itertools
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
 from fractions import Fraction
 
+import icalendar
 import pytest
+from icalendar.parser import Contentlines, split_on_unescaped_comma
 from hypothesis import HealthCheck, assume, given, note, settings
 from hypothesis import strategies as st
 
@@ -28,7 +34,9 @@ from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import Rule, check_schedule
 from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
+from app.domain.scheduling.schedule import Schedule
 from app.domain.teams import covers
+from app.schedules import gantt_svg, schedule_csv, schedule_ics
 from app.solvers.registry import get_solver
 
 ZONES = ("A", "B")
@@ -318,3 +326,92 @@ def test_a_team_task_starts_when_its_last_member_arrives() -> None:
         start=None,
     )
     assert Rule.TEAM in {v.rule for v in check_schedule(problem, lone)}
+
+
+def _team_plan() -> tuple[Problem, Schedule]:
+    tasks = (
+        Task(id="beam", name="Lift, beam", features=("h",), team={"h": 2}, duration=30, zone="A"),
+        Task(
+            id="panel",
+            name="Fix panel",
+            features=("h", "c"),
+            team={"h": 1, "c": 1},
+            duration=20,
+            zone="B",
+            after=("beam",),
+        ),
+        Task(id="sweep", name="Sweep", features=("c",), duration=15, zone="B"),
+    )
+    robots = (
+        Robot(name="crane", success={"h": 0.9, "c": 0.2}, zone="A", skills=("h",)),
+        Robot(name="arm;1,b", success={"h": 0.3, "c": 0.95}, zone="B"),
+        Robot(name="lifter", success={"h": 0.8, "c": 0.4}, zone="A"),
+    )
+    start = datetime(2026, 12, 7, 7, 0, tzinfo=UTC)
+    instance = Instance(tasks=tasks, robots=robots, travel={"A": {"B": 6}}, start=start)
+    problem = Problem.build(instance, Mode.SUCCESS_FOCUSED)
+    solution = get_solver("optimal").solve(problem)
+    return problem, solution.details["schedule"]
+
+
+def test_csv_has_one_row_per_task_and_member() -> None:
+    problem, schedule = _team_plan()
+    rows = list(csv.DictReader(io.StringIO(schedule_csv(problem, schedule))))
+    expected = [
+        (problem.instance.tasks[s.task].id, problem.instance.robots[m].name)
+        for s in schedule.slots
+        for m in s.members
+    ]
+    assert [(r["task_id"], r["robot"]) for r in rows] == expected
+    assert len(rows) == 2 + 2 + 1
+    for row in rows:
+        slot = next(
+            s for s in schedule.slots if problem.instance.tasks[s.task].id == row["task_id"]
+        )
+        robot = problem.instance.robot_index(row["robot"])
+        assert robot is not None
+        assert (float(row["start_min"]), float(row["end_min"])) == (slot.start, slot.end)
+        assert float(row["travel_min"]) == slot.travel_of(robot)
+        if slot.team:
+            unit = slot.team.index(robot)
+            assert row["feature"] == problem.instance.units[slot.task][unit]
+        else:
+            assert row["feature"] == ""
+
+
+def test_ics_has_one_event_per_task_with_every_member_in_resources() -> None:
+    problem, schedule = _team_plan()
+    data = schedule_ics(problem, schedule, calendar_name="Site", uid_prefix="p")
+    events = list(icalendar.Calendar.from_ical(data).walk("VEVENT"))
+    assert len(events) == problem.instance.n_tasks
+    # RFC 5545 3.8.1.10: RESOURCES is a list of TEXT values separated by commas. The
+    # Calendar reads it as one TEXT, so the raw values come from icalendar's line parser
+    # (unfolded) and its own split on unescaped commas.
+    raw = [
+        line.split(":", 1)[1]  # as written: parts() would unescape the separators too
+        for line in Contentlines.from_ical(data.decode())
+        if line.startswith("RESOURCES:")
+    ]
+    robots = problem.instance.robots
+    for event, slot, value in zip(events, schedule.slots, raw, strict=True):
+        names = split_on_unescaped_comma(value)
+        assert sorted(names) == sorted(robots[m].name for m in slot.members)
+        assert event.decoded("DTSTART") == schedule.start + timedelta(minutes=slot.start)
+
+
+def test_gantt_links_a_teams_bars_across_lanes() -> None:
+    problem, schedule = _team_plan()
+    root = ET.fromstring(gantt_svg(problem, schedule))
+    ns = "{http://www.w3.org/2000/svg}"
+    bars = [e for e in root.iter(f"{ns}rect") if "team" in (e.get("class") or "").split()]
+    links = [e for e in root.iter(f"{ns}line") if e.get("class") == "team-link"]
+    for slot in schedule.slots:
+        task_id = str(problem.instance.tasks[slot.task].id)
+        mine = [b for b in bars if b.get("data-task") == task_id]
+        assert len(mine) == (len(slot.team) if slot.team else 0)
+        titles = {b.find(f"{ns}title").text for b in mine}  # type: ignore[union-attr]
+        assert len(titles) <= 1  # one shared title naming the whole team
+        if slot.team:
+            assert all(problem.instance.robots[m].name in next(iter(titles)) for m in slot.team)
+            (link,) = [x for x in links if x.get("data-task") == task_id]
+            assert float(link.get("y2") or 0) > float(link.get("y1") or 0)
