@@ -23,9 +23,9 @@ from fractions import Fraction
 
 import icalendar
 import pytest
-from icalendar.parser import Contentlines, split_on_unescaped_comma
 from hypothesis import HealthCheck, assume, given, note, settings
 from hypothesis import strategies as st
+from icalendar.parser import Contentlines, split_on_unescaped_comma
 
 from app.domain.errors import DomainError
 from app.domain.models import Instance, Robot, Task
@@ -145,6 +145,12 @@ def success(inst: Instance, t: int, members: tuple[int, ...]) -> Fraction:
     return sum(rates, Fraction(0)) / len(rates)
 
 
+def minutes(inst: Instance, t: int) -> float:
+    duration = inst.tasks[t].duration
+    assert isinstance(duration, int | float)  # every task here has one number
+    return float(duration)
+
+
 def earliest(
     case: Case, members: list[tuple[int, ...]], orders: list[tuple[int, ...]]
 ) -> list[float] | None:
@@ -167,13 +173,10 @@ def earliest(
             preds = [k for k, other in enumerate(inst.tasks) if other.id in task.after]
             if any(start[p] is None for p in preds):
                 continue
-            d = float(task.duration)  # type: ignore[arg-type]
+            d = minutes(inst, t)
             ready = [free[r] + (0 if where[r] == task.zone else case.travel) for r in members[t]]
-            s = max(
-                ready
-                + [float(task.release or 0)]
-                + [start[p] + float(inst.tasks[p].duration) for p in preds]
-            )  # type: ignore[operator,arg-type]
+            ends = [(start[p] or 0.0) + minutes(inst, p) for p in preds]
+            s = max([*ready, float(task.release or 0), *ends])
             if task.deadline is not None and s + d > task.deadline:
                 return None
             for r in members[t]:
@@ -205,7 +208,7 @@ def exhaustive(case: Case) -> tuple[Fraction, float] | None:
             starts = earliest(case, list(members), list(orders))
             if starts is None:
                 continue
-            makespan = max(s + float(inst.tasks[t].duration) for t, s in enumerate(starts))  # type: ignore[arg-type]
+            makespan = max(s + minutes(inst, t) for t, s in enumerate(starts))
             if best is None:
                 best = (es, makespan)
             elif problem.objective.kind is ObjectiveKind.SUCCESS_THEN_MAKESPAN:
@@ -396,6 +399,7 @@ def test_ics_has_one_event_per_task_with_every_member_in_resources() -> None:
     for event, slot, value in zip(events, schedule.slots, raw, strict=True):
         names = split_on_unescaped_comma(value)
         assert sorted(names) == sorted(robots[m].name for m in slot.members)
+        assert schedule.start is not None
         assert event.decoded("DTSTART") == schedule.start + timedelta(minutes=slot.start)
 
 
@@ -409,9 +413,10 @@ def test_gantt_links_a_teams_bars_across_lanes() -> None:
         task_id = str(problem.instance.tasks[slot.task].id)
         mine = [b for b in bars if b.get("data-task") == task_id]
         assert len(mine) == (len(slot.team) if slot.team else 0)
-        titles = {b.find(f"{ns}title").text for b in mine}  # type: ignore[union-attr]
+        titles = {b.findtext(f"{ns}title") or "" for b in mine}
         assert len(titles) <= 1  # one shared title naming the whole team
         if slot.team:
-            assert all(problem.instance.robots[m].name in next(iter(titles)) for m in slot.team)
+            title = next(iter(titles))
+            assert all(problem.instance.robots[m].name in title for m in slot.team)
             (link,) = [x for x in links if x.get("data-task") == task_id]
             assert float(link.get("y2") or 0) > float(link.get("y1") or 0)
