@@ -84,3 +84,41 @@ def test_ltaa_refuses_a_timed_team_instance_naming_the_methods(client: TestClien
     (item,) = assert_error_shape(r.json())
     assert item["loc"] == ["body", "tasks", 0, "team"]
     assert "'ltaa'" in item["msg"] and "'schedule'" in item["msg"]
+
+
+def test_baseline_team_is_listed_and_planned_by_every_team_method(client: TestClient) -> None:
+    """docs/schedules.md#the-team-scenario: GET /scenarios lists it with `team: true`; sent
+    back as its own tasks it is the same instance; every team method plans it."""
+    listed = {s["name"]: s for s in client.get("/scenarios").json()}
+    team = listed["baseline_team"]
+    assert team["timed"] is True and team["team"] is True
+    assert listed["baseline_timed"]["team"] is False
+    teams = {t["id"]: t["team"] for t in team["tasks"] if t.get("team")}
+    assert teams == {
+        200: {"heavy": 2},
+        201: {"heavy": 2},
+        203: {"heavy": 2},
+        3: {"heavy": 1, "careful": 1},
+        11: {"heavy": 1, "careful": 1},
+        13: {"heavy": 1, "careful": 1},
+        210: {"heavy": 1, "careful": 1},
+    }
+    assert all(isinstance(t["duration"], float | int) for t in team["tasks"] if t.get("team"))
+    own = {k: team[k] for k in ("tasks", "robots", "travel", "start")}
+    for solver in sorted(SCHEDULED):
+        options = {"time_limit_s": 1} if solver == "schedule" else {}
+        by_name = client.post(
+            "/allocate", json={"scenario": "baseline_team", "solver": solver, "options": options}
+        )
+        if solver == "brute_force":  # 36 tasks: past its limit, and it says so
+            assert by_name.status_code == 422 and "too_large" in by_name.text
+            continue
+        assert by_name.status_code == 200, by_name.text
+        data = by_name.json()
+        assert data["schedule_violations"] == [], (solver, data["schedule_violations"])
+        assert sum(len(a.get("team") or [a]) for a in data["assignments"]) == 43  # units
+        if solver == "optimal":
+            by_content = client.post("/allocate", json={**own, "solver": solver})
+            assert by_content.status_code == 200, by_content.text
+            for key in ("assignments", "metrics", "schedule"):
+                assert by_content.json()[key] == data[key]
