@@ -420,3 +420,29 @@ def test_gantt_links_a_teams_bars_across_lanes() -> None:
             assert all(problem.instance.robots[m].name in title for m in slot.team)
             (link,) = [x for x in links if x.get("data-task") == task_id]
             assert float(link.get("y2") or 0) > float(link.get("y1") or 0)
+
+
+def test_a_team_instance_past_the_team_models_size_is_refused_with_a_sentence() -> None:
+    zones = ("A", "B", "C")
+    tasks = tuple(
+        Task(
+            id=t,
+            name=f"t{t}",
+            features=("h",),
+            team={"h": 2} if t % 10 == 0 else None,
+            duration=5,
+            zone=zones[t % 3],
+        )
+        for t in range(240)
+    )
+    robots = tuple(Robot(name=f"r{i}", success={"h": 0.8}, zone="A") for i in range(5))
+    travel = {"A": {"B": 3, "C": 4}, "B": {"C": 2}}
+    problem = Problem.build(
+        Instance(tasks=tasks, robots=robots, travel=travel), Mode.SUCCESS_FOCUSED
+    )
+    with pytest.raises(DomainError) as err:
+        get_solver("schedule").solve(problem)
+    assert err.value.code == "too_large" and err.value.field == "tasks"
+    assert "'optimal'" in err.value.message and "literals" in err.value.message
+    # the list scheduler still times optimal's teams
+    assert get_solver("optimal").solve(problem).details["schedule"] is not None

@@ -33,6 +33,28 @@ from app.solvers.cpsat.time_scale import TimeScale
 from app.solvers.units import UnitView
 
 
+def team_model_size(problem: Problem) -> int:
+    """Literals of the team model: a presence per (task, robot allowed), an assignment per
+    (team task, robot, feature it covers), an order per two tasks in different zones that
+    one robot may both take (an upper bound: precedence saves some)."""
+    instance, tm = problem.instance, problem.instance.timing
+    on: list[dict[int | None, int]] = [{} for _ in range(tm.n_robots)]
+    total = 0
+    for t in range(tm.n_tasks):
+        pin = problem.pinned.get(t)
+        robots = [pin] if pin is not None else tm.eligible_robots(t)
+        for r in robots:
+            if pin is None and r in problem.unavailable:
+                continue
+            total += 1 + sum(covers(instance.robots[r], f) for f in set(instance.units[t]))
+            on[r][tm.task_zone[t]] = on[r].get(tm.task_zone[t], 0) + 1
+    if tm.has_travel:
+        for counts in on:
+            n = sum(counts.values())
+            total += (n * n - sum(c * c for c in counts.values())) // 2
+    return total
+
+
 class TeamWeights:
     """Integer expected success per (task, robot) of a single-robot task and per (task,
     robot, feature) of a team unit: the integers `optimal` compares (`UnitView`), over the
@@ -95,6 +117,7 @@ class TeamModel:
         self._tasks_on: list[list[int]] = [[] for _ in range(tm.n_robots)]
         self._orders: list[tuple[int, int, cp_model.IntVar]] = []
         self._task_intervals: list[cp_model.IntervalVar] = []
+        self._ancestors = self._ancestor_masks()
         for t in range(tm.n_tasks):
             self._add_task(t)
         self.makespan = self.model.new_int_var(0, self.horizon, "makespan")
@@ -215,11 +238,28 @@ class TeamModel:
                 if tm.task_zone[t] == tm.task_zone[u]:
                     continue
                 both = [self.present[t, r], self.present[u, r]]
+                args = (m, self.problem, self.scale, self.start, self.end)
+                # Where precedence fixes the order, one constraint and no literal.
+                if self._ancestors[u] >> t & 1:
+                    add_after(*args, (r, t, u), both)
+                    continue
+                if self._ancestors[t] >> u & 1:
+                    add_after(*args, (r, u, t), both)
+                    continue
                 before = m.new_bool_var(f"b{r}_{t}_{u}")
                 self._orders.append((t, u, before))
-                args = (m, self.problem, self.scale, self.start, self.end)
                 add_after(*args, (r, t, u), [*both, before])
                 add_after(*args, (r, u, t), [*both, before.Not()])
+
+    def _ancestor_masks(self) -> list[int]:
+        """Per task, a bitmask of the tasks that must end before it starts (a task with a
+        pinned start is a fact and waits for nothing)."""
+        masks = [0] * self.tm.n_tasks
+        for t in self.tm.order:
+            if t not in self.problem.pinned_starts:
+                for p in self.tm.predecessors[t]:
+                    masks[t] |= masks[p] | (1 << p)
+        return masks
 
     def _add_energy(self, r: int) -> None:
         mine = [t for t in self._tasks_on[r] if t not in self.problem.pinned_starts]

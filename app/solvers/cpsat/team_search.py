@@ -28,10 +28,15 @@ from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
 from app.domain.scheduling.schedule import Schedule
 from app.solvers.cpsat.common import Search, model_cost, none_found, proved_none
 from app.solvers.cpsat.outcome import ScheduleOutcome
-from app.solvers.cpsat.team_model import TeamModel, TeamWeights
+from app.solvers.cpsat.team_model import TeamModel, TeamWeights, team_model_size
 from app.solvers.cpsat.time_scale import TimeScale
 from app.solvers.unit_flow import best_units
 from app.solvers.units import UnitView
+
+# The team model is built whole (no large-instance path plans teams yet): past this many
+# literals (presences, unit assignments, travel orders) it is refused with a sentence
+# rather than built for minutes (100 tasks on 5 robots over three zones: ~17,000).
+TEAM_LIMIT = 60_000
 
 TEAM_MODEL = (
     "exact: multi-skill project scheduling (a team's interval shared by optional per-robot "
@@ -86,6 +91,16 @@ def solve_team_schedule(
 ) -> ScheduleOutcome:
     """The best team schedule found within `time_limit_s` (deterministic budget), with what
     is proven. DomainError when CP-SAT proves none exists or none is found in time."""
+    size = team_model_size(problem)
+    if size > TEAM_LIMIT:
+        raise DomainError(
+            "tasks",
+            f"the team schedule model of this instance would have {size:,} literals, above "
+            f"its limit of {TEAM_LIMIT:,} (no large-instance path plans teams yet); plan it "
+            "with 'optimal' or 'greedy', whose teams the list scheduler times "
+            "(docs/schedules.md#teams-in-time)",
+            code="too_large",
+        )
     search = Search(time_limit_s, workers, seed, wall_cap_s=wall_cap_s)
     scale = TimeScale.of(problem)
     weights = TeamWeights(problem)
