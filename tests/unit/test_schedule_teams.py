@@ -36,6 +36,7 @@ from app.domain.scheduling.feasibility import Rule, check_schedule
 from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
 from app.domain.scheduling.schedule import Schedule
 from app.domain.teams import covers
+from app.exchange.mspdi_write import write_mspdi
 from app.schedules import gantt_svg, schedule_csv, schedule_ics
 from app.solvers.registry import get_solver
 
@@ -446,3 +447,20 @@ def test_a_team_instance_past_the_team_models_size_is_refused_with_a_sentence() 
     assert "'optimal'" in err.value.message and "literals" in err.value.message
     # the list scheduler still times optimal's teams
     assert get_solver("optimal").solve(problem).details["schedule"] is not None
+
+
+def test_mspdi_export_has_one_assignment_per_task_and_member() -> None:
+    problem, schedule = _team_plan()
+    root = ET.fromstring(write_mspdi(problem, schedule, project_name="team plan"))
+    ns = "{http://schemas.microsoft.com/project}"
+    uid_of = {t.findtext(f"{ns}Name"): t.findtext(f"{ns}UID") for t in root.iter(f"{ns}Task")}
+    names = {r.findtext(f"{ns}UID"): r.findtext(f"{ns}Name") for r in root.iter(f"{ns}Resource")}
+    held = sorted(
+        (a.findtext(f"{ns}TaskUID"), names[a.findtext(f"{ns}ResourceUID")])
+        for a in root.iter(f"{ns}Assignment")
+    )
+    tasks, robots = problem.instance.tasks, problem.instance.robots
+    expected = sorted(
+        (uid_of[tasks[s.task].name], robots[m].name) for s in schedule.slots for m in s.members
+    )
+    assert held == expected and len(held) == 5
