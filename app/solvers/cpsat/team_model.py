@@ -28,7 +28,7 @@ from ortools.sat.python import cp_model
 
 from app.domain.problem import Problem
 from app.domain.teams import covers
-from app.solvers.cpsat.model import add_after
+from app.solvers.cpsat.model import add_after, zones_to_enter
 from app.solvers.cpsat.time_scale import TimeScale
 from app.solvers.units import UnitView
 
@@ -118,16 +118,18 @@ class TeamModel:
         self._orders: list[tuple[int, int, cp_model.IntVar]] = []
         self._task_intervals: list[cp_model.IntervalVar] = []
         self._ancestors = self._ancestor_masks()
+        self._blocks: list[tuple[int, int, int, cp_model.IntVar, cp_model.IntVar, int]] = []
         for t in range(tm.n_tasks):
             self._add_task(t)
         self.makespan = self.model.new_int_var(0, self.horizon, "makespan")
         for e in self.end:
             self.model.add(self.makespan >= e)
         for r in range(tm.n_robots):
+            entries = self._add_zone_blocks(r) if tm.has_travel else []
             self.model.add_no_overlap(self._intervals[r])
             if tm.has_travel:
                 self._add_travel(r)
-            self._add_energy(r)
+            self._add_energy(r, entries)
         for t, preds in enumerate(tm.predecessors):
             if t not in problem.pinned_starts:
                 for p in preds:
@@ -261,14 +263,42 @@ class TeamModel:
                     masks[t] |= masks[p] | (1 << p)
         return masks
 
-    def _add_energy(self, r: int) -> None:
+    def _add_energy(self, r: int, entries: list[tuple[int, cp_model.IntVar]]) -> None:
+        """Redundant: a robot's work and zone entries fit between its shift start and the
+        makespan."""
         mine = [t for t in self._tasks_on[r] if t not in self.problem.pinned_starts]
         if mine:
             load = cp_model.LinearExpr.weighted_sum(
-                [self.present[t, r] for t in mine],
-                [self.scale.up(self.tm.duration(t, r)) for t in mine],
+                [self.present[t, r] for t in mine] + [v for _, v in entries],
+                [self.scale.up(self.tm.duration(t, r)) for t in mine] + [n for n, _ in entries],
             )
             self.model.add(self.makespan >= self.scale.up(self.tm.shifts[r][0]) + load)
+
+    def _add_zone_blocks(self, r: int) -> list[tuple[int, cp_model.IntVar]]:
+        """Redundant, as in the one-robot model: per zone other than the start zone that
+        the robot may work in, a block as long as the shortest way into it, present when
+        it works there, inside its NoOverlap (it fits in the real gap before its first
+        entry there). (minutes into the zone, visited literal) per zone."""
+        tm, m, up = self.tm, self.model, self.scale.up
+        if tm.robot_zone[r] is None:
+            return []  # it starts at its first task: no first entry to bound
+        a, b = tm.shifts[r]
+        lo = up(a)
+        hi = self.horizon if not math.isfinite(b) else self.scale.down(b)
+        entries = []
+        for z, tasks in zones_to_enter(self.problem, r, self._tasks_on[r]).items():
+            size = up(min(tm.travel_minutes[y][z] for y in range(len(tm.zones)) if y != z))
+            if size <= 0:
+                continue
+            visit = m.new_bool_var(f"visit{r}_{z}")
+            for t in tasks:
+                m.add_implication(self.present[t, r], visit)
+            start = m.new_int_var(lo, max(lo, hi - size), f"enter{r}_{z}")
+            block = m.new_optional_fixed_size_interval_var(start, size, visit, f"way{r}_{z}")
+            self._intervals[r].append(block)
+            self._blocks.append((r, z, size, visit, start, lo))
+            entries.append((size, visit))
+        return entries
 
     def _add_cap(self) -> None:
         cap = self.problem.cap
@@ -318,6 +348,10 @@ class TeamModel:
             m.add_hint(x, key in covered)
         for t, u, before in self._orders:
             m.add_hint(before, (at[t], t) < (at[u], u))
+        for r, z, size, visit, start, lo in self._blocks:
+            there = [at[t] for t in self._tasks_on[r] if r in members[t] and tm.task_zone[t] == z]
+            m.add_hint(visit, bool(there))
+            m.add_hint(start, max(lo, min(there) - size) if there else lo)
         m.add_hint(self.makespan, max(ends, default=0))
 
     def read(self, solver: cp_model.CpSolver) -> tuple[list[list[int]], dict[int, tuple[int, ...]]]:
