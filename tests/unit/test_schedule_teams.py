@@ -464,3 +464,19 @@ def test_mspdi_export_has_one_assignment_per_task_and_member() -> None:
         (uid_of[tasks[s.task].name], robots[m].name) for s in schedule.slots for m in s.members
     )
     assert held == expected and len(held) == 5
+
+
+def test_team_times_finer_than_the_models_unit_are_never_called_optimal() -> None:
+    # Rounded up one by one at the model's scale: the plan is feasible, its bound the
+    # chains' floor, and "optimal" is not claimed (docs/schedules.md#teams-in-time).
+    tasks = tuple(
+        Task(id=t, name=f"t{t}", features=("h",), team={"h": 2} if t % 2 else None, duration=0.0001)
+        for t in range(6)
+    )
+    robots = tuple(Robot(name=f"r{i}", success={"h": 0.5 + i / 10}) for i in range(3))
+    problem = Problem.build(Instance(tasks=tasks, robots=robots), Mode.SUCCESS_FOCUSED)
+    details = get_solver("schedule").solve(problem).details
+    assert details["status"] == "feasible"
+    assert check_schedule(problem, details["schedule"]) == []
+    assert 0 < details["bound"] <= details["objective_value"]
+    assert details["bound_source"] == "precedence chains and work"

@@ -26,7 +26,14 @@ from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
 from app.domain.scheduling.schedule import Schedule
-from app.solvers.cpsat.common import Search, model_cost, none_found, proved_none
+from app.solvers.cpsat.bounds import best_bound
+from app.solvers.cpsat.common import (
+    Search,
+    makespan_floor,
+    model_cost,
+    none_found,
+    proved_none,
+)
 from app.solvers.cpsat.outcome import ScheduleOutcome
 from app.solvers.cpsat.team_model import TeamModel, TeamWeights, team_model_size
 from app.solvers.cpsat.time_scale import TimeScale
@@ -135,8 +142,12 @@ def solve_team_schedule(
     if best is None:
         raise none_found(time_limit_s, TEAM_MODEL)
     proven = scale.exact and status == "OPTIMAL" and es_proven
-    bound = best.makespan if proven else scale.minutes(max(0.0, solver.best_objective_bound))
-    bound = min(bound, best.makespan)
+    # CP-SAT's bound holds for the plan only when times are whole at the model's scale
+    # (rounded-up durations make the model's makespans longer); else the chains' floor.
+    floors = {"precedence chains and work": makespan_floor(problem)}
+    if scale.exact and status != "INFEASIBLE":
+        floors["CP-SAT search"] = scale.minutes(solver.best_objective_bound)
+    bound, source = best_bound(floors, best.makespan, proven)
     search.mark(best.makespan, bound)
     return ScheduleOutcome(
         schedule=best,
@@ -150,8 +161,8 @@ def solve_team_schedule(
         expected_success_bound=expected_success(problem.instance, flow.assignment, flow.teams),
         wall_s=search.elapsed(),
         stages=search.stages,
-        bound_source="CP-SAT search",
-        bounds={"CP-SAT search": bound},
+        bound_source=source,
+        bounds=floors,
         budget=search.summary(),
         trajectory=search.trajectory,
     )
