@@ -39,6 +39,7 @@ from app.domain.teams import covers
 from app.exchange.mspdi_write import write_mspdi
 from app.schedules import gantt_svg, schedule_csv, schedule_ics
 from app.solvers.registry import get_solver
+from benchmarks.team_schedules import measure
 
 ZONES = ("A", "B")
 TEAMS = ({"h": 2}, {"h": 1, "c": 1}, {"c": 2})
@@ -480,3 +481,8 @@ def test_team_times_finer_than_the_models_unit_are_never_called_optimal() -> Non
     assert check_schedule(problem, details["schedule"]) == []
     assert 0 < details["bound"] <= details["objective_value"]
     assert details["bound_source"] == "precedence chains and work"
+
+
+def test_the_team_benchmark_measures_a_method() -> None:
+    row = measure(Mode.BALANCED, "optimal")
+    assert row.method == "optimal" and row.broken == 0 and row.makespan > 0 and 0 < row.es <= 1
