@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import gc
 from collections.abc import Generator, Iterator
+from functools import cache
 from pathlib import Path
 
 import pytest
+from xdist.remote import Producer
+from xdist.scheduler import LoadScopeScheduling
 
 from app.config import Settings
 from tests.fakes.llm_providers import PROVIDERS, Provider
@@ -14,6 +17,7 @@ from tests.fakes.llm_providers import PROVIDERS, Provider
 # The directories whose tests take minutes (servers killed and restarted, a browser), in
 # the order they are handed out: see pytest_collection_modifyitems.
 LONG_FIRST = ("tests/e2e/", "tests/browser/")
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.hookimpl(wrapper=True)
@@ -36,12 +40,11 @@ def pytest_collection(session: pytest.Session) -> Generator[None, object, object
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The long tests first, longest-first scheduling: pytest-xdist's `load` with
-    --maxschedchunk=1 (pyproject.toml) hands tests out from the head of this list one at a
-    time as workers finish, so the end-to-end and browser tests (and the tests marked slow)
-    spread over every worker at the start and the short ones fill in after them; in
-    collection order one of those minutes-long tests could start last and the whole run
-    would wait for it."""
+    """The long tests first, longest-first scheduling: the queue below
+    (pytest_xdist_make_scheduler) hands tests out from the head of this list as workers
+    finish, so the end-to-end and browser tests (and the tests marked slow) spread over
+    every worker at the start and the short ones fill in after them; in collection order
+    one of those minutes-long tests could start last and the whole run would wait for it."""
 
     def rank(item: pytest.Item) -> int:
         if item.get_closest_marker("slow"):  # training runs of a minute, wherever they live
@@ -52,6 +55,40 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         )
 
     items.sort(key=rank)  # stable: within a rank, collection order
+
+
+class ModulesSharingAServer(LoadScopeScheduling):
+    """pytest-xdist's queue (its `loadscope` scheduler, in the order collected): each
+    worker holds up to three tests and takes the next unit from the head as it finishes
+    one. A unit is one test, or a whole end-to-end or browser module whose tests share a
+    module-scoped fixture (a server, often with runs or a PostgreSQL database behind it):
+    handed out one test at a time, such a module's tests landed on every worker and each
+    worker started the module's server again (3 CPU-s or more a time). pytest-xdist's own
+    `loadgroup` cannot do this with pytest 9 (it renames `item._nodeid`, which pytest 9
+    no longer reads)."""
+
+    def _split_scope(self, nodeid: str) -> str:
+        module = nodeid.split("::", 1)[0]
+        return module if _shares_a_server(module) else nodeid
+
+
+@cache
+def _shares_a_server(module: str) -> bool:
+    """Every browser module (tests/browser/conftest.py's `server` is module-scoped), and the
+    end-to-end modules that define a module-scoped fixture."""
+    if module.startswith("tests/browser/"):
+        return True
+    path = ROOT / module
+    return (
+        module.startswith("tests/e2e/") and path.is_file() and 'scope="module"' in path.read_text()
+    )
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Producer) -> ModulesSharingAServer:
+    """The scheduler `make test` runs the suite with (docs/development.md#tests-and-ci-time):
+    the collection order kept (no reordering by unit size)."""
+    config.option.loadscopereorder = False
+    return ModulesSharingAServer(config, log)
 
 
 @pytest.fixture

@@ -157,10 +157,12 @@ def write_mspdi(
             "<Type>1</Type></Resource>"
         )
     out.append("</Resources><Assignments>")
-    for number, (slot, uid) in enumerate(zip(schedule.slots, uids, strict=True), start=1):
+    # One per (task, member): a team task (docs/allocation.md#teams) holds each member.
+    pairs = [(s, uid, r) for s, uid in zip(schedule.slots, uids, strict=True) for r in s.members]
+    for number, (slot, uid, member) in enumerate(pairs, start=1):
         out.append(
             f"<Assignment><UID>{number}</UID><TaskUID>{uid}</TaskUID>"
-            f"<ResourceUID>{slot.robot + 1}</ResourceUID><Finish>{at(slot.end)}</Finish>"
+            f"<ResourceUID>{member + 1}</ResourceUID><Finish>{at(slot.end)}</Finish>"
             f"<Start>{at(slot.start)}</Start><Units>1</Units>"
             f"<Work>{_duration(slot.end - slot.start)}</Work></Assignment>"
         )

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 from datetime import timedelta
 from typing import Protocol
 
-from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -21,12 +20,12 @@ from app.store.webhook_models import (
     WebhookSecret,
     WebhookSubscription,
 )
+from app.webhooks import repository
 from app.webhooks.errors import (
     DeliveryNotFoundError,
     DeliveryStateConflictError,
     DuplicateSubscriptionError,
     IdempotencyKeyReusedError,
-    WebhookNotFoundError,
 )
 from app.webhooks.events import ALL
 from app.webhooks.queue import db_now
@@ -62,26 +61,8 @@ def dedupe_key(url: str, events: list[str]) -> str:
     return hashlib.sha256(json.dumps([url, events]).encode("utf-8")).hexdigest()
 
 
-def _require(session: Session, webhook_id: str) -> WebhookSubscription:
-    sub = session.get(WebhookSubscription, webhook_id)
-    if sub is None or sub.deleted_at is not None:
-        raise WebhookNotFoundError(webhook_id)
-    return sub
-
-
-def _by_key(session: Session, keyed: Keyed) -> WebhookSubscription | None:
-    return session.scalar(
-        select(WebhookSubscription).where(WebhookSubscription.idempotency_key == keyed.key)
-    )
-
-
 def _current_secret(session: Session, box: SecretBox, webhook_id: str) -> str:
-    ciphertext = session.scalar(
-        select(WebhookSecret.ciphertext)
-        .where(WebhookSecret.subscription_id == webhook_id)
-        .order_by(WebhookSecret.id.desc())
-        .limit(1)
-    )
+    ciphertext = repository.newest_ciphertext(session=session, webhook_id=webhook_id)
     return box.decrypt(ciphertext) if ciphertext else ""
 
 
@@ -121,15 +102,13 @@ def create_subscription(
         pass
     with sessions() as session:
         if keyed is not None:
-            earlier = _by_key(session, keyed)
+            earlier = repository.subscription_by_key(session=session, key=keyed.key)
             if earlier is not None:
                 if earlier.request_digest != keyed.digest:
                     raise IdempotencyKeyReusedError(f"it created webhook '{earlier.id}'")
                 return Issued(earlier, _current_secret(session, box, earlier.id)), True
-        duplicate = session.scalar(
-            select(WebhookSubscription.id).where(
-                WebhookSubscription.dedupe_key == dedupe_key(url, events)
-            )
+        duplicate = repository.subscription_id_by_dedupe_key(
+            session=session, dedupe_key=dedupe_key(url, events)
         )
     if duplicate is not None:
         raise DuplicateSubscriptionError(duplicate)
@@ -138,36 +117,22 @@ def create_subscription(
 
 def list_subscriptions(*, sessions: sessionmaker[Session]) -> list[WebhookSubscription]:
     with sessions() as session:
-        return list(
-            session.scalars(
-                select(WebhookSubscription)
-                .where(WebhookSubscription.deleted_at.is_(None))
-                .order_by(WebhookSubscription.created_at, WebhookSubscription.id)
-            )
-        )
+        return repository.live_subscriptions(session=session)
 
 
 def get_subscription(*, sessions: sessionmaker[Session], webhook_id: str) -> WebhookSubscription:
     with sessions() as session:
-        return _require(session, webhook_id)
+        return repository.live_subscription(session=session, webhook_id=webhook_id)
 
 
 def delete_subscription(*, sessions: sessionmaker[Session], webhook_id: str) -> None:
     """Stop sending: undelivered deliveries are cancelled; the log stays readable to the
     database, not through the API."""
     with transaction(sessions) as session:
-        sub = _require(session, webhook_id)
+        sub = repository.live_subscription(session=session, webhook_id=webhook_id)
         sub.deleted_at = utcnow()
         sub.dedupe_key = None
-        session.execute(
-            update(WebhookDelivery)
-            .where(
-                WebhookDelivery.subscription_id == webhook_id,
-                WebhookDelivery.state == DeliveryState.PENDING,
-            )
-            .values(state=DeliveryState.CANCELLED, finished_at=utcnow())
-            .execution_options(synchronize_session=False)
-        )
+        repository.cancel_pending_deliveries(session=session, webhook_id=webhook_id)
 
 
 def rotate_secret(
@@ -182,15 +147,9 @@ def rotate_secret(
     secret = new_secret()
     try:
         with transaction(sessions) as session:
-            sub = _require(session, webhook_id)
-            session.execute(
-                update(WebhookSecret)
-                .where(
-                    WebhookSecret.subscription_id == webhook_id,
-                    WebhookSecret.expires_at.is_(None),
-                )
-                .values(expires_at=db_now(session, grace_s))
-                .execution_options(synchronize_session=False)
+            sub = repository.live_subscription(session=session, webhook_id=webhook_id)
+            repository.expire_open_secrets(
+                session=session, webhook_id=webhook_id, expires_at=db_now(session, grace_s)
             )
             session.add(
                 WebhookSecret(
@@ -205,16 +164,17 @@ def rotate_secret(
         if keyed is None:
             raise
     with sessions() as session:
-        earlier = session.scalar(
-            select(WebhookSecret).where(WebhookSecret.idempotency_key == keyed.key)
-        )
+        earlier = repository.secret_by_key(session=session, key=keyed.key)
         if earlier is None:
             raise RuntimeError("secret rotation failed on an unexpected constraint")
         if earlier.subscription_id != webhook_id or earlier.request_digest != keyed.digest:
             raise IdempotencyKeyReusedError(
                 f"it rotated the secret of webhook '{earlier.subscription_id}'"
             )
-        return Issued(_require(session, webhook_id), box.decrypt(earlier.ciphertext)), True
+        return Issued(
+            repository.live_subscription(session=session, webhook_id=webhook_id),
+            box.decrypt(earlier.ciphertext),
+        ), True
 
 
 @dataclass
@@ -228,24 +188,13 @@ def list_deliveries(
 ) -> list[DeliveryView]:
     """Newest first, each with every attempt (oldest first)."""
     with sessions() as session:
-        _require(session, webhook_id)
-        deliveries = list(
-            session.scalars(
-                select(WebhookDelivery)
-                .where(WebhookDelivery.subscription_id == webhook_id)
-                .order_by(WebhookDelivery.created_at.desc(), WebhookDelivery.id)
-                .limit(limit)
-                .offset(offset)
-            )
+        repository.live_subscription(session=session, webhook_id=webhook_id)
+        deliveries = repository.deliveries_page(
+            session=session, webhook_id=webhook_id, limit=limit, offset=offset
         )
         by_delivery: dict[str, list[WebhookAttempt]] = {d.id: [] for d in deliveries}
-        if deliveries:
-            for attempt in session.scalars(
-                select(WebhookAttempt)
-                .where(WebhookAttempt.delivery_id.in_(list(by_delivery)))
-                .order_by(WebhookAttempt.attempt)
-            ):
-                by_delivery[attempt.delivery_id].append(attempt)
+        for attempt in repository.attempts_of(session=session, delivery_ids=list(by_delivery)):
+            by_delivery[attempt.delivery_id].append(attempt)
     return [DeliveryView(d, by_delivery[d.id]) for d in deliveries]
 
 
@@ -255,7 +204,7 @@ def retry_delivery(
     """Attempt now. A delivered or failed delivery gets one more attempt (its schedule is
     spent); a waiting one is simply brought forward."""
     with transaction(sessions) as session:
-        _require(session, webhook_id)
+        repository.live_subscription(session=session, webhook_id=webhook_id)
         delivery = session.get(WebhookDelivery, delivery_id, with_for_update=True)
         if delivery is None or delivery.subscription_id != webhook_id:
             raise DeliveryNotFoundError(webhook_id, delivery_id)
@@ -267,13 +216,7 @@ def retry_delivery(
             delivery.finished_at = None
         delivery.next_attempt_at = utcnow() - timedelta(seconds=1)
         session.flush()
-        attempts = list(
-            session.scalars(
-                select(WebhookAttempt)
-                .where(WebhookAttempt.delivery_id == delivery_id)
-                .order_by(WebhookAttempt.attempt)
-            )
-        )
+        attempts = repository.attempts_of(session=session, delivery_ids=[delivery_id])
     return DeliveryView(delivery, attempts)
 
 
@@ -281,7 +224,7 @@ def reencrypt_secrets(*, sessions: sessionmaker[Session], box: SecretBox) -> int
     """Re-encrypt every stored secret under the first server key (after a new key was put
     first in LTAA_SECRET_KEY); the old key may then be dropped. Returns how many rows."""
     with transaction(sessions) as session:
-        rows = list(session.scalars(select(WebhookSecret).with_for_update()))
+        rows = repository.secrets_for_update(session=session)
         for row in rows:
             row.ciphertext = box.rotate(row.ciphertext)
     return len(rows)

@@ -3,6 +3,7 @@ the provider's fake on loopback failing the way real networks do."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -59,22 +60,30 @@ def test_a_run_through_transport_faults_and_a_poor_answer(
         assert {r["model"] for r in api.requests} == {provider.model}
 
 
-def test_an_unconfigured_provider_is_a_422_naming_the_setting(
-    tmp_path: Path, provider: Provider
-) -> None:
-    # The SDKs' own variables point at a live server: the openai one must never be used.
+@pytest.fixture(scope="module")
+def unconfigured(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> Iterator[tuple[Server, FakeChatCompletionsAPI]]:
+    """One server with no provider configured, for both providers' refusals (each refused
+    run writes nothing, so neither check sees the other's): a server start is 2-3 CPU-s.
+    The SDKs' own variables point at a live decoy: the openai one must never be used."""
     with FakeChatCompletionsAPI() as decoy:
         env = {"OPENAI_BASE_URL": decoy.base_url, "OPENAI_API_KEY": "sk-from-the-environment"}
-        server = Server(tmp_path / "data", env=env).start()
+        server = Server(tmp_path_factory.mktemp("unconfigured") / "data", env=env).start()
         try:
-            with server.client() as c:
-                response = c.post(
-                    "/runs", json={"scenario": "baseline", "reasoner": provider.reasoner}
-                )
-                assert response.status_code == 422
-                assert response.json()["detail"][0]["loc"] == ["body", "reasoner"]
-                assert provider.missing_setting in response.json()["detail"][0]["msg"]
-                assert c.get("/runs").json() == []
+            yield server, decoy
         finally:
             server.stop()
-        assert decoy.requests == []
+
+
+def test_an_unconfigured_provider_is_a_422_naming_the_setting(
+    unconfigured: tuple[Server, FakeChatCompletionsAPI], provider: Provider
+) -> None:
+    server, decoy = unconfigured
+    with server.client() as c:
+        response = c.post("/runs", json={"scenario": "baseline", "reasoner": provider.reasoner})
+        assert response.status_code == 422
+        assert response.json()["detail"][0]["loc"] == ["body", "reasoner"]
+        assert provider.missing_setting in response.json()["detail"][0]["msg"]
+        assert c.get("/runs").json() == []
+    assert decoy.requests == []
