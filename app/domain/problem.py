@@ -26,13 +26,14 @@ from types import MappingProxyType
 import numpy as np
 
 from app.domain.cap import WorkloadCap
-from app.domain.completion import completable
+from app.domain.completion import TeamLeft, completable, units_completable
 from app.domain.eligibility import check_time_arguments
 from app.domain.errors import DomainError, InfeasibleCapError
 from app.domain.metrics import BalanceScope
 from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.objective import Objective
+from app.domain.teams import covers
 
 _NO_PINS: Mapping[int, int] = MappingProxyType({})
 _NO_STARTS: Mapping[int, float] = MappingProxyType({})
@@ -144,8 +145,10 @@ class Problem:
         eligibility restrictions (docs/allocation.md#teams) only eligible robots, and when the
         free tasks are placed in queue order (`in_order`) only those after whose choice every
         later free task still gets an eligible robot within the cap."""
-        robots = self.cap.feasible_robots(loads, remaining_after)
         eligible = self.instance.eligible
+        if self.instance.has_teams:
+            return self._unit_feasible(task_index, loads, in_order=in_order)
+        robots = self.cap.feasible_robots(loads, remaining_after)
         if eligible.all():
             return robots
         robots = [r for r in robots if eligible[task_index, r]]
@@ -161,6 +164,74 @@ class Problem:
             if completable(rows, balanced, self.cap.lower, self.cap.upper):
                 out.append(r)
         return out
+
+    def _unit_feasible(self, task_index: int, loads: Sequence[int], *, in_order: bool) -> list[int]:
+        """feasible_robots on an instance with team tasks, where loads count units. For a team
+        task: the robots that may join its team (eligible, with room under the cap); the
+        team is then checked whole (`team_problem`)."""
+        eligible = self.instance.eligible[task_index]
+        upper = self.cap.upper
+        robots = [r for r in self.available if eligible[r] and loads[r] < upper]
+        if self.instance.units[task_index] or not in_order:
+            return robots
+        out = []
+        for r in robots:
+            after = list(loads)
+            after[r] += 1
+            if self.completes_after(task_index, after):
+                out.append(r)
+        return out
+
+    @cached_property
+    def _team_left(self) -> dict[int, TeamLeft]:
+        """Per team task: per feature, its count and the available robots that may cover it."""
+        inst, cols = self.instance, self.available
+        out: dict[int, TeamLeft] = {}
+        for t, units in enumerate(inst.units):
+            if units:
+                out[t] = [
+                    (
+                        units.count(f),
+                        np.array([covers(inst.robots[c], f) for c in cols])
+                        & inst.eligible[t, list(cols)],
+                    )
+                    for f in dict.fromkeys(units)
+                ]
+        return out
+
+    def completes_after(self, task_index: int, loads_after: Sequence[int]) -> bool:
+        """Can every free task after `task_index` (every unit of a team) still get a distinct
+        eligible robot within the cap, from `loads_after` (docs/allocation.md#teams)?"""
+        later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
+        units = self.instance.units
+        singles = [t for t in later if not units[t]]
+        rows = self.instance.eligible[np.ix_(singles, self.available)]
+        teams = [self._team_left[t] for t in later if units[t]]
+        balanced = [loads_after[c] for c in self.available]
+        return units_completable(rows, teams, balanced, self.cap.lower, self.cap.upper)
+
+    def team_problem(
+        self, task_index: int, loads: Sequence[int], members: Sequence[int]
+    ) -> str | None:
+        """Why giving team task `task_index` to `members` breaks the cap (None: it does not)."""
+        names = self.instance.robots
+        after = list(loads)
+        for r in members:
+            if r in self.unavailable:
+                return f"{names[r].display} is unavailable"
+            after[r] += 1
+            if after[r] > self.cap.upper:
+                return (
+                    f"{names[r].display} would carry {after[r]} tasks, above the cap's "
+                    f"{self.cap.upper}"
+                )
+        if not self.completes_after(task_index, after):
+            return (
+                "this team would make the workload cap infeasible for the tasks after it "
+                "(some later task could no longer get eligible robots within "
+                f"[{self.cap.lower}, {self.cap.upper}] tasks per robot)"
+            )
+        return None
 
     def remaining_after(self, task_index: int) -> int:
         """Free tasks after `task_index` in the queue."""

@@ -42,7 +42,7 @@ class SolverOptions(BaseModel):
 
 
 # The methods that plan team tasks (docs/allocation.md#teams); the others refuse them.
-TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy")
+TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "ltaa")
 
 
 class Solver(ABC):
