@@ -127,6 +127,12 @@ def run_view(
         usage = records.usage_of_totals(replies)
         signed = signoffs(session=session, run_id=run_id)
         completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
+        # docs/allocation.md#teams: a team decision counts for each member.
+        teams = (
+            decision_repo.decision_teams(session=session, run_id=run_id)
+            if any(t.get("team") for t in spec.instance_data["tasks"])
+            else []
+        )
         # Every decision's robot only once the run is complete, for its metrics.
         outcomes = (
             decision_repo.decision_outcomes(session=session, run_id=run_id)
@@ -137,14 +143,21 @@ def run_view(
     workload = dict.fromkeys(names, 0)
     for robot, n in sorted(totals.by_robot.items()):
         workload[names[robot]] += n
+    for team in teams:  # the first member is the decision's robot, counted above
+        for member in team[1:]:
+            workload[member["robot"]] += 1
     metrics = _METRICS.get(run_id) if completed else None
     if completed and metrics is None:
         problem = spec.problem
+        index = {name: i for i, name in enumerate(names)}
         metrics = compute_metrics(
             problem.instance,
             [o.robot for o in outcomes],
             seed=spec.seed,
             scope=problem.balance_scope,
+            teams={
+                o.task_index: tuple(index[m["robot"]] for m in o.team) for o in outcomes if o.team
+            },
         )
         if problem.pinned:
             # A pin keeps the success it was decided with, whatever set_rates changed.

@@ -87,6 +87,16 @@ def decisions_page(
     return list(session.scalars(query.order_by(Decision.task_index).limit(limit)))
 
 
+def decision_teams(*, session: Session, run_id: str) -> list[Any]:
+    """The members of a run's team decisions (docs/allocation.md#teams), in task order."""
+    rows = session.scalars(
+        select(Decision.team)
+        .where(Decision.run_id == run_id, Decision.team.is_not(None))
+        .order_by(Decision.task_index)
+    )
+    return [team for team in rows if team]  # (a JSON null, should one be stored, is no team)
+
+
 def attempts_of_tasks(
     *, session: Session, run_id: str, first: int, last: int
 ) -> dict[int, list[Attempt]]:
@@ -123,11 +133,17 @@ def decisions_slice(
 
 
 def decision_outcomes(*, session: Session, run_id: str) -> list[Any]:
-    """(task_index, robot, regret, expected_success) of every decision in task order: the
-    few columns a run's totals need, without loading each row's record."""
+    """(task_index, robot, regret, expected_success, team) of every decision in task order:
+    the few columns a run's totals need, without loading each row's record."""
     return list(
         session.execute(
-            select(Decision.task_index, Decision.robot, Decision.regret, Decision.expected_success)
+            select(
+                Decision.task_index,
+                Decision.robot,
+                Decision.regret,
+                Decision.expected_success,
+                Decision.team,
+            )
             .where(Decision.run_id == run_id)
             .order_by(Decision.task_index)
         )

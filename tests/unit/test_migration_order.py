@@ -34,6 +34,7 @@ RECORDED = [
     "0010_sites",
     "0011_times",
     "0012_unmeasured",
+    "0013_decision_team",
 ]
 
 
