@@ -87,16 +87,6 @@ def decisions_page(
     return list(session.scalars(query.order_by(Decision.task_index).limit(limit)))
 
 
-def decision_teams(*, session: Session, run_id: str) -> list[Any]:
-    """The members of a run's team decisions (docs/allocation.md#teams), in task order."""
-    rows = session.scalars(
-        select(Decision.team)
-        .where(Decision.run_id == run_id, Decision.team.is_not(None))
-        .order_by(Decision.task_index)
-    )
-    return [team for team in rows if team]  # (a JSON null, should one be stored, is no team)
-
-
 def attempts_of_tasks(
     *, session: Session, run_id: str, first: int, last: int
 ) -> dict[int, list[Attempt]]:
@@ -137,13 +127,8 @@ def decision_outcomes(*, session: Session, run_id: str) -> list[Any]:
     the few columns a run's totals need, without loading each row's record."""
     return list(
         session.execute(
-            select(
-                Decision.task_index,
-                Decision.robot,
-                Decision.regret,
-                Decision.expected_success,
-                Decision.team,
-            )
+            select(Decision.task_index, Decision.robot, Decision.regret)
+            .add_columns(Decision.expected_success, Decision.team)
             .where(Decision.run_id == run_id)
             .order_by(Decision.task_index)
         )

@@ -107,7 +107,9 @@ def test_a_timed_team_run_is_still_refused_with_a_sentence(client: TestClient) -
 
 
 def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
-    r = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), "review": {"on": ["every_decision"]}})
+    r = client.post(
+        "/runs", json={**copy.deepcopy(TEAM_BODY), "review": {"on": ["every_decision"]}}
+    )
     assert r.status_code == 422, r.text
     (item,) = assert_error_shape(r.json())
     assert item["loc"][-1] == "review" and "team" in item["msg"]
