@@ -6,11 +6,12 @@ label). Every error names the offending entry by its dotted path in the request.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from app.domain.errors import DomainError
 from app.domain.models import Instance, TaskId
+from app.domain.teams import team_problem
 
 
 @dataclass(frozen=True)
@@ -81,3 +82,23 @@ def resolve_pins(
             code="no_robot_left",
         )
     return Pins(pinned=pins, unavailable=frozenset(off))
+
+
+def checked_pinned_teams(
+    instance: Instance, pins: Mapping[int, int], teams: Mapping[int, Sequence[int]]
+) -> dict[int, tuple[int, ...]]:
+    """A pinned team is a pinned team task's whole team, its first member the pin's robot."""
+    out: dict[int, tuple[int, ...]] = {}
+    for task, members in sorted(teams.items()):
+        chosen = tuple(members)
+        if task not in pins or not chosen or chosen[0] != pins[task]:
+            raise DomainError(
+                "pinned", f"the team pinned on task index {task} does not match its pin"
+            )
+        why = team_problem(instance.tasks[task], instance.robots, chosen)
+        if why is not None:
+            raise DomainError(
+                "pinned", f"the team pinned on task {instance.tasks[task].id!r} is invalid: {why}"
+            )
+        out[task] = chosen
+    return out

@@ -33,10 +33,12 @@ from app.domain.metrics import BalanceScope
 from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.objective import Objective
+from app.domain.pins import checked_pinned_teams
 from app.domain.teams import covers
 
 _NO_PINS: Mapping[int, int] = MappingProxyType({})
 _NO_STARTS: Mapping[int, float] = MappingProxyType({})
+_NO_TEAMS: Mapping[int, tuple[int, ...]] = MappingProxyType({})
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,11 @@ class Problem:
     # docs/schedules.md#the-order-of-decisions). Empty: the earliest-start order. Set with
     # dataclasses.replace, never by build().
     decide_by: Mapping[int, float] = field(default_factory=lambda: _NO_STARTS, hash=False)
+    # docs/living-plans.md#teams-in-a-revision: task index -> the members (unit order) of a pinned
+    # team task; its `pinned` robot is the first. Every available member carries the pin's load.
+    pinned_teams: Mapping[int, tuple[int, ...]] = field(
+        default_factory=lambda: _NO_TEAMS, hash=False
+    )
 
     @classmethod
     def build(
@@ -70,12 +77,14 @@ class Problem:
         objective: Objective | None = None,
         pinned_starts: Mapping[int, float] | None = None,
         not_before: float = 0.0,
+        pinned_teams: Mapping[int, Sequence[int]] | None = None,
     ) -> Problem:
         """Apply the mode's default cap (for the W of the available fleet) unless
         `max_deviation` overrides it (or `uncapped` asks for no cap at all); reject
         infeasible caps, including caps the pins already break. The time arguments are for
         timed instances only."""
         pins = _checked_pins(instance, pinned or {})
+        teams = checked_pinned_teams(instance, pins, pinned_teams or {})
         off = _checked_unavailable(instance, unavailable)
         objective = objective or Objective()
         starts = check_time_arguments(
@@ -84,7 +93,7 @@ class Problem:
         n_available = instance.n_robots - len(off)
         # Loads count units (docs/allocation.md#teams): a team task once per member.
         added = instance.loads_added
-        balance_tasks = sum(1 for r in pins.values() if r not in off)
+        balance_tasks = sum(1 for t, r in pins.items() for m in teams.get(t, (r,)) if m not in off)
         balance_tasks += instance.n_units - sum(added[t] for t in pins)
         if uncapped:
             max_deviation = None
@@ -102,8 +111,10 @@ class Problem:
             objective=objective,
             pinned_starts=MappingProxyType(starts),
             not_before=float(not_before),
+            pinned_teams=MappingProxyType(teams),
         )
         if pins or off:
+            problem._ensure_formable()
             problem._ensure_completable()
         else:
             cap.ensure_feasible()
@@ -127,9 +138,10 @@ class Problem:
     def initial_loads(self) -> tuple[int, ...]:
         """Per robot of the fleet: the pins on it if available, 0 if unavailable."""
         loads = [0] * self.instance.n_robots
-        for robot in self.pinned.values():
-            if robot not in self.unavailable:
-                loads[robot] += 1
+        for task, robot in self.pinned.items():
+            for member in self.pinned_teams.get(task, (robot,)):
+                if member not in self.unavailable:
+                    loads[member] += 1
         return tuple(loads)
 
     @cached_property
@@ -270,6 +282,42 @@ class Problem:
         return assignment
 
     # -- validation ------------------------------------------------------------------------
+
+    def _ensure_formable(self) -> None:
+        """With team tasks (docs/living-plans.md#teams-in-a-revision): every free team task can
+        still be formed from the available robots, each unit by a distinct robot that may cover
+        it, and all of them together within the cap; else a 422 naming the task and feature."""
+        inst = self.instance
+        if not inst.has_teams:
+            return
+        robots = inst.robots
+        off = [robots[r].name for r in sorted(self.unavailable)]
+        gone = f" ({', '.join(off)} unavailable)" if off else ""
+        for t in self.free_tasks:
+            units = inst.units[t]
+            for f in dict.fromkeys(units):
+                need = units.count(f)
+                able = [
+                    robots[r].name
+                    for r in self.available
+                    if inst.eligible[t, r] and covers(robots[r], f)
+                ]
+                if len(able) < need:
+                    can = f"only {len(able)} can ({', '.join(able)})" if able else "none can"
+                    raise DomainError(
+                        f"tasks.{t}.team.{f}",
+                        f"task {inst.tasks[t].id!r} needs {need} distinct robots for '{f}' "
+                        f"at once, and of the available robots {can}{gone}; make a robot that "
+                        f"covers '{f}' available again, add one, or remove the task",
+                        code="team_unformable",
+                    )
+        if not self.completes_after(-1, self.initial_loads):
+            raise InfeasibleCapError(
+                "the free tasks' teams cannot all be formed within the workload cap "
+                f"[{self.cap.lower}, {self.cap.upper}] tasks per available robot{gone}, "
+                "given the pins; raise max_deviation or make a robot available again",
+                field="pinned",
+            )
 
     def _ensure_completable(self) -> None:
         cap, free = self.cap, self.free_units

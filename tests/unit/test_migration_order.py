@@ -35,6 +35,7 @@ RECORDED = [
     "0011_times",
     "0012_unmeasured",
     "0013_decision_team",
+    "0014_site_report_members",
 ]
 
 
