@@ -88,7 +88,7 @@ class Problem:
         off = _checked_unavailable(instance, unavailable)
         objective = objective or Objective()
         starts = check_time_arguments(
-            instance, pins, off, objective, dict(pinned_starts or {}), not_before
+            instance, pins, off, objective, dict(pinned_starts or {}), not_before, teams=teams
         )
         n_available = instance.n_robots - len(off)
         # Loads count units (docs/allocation.md#teams): a team task once per member.
@@ -292,7 +292,7 @@ class Problem:
             return
         robots = inst.robots
         off = [robots[r].name for r in sorted(self.unavailable)]
-        gone = f" ({', '.join(off)} unavailable)" if off else ""
+        gone = f", with {', '.join(off)} unavailable" if off else ""
         for t in self.free_tasks:
             units = inst.units[t]
             for f in dict.fromkeys(units):
