@@ -128,3 +128,42 @@ def test_a_revision_carries_a_team_report_and_it_counts_once(client: TestClient)
     sessions = client.app.state.runs.sessions  # type: ignore[attr-defined]
     comparison = rebuild.compare(sessions=sessions)
     assert comparison.agree and comparison.stored == 5, comparison
+
+
+def test_use_learned_and_set_rates_revise_a_team_run(client: TestClient) -> None:
+    created = client.post("/runs", json=SITE)
+    run = wait_status(client, created.json()["id"], "completed")
+    send(client, run["id"], [{"task_id": "truss", "state": "failed"}])
+    truss = next(a for a in run["assignments"] if a["task_id"] == "truss")["team"]
+    revision = revise(
+        client,
+        run["id"],
+        {
+            "changes": [
+                {"type": "use_learned"},
+                {"type": "set_rates", "robot": "arm", "success": {"careful": 0.5}},
+            ],
+            "reason": "the truss failed",
+        },
+    )["id"]
+    state = wait_status(client, revision, "completed")
+    detail = client.get(f"/runs/{revision}/trace").json()["events"][0]["detail"]
+    estimates = client.get("/sites/yard/estimates").json()
+    for m in truss:  # each member learned one failure on heavy, the feature it covered
+        used = detail["learned"]["robots"][m["robot"]]["heavy"]
+        assert (used["successes"], used["failures"], used["basis"]) == (0, 1, "learned")
+        assert (
+            abs(used["used"] - estimate_of(estimates, m["robot"], "heavy")["posterior_mean"]) < 1e-9
+        )
+        assert detail["learned"]["robots"][m["robot"]]["careful"]["basis"] == "prior"
+    # The revision re-planned with those rates: its decisions' successes are the new teams' means.
+    robots = {r["name"]: dict(r["success"]) for r in ROBOTS}
+    for name, rates in detail["learned"]["robots"].items():
+        robots[name].update({f: r["used"] for f, r in rates.items()})
+    robots["arm"]["careful"] = 0.5
+    truss_now = next(a for a in state["assignments"] if a["task_id"] == "truss")
+    assert not truss_now["pinned"]  # failed: never pinned, re-formed
+    expected = sum(robots[m["robot"]][m["feature"]] for m in truss_now["team"]) / 3
+    assert abs(truss_now["success"] - expected) < 1e-9
+    verify = client.get(f"/runs/{revision}/trace/verify").json()
+    assert verify["ok"] is True, verify

@@ -124,9 +124,7 @@ def test_a_member_unavailable_re_forms_its_team_and_pins_keep_whole_teams(
     assert gone in moved["panel"]["members_left"]
     assert moved["panel"]["from_team"] == by_id["panel"]["team"]
     assert moved["panel"]["to_team"] == now["panel"]["team"]
-    assert moved["panel"]["members_joined"] == [
-        r for r in members(now["panel"]) if r not in panel
-    ]
+    assert moved["panel"]["members_joined"] == [r for r in members(now["panel"]) if r not in panel]
     assert "beam" not in moved
     # Every team task that held the robot was re-formed without it.
     for task_id, a in by_id.items():
