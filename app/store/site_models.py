@@ -1,12 +1,13 @@
 """The site's outcomes (docs/estimates.md#counting-each-report-once): one row per task reported done
-or failed (a team task: one per member), written in the same transaction as the report, so the estimates of a site with 100,000
-reports are one indexed aggregate rather than a walk over every run's record.
+or failed (a team task: one per member), written in the same transaction as the report, so the
+estimates of a site with 100,000 reports are one indexed aggregate rather than a walk over every
+run's record.
 
 The row is derived, never the record: `ltaa rebuild-estimates` recomputes the table from the
 execution-report events and annotations (app.sites.rebuild), and a test proves both agree.
 A report is counted on the run it was sent to; the copies a revision carries of its pinned
 tasks' reports are no reports and write no row (the unique key would refuse a second row
-for the same run and task anyway).
+for the same run, task and robot anyway).
 """
 
 from __future__ import annotations
