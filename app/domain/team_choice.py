@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 from app.domain.decision import DecisionContext, Members, TeamFacts, percent
@@ -24,11 +24,17 @@ MAX_TEAMS = 20_000
 _SPARE = 3  # robots kept per feature beyond its count when the teams are too many
 
 
+def by_rate(rates: Sequence[float | None], robots: Iterable[int]) -> list[int]:
+    """The robots that may cover a feature (rate not None), the best-rated first."""
+
+    def key(r: int) -> tuple[float, int]:
+        return (-(rates[r] or 0.0), r)
+
+    return sorted((r for r in robots if rates[r] is not None), key=key)
+
+
 def _coverers(facts: TeamFacts, allowed: Sequence[int]) -> list[list[int]]:
-    out = []
-    for k in range(len(facts.features)):
-        able = [r for r in allowed if facts.rates[k][r] is not None]
-        out.append(sorted(able, key=lambda r, k=k: (-(facts.rates[k][r] or 0.0), r)))
+    out = [by_rate(rates, allowed) for rates in facts.rates]
     pairs = list(zip(out, facts.features, strict=True))
     total = math.prod(math.comb(len(a), facts.count(f)) for a, f in pairs)
     if total > MAX_TEAMS:

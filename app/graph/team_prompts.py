@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from app.domain.decision import DecisionContext, TeamFacts, percent
 from app.domain.modes import tradeoff_threshold
-from app.domain.team_choice import describe_team, team_summary
+from app.domain.team_choice import by_rate, describe_team, team_summary
 from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 
 TEAM_FORMAT = """Reply in exactly this format:
@@ -40,10 +40,7 @@ def team_facts_text(ctx: DecisionContext) -> str:
     ]
     units = []
     for k, f in enumerate(facts.features):
-        able = sorted(
-            (r for r, x in enumerate(facts.rates[k]) if x is not None),
-            key=lambda r, k=k: (-(facts.rates[k][r] or 0.0), r),
-        )
+        able = by_rate(facts.rates[k], range(len(labels)))
         who = ", ".join(f"{labels[r]} {percent(facts.rates[k][r] or 0.0)}" for r in able)
         units.append(f"- {f} x{facts.count(f)}: {who or 'no allowed robot'}")
     cap = (

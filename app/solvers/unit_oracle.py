@@ -109,8 +109,8 @@ class UnitOracle:
             return None
         pinned = problem.pinned.get(task_index)
         if pinned is not None:
-            costs = tuple(0.0 if r == pinned else None for r in range(n_robots))
-            return GuidedChoice(robot=pinned, costs=costs)
+            pin_costs = tuple(0.0 if r == pinned else None for r in range(n_robots))
+            return GuidedChoice(robot=pinned, costs=pin_costs)
         position = self._position(task_index)
         best = self._best(position, loads)
         if best is None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from app.graph.prompts import prompt_for
+from app.graph.recorder import DecisionRecord
 from app.graph.validation import validate_text
 from app.reasoners.anthropic import AnthropicReasoner
 from app.reasoners.openai import OpenAIReasoner
@@ -26,7 +27,7 @@ def test_the_fake_answers_every_tier_of_a_team_prompt_with_a_valid_team() -> Non
             assert ctx.team is not None and verdict.team in (ctx.team.best, ctx.team.guided)
 
 
-def _teams(decisions: list) -> list:  # type: ignore[type-arg]
+def _teams(decisions: list[DecisionRecord]) -> list[list[dict[str, str]] | None]:
     return [d.team for d in decisions]
 
 
