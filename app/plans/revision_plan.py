@@ -222,14 +222,15 @@ def _problem(
     times: RevisionTimes,
     teams: dict[int, list[int]],
 ) -> Problem:
-    # docs/living-plans.md#teams-in-a-revision: the graph forms teams on untimed instances only.
-    if instance.timed:
-        refuse_teams(
-            instance.tasks,
-            "a run's revision on a timed instance",
-            "plan team tasks in time with POST /allocate",
-        )
     try:
+        # docs/living-plans.md#teams-in-a-revision: the graph forms teams on untimed instances
+        # only; timed team runs are still refused until teams are scheduled in time.
+        if instance.timed:
+            refuse_teams(
+                instance.tasks,
+                "a run's revision on a timed instance",
+                "plan team tasks in time with POST /allocate",
+            )
         return Problem.build(
             instance,
             mode,

@@ -202,3 +202,24 @@ def test_an_added_team_task_is_planned_with_a_team(client: TestClient, tmp_path:
     for was, now in zip(parent["assignments"], revision["assignments"][:-1], strict=True):
         assert now["pinned"] and now.get("team") == was.get("team")
     verified(client, created["id"], tmp_path)
+
+
+def test_a_team_task_added_to_a_timed_run_is_refused_with_a_sentence(client: TestClient) -> None:
+    tasks = [
+        {"id": "pour", "features": ["heavy"], "duration": 30},
+        {"id": "trim", "features": ["careful"], "duration": 20},
+    ]
+    created = client.post("/runs", json={**BODY, "tasks": tasks})
+    assert created.status_code == 202, created.text
+    parent = wait_status(client, created.json()["id"], "completed")
+    before = client.get("/runs").json()
+    added = {"id": "mast", "team": {"heavy": 2}, "duration": 15}
+    r = client.post(
+        f"/runs/{parent['id']}/revisions",
+        json={"changes": [{"type": "add_tasks", "tasks": [added]}], "reason": "mast"},
+    )
+    assert r.status_code == 422, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"][-1] == "changes"
+    assert "'mast' needs a team" in item["msg"] and "timed instance" in item["msg"]
+    assert client.get("/runs").json() == before
