@@ -82,42 +82,43 @@ def test_a_free_team_the_available_robots_cannot_form_names_task_and_feature() -
     assert "crane, hoist unavailable" in message
 
 
+def _units(task: Task) -> list[str]:
+    return [f for f, c in (task.team or {}).items() for _ in range(c)]
+
+
+def _staffing_success(inst: Instance, t: int, members: tuple[int, ...]) -> float:
+    task = inst.tasks[t]
+    units = _units(task)
+    if not units:
+        rates = inst.robots[members[0]].success
+        return sum(rates[f] for f in task.features) / len(task.features)
+    return sum(inst.robots[r].success[f] for r, f in zip(members, units, strict=True)) / len(units)
+
+
+def _may_cover(robot: Robot, feature: str) -> bool:
+    return robot.skills is None or feature in robot.skills
+
+
 def _exhaustive(problem: Problem) -> float:
-    """Best total success of the free tasks by trying every staffing (cap ignored: uncapped)."""
+    """Best total success of the free tasks by trying every staffing (uncapped)."""
     inst = problem.instance
-    options = []
+    options: list[list[tuple[int, ...]]] = []
     for t in problem.free_tasks:
-        task = inst.tasks[t]
-        if task.team is None:
+        units = _units(inst.tasks[t])
+        if not units:
             options.append([(r,) for r in problem.available])
             continue
-        units = [f for f, c in task.team.items() for _ in range(c)]
         options.append(
             [
                 m
                 for m in itertools.permutations(problem.available, len(units))
-                if all(
-                    inst.robots[r].skills is None or f in inst.robots[r].skills
-                    for r, f in zip(m, units, strict=True)
-                )
+                if all(_may_cover(inst.robots[r], f) for r, f in zip(m, units, strict=True))
             ]
         )
-    best = 0.0
-    for choice in itertools.product(*options):
-        total = 0.0
-        for t, members in zip(problem.free_tasks, choice, strict=True):
-            task = inst.tasks[t]
-            units = [f for f, c in task.team.items() for _ in range(c)] if task.team else None
-            if units is None:
-                total += sum(inst.robots[members[0]].success[f] for f in task.features) / len(
-                    task.features
-                )
-            else:
-                total += sum(
-                    inst.robots[r].success[f] for r, f in zip(members, units, strict=True)
-                ) / len(units)
-        best = max(best, total)
-    return best
+    return max(
+        sum(_staffing_success(inst, t, m) for t, m in zip(problem.free_tasks, choice, strict=True))
+        for choice in itertools.product(*options)
+    )
 
 
 def test_optimal_plans_the_rest_around_a_pinned_team() -> None:
@@ -132,20 +133,12 @@ def test_optimal_plans_the_rest_around_a_pinned_team() -> None:
     )
     solution = get_solver("optimal").solve(problem)
     assert solution.assignment[0] == CRANE
-    free = [t for t in problem.free_tasks]
+    free = list(problem.free_tasks)
     for t in free:
         members = solution.teams.get(t, (solution.assignment[t],))
         assert LIFTER not in members
-    inst = problem.instance
-    got = 0.0
-    for t in free:
-        task = inst.tasks[t]
-        if task.team is None:
-            r = solution.assignment[t]
-            got += sum(inst.robots[r].success[f] for f in task.features) / len(task.features)
-        else:
-            units = [f for f, c in task.team.items() for _ in range(c)]
-            got += sum(
-                inst.robots[r].success[f] for r, f in zip(solution.teams[t], units, strict=True)
-            ) / len(units)
+    got = sum(
+        _staffing_success(problem.instance, t, solution.teams.get(t, (solution.assignment[t],)))
+        for t in free
+    )
     assert got == pytest.approx(_exhaustive(problem))
