@@ -130,7 +130,13 @@ def test_a_member_unavailable_re_forms_its_team_and_pins_keep_whole_teams(
     for task_id, a in by_id.items():
         if gone in members(a) and task_id != "beam":
             assert task_id in moved and gone in moved[task_id]["members_left"]
-    for run_id in (parent["id"], created["id"]):
+    # A revision of the revision pins its teams whole too (its pins' rows carry the team).
+    again = revise(client, created["id"], {"changes": [], "pin": "decided", "reason": "hold"})
+    kept = wait_status(client, again["id"], "completed")
+    assert [(a["pinned"], a.get("team")) for a in kept["assignments"]] == [
+        (True, a.get("team")) for a in revision["assignments"]
+    ]
+    for run_id in (parent["id"], created["id"], again["id"]):
         verified(client, run_id, tmp_path)
 
 
