@@ -12,6 +12,7 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
+from app.cli.revise import held_by
 from tests.api.test_api_bad_requests import assert_error_shape
 from tests.api.test_docs_check_trace import check_trace_source
 from tests.api.test_revisions import revise, wait_status
@@ -126,6 +127,11 @@ def test_a_member_unavailable_re_forms_its_team_and_pins_keep_whole_teams(
     assert moved["panel"]["to_team"] == now["panel"]["team"]
     assert moved["panel"]["members_joined"] == [r for r in members(now["panel"]) if r not in panel]
     assert "beam" not in moved
+    # The console's diff and `ltaa revise` show every member, before and after.
+    fragment = client.get(f"/console/runs/{created['id']}/diff", params={"fragment": 1}).text
+    row = fragment[fragment.index('data-task="panel"') :].split("</tr>")[0]
+    assert " + ".join(panel) in row and " + ".join(members(now["panel"])) in row
+    assert held_by(moved["panel"], "from") == " + ".join(panel)
     # Every team task that held the robot was re-formed without it.
     for task_id, a in by_id.items():
         if gone in members(a) and task_id != "beam":
