@@ -53,7 +53,10 @@ def check_teams(assignments: list[dict[str, Any]]) -> dict[str, int]:
     return loads
 
 
-def test_a_durable_team_run_lists_members_and_verifies(client: TestClient, tmp_path: Path) -> None:
+def test_a_durable_team_run_lists_members_and_verifies(
+    any_db_client: TestClient, tmp_path: Path
+) -> None:
+    client = any_db_client
     state = completed(client, reasoner="rules")
     run_id = state["id"]
     run = client.get(f"/runs/{run_id}").json()
