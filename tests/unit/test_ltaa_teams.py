@@ -21,6 +21,7 @@ from app.graph.prompts import TARGET_USER_PROMPT_CHARS, prompt_for, prompt_size
 from app.graph.state import task_view
 from app.graph.validation import validate_text
 from app.reasoners.rules import choose_team, compose_answer
+from app.reasoners.scope import is_contested
 from app.solvers.registry import get_solver
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
 from tests.unit.ltaa_support import run
@@ -311,3 +312,10 @@ def test_the_unit_completion_check_agrees_with_exhaustive_search(seed: int) -> N
         expected = _brute_completes(instance, problem, after, loads)
         assert problem.completes_after(after, loads) == expected, (seed, after, loads)
         checked += 1
+
+
+def test_llm_scope_judges_a_team_decision_on_its_two_candidate_teams() -> None:
+    # A 42.5-point gap is far from every threshold: clear-cut, the rules answer it.
+    assert not is_contested(ctx_at(PROBLEM, 1, [2, 0, 2, 0]))
+    # Guidance naming another team than the rule's makes it contested.
+    assert is_contested(ctx_at(PROBLEM, 1, [2, 0, 2, 0], guided=[LIFTER, SWEEPER]))
