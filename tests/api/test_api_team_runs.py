@@ -139,3 +139,14 @@ def test_a_durable_llm_team_run_forms_teams_and_replays(
     assert run["assignments"] == reference["assignments"]  # the fakes answer as the rules do
     replay = completed(client, reasoner="replay", replay_of=state["id"])
     assert client.get(f"/runs/{replay['id']}").json()["assignments"] == run["assignments"]
+
+
+def test_ltaa_refuses_a_timed_team_instance_on_allocate(client: TestClient) -> None:
+    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
+    r = client.post(
+        "/allocate", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks, "solver": "ltaa"}
+    )
+    assert r.status_code == 422, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"] == ["body", "tasks", 0, "team"]
+    assert "timed instance" in item["msg"] and "LTAA graph" in item["msg"]
