@@ -70,7 +70,12 @@ def units_completable(
 ) -> bool:
     """`completable` with team tasks among those left: each team task's features get their
     counts of distinct robots, through a (task, robot) gate of capacity 1 per robot. The
-    same max flow otherwise, so it saturates iff a placement within [lower, upper] exists."""
+    same max flow otherwise, so it saturates iff a placement within [lower, upper] exists.
+
+    k identical team tasks share one set of nodes: per feature k x count units, and a gate
+    of capacity k per robot. Exact: split each feature into `count` slots of k units; the
+    flow is then a bipartite multigraph of maximum degree k between slots and robots, which
+    by Koenig's edge-colouring theorem splits into k matchings, one team per task."""
     from scipy.sparse import csr_array
     from scipy.sparse.csgraph import maximum_flow
 
@@ -105,17 +110,21 @@ def units_completable(
             arc(source, k, int(n))
             for col in np.flatnonzero(row):
                 arc(k, 3 + int(col), int(n))
+    alike: dict[tuple[tuple[int, bytes], ...], tuple[TeamLeft, int]] = {}
     for team in teams:
+        key = tuple((n, mask.tobytes()) for n, mask in team)
+        alike[key] = (team, alike[key][1] + 1 if key in alike else 1)
+    for team, copies in alike.values():
         gates: dict[int, int] = {}
         for n, mask in team:
             k = node()
-            arc(source, k, n)
+            arc(source, k, n * copies)
             for col in np.flatnonzero(mask):
                 c = int(col)
                 if c not in gates:
                     gates[c] = node()
-                    arc(gates[c], 3 + c, 1)
-                arc(k, gates[c], 1)
+                    arc(gates[c], 3 + c, copies)
+                arc(k, gates[c], copies)
     for j in range(r):
         arc(3 + j, sink, need[j])
         arc(3 + j, spare, room[j] - need[j])

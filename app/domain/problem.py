@@ -214,13 +214,23 @@ class Problem:
     def completes_after(self, task_index: int, loads_after: Sequence[int]) -> bool:
         """Can every free task after `task_index` (every unit of a team) still get a distinct
         eligible robot within the cap, from `loads_after` (docs/allocation.md#teams)?"""
-        later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
-        units = self.instance.units
-        singles = [t for t in later if not units[t]]
-        rows = self.instance.eligible[np.ix_(singles, self.available)]
-        teams = [self._team_left[t] for t in later if units[t]]
-        balanced = [loads_after[c] for c in self.available]
-        return units_completable(rows, teams, balanced, self.cap.lower, self.cap.upper)
+        balanced = tuple(loads_after[c] for c in self.available)
+        memo = self._completion_memo  # the graph asks the same state several times per task
+        key = (task_index, balanced)
+        if key not in memo:
+            later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
+            units = self.instance.units
+            singles = [t for t in later if not units[t]]
+            rows = self.instance.eligible[np.ix_(singles, self.available)]
+            teams = [self._team_left[t] for t in later if units[t]]
+            memo[key] = units_completable(rows, teams, balanced, self.cap.lower, self.cap.upper)
+            if len(memo) > 4096:  # a run moves forward: the oldest states are not asked again
+                memo.pop(next(iter(memo)), None)
+        return memo[key]
+
+    @cached_property
+    def _completion_memo(self) -> dict[tuple[int, tuple[int, ...]], bool]:
+        return {}
 
     def team_problem(
         self, task_index: int, loads: Sequence[int], members: Sequence[int]

@@ -51,6 +51,9 @@ def team_facts(
     )
 
     def check(members: tuple[int, ...]) -> str | None:
+        # The seam for timed teams: validation, the candidate teams and the fallback all ask
+        # this one question, so "every member free in time (and the deadline met)" is added
+        # here, from the time model, once timed team tasks are scheduled.
         return problem.team_problem(t, loads, members)
 
     facts = TeamFacts(

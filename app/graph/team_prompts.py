@@ -66,8 +66,8 @@ def team_facts_text(ctx: DecisionContext) -> str:
             "Units (robots that may cover each, with their rate for its feature):",
             *units,
             *candidates,
-            f"Target load W = {ctx.target:.1f}; allocated {sum(ctx.loads)}/{ctx.total_tasks}; "
-            f"{cap}.",
+            f"Target load W = {ctx.target:.1f} (units per robot); allocated {number}/"
+            f"{ctx.total_tasks} tasks; {cap}.",
         ]
     )
 

@@ -10,11 +10,14 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pytest
 from fastapi.testclient import TestClient
 
+from tests.api.conftest import ClientFactory
 from tests.api.test_api_bad_requests import assert_error_shape
 from tests.api.test_api_teams import TEAM_BODY
 from tests.api.test_docs_check_trace import check_trace_source
+from tests.fakes.llm_providers import PROVIDERS
 from tests.offline_check import check_offline
 from tests.polling import wait_until
 
@@ -50,7 +53,10 @@ def check_teams(assignments: list[dict[str, Any]]) -> dict[str, int]:
     return loads
 
 
-def test_a_durable_team_run_lists_members_and_verifies(client: TestClient, tmp_path: Path) -> None:
+def test_a_durable_team_run_lists_members_and_verifies(
+    any_db_client: TestClient, tmp_path: Path
+) -> None:
+    client = any_db_client
     state = completed(client, reasoner="rules")
     run_id = state["id"]
     run = client.get(f"/runs/{run_id}").json()
@@ -114,3 +120,33 @@ def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
     (item,) = assert_error_shape(r.json())
     assert item["loc"][-1] == "review" and "team" in item["msg"]
     assert client.get("/runs").json() == []
+
+
+@pytest.mark.parametrize("name", list(PROVIDERS))
+def test_a_durable_llm_team_run_forms_teams_and_replays(
+    make_client: ClientFactory, name: str
+) -> None:
+    provider = PROVIDERS[name]
+    with provider.fake() as api:
+        client = make_client(**provider.settings(api))
+        state = completed(client, reasoner=name)
+        assert len(api.requests) == 4  # one call per decision: every team answer accepted
+    run = client.get(f"/runs/{state['id']}").json()
+    check_teams(run["assignments"])
+    trace = client.get(f"/runs/{state['id']}/trace").json()
+    assert all(not d["fallback"] and d["reasoner"] == name for d in trace["decisions"])
+    reference = client.get(f"/runs/{completed(client, reasoner='rules')['id']}").json()
+    assert run["assignments"] == reference["assignments"]  # the fakes answer as the rules do
+    replay = completed(client, reasoner="replay", replay_of=state["id"])
+    assert client.get(f"/runs/{replay['id']}").json()["assignments"] == run["assignments"]
+
+
+def test_ltaa_refuses_a_timed_team_instance_on_allocate(client: TestClient) -> None:
+    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
+    r = client.post(
+        "/allocate", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks, "solver": "ltaa"}
+    )
+    assert r.status_code == 422, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"] == ["body", "tasks", 0, "team"]
+    assert "timed instance" in item["msg"] and "LTAA graph" in item["msg"]

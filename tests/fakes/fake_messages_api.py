@@ -137,7 +137,9 @@ _TASK = re.compile(r"^Task (\d+)/(\d+): (.*?)(?: \(([^()]*)\))?; features: (.+)$
 _ROBOT = re.compile(
     r"^- (.+?) \[([^\]]+)\]: S ([\d.]+)%, load (\d+) \(dev [^)]*\)(, NOT allowed)?$", re.M
 )
-_TARGET = re.compile(r"^Target load W = ([\d.]+);.*?(?:final loads in \[(\d+), (\d+)\])?", re.M)
+_TARGET = re.compile(
+    r"^Target load W = ([\d.]+)(?: \([^)]*\))?;.*?(?:final loads in \[(\d+), (\d+)\])?", re.M
+)
 _PHASE = re.compile(r"^Phase: (early|middle|late)\b|the (early|middle|late) phase of", re.M)
 _MODE = re.compile(r"^Mode: (\w+),|phase of (\w+) mode", re.M)
 _GUIDED = re.compile(r"^Optimizer guidance: (.+?) lies on", re.M)

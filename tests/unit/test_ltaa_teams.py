@@ -5,6 +5,7 @@ against an exhaustive search written in tests/unit/test_teams.py."""
 
 from __future__ import annotations
 
+import itertools
 import random
 
 import pytest
@@ -20,10 +21,11 @@ from app.graph.prompts import TARGET_USER_PROMPT_CHARS, prompt_for, prompt_size
 from app.graph.state import task_view
 from app.graph.validation import validate_text
 from app.reasoners.rules import choose_team, compose_answer
+from app.reasoners.scope import is_contested
 from app.solvers.registry import get_solver
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
 from tests.unit.ltaa_support import run
-from tests.unit.test_teams import _covers, exhaustive
+from tests.unit.test_teams import _choices, _covers, exhaustive
 
 CRANE, ARM, LIFTER, SWEEPER = 0, 1, 2, 3
 ROBOTS = (
@@ -273,3 +275,47 @@ def test_the_ltaa_solver_forms_valid_teams_and_guided_reaches_the_optimum(seed: 
             # The exhaustive optimum (a sum of success over the tasks, in exact arithmetic).
             assert got * instance.n_tasks == pytest.approx(float(best[0]), abs=1e-9)
             assert solution.details["regret"] == pytest.approx(0.0, abs=1e-9)
+
+
+def _brute_completes(instance: Instance, problem: Problem, after: int, loads: list[int]) -> bool:
+    """Some staffing of the tasks after `after` (one robot, or distinct members per unit, each
+    eligible) ends every load within the cap: tried exhaustively."""
+    lo, hi = problem.cap.lower, problem.cap.upper
+    options = [_choices(instance, t) for t in range(after + 1, instance.n_tasks)]
+    return any(
+        all(lo <= x <= hi for x in _added(loads, plan)) for plan in itertools.product(*options)
+    )
+
+
+def _added(loads: list[int], plan: tuple[tuple[int, ...], ...]) -> list[int]:
+    out = list(loads)
+    for members in plan:
+        for r in members:
+            out[r] += 1
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_unit_completion_check_agrees_with_exhaustive_search(seed: int) -> None:
+    # Identical team tasks share nodes in the flow (Koenig's theorem says that is exact):
+    # draws with repeated teams check it against every staffing.
+    rng = random.Random(100 + seed)
+    checked = 0
+    while checked < 12:
+        try:
+            instance = _random_instance(rng)
+            problem = Problem.build(instance, Mode.BALANCED, rng.choice([0.5, 1.0, 2.0]))
+        except Exception:
+            continue
+        after = rng.randrange(instance.n_tasks - 1)
+        loads = [rng.randrange(0, 4) for _ in range(4)]
+        expected = _brute_completes(instance, problem, after, loads)
+        assert problem.completes_after(after, loads) == expected, (seed, after, loads)
+        checked += 1
+
+
+def test_llm_scope_judges_a_team_decision_on_its_two_candidate_teams() -> None:
+    # A 42.5-point gap is far from every threshold: clear-cut, the rules answer it.
+    assert not is_contested(ctx_at(PROBLEM, 1, [2, 0, 2, 0]))
+    # Guidance naming another team than the rule's makes it contested.
+    assert is_contested(ctx_at(PROBLEM, 1, [2, 0, 2, 0], guided=[LIFTER, SWEEPER]))
