@@ -33,7 +33,10 @@ def tally_team(tally: Tally, a: dict[str, Any], done: bool) -> None:
         tally.add(a["robot"], a["features"], done)
 
 
-def test_a_team_task_reported_done_counts_one_success_per_member(client: TestClient) -> None:
+def test_a_team_task_reported_done_counts_one_success_per_member(
+    any_db_client: TestClient,
+) -> None:
+    client = any_db_client  # SQLite and PostgreSQL: the unique key per member, the rebuild
     created = client.post("/runs", json=SITE)
     assert created.status_code == 202, created.text
     run = wait_status(client, created.json()["id"], "completed")
