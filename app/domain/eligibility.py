@@ -87,7 +87,7 @@ def check_pins_eligible(
         return
     why = "its duration map does not name that robot" if instance.timed else "its skills lack"
     for t, r in pins.items():
-        if not eligible[t, r]:
+        if not eligible[t, r] and t not in teams:  # a pinned team is what was decided
             reason = why if instance.timed else f"{why} a feature the task needs"
             raise DomainError(
                 "pinned",

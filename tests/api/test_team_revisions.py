@@ -235,3 +235,33 @@ def test_a_team_task_added_to_a_timed_run_is_refused_with_a_sentence(client: Tes
     assert item["loc"][-1] == "changes"
     assert "'mast' needs a team" in item["msg"] and "timed instance" in item["msg"]
     assert client.get("/runs").json() == before
+
+
+def test_a_pinned_team_survives_a_member_re_rated_to_zero(client: TestClient) -> None:
+    parent = completed(client)
+    beam = parent["assignments"][0]
+    # A member without skills covers what it rates above 0: re-rated to 0 it covers no more
+    # `heavy`, but the committed beam keeps its crew and recorded success. (The truss, which
+    # needs every heavy robot, is dropped: the instance itself could not staff it any more.)
+    member = next(r for r in members(beam) if r in ("lifter", "hoist"))
+    created = revise(
+        client,
+        parent["id"],
+        {
+            "changes": [
+                {"type": "set_rates", "robot": member, "success": {"heavy": 0.0}},
+                {"type": "remove_tasks", "task_ids": ["truss"]},
+            ],
+            "pin": {"task_ids": ["beam"]},
+            "reason": "re-rated",
+        },
+    )
+    revision = wait_status(client, created["id"], "completed")
+    now = revision["assignments"]
+    assert now[0]["pinned"] and (now[0]["team"], now[0]["success"]) == (
+        beam["team"],
+        beam["success"],
+    )
+    for a in now:
+        if not a["pinned"] and a.get("team"):
+            assert {"robot": member, "feature": "heavy"} not in a["team"], a

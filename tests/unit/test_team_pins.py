@@ -56,7 +56,6 @@ def test_a_pinned_team_loads_each_available_member() -> None:
     ("team", "why"),
     [
         ((LIFTER, CRANE), "does not match its pin"),  # the first member is the pin's robot
-        ((CRANE, ARM), "cannot cover 'heavy'"),
         ((CRANE, CRANE), "distinct"),
         ((CRANE,), "1 members for 2 units"),
     ],
@@ -65,6 +64,14 @@ def test_a_pinned_team_must_be_the_tasks_whole_valid_team(team: tuple[int, ...],
     with pytest.raises(DomainError) as err:
         Problem.build(instance(), Mode.BALANCED, pinned={0: CRANE}, pinned_teams={0: team})
     assert err.value.field == "pinned" and why in err.value.message
+
+
+def test_a_pinned_team_stays_whatever_its_members_rates_say_now() -> None:
+    # The arm cannot cover `heavy` (skills); pinned, the decided team is kept as it was.
+    problem = Problem.build(
+        instance(), Mode.BALANCED, pinned={0: CRANE}, pinned_teams={0: (CRANE, ARM)}
+    )
+    assert problem.pinned_teams[0] == (CRANE, ARM) and problem.initial_loads == (1, 1, 0, 0)
 
 
 def test_a_team_task_pinned_without_its_team_is_still_refused() -> None:
