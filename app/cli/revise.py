@@ -191,14 +191,20 @@ def print_diff(created: dict[str, Any], diff: dict[str, Any] | None, console: Co
         moved.add_row(
             str(c["task_id"]),
             c["task_name"],
-            c["from_robot"],
-            c["to_robot"],
+            held_by(c, "from"),
+            held_by(c, "to"),
             pct(c["success_before"]),
             pct(c["success_after"]),
         )
     console.print(moved)
     if diff.get("schedule"):
         print_time_moves(diff["schedule"], console)
+
+
+def held_by(change: dict[str, Any], side: str) -> str:
+    """The robot, or a team task's members (docs/living-plans.md#teams-in-a-revision)."""
+    team = change.get(f"{side}_team")
+    return " + ".join(m["robot"] for m in team) if team else str(change[f"{side}_robot"])
 
 
 def print_time_moves(schedule: dict[str, Any], console: Console) -> None:

@@ -54,3 +54,83 @@ def completable(eligible: np.ndarray, loads: Sequence[int], lower: int, upper: i
         shape=(sink + 1, sink + 1),
     )
     return int(maximum_flow(graph, source, sink).flow_value) == m
+
+
+# A team task still to place: per feature, (count, which robots may cover it); a robot covers
+# at most one unit of the task (docs/allocation.md#teams).
+TeamLeft = Sequence[tuple[int, np.ndarray]]
+
+
+def units_completable(
+    singles: np.ndarray,
+    teams: Sequence[TeamLeft],
+    loads: Sequence[int],
+    lower: int,
+    upper: int,
+) -> bool:
+    """`completable` with team tasks among those left: each team task's features get their
+    counts of distinct robots, through a (task, robot) gate of capacity 1 per robot. The
+    same max flow otherwise, so it saturates iff a placement within [lower, upper] exists.
+
+    k identical team tasks share one set of nodes: per feature k x count units, and a gate
+    of capacity k per robot. Exact: split each feature into `count` slots of k units; the
+    flow is then a bipartite multigraph of maximum degree k between slots and robots, which
+    by Koenig's edge-colouring theorem splits into k matchings, one team per task."""
+    from scipy.sparse import csr_array
+    from scipy.sparse.csgraph import maximum_flow
+
+    r = len(loads)
+    m = len(singles) + sum(count for team in teams for count, _ in team)
+    need = [max(0, lower - x) for x in loads]
+    room = [upper - x for x in loads]
+    if min(room, default=0) < 0 or sum(need) > m or sum(room) < m:
+        return False
+    if m == 0:
+        return True
+    tails: list[int] = []
+    heads: list[int] = []
+    caps: list[int] = []
+    count = [3 + r]  # next free node: 0 source, 1 spare, 2 sink, 3.. robots
+
+    def node() -> int:
+        count[0] += 1
+        return count[0] - 1
+
+    def arc(a: int, b: int, capacity: int) -> None:
+        if capacity > 0:
+            tails.append(a)
+            heads.append(b)
+            caps.append(capacity)
+
+    source, spare, sink = 0, 1, 2
+    if len(singles):
+        rows, counts = np.unique(singles, axis=0, return_counts=True)
+        for row, n in zip(rows, counts, strict=True):
+            k = node()
+            arc(source, k, int(n))
+            for col in np.flatnonzero(row):
+                arc(k, 3 + int(col), int(n))
+    alike: dict[tuple[tuple[int, bytes], ...], tuple[TeamLeft, int]] = {}
+    for team in teams:
+        key = tuple((n, mask.tobytes()) for n, mask in team)
+        alike[key] = (team, alike[key][1] + 1 if key in alike else 1)
+    for team, copies in alike.values():
+        gates: dict[int, int] = {}
+        for n, mask in team:
+            k = node()
+            arc(source, k, n * copies)
+            for col in np.flatnonzero(mask):
+                c = int(col)
+                if c not in gates:
+                    gates[c] = node()
+                    arc(gates[c], 3 + c, copies)
+                arc(k, gates[c], copies)
+    for j in range(r):
+        arc(3 + j, sink, need[j])
+        arc(3 + j, spare, room[j] - need[j])
+    arc(spare, sink, m - sum(need))
+    size = count[0]
+    graph = csr_array(
+        (np.array(caps, dtype=np.int32), (np.array(tails), np.array(heads))), shape=(size, size)
+    )
+    return int(maximum_flow(graph, source, sink).flow_value) == m

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from app.domain.modes import Mode, Weights
@@ -10,6 +11,44 @@ from app.domain.phases import Phase
 
 if TYPE_CHECKING:
     from app.domain.scheduling.progress import TimeOption
+
+
+# A team in unit order: the robot covering each unit of the task (docs/allocation.md#teams).
+Members = tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class TeamFacts:
+    """The team side of a decision on a team task (docs/allocation.md#teams)."""
+
+    units: tuple[str, ...]  # the features of the task's units, in the team's key order
+    # Per feature (key order), per robot: its rate, or None where it may not cover the feature.
+    rates: tuple[tuple[float | None, ...], ...]
+    best: Members | None = None  # the best-success team the cap allows
+    fewest: Members | None = None  # the least-loaded team the cap allows
+    guided: Members | None = None  # the optimizer's team, when the run is guided
+    # Why a team breaks the cap for the tasks after this one (None: it does not). The seam
+    # where a timed decision will also check that the members are free in time.
+    check: Callable[[Members], str | None] | None = field(default=None, compare=False)
+
+    @property
+    def features(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(self.units))
+
+    def count(self, feature: str) -> int:
+        return self.units.count(feature)
+
+    def rate(self, feature: str, robot: int) -> float | None:
+        return self.rates[self.features.index(feature)][robot]
+
+    def success(self, members: Members) -> float:
+        """The team's S: the mean over units of the covering member's rate."""
+        rates = [self.rate(f, r) or 0.0 for f, r in zip(self.units, members, strict=True)]
+        return sum(rates) / len(rates)
+
+    def problem(self, members: Members) -> str | None:
+        """The cap check, when there is one."""
+        return None if self.check is None else self.check(members)
 
 
 @dataclass(frozen=True)
@@ -57,6 +96,9 @@ class DecisionContext:
     # docs/allocation.md#teams: per robot, may it take this task (skills, duration map)?
     # Empty: every robot may. An ineligible robot is never in `feasible`.
     eligible: tuple[bool, ...] = ()
+    # docs/allocation.md#teams: set on a team task; `feasible` then holds the robots that may
+    # still join a team (eligible, room under the cap), and the team itself is checked whole.
+    team: TeamFacts | None = None
 
     @property
     def labels(self) -> tuple[str, ...]:
@@ -79,3 +121,6 @@ class GuidedChoice:
     # Success points (sum of S x 100 over the rest of the queue) each robot would give away;
     # None where choosing it would make the cap unsatisfiable.
     costs: tuple[float | None, ...]
+    # A team task (docs/allocation.md#teams): the optimal completion's team; `robot` is its
+    # first member and `costs` is empty (a team's alternatives are teams, not robots).
+    team: Members | None = None

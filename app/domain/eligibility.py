@@ -3,13 +3,14 @@
 The rule itself is `Instance.eligible` (docs/allocation.md#teams): a robot's `skills`, and a
 per-robot duration map that omits a robot (docs/schedules.md#the-model). On top of the
 instance's own rules, a problem's pins and unavailable robots must leave every task a robot
-that may take it; a pinned start belongs to a pinned task; a team task is not pinned (yet).
+that may take it; a pinned start belongs to a pinned task; a team task is pinned only with its
+whole team (a revision's pins).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 from app.domain.errors import DomainError
 from app.domain.models import Instance
@@ -23,12 +24,13 @@ def check_time_arguments(
     objective: Objective,
     starts: dict[int, float],
     not_before: float,
+    teams: Collection[int] = frozenset(),
 ) -> dict[int, float]:
     """The pinned starts as floats; DomainError for anything that needs a timed instance
     without one, a pin on a robot that cannot take its task, or a task left without any
     available robot that can take it."""
     if not instance.timed:
-        check_pins_eligible(instance, pins, unavailable)
+        check_pins_eligible(instance, pins, unavailable, teams)
         for name, given in (
             ("objective", not objective.is_default),
             ("pinned_starts", bool(starts)),
@@ -43,7 +45,7 @@ def check_time_arguments(
         raise DomainError(
             "not_before", f"must be a non-negative number of minutes, got {not_before!r}"
         )
-    check_pins_eligible(instance, pins, unavailable)
+    check_pins_eligible(instance, pins, unavailable, teams)
     tasks = instance.tasks
     out: dict[int, float] = {}
     for t, start in sorted(starts.items()):
@@ -63,13 +65,17 @@ def check_time_arguments(
 
 
 def check_pins_eligible(
-    instance: Instance, pins: Mapping[int, int], unavailable: frozenset[int]
+    instance: Instance,
+    pins: Mapping[int, int],
+    unavailable: frozenset[int],
+    teams: Collection[int] = frozenset(),
 ) -> None:
-    """A pin names a robot that may take its task, no team task is pinned, and every free
-    task keeps an available robot that may take it."""
+    """A pin names a robot that may take its task, a team task is pinned only with its whole
+    team (`teams`: a revision's, docs/living-plans.md#teams-in-a-revision), and every free task
+    keeps an available robot that may take it."""
     tasks, robots = instance.tasks, instance.robots
     for t in pins:
-        if tasks[t].team is not None:
+        if tasks[t].team is not None and t not in teams:
             raise DomainError(
                 "pinned",
                 f"task {tasks[t].id!r} is a team task, which cannot be pinned yet "
@@ -81,7 +87,7 @@ def check_pins_eligible(
         return
     why = "its duration map does not name that robot" if instance.timed else "its skills lack"
     for t, r in pins.items():
-        if not eligible[t, r]:
+        if not eligible[t, r] and t not in teams:  # a pinned team is what was decided
             reason = why if instance.timed else f"{why} a feature the task needs"
             raise DomainError(
                 "pinned",

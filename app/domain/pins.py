@@ -6,11 +6,12 @@ label). Every error names the offending entry by its dotted path in the request.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from app.domain.errors import DomainError
 from app.domain.models import Instance, TaskId
+from app.domain.teams import units_of
 
 
 @dataclass(frozen=True)
@@ -81,3 +82,30 @@ def resolve_pins(
             code="no_robot_left",
         )
     return Pins(pinned=pins, unavailable=frozenset(off))
+
+
+def checked_pinned_teams(
+    instance: Instance, pins: Mapping[int, int], teams: Mapping[int, Sequence[int]]
+) -> dict[int, tuple[int, ...]]:
+    """A pinned team is a pinned team task's whole team: one distinct robot per unit, its first
+    member the pin's robot. Whether each member may still cover its unit is not asked: a pin is
+    what was decided (and may be done), whatever `set_rates` says of the robot now."""
+    out: dict[int, tuple[int, ...]] = {}
+    for task, members in sorted(teams.items()):
+        chosen = tuple(members)
+        if task not in pins or not chosen or chosen[0] != pins[task]:
+            raise DomainError(
+                "pinned", f"the team pinned on task index {task} does not match its pin"
+            )
+        units = len(units_of(instance.tasks[task]))
+        why = None
+        if len(chosen) != units:
+            why = f"{len(chosen)} members for {units} units; one robot per unit"
+        elif len(set(chosen)) != len(chosen):
+            why = "a robot covers two units; a team's members are distinct"
+        if why is not None:
+            raise DomainError(
+                "pinned", f"the team pinned on task {instance.tasks[task].id!r} is invalid: {why}"
+            )
+        out[task] = chosen
+    return out

@@ -26,16 +26,19 @@ from types import MappingProxyType
 import numpy as np
 
 from app.domain.cap import WorkloadCap
-from app.domain.completion import completable
+from app.domain.completion import TeamLeft, completable, units_completable
 from app.domain.eligibility import check_time_arguments
 from app.domain.errors import DomainError, InfeasibleCapError
 from app.domain.metrics import BalanceScope
 from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.objective import Objective
+from app.domain.pins import checked_pinned_teams
+from app.domain.teams import covers
 
 _NO_PINS: Mapping[int, int] = MappingProxyType({})
 _NO_STARTS: Mapping[int, float] = MappingProxyType({})
+_NO_TEAMS: Mapping[int, tuple[int, ...]] = MappingProxyType({})
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,11 @@ class Problem:
     # docs/schedules.md#the-order-of-decisions). Empty: the earliest-start order. Set with
     # dataclasses.replace, never by build().
     decide_by: Mapping[int, float] = field(default_factory=lambda: _NO_STARTS, hash=False)
+    # docs/living-plans.md#teams-in-a-revision: task index -> the members (unit order) of a pinned
+    # team task; its `pinned` robot is the first. Every available member carries the pin's load.
+    pinned_teams: Mapping[int, tuple[int, ...]] = field(
+        default_factory=lambda: _NO_TEAMS, hash=False
+    )
 
     @classmethod
     def build(
@@ -69,21 +77,23 @@ class Problem:
         objective: Objective | None = None,
         pinned_starts: Mapping[int, float] | None = None,
         not_before: float = 0.0,
+        pinned_teams: Mapping[int, Sequence[int]] | None = None,
     ) -> Problem:
         """Apply the mode's default cap (for the W of the available fleet) unless
         `max_deviation` overrides it (or `uncapped` asks for no cap at all); reject
         infeasible caps, including caps the pins already break. The time arguments are for
         timed instances only."""
         pins = _checked_pins(instance, pinned or {})
+        teams = checked_pinned_teams(instance, pins, pinned_teams or {})
         off = _checked_unavailable(instance, unavailable)
         objective = objective or Objective()
         starts = check_time_arguments(
-            instance, pins, off, objective, dict(pinned_starts or {}), not_before
+            instance, pins, off, objective, dict(pinned_starts or {}), not_before, teams=teams
         )
         n_available = instance.n_robots - len(off)
         # Loads count units (docs/allocation.md#teams): a team task once per member.
         added = instance.loads_added
-        balance_tasks = sum(1 for r in pins.values() if r not in off)
+        balance_tasks = sum(1 for t, r in pins.items() for m in teams.get(t, (r,)) if m not in off)
         balance_tasks += instance.n_units - sum(added[t] for t in pins)
         if uncapped:
             max_deviation = None
@@ -101,8 +111,10 @@ class Problem:
             objective=objective,
             pinned_starts=MappingProxyType(starts),
             not_before=float(not_before),
+            pinned_teams=MappingProxyType(teams),
         )
         if pins or off:
+            problem._ensure_formable()
             problem._ensure_completable()
         else:
             cap.ensure_feasible()
@@ -126,9 +138,10 @@ class Problem:
     def initial_loads(self) -> tuple[int, ...]:
         """Per robot of the fleet: the pins on it if available, 0 if unavailable."""
         loads = [0] * self.instance.n_robots
-        for robot in self.pinned.values():
-            if robot not in self.unavailable:
-                loads[robot] += 1
+        for task, robot in self.pinned.items():
+            for member in self.pinned_teams.get(task, (robot,)):
+                if member not in self.unavailable:
+                    loads[member] += 1
         return tuple(loads)
 
     @cached_property
@@ -144,8 +157,10 @@ class Problem:
         eligibility restrictions (docs/allocation.md#teams) only eligible robots, and when the
         free tasks are placed in queue order (`in_order`) only those after whose choice every
         later free task still gets an eligible robot within the cap."""
-        robots = self.cap.feasible_robots(loads, remaining_after)
         eligible = self.instance.eligible
+        if self.instance.has_teams:
+            return self._unit_feasible(task_index, loads, in_order=in_order)
+        robots = self.cap.feasible_robots(loads, remaining_after)
         if eligible.all():
             return robots
         robots = [r for r in robots if eligible[task_index, r]]
@@ -161,6 +176,84 @@ class Problem:
             if completable(rows, balanced, self.cap.lower, self.cap.upper):
                 out.append(r)
         return out
+
+    def _unit_feasible(self, task_index: int, loads: Sequence[int], *, in_order: bool) -> list[int]:
+        """feasible_robots on an instance with team tasks, where loads count units. For a team
+        task: the robots that may join its team (eligible, with room under the cap); the
+        team is then checked whole (`team_problem`)."""
+        eligible = self.instance.eligible[task_index]
+        upper = self.cap.upper
+        robots = [r for r in self.available if eligible[r] and loads[r] < upper]
+        if self.instance.units[task_index] or not in_order:
+            return robots
+        out = []
+        for r in robots:
+            after = list(loads)
+            after[r] += 1
+            if self.completes_after(task_index, after):
+                out.append(r)
+        return out
+
+    @cached_property
+    def _team_left(self) -> dict[int, TeamLeft]:
+        """Per team task: per feature, its count and the available robots that may cover it."""
+        inst, cols = self.instance, self.available
+        out: dict[int, TeamLeft] = {}
+        for t, units in enumerate(inst.units):
+            if units:
+                out[t] = [
+                    (
+                        units.count(f),
+                        np.array([covers(inst.robots[c], f) for c in cols])
+                        & inst.eligible[t, list(cols)],
+                    )
+                    for f in dict.fromkeys(units)
+                ]
+        return out
+
+    def completes_after(self, task_index: int, loads_after: Sequence[int]) -> bool:
+        """Can every free task after `task_index` (every unit of a team) still get a distinct
+        eligible robot within the cap, from `loads_after` (docs/allocation.md#teams)?"""
+        balanced = tuple(loads_after[c] for c in self.available)
+        memo = self._completion_memo  # the graph asks the same state several times per task
+        key = (task_index, balanced)
+        if key not in memo:
+            later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
+            units = self.instance.units
+            singles = [t for t in later if not units[t]]
+            rows = self.instance.eligible[np.ix_(singles, self.available)]
+            teams = [self._team_left[t] for t in later if units[t]]
+            memo[key] = units_completable(rows, teams, balanced, self.cap.lower, self.cap.upper)
+            if len(memo) > 4096:  # a run moves forward: the oldest states are not asked again
+                memo.pop(next(iter(memo)), None)
+        return memo[key]
+
+    @cached_property
+    def _completion_memo(self) -> dict[tuple[int, tuple[int, ...]], bool]:
+        return {}
+
+    def team_problem(
+        self, task_index: int, loads: Sequence[int], members: Sequence[int]
+    ) -> str | None:
+        """Why giving team task `task_index` to `members` breaks the cap (None: it does not)."""
+        names = self.instance.robots
+        after = list(loads)
+        for r in members:
+            if r in self.unavailable:
+                return f"{names[r].display} is unavailable"
+            after[r] += 1
+            if after[r] > self.cap.upper:
+                return (
+                    f"{names[r].display} would carry {after[r]} tasks, above the cap's "
+                    f"{self.cap.upper}"
+                )
+        if not self.completes_after(task_index, after):
+            return (
+                "this team would make the workload cap infeasible for the tasks after it "
+                "(some later task could no longer get eligible robots within "
+                f"[{self.cap.lower}, {self.cap.upper}] tasks per robot)"
+            )
+        return None
 
     def remaining_after(self, task_index: int) -> int:
         """Free tasks after `task_index` in the queue."""
@@ -199,6 +292,42 @@ class Problem:
         return assignment
 
     # -- validation ------------------------------------------------------------------------
+
+    def _ensure_formable(self) -> None:
+        """With team tasks (docs/living-plans.md#teams-in-a-revision): every free team task can
+        still be formed from the available robots, each unit by a distinct robot that may cover
+        it, and all of them together within the cap; else a 422 naming the task and feature."""
+        inst = self.instance
+        if not inst.has_teams:
+            return
+        robots = inst.robots
+        off = [robots[r].name for r in sorted(self.unavailable)]
+        gone = f", with {', '.join(off)} unavailable" if off else ""
+        for t in self.free_tasks:
+            units = inst.units[t]
+            for f in dict.fromkeys(units):
+                need = units.count(f)
+                able = [
+                    robots[r].name
+                    for r in self.available
+                    if inst.eligible[t, r] and covers(robots[r], f)
+                ]
+                if len(able) < need:
+                    can = f"only {len(able)} can ({', '.join(able)})" if able else "none can"
+                    raise DomainError(
+                        f"tasks.{t}.team.{f}",
+                        f"task {inst.tasks[t].id!r} needs {need} distinct robots for '{f}' "
+                        f"at once, and of the available robots {can}{gone}; make a robot that "
+                        f"covers '{f}' available again, add one, or remove the task",
+                        code="team_unformable",
+                    )
+        if not self.completes_after(-1, self.initial_loads):
+            raise InfeasibleCapError(
+                "the free tasks' teams cannot all be formed within the workload cap "
+                f"[{self.cap.lower}, {self.cap.upper}] tasks per available robot{gone}, "
+                "given the pins; raise max_deviation or make a robot available again",
+                field="pinned",
+            )
 
     def _ensure_completable(self) -> None:
         cap, free = self.cap, self.free_units

@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
-from app.domain.decision import DecisionContext
+from app.domain.decision import DecisionContext, TeamFacts
 from app.domain.links import explain
 from app.domain.modes import strategic_weights
 from app.domain.phases import Phase
 from app.domain.problem import Problem
 from app.domain.scheduling.progress import TimeOption
+from app.domain.team_choice import best_and_fewest
+from app.domain.teams import covers
 
 # robot -> feature -> (basis, reports): app.domain.estimates.rate_notes
 RateNotes = Mapping[str, Mapping[str, tuple[str, int]]]
@@ -28,6 +31,40 @@ def _rate_note(notes: Mapping[str, tuple[str, int]], features: tuple[str, ...]) 
                 else f"{feature} {basis} on {reports} reports"
             )
     return "; ".join(parts)
+
+
+def team_facts(
+    problem: Problem, t: int, loads: tuple[int, ...], feasible: tuple[int, ...], guided: Any
+) -> TeamFacts | None:
+    """The team side of task t's decision (docs/allocation.md#teams); None for one robot.
+    Untimed only: a timed team decision would add "members free in time" to `check`."""
+    inst = problem.instance
+    units = inst.units[t]
+    if not units:
+        return None
+    allowed = set(feasible)
+    rates = tuple(
+        tuple(
+            r_.success[f] if r in allowed and covers(r_, f) else None
+            for r, r_ in enumerate(inst.robots)
+        )
+        for f in dict.fromkeys(units)
+    )
+
+    def check(members: tuple[int, ...]) -> str | None:
+        # The seam for timed teams: validation, the candidate teams and the fallback all ask
+        # this one question, so "every member free in time (and the deadline met)" is added
+        # here, from the time model, once timed team tasks are scheduled.
+        return problem.team_problem(t, loads, members)
+
+    facts = TeamFacts(
+        units=units,
+        rates=rates,
+        guided=tuple(guided) if guided is not None else None,
+        check=check,
+    )
+    best, fewest = best_and_fewest(facts, loads, feasible, check)
+    return replace(facts, best=best, fewest=fewest)
 
 
 def decision_context(
@@ -93,4 +130,5 @@ def decision_context(
         links=links,
         allocated=allocated,
         eligible=() if inst.eligible.all() else tuple(bool(x) for x in inst.eligible[t]),
+        team=team_facts(problem, t, loads, feasible, view.get("guided_team")),
     )

@@ -21,6 +21,7 @@ _SECTION_PATTERNS: dict[str, str] = {
     "confidence": r"confidence(?:\s+level)?",
     "tradeoff": r"trade[\s-]?off(?:\s+summary)?",
     "robot_analysis": r"robot\s+analysis",
+    "team": r"team(?:\s+(?:members|composition|assignment))?",
 }
 _NAMES = "|".join(f"(?P<{key}>{pattern})" for key, pattern in _SECTION_PATTERNS.items())
 _HEADER = re.compile(
@@ -45,12 +46,22 @@ class ParsedResponse:
     confidence: str | None = None  # "high" | "medium" | "low"
     tradeoff: str | None = None
     robot_analysis: str | None = None
+    # docs/reasoners.md#the-response-format, a team task: one entry per line of the **Team**
+    # block: {"feature", "robot" (index or None), "text" (the robot as written), "reason"}.
+    team: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self, robot_names: Sequence[str]) -> dict[str, Any]:
         """JSON-friendly, with robots by key (for the attempt record)."""
         out = asdict(self)
         out["robot_name"] = robot_names[self.robot] if self.robot is not None else None
         out["workload_after"] = {robot_names[r]: n for r, n in self.workload_after.items()}
+        if not self.team:
+            del out["team"]  # single-robot attempts keep the record they always had
+        else:
+            out["team"] = [
+                {**line, "robot": None if line["robot"] is None else robot_names[line["robot"]]}
+                for line in self.team
+            ]
         return out
 
 
@@ -150,7 +161,57 @@ def count_sentences(text: str) -> int:
     return len([s for s in _SENTENCE_END.split(text.strip()) if s.strip()]) if text.strip() else 0
 
 
-def parse_response(text: str, names: Sequence[str], labels: Sequence[str]) -> ParsedResponse:
+_BULLET = re.compile(r"^\s*(?:[-*+>•]|\d+[.)])\s*")
+_HEAD = re.compile(r"\s*(?::|->|→|=>|=)\s*")
+_REASON = re.compile(r"\s+[—–-]+\s+|\s*[:;]\s+|\s*\(\s*|,\s+(?=because|as|since)|\s+because\s+")
+
+
+def _first_of(text: str, words: Sequence[str]) -> str | None:
+    lowered = text.lower()
+    found = [
+        (m.start(), -len(w), w)
+        for w in words
+        if (m := _alias_regex(w.lower()).search(lowered)) is not None
+    ]
+    return min(found)[2] if found else None
+
+
+def parse_team(
+    text: str, features: Sequence[str], names: Sequence[str], labels: Sequence[str]
+) -> list[dict[str, Any]]:
+    """The **Team** block, one unit per line: `- heavy: Heavy Robot — why`, `heavy -> HR1:
+    why`, `1. careful: light (because ...)`; lines naming no feature are skipped."""
+    out: list[dict[str, Any]] = []
+    for raw in text.splitlines():
+        line = _BULLET.sub("", _clean(raw)).strip()
+        if not line:
+            continue
+        parts = _HEAD.split(line, maxsplit=1)
+        feature = _first_of(parts[0], features) if len(parts) == 2 else None
+        named_first = feature is not None  # `feature: robot ...`
+        rest = parts[1] if named_first else line
+        if feature is None:
+            feature = _first_of(line, features)
+        if feature is None:
+            continue
+        clause, *why = _REASON.split(rest, maxsplit=1)
+        robot = find_robot(clause, names, labels)
+        if robot is None and not named_first:
+            robot = find_robot(rest, names, labels)
+        out.append(
+            {
+                "feature": feature,
+                "robot": robot,
+                "text": clause.strip(),
+                "reason": (why[0] if why else "").strip().rstrip(")").strip(),
+            }
+        )
+    return out
+
+
+def parse_response(
+    text: str, names: Sequence[str], labels: Sequence[str], features: Sequence[str] = ()
+) -> ParsedResponse:
     sections = split_sections(text or "")
     parsed = ParsedResponse()
     decision = sections.get("decision")
@@ -167,4 +228,6 @@ def parse_response(text: str, names: Sequence[str], labels: Sequence[str]) -> Pa
         parsed.confidence = m.group(1).lower() if m else None
     parsed.tradeoff = sections.get("tradeoff") or None
     parsed.robot_analysis = sections.get("robot_analysis") or None
+    if features and sections.get("team"):
+        parsed.team = parse_team(sections["team"], features, names, labels)
     return parsed

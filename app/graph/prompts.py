@@ -14,6 +14,7 @@ from app.domain.decision import DecisionContext, percent
 from app.domain.modes import MODE_DESCRIPTIONS, tradeoff_threshold
 from app.domain.phases import Phase
 from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
+from app.graph.team_prompts import TEAM_FORMAT, team_facts_text, team_guidance, team_step_template
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
 
 TARGET_USER_PROMPT_CHARS = 2_500
@@ -22,7 +23,8 @@ SYSTEM_PROMPT = (
     "You are the reasoning step of LTAA, a construction-site task allocator. Each message "
     "describes one task and a fleet of robots. Choose exactly one robot, weighing task success "
     "against workload balance as the operational mode and workflow phase direct, and never a "
-    "robot the workload cap forbids. Use only the numbers given; do not invent data. Reply in "
+    "robot the workload cap forbids. For a team task, choose the whole team: one distinct robot "
+    "per unit, each with its reason. Use only the numbers given; do not invent data. Reply in "
     "the required markdown format and nothing else."
 )
 
@@ -43,6 +45,8 @@ _FORMAT = """Reply in exactly this format:
 
 
 def _facts(ctx: DecisionContext) -> str:
+    if ctx.team is not None:  # docs/allocation.md#teams: per unit, who may cover it
+        return team_facts_text(ctx)
     labels = ctx.labels
     allocated = sum(ctx.loads)
     task_type = f" ({ctx.task_type})" if ctx.task_type else ""
@@ -118,6 +122,10 @@ def _guidance(ctx: DecisionContext) -> str:
         f"Phase: {ctx.phase.value} (progress {progress:.0%}); {_PHASE_GUIDANCE[ctx.phase]}.",
         f"Mode: {ctx.mode.value}, {MODE_DESCRIPTIONS[ctx.mode]}; weights success:balance "
         f"{ctx.weights} now.",
+    ]
+    if ctx.team is not None:
+        return "\n".join(lines + team_guidance(ctx))
+    lines += [
         "Decision framework, among allowed robots: best = highest S, fewest = lowest load, "
         f"gap = S(best) - S(fewest) in points. Gap > {DECISIVE_GAP:g}: best. Gap < "
         f"{NEGLIGIBLE_GAP:g}: fewest. Otherwise best if gap > {threshold:g} (this mode and "
@@ -145,9 +153,13 @@ def _optimizer_guidance(ctx: DecisionContext) -> list[str]:
     return lines
 
 
+def _format(ctx: DecisionContext) -> str:
+    return TEAM_FORMAT if ctx.team is not None else _FORMAT
+
+
 def user_prompt(ctx: DecisionContext) -> str:
     """Tier 0: the first try."""
-    return "\n\n".join([_facts(ctx), _guidance(ctx), _FORMAT])
+    return "\n\n".join([_facts(ctx), _guidance(ctx), _format(ctx)])
 
 
 def _feedback_block(feedback: str, quality: float | None, threshold: float) -> str:
@@ -187,9 +199,12 @@ def retry_prompt(
     if tier <= 1:
         return "\n\n".join([user_prompt(ctx), fb, "Answer again, fixing every problem listed."])
     if tier == 2:
+        example = [] if ctx.team is not None else [_WORKED_EXAMPLE]
         return "\n\n".join(
-            [_facts(ctx), _guidance(ctx), fb, _criteria_guide(), _WORKED_EXAMPLE, _FORMAT]
+            [_facts(ctx), _guidance(ctx), fb, _criteria_guide(), *example, _format(ctx)]
         )
+    if ctx.team is not None:
+        return "\n\n".join([_facts(ctx), _guidance(ctx), fb, team_step_template(ctx)])
     # The step template replaces the framework text, but not the optimizer's choice.
     guidance = _optimizer_guidance(ctx)
     return "\n\n".join(

@@ -94,6 +94,9 @@ class DecisionRecord:
     travel: float | None = None
     seq: int | None = None
     later_by: float | None = None
+    # docs/allocation.md#teams, a team task: one {"robot", "feature"} per unit, in unit order
+    # (`robot` above is the first). None for a single-robot task.
+    team: list[dict[str, str]] | None = None
 
 
 class Recorder(Protocol):

@@ -34,8 +34,9 @@ DEFAULT_MAX_RETRIES = 3
 # Optimizer guidance: (task index, loads before) -> the robot to prefer (optionally with
 # what each alternative would cost), or None.
 Guidance = Callable[[int, Sequence[int]], int | GuidedChoice | None]
-# Regret: (task index, loads before, robot) -> expected success the decision gave away.
-Regret = Callable[[int, Sequence[int], int], float]
+# Regret: (task index, loads before, members) -> expected success the decision gave away;
+# members is (robot,) for a single-robot task, the team in unit order for a team task.
+Regret = Callable[[int, Sequence[int], tuple[int, ...]], float]
 
 
 class TaskView(TypedDict):
@@ -49,6 +50,7 @@ class TaskView(TypedDict):
     feasible: list[int]  # robots whose choice keeps the cap satisfiable
     guided_robot: int | None
     guided_costs: list[float | None] | None  # success points each robot would give away
+    guided_team: list[int] | None  # a team task's optimal team (docs/allocation.md#teams)
 
 
 class LTAAState(TypedDict, total=False):
@@ -117,6 +119,7 @@ def task_view(
     guided_robot: int | None,
     guided_costs: Sequence[float | None] | None = None,
     decided: int | None = None,
+    guided_team: Sequence[int] | None = None,
 ) -> TaskView:
     """`decided`: the graph's decisions so far, when it does not decide in queue order (a
     timed instance); else they are the free tasks before `task_index`."""
@@ -142,6 +145,7 @@ def task_view(
         "feasible": problem.feasible_robots(task_index, loads, remaining, in_order=decided is None),
         "guided_robot": guided_robot,
         "guided_costs": list(guided_costs) if guided_costs is not None else None,
+        "guided_team": list(guided_team) if guided_team is not None else None,
     }
 
 

@@ -9,13 +9,24 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from app.domain.decision import DecisionContext, percent
+from app.domain.decision import DecisionContext
 from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
 from app.graph.parsing import (
     ParsedResponse,
     count_sentences,
     mentioned_robots,
     parse_response,
+)
+from app.graph.team_validation import (
+    ACCURACY_EXACT as ACCURACY_EXACT,  # re-exported: tests and tools read them here
+)
+from app.graph.team_validation import (
+    ACCURACY_ZERO as ACCURACY_ZERO,
+)
+from app.graph.team_validation import (
+    accuracy,
+    team_criteria,
+    team_members,
 )
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
@@ -42,9 +53,6 @@ CRITERION_TITLES: dict[str, str] = {
     "confidence_justification": "confidence justification",
 }
 
-# Stated success within this of the true S is exact (rounding); beyond the outer bound, 0.
-ACCURACY_EXACT = 0.015
-ACCURACY_ZERO = 0.15
 _CONFIDENCE_RANK = {"low": 0, "medium": 1, "high": 2}
 _PHASE_WORD = re.compile(r"\b(early|middle|mid|late)\b", re.IGNORECASE)
 _NUMBER_CITED = re.compile(
@@ -63,6 +71,8 @@ class Validation:
     accepted: bool
     hard_invalid: str | None = None
     parsed: ParsedResponse = field(default_factory=ParsedResponse)
+    # A team task (docs/allocation.md#teams): the members in unit order; `robot` is the first.
+    team: tuple[int, ...] | None = None
 
 
 def hard_invalid_reason(parsed: ParsedResponse, ctx: DecisionContext) -> str | None:
@@ -121,15 +131,7 @@ def _explanation(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[
 
 
 def _accuracy(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
-    true_s = ctx.success[choice]
-    label = ctx.labels[choice]
-    if p.expected_success is None:
-        return 0.0, f"no **Expected Success** value (S of {label} is {percent(true_s)})"
-    err = abs(p.expected_success - true_s)
-    if err <= ACCURACY_EXACT:
-        return 1.0, ""
-    q = max(0.0, 1.0 - (err - ACCURACY_EXACT) / (ACCURACY_ZERO - ACCURACY_EXACT))
-    return q, f"stated {percent(p.expected_success)} but S of {label} is {percent(true_s)}"
+    return accuracy(p.expected_success, ctx.success[choice], ctx.labels[choice])
 
 
 def _tradeoff_analysis(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
@@ -222,9 +224,33 @@ def _confidence(
     return (0.5 if distance == 1 else 0.0), note
 
 
+def _weighed(
+    parsed: ParsedResponse,
+    results: dict[str, tuple[float, str]],
+    threshold: float,
+    robot: int,
+    team: tuple[int, ...] | None = None,
+) -> Validation:
+    scores = {k: round(results[k][0], 4) for k in WEIGHTS}
+    notes = {k: note for k, (_, note) in results.items() if note}
+    quality = round(sum(WEIGHTS[k] * q for k, q in scores.items()), 4)
+    return Validation(robot, scores, notes, quality, quality >= threshold, None, parsed, team)
+
+
+def _team_score(parsed: ParsedResponse, ctx: DecisionContext, threshold: float) -> Validation:
+    members, invalid = team_members(parsed, ctx)
+    if members is None:
+        zeros = dict.fromkeys(WEIGHTS, 0.0)
+        return Validation(parsed.robot, zeros, {}, 0.0, False, invalid, parsed)
+    results = {**team_criteria(parsed, ctx, members), "phase_consistency": _phase(parsed, ctx)}
+    return _weighed(parsed, results, threshold, members[0], members)
+
+
 def score(
     parsed: ParsedResponse, ctx: DecisionContext, threshold: float = DEFAULT_QUALITY_THRESHOLD
 ) -> Validation:
+    if ctx.team is not None:  # docs/allocation.md#teams
+        return _team_score(parsed, ctx, threshold)
     invalid = hard_invalid_reason(parsed, ctx)
     if invalid is not None:
         zeros = dict.fromkeys(WEIGHTS, 0.0)
@@ -242,10 +268,7 @@ def score(
         "logical_consistency": _logic(parsed, ctx, choice),
         "confidence_justification": _confidence(parsed, ctx, choice, rule),
     }
-    scores = {k: round(q, 4) for k, (q, _) in results.items()}
-    notes = {k: note for k, (_, note) in results.items() if note}
-    quality = round(sum(WEIGHTS[k] * q for k, q in scores.items()), 4)
-    return Validation(choice, scores, notes, quality, quality >= threshold, None, parsed)
+    return _weighed(parsed, results, threshold, choice)
 
 
 def reasoner_failed(error: str) -> Validation:
@@ -258,4 +281,5 @@ def reasoner_failed(error: str) -> Validation:
 def validate_text(
     text: str, ctx: DecisionContext, threshold: float = DEFAULT_QUALITY_THRESHOLD
 ) -> Validation:
-    return score(parse_response(text, ctx.robot_names, ctx.labels), ctx, threshold)
+    features = ctx.team.features if ctx.team is not None else ()
+    return score(parse_response(text, ctx.robot_names, ctx.labels, features), ctx, threshold)

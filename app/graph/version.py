@@ -17,8 +17,9 @@ from app.graph.builder import NODES
 from app.graph.state import LTAAState, TaskView
 
 # Bump when prompts, parsing or validation change what a resumed task would decide (the
-# node set and the state schema are read from the code itself).
-BEHAVIOUR_VERSION = 1
+# node set and the state schema are read from the code itself). 2: team decisions
+# (docs/allocation.md#teams) and unit-aware candidate lists on instances with team tasks.
+BEHAVIOUR_VERSION = 2
 
 
 def _annotations(schema: type) -> dict[str, str]:

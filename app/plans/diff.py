@@ -44,8 +44,11 @@ def side(run: Run, spec: RunSpec, decisions: list[DecisionRecord]) -> dict[str, 
     included) and the balance of their loads over the robots in the balance."""
     problem = spec.problem
     loads = [0] * problem.instance.n_robots
+    index = {r.name: i for i, r in enumerate(problem.instance.robots)}
     for d in decisions:
-        loads[d.robot] += 1
+        # A team decision counts once for each member (docs/allocation.md#teams).
+        for member in [index[m["robot"]] for m in d.team] if d.team else [d.robot]:
+            loads[member] += 1
     es = statistics.fmean(d.expected_success for d in decisions) if decisions else None
     return {
         "expected_success": es,
@@ -54,6 +57,26 @@ def side(run: Run, spec: RunSpec, decisions: list[DecisionRecord]) -> dict[str, 
         else None,
         "decided": len(decisions),
         "total": run.n_tasks,
+    }
+
+
+def _held(d: DecisionRecord) -> list[Any]:
+    """What a decision gives a task: its robot, or its team's members unit by unit."""
+    return [(m["robot"], m["feature"]) for m in d.team] if d.team else [d.robot_name]
+
+
+def _team_change(was: DecisionRecord, now: DecisionRecord) -> dict[str, Any]:
+    """docs/living-plans.md#teams-in-a-revision: a team task's members before and after, and
+    who left and joined it (a change of any member, not only the first)."""
+    if not (was.team or now.team):
+        return {}
+    before = [m["robot"] for m in was.team or []]
+    after = [m["robot"] for m in now.team or []]
+    return {
+        "from_team": was.team,
+        "to_team": now.team,
+        "members_left": [r for r in before if r not in after],
+        "members_joined": [r for r in after if r not in before],
     }
 
 
@@ -84,7 +107,7 @@ def diff(*, sessions: sessionmaker[Session], run_id: str) -> Diff:
     changes = []
     for d in after:
         was = decided_before.get(str(d.task_id))
-        if was is not None and was.robot_name != d.robot_name:
+        if was is not None and _held(was) != _held(d):
             changes.append(
                 {
                     "task_id": d.task_id,
@@ -93,6 +116,7 @@ def diff(*, sessions: sessionmaker[Session], run_id: str) -> Diff:
                     "to_robot": d.robot_name,
                     "success_before": was.expected_success,
                     "success_after": d.expected_success,
+                    **_team_change(was, d),
                 }
             )
     order = [t["id"] for t in spec.instance_data["tasks"]]

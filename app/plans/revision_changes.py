@@ -165,11 +165,15 @@ def _add_tasks(d: Draft, i: int, c: Mapping[str, Any]) -> None:
                 where, f"task id '{task_id}' is already in the queue", code="duplicate_task"
             )
         d.known.add(task_id)
+        team = task.get("team")
         entry = {
             "id": task["id"],
             "name": task.get("name") or str(task["id"]),
             "type": task.get("type", "Custom"),
-            "features": list(task["features"]),
+            # docs/living-plans.md#teams-in-a-revision: an added task may need a team; its
+            # features are then its team's keys unless it names them.
+            "features": list(task.get("features", team or [])),
+            **({"team": dict(team)} if team else {}),
             # docs/living-plans.md#a-revision-in-time: an added task of a timed run brings its
             # own time fields.
             **{k: task[k] for k in _TASK_TIME if task.get(k) is not None},

@@ -37,8 +37,11 @@ def pinned_rows(
         d = parent.record
         robot = problem.pinned[index]
         before = list(loads)
-        if robot not in problem.unavailable:
-            loads[robot] += 1
+        # A pinned team adds one to each available member
+        # (docs/living-plans.md#teams-in-a-revision).
+        for member in problem.pinned_teams.get(index, (robot,)):
+            if member not in problem.unavailable:
+                loads[member] += 1
         task = inst.tasks[index]
         rows.append(
             {
@@ -66,6 +69,7 @@ def pinned_rows(
                 "review": d.review,
                 "pinned": True,
                 "pinned_from": parent.chain_hash,
+                **({"team": d.team} if d.team else {}),
                 **_times(problem, index, (facts or {}).get(index)),
             }
         )

@@ -194,13 +194,22 @@ def _pinned_parent(
     d: Draft,
 ) -> list[int]:
     """Pins: what the rule names, less failed tasks and tasks started (not done) on a robot
-    that is now unavailable."""
+    that is now unavailable (a team task: on a team one of whose members is unavailable; it is
+    re-formed, docs/living-plans.md#teams-in-a-revision)."""
     return [
         t
         for t in _pin_candidates(pin, decided, d.tasks, execution)
         if execution.get(t) != "failed"
-        and not (execution.get(t) == "started" and decided[t].record.robot_name in d.unavailable)
+        and not (
+            execution.get(t) == "started" and not d.unavailable.isdisjoint(_members(decided[t]))
+        )
     ]
+
+
+def _members(parent: ParentDecision) -> list[str]:
+    """The robots a parent decision holds: its team's members, or its robot."""
+    team = parent.record.team
+    return [str(m["robot"]) for m in team] if team else [parent.record.robot_name]
 
 
 def _problem(
@@ -211,10 +220,17 @@ def _problem(
     pinned: dict[int, int],
     off: set[int],
     times: RevisionTimes,
+    teams: dict[int, list[int]],
 ) -> Problem:
-    # Runs plan one robot per task: a revision may not add a team task (yet).
-    refuse_teams(instance.tasks, "a run's revision", "plan team tasks with POST /allocate")
     try:
+        # docs/living-plans.md#teams-in-a-revision: the graph forms teams on untimed instances
+        # only; timed team runs are still refused until teams are scheduled in time.
+        if instance.timed:
+            refuse_teams(
+                instance.tasks,
+                "a run's revision on a timed instance",
+                "plan team tasks in time with POST /allocate",
+            )
         return Problem.build(
             instance,
             mode,
@@ -224,6 +240,7 @@ def _problem(
             unavailable=off,
             pinned_starts=times.pinned_starts,
             not_before=times.not_before,
+            pinned_teams=teams,
         )
     except InfeasibleCapError as exc:
         raise InfeasibleCapError(
@@ -292,9 +309,15 @@ def plan_revision(
     except DomainError as exc:
         raise DomainError("changes", exc.message, code=exc.code) from None
     pinned = {i: names.index(robot) for i, robot in pinned_on.items()}
+    # A pinned team task keeps its whole team (docs/living-plans.md#teams-in-a-revision).
+    teams = {
+        i: [names.index(m) for m in _members(decided[t])]
+        for i, t in enumerate(origin)
+        if i in pinned and t is not None and decided[t].record.team
+    }
     off = {names.index(n) for n in d.unavailable}
     max_dev, keep = _cap(parent_spec, d)
-    problem = _problem(instance, d.mode, max_dev, keep, pinned, off, times)
+    problem = _problem(instance, d.mode, max_dev, keep, pinned, off, times, teams)
 
     # Everything not named here is inherited as it is (quality threshold, retries,
     # temperature, guidance, seed, LLM scope, and whatever a run spec gains later).
@@ -309,6 +332,7 @@ def plan_revision(
         replay_of=None,
         cap_explicit=keep,
         pinned={str(t): r for t, r in sorted(pinned.items())},
+        pinned_teams={str(t): m for t, m in sorted(teams.items())} or None,
         unavailable=sorted(off),
         revision_of=parent_id,
         pinned_starts={str(t): m for t, m in sorted(times.pinned_starts.items())} or None,

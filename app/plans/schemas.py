@@ -7,6 +7,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
 from app.allocation.schemas import Probability, RobotIn, TaskId, TaskIn
+from app.allocation.teams import TeamMemberOut
 from app.domain.estimates import DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_ROBOTS, MAX_TASKS
@@ -177,6 +178,27 @@ class RobotChange(BaseModel):
     to_robot: str
     success_before: float
     success_after: float
+    # docs/living-plans.md#teams-in-a-revision: a team task's members before and after.
+    from_team: list[TeamMemberOut] | None = Field(
+        None,
+        description="A team task: its members in the parent (one per unit)",
+        exclude_if=lambda v: v is None,
+    )
+    to_team: list[TeamMemberOut] | None = Field(
+        None,
+        description="A team task: its members in the revision (one per unit)",
+        exclude_if=lambda v: v is None,
+    )
+    members_left: list[str] | None = Field(
+        None,
+        description="A team task: robots that were members and are no longer",
+        exclude_if=lambda v: v is None,
+    )
+    members_joined: list[str] | None = Field(
+        None,
+        description="A team task: robots that joined its team",
+        exclude_if=lambda v: v is None,
+    )
 
 
 class SideMetrics(BaseModel):

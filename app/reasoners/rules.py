@@ -6,7 +6,8 @@ true DecisionContext rather than the prompt, so it is also the graph's fallback.
 
 from __future__ import annotations
 
-from app.domain.decision import DecisionContext, percent
+from app.domain.decision import DecisionContext, Members, percent
+from app.domain.team_choice import TeamRule, describe_team, team_load, team_rule, team_summary
 from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
 from app.reasoners.base import ReasonerReply
 
@@ -19,7 +20,70 @@ def choose(ctx: DecisionContext) -> tuple[int, TradeOff]:
     return rule.choice, rule
 
 
+def choose_team(ctx: DecisionContext) -> tuple[Members, TeamRule]:
+    """The rules reasoner's team (docs/allocation.md#teams): the optimizer's team when given
+    and allowed, else the trade-off rule between the best-success and the least-loaded team
+    the cap allows. Also the graph's fallback team."""
+    facts = ctx.team
+    assert facts is not None
+    rule = team_rule(ctx)
+    if facts.guided is not None and facts.problem(facts.guided) is None:
+        return facts.guided, rule
+    return rule.choice, rule
+
+
+def compose_team_answer(ctx: DecisionContext) -> str:
+    """The answer in the team format: **Team** one line per unit, with its member's reason."""
+    facts = ctx.team
+    assert facts is not None
+    members, rule = choose_team(ctx)
+    names, loads = ctx.labels, ctx.loads
+    s = facts.success(members)
+    lines = [
+        f"- {f}: {names[r]} — covers {f} at {percent(facts.rate(f, r) or 0.0)} with {loads[r]} "
+        "tasks so far."
+        for f, r in zip(facts.units, members, strict=True)
+    ]
+    guided = facts.guided is not None and members == facts.guided
+    sentences = [
+        f"Rule-based choice (the trade-off rule, not a language model): the team "
+        f"{describe_team(facts, names, members)} has success {percent(s)} on {ctx.task_name}, "
+        f"the mean over its {len(facts.units)} units.",
+        f"The best team the cap allows is {team_summary(facts, names, loads, rule.best)} and the "
+        f"least-loaded is {team_summary(facts, names, loads, rule.fewest)}; "
+        f"{rule.rule.rule_text.replace('robot', 'team')}.",
+        f"This is the {ctx.phase.value} phase of {ctx.mode.value} mode, with a threshold of "
+        f"{rule.rule.threshold:g} points.",
+    ]
+    if guided:
+        sentences.append("The optimizer's guidance names this team, and this choice follows it.")
+    after = list(loads)
+    for r in members:
+        after[r] += 1
+    tradeoff = (
+        f"Best team {describe_team(facts, names, rule.best)} {percent(facts.success(rule.best))} "
+        f"vs least-loaded team {describe_team(facts, names, rule.fewest)} "
+        f"({team_load(loads, rule.fewest)} tasks between them): "
+        f"{rule.rule.rule_text.replace('robot', 'team')}."
+    )
+    return "\n".join(
+        [
+            f"**Decision**: {names[members[0]]}",
+            "**Team**:",
+            *lines,
+            f"**Expected Success**: {percent(s)}",
+            f"**Reasoning**: {' '.join(sentences)}",
+            "**Workload After Assignment**: "
+            + ", ".join(f"{names[r]}: {after[r]}" for r in range(len(after))),
+            f"**Confidence Level**: {rule.confidence(members, facts.guided).capitalize()}",
+            f"**Trade-Off Summary**: {tradeoff}",
+        ]
+    )
+
+
 def compose_answer(ctx: DecisionContext) -> str:
+    if ctx.team is not None:
+        return compose_team_answer(ctx)
     choice, rule = choose(ctx)
     names, s, loads = ctx.labels, ctx.success, ctx.loads
     others = sorted((r for r in range(len(s)) if r != choice), key=lambda r: (-s[r], r))

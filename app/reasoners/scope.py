@@ -18,6 +18,7 @@ from __future__ import annotations
 from enum import StrEnum
 
 from app.domain.decision import DecisionContext
+from app.domain.team_choice import team_rule
 from app.domain.tradeoff import rule_for
 from app.reasoners.attribution import Why, stood_in
 from app.reasoners.base import Reasoner, ReasonerReply, close_reasoner
@@ -32,6 +33,14 @@ class LLMScope(StrEnum):
 
 
 def is_contested(ctx: DecisionContext, margin: float = DEFAULT_LLM_MARGIN) -> bool:
+    if ctx.team is not None:  # docs/allocation.md#teams: the rule between two teams
+        teams = team_rule(ctx)
+        guided_team = ctx.team.guided
+        if guided_team is not None and guided_team != teams.choice:
+            return True
+        if teams.best == teams.fewest:
+            return False
+        return abs(teams.rule.gap - teams.rule.threshold) <= margin
     if len(ctx.feasible) <= 1:
         return False
     rule = rule_for(ctx)

@@ -8,6 +8,7 @@ from fastapi import APIRouter, Body, Query, Response, status
 from fastapi.responses import StreamingResponse
 
 from app.allocation.schemas import MetricsOut, UsageOut
+from app.allocation.teams import TeamMemberOut
 from app.audit import verify
 from app.domain.estimates import DurationSource, RateSource
 from app.domain.models import Instance
@@ -117,6 +118,11 @@ def _summary(r: Run) -> RunSummary:
     )
 
 
+def _team_out(d: DecisionRecord) -> list[TeamMemberOut] | None:
+    """docs/allocation.md#teams: a team decision's members, one per unit."""
+    return None if not d.team else [TeamMemberOut.model_validate(m) for m in d.team]
+
+
 def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
     return None if review is None else DecisionReviewOut.model_validate(review)
 
@@ -134,6 +140,7 @@ def _assignment(view: views.RunView, d: DecisionRecord) -> RunAssignment:
         pinned=d.task_index in view.pins,
         pinned_from=view.pins.get(d.task_index),
         execution=_execution_out(view.execution.get(d.task_index)),
+        team=_team_out(d),
         **decision_times(instance, d),
     )
 
@@ -332,6 +339,7 @@ def _decision_out(
         pinned=d.task_index in pins,
         pinned_from=pins.get(d.task_index),
         attempts=outs,
+        team=_team_out(d),
         **decision_times(instance, d),
     )
 

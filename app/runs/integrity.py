@@ -65,6 +65,7 @@ def check_integrity(
     initial_loads: Sequence[int] | None = None,
     balance_robots: Sequence[int] | None = None,
     target: float | None = None,
+    robot_names: Sequence[str] = (),
 ) -> IntegrityReport:
     """Queue position, loads recomputed from stored decisions, phase re-derived.
 
@@ -77,8 +78,10 @@ def check_integrity(
     of the `free_tasks`, and loads count from `initial_loads` (the pins on available robots).
     `free_tasks` is the order the graph decides in: queue order, or on a timed instance the
     order in time (app.domain.scheduling.progress.decision_order and the next task).
+    A team decision (docs/allocation.md#teams) adds one to each member: `robot_names` reads them.
     """
     problems: list[str] = []
+    index = {name: i for i, name in enumerate(robot_names)}
     pins = dict(pinned or {})
     free = list(free_tasks) if free_tasks is not None else list(range(n_tasks))
     stored_pins = {d.task_index: d.robot for d in decisions if d.task_index in pins}
@@ -95,13 +98,13 @@ def check_integrity(
             f"decision task indices are not the first {len(indices)} free tasks: {indices[:10]}"
         )
     start = list(initial_loads) if initial_loads is not None else [0] * n_robots
-    loads = _replayed_loads(graph_made, start, problems)
+    loads = _replayed_loads(graph_made, start, problems, index)
     cp_index = checkpoint.get("task_index") if checkpoint else None
     cp_loads = list(checkpoint["loads"]) if checkpoint and "loads" in checkpoint else None
     loads_consistent = True
     if cp_index is not None:
         loads_consistent = _checkpoint_agrees(
-            checkpoint or {}, cp_index, cp_loads, graph_made, free, place, start, n_robots, problems
+            checkpoint or {}, cp_index, cp_loads, graph_made, free, place, start, problems, index
         )
     resume_at = free[len(graph_made)] if len(graph_made) < len(free) else n_tasks
     w = target if target is not None else n_tasks / n_robots
@@ -133,13 +136,22 @@ def _pin_problems(pins: Mapping[int, int], stored_pins: Mapping[int, int]) -> li
     ]
 
 
+def _members(d: DecisionRecord, index: Mapping[str, int]) -> list[int]:
+    """The robots a decision adds one to: its team's members, or its robot."""
+    return [index[m["robot"]] for m in d.team] if d.team else [d.robot]
+
+
 def _replayed_loads(
-    graph_made: Sequence[DecisionRecord], start: Sequence[int], problems: list[str]
+    graph_made: Sequence[DecisionRecord],
+    start: Sequence[int],
+    problems: list[str],
+    index: Mapping[str, int],
 ) -> list[int]:
     """The loads the graph's decisions give, each checked against its stored loads_after."""
     loads = list(start)
     for d in graph_made:
-        loads[d.robot] += 1
+        for r in _members(d, index):
+            loads[r] += 1
         if d.loads_after != loads:
             problems.append(
                 f"task {d.task_index}: stored loads_after {d.loads_after} but the "
@@ -157,8 +169,8 @@ def _checkpoint_agrees(
     free: Sequence[int],
     place: Mapping[int, int],
     start: Sequence[int],
-    n_robots: int,
     problems: list[str],
+    index: Mapping[str, int],
 ) -> bool:
     """Whether the checkpoint's loads agree with the stored decisions (a lag of one task is
     consistent); problems gets what disagrees."""
@@ -173,15 +185,20 @@ def _checkpoint_agrees(
         return True
     expected = list(start)
     for d in graph_made[: min(position, len(graph_made))]:
-        expected[d.robot] += 1
+        for r in _members(d, index):
+            expected[r] += 1
     # The checkpoint may already count the current task (after update_workload),
-    # whose decision is stored only by the next node: its robot is then the
-    # checkpoint's own `robot`.
+    # whose decision is stored only by the next node: its robot (or team) is then the
+    # checkpoint's own `robot` (and its `decision` scratch's team).
     current = graph_made[position] if position < len(graph_made) else None
-    robot = current.robot if current is not None else checkpoint.get("robot")
+    if current is not None:
+        members: list[Any] = _members(current, index)
+    else:
+        members = (checkpoint.get("decision") or {}).get("team") or [checkpoint.get("robot")]
     counted = expected.copy()
-    if isinstance(robot, int) and 0 <= robot < n_robots:
-        counted[robot] += 1
+    for r in members:
+        if isinstance(r, int) and 0 <= r < len(counted):
+            counted[r] += 1
     consistent = cp_loads in (expected, counted)
     if not consistent:
         problems.append(
@@ -221,6 +238,7 @@ def checked_for_resume(
         initial_loads=problem.initial_loads,
         balance_robots=problem.available,
         target=problem.target,
+        robot_names=[r.name for r in instance.robots],
     )
     if not report.ok:
         # Resuming would build on a record that the checkpoint contradicts, and its

@@ -19,6 +19,7 @@ from app.allocation.schemas import (
     absent,
     present,
 )
+from app.allocation.teams import MEMBERS_FIELD, TeamMemberOut
 from app.audit.signoffs import SignOff
 from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
@@ -285,6 +286,7 @@ class RunAssignment(DecisionTimes):
     pinned_from: str | None = Field(
         None, description="Of a pinned decision: the parent decision's chain hash"
     )
+    team: list[TeamMemberOut] | None = MEMBERS_FIELD
     execution: ExecutionStateOut | None = Field(
         None, description="The latest execution report on this task, if any"
     )

@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.allocation.service import resolve_instance
 from app.config import Settings
-from app.domain.errors import RunStateConflictError
+from app.domain.errors import DomainError, RunStateConflictError
 from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
 from app.domain.objective import Objective
@@ -147,7 +147,8 @@ def submit_run(
 
 
 _TEAM_USE = (
-    "plan team tasks with POST /allocate and solver 'optimal', 'dp', 'brute_force' or 'greedy'"
+    "drop the durations to run the teams untimed, or plan them with POST /allocate and solver "
+    "'optimal', 'dp', 'brute_force' or 'greedy'"
 )
 
 
@@ -171,7 +172,18 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         uncapped="max_deviation" in order.sent and order.max_deviation is None,
         objective=Objective(order.objective, order.min_expected_success),
     )
-    refuse_teams(instance.tasks, "the LTAA graph", _TEAM_USE)
+    # docs/allocation.md#teams: the graph forms teams on untimed instances; in time it does not yet
+    # (members free in time is the validation seam still to fill).
+    if instance.timed:
+        refuse_teams(instance.tasks, "the LTAA graph on a timed instance", _TEAM_USE)
+    if instance.has_teams and order.review is not None:
+        raise DomainError(
+            "review",
+            "a review policy on an instance with team tasks is not supported yet (a review "
+            "overrides one robot, not a team); drop `review` or the team tasks "
+            "(docs/allocation.md#teams)",
+            code="unsupported_field",
+        )
     scope: dict[str, Any] = {}
     if order.llm_scope is not None:
         scope["llm_scope"] = order.llm_scope

@@ -118,6 +118,9 @@ class RunSpec:
     pinned: dict[str, int] | None = None
     unavailable: list[int] | None = None
     revision_of: str | None = None
+    # docs/living-plans.md#teams-in-a-revision: task index (as text) -> robot indexes of a pinned
+    # team task's members in unit order (the first is its `pinned` robot). None: no team pinned.
+    pinned_teams: dict[str, list[int]] | None = None
     # Time in a revision (docs/living-plans.md#a-revision-in-time): task index (as text) -> the
     # fixed start minute of a pinned task reported started or done, and the revision's `now` in
     # minutes (nothing else starts earlier). None on every untimed run and every run that is not a
@@ -163,6 +166,7 @@ class RunSpec:
             objective=self.objective_of(),
             pinned_starts={int(t): m for t, m in (self.pinned_starts or {}).items()},
             not_before=self.not_before or 0.0,
+            pinned_teams={int(t): m for t, m in (self.pinned_teams or {}).items()},
         )
 
     def objective_of(self) -> Objective:

@@ -6,6 +6,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
+from app.allocation.teams import MEMBERS_FIELD, TeamMemberOut
 from app.domain.lifecycle import RunStatus
 from app.http.times import Timestamp
 from app.runs.schemas import DecisionReviewOut, Page, StandIn
@@ -92,6 +93,7 @@ class DecisionOut(DecisionTimes):
     pinned_from: str | None = Field(
         None, description="Of a pinned decision: the parent decision's chain hash"
     )
+    team: list[TeamMemberOut] | None = MEMBERS_FIELD
     attempts: list[AttemptOut]
 
 

@@ -127,6 +127,7 @@ def run_view(
         usage = records.usage_of_totals(replies)
         signed = signoffs(session=session, run_id=run_id)
         completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
+        teams = _teams(session, run_id, spec)
         # Every decision's robot only once the run is complete, for its metrics.
         outcomes = (
             decision_repo.decision_outcomes(session=session, run_id=run_id)
@@ -134,17 +135,19 @@ def run_view(
             else []
         )
     names = [r["name"] for r in spec.instance_data["robots"]]
-    workload = dict.fromkeys(names, 0)
-    for robot, n in sorted(totals.by_robot.items()):
-        workload[names[robot]] += n
+    workload = _workload(names, totals.by_robot, teams)
     metrics = _METRICS.get(run_id) if completed else None
     if completed and metrics is None:
         problem = spec.problem
+        index = {name: i for i, name in enumerate(names)}
         metrics = compute_metrics(
             problem.instance,
             [o.robot for o in outcomes],
             seed=spec.seed,
             scope=problem.balance_scope,
+            teams={
+                o.task_index: tuple(index[m["robot"]] for m in o.team) for o in outcomes if o.team
+            },
         )
         if problem.pinned:
             # A pin keeps the success it was decided with, whatever set_rates changed.
@@ -168,6 +171,27 @@ def run_view(
         signoffs=signed,
         page=page,
     )
+
+
+def _teams(session: Session, run_id: str, spec: RunSpec) -> list[Any]:
+    """The members of each decision (None: one robot), read only on an instance with team
+    tasks (docs/allocation.md#teams), where a decision counts for each member."""
+    if not any(t.get("team") for t in spec.instance_data["tasks"]):
+        return []
+    return [o.team for o in decision_repo.decision_outcomes(session=session, run_id=run_id)]
+
+
+def _workload(
+    names: list[str], by_robot: dict[int, int], teams: list[list[dict[str, str]] | None]
+) -> dict[str, int]:
+    """Decisions per robot, a team decision once for each member (docs/allocation.md#teams)."""
+    workload = dict.fromkeys(names, 0)
+    for robot, n in sorted(by_robot.items()):
+        workload[names[robot]] += n
+    for team in teams:  # the first member is the decision's robot, counted above
+        for member in (team or [])[1:]:
+            workload[member["robot"]] += 1
+    return workload
 
 
 def run_row(*, sessions: sessionmaker[Session], run_id: str) -> Run:

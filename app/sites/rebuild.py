@@ -80,22 +80,27 @@ def rows_from_record(session: Session) -> list[dict[str, Any]]:
                         started_here, task_id, at_sent=not _server_clock(update)
                     ),
                 )
-                out.append(
-                    site_repo.outcome_row(
+                out.extend(
+                    site_repo.outcome_rows(
                         run=run, reported=reported, decision=decisions[index], received_at=received
                     )
                 )
         session.expunge_all()  # one run's rows at a time in memory
-    return sorted(out, key=lambda r: (r["run_id"], r["task_index"]))
+    return sorted(out, key=_key)
+
+
+def _key(row: dict[str, Any]) -> tuple[str, int, str]:
+    """A row's identity: its run, task and robot (a team task has one row per member)."""
+    return (row["run_id"], row["task_index"], row["robot"])
 
 
 @dataclass(frozen=True)
 class Comparison:
     stored: int
     rebuilt: int
-    missing: list[tuple[str, int]]  # in the record, not in the table
-    extra: list[tuple[str, int]]  # in the table, not in the record
-    different: list[tuple[str, int]]
+    missing: list[tuple[str, int, str]]  # in the record, not in the table
+    extra: list[tuple[str, int, str]]  # in the table, not in the record
+    different: list[tuple[str, int, str]]
 
     @property
     def agree(self) -> bool:
@@ -105,8 +110,8 @@ class Comparison:
 def compare(*, sessions: sessionmaker[Session]) -> Comparison:
     """The table against the record, row by row (nothing written)."""
     with sessions() as session:
-        stored = {(r["run_id"], r["task_index"]): r for r in site_repo.stored_rows(session=session)}
-        rebuilt = {(r["run_id"], r["task_index"]): r for r in rows_from_record(session)}
+        stored = {_key(r): r for r in site_repo.stored_rows(session=session)}
+        rebuilt = {_key(r): r for r in rows_from_record(session)}
     return Comparison(
         stored=len(stored),
         rebuilt=len(rebuilt),

@@ -42,11 +42,11 @@ class SolverOptions(BaseModel):
 
 
 # The methods that plan team tasks (docs/allocation.md#teams); the others refuse them.
-TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule")
+TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule", "ltaa")
 # ... and those that plan them on a timed instance: the exact scheduler, and the methods
-# whose team assignment the shared list scheduler times. A method that forms teams its own
-# way in time (the LTAA graph's time lines) refuses until it schedules them itself.
-TIMED_TEAM_METHODS = TEAM_METHODS
+# whose team assignment the shared list scheduler times. The LTAA graph forms teams on its
+# own time lines, which do not place a team yet: it refuses timed team tasks.
+TIMED_TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule")
 
 
 class Solver(ABC):

@@ -26,7 +26,7 @@ from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import DecisionRecord, Recorder
 from app.graph.review import ReviewGate
-from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext, Guidance
+from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext, Guidance, Regret
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
@@ -39,6 +39,7 @@ from app.solvers.timed_guidance import (
     guided_problem,
     plan_guidance,
 )
+from app.solvers.unit_oracle import UnitOracle
 
 
 class LTAAOptions(SolverOptions):
@@ -76,7 +77,17 @@ def graph_context(
 
     A guided timed run follows `plan` (a durable run's stored plan) or, without one, the
     plan solved here; its problem then decides in the plan's order."""
-    oracle = CompletionOracle(problem)
+    oracle: CompletionOracle | UnitOracle
+    regret: Regret
+    if problem.instance.has_teams:
+        # docs/allocation.md#teams: the exact optimum over task units (optimal's flow).
+        oracle = units = UnitOracle(problem)
+        regret = units.regret
+    else:
+        oracle = single = CompletionOracle(problem)
+
+        def regret(task_index: int, loads: Sequence[int], members: tuple[int, ...]) -> float:
+            return single.regret(task_index, loads, members[0])
 
     def cost(task_index: int, loads: Sequence[int], robot: int) -> float | None:
         # Success points over the rest of the queue: the unit of the guidance costs.
@@ -106,7 +117,7 @@ def graph_context(
         guidance=guide,
         # The oracle's regret counts the tasks after this one in queue order; a timed run
         # decides in time order, so its decisions record no regret.
-        regret=None if problem.instance.timed else oracle.regret,
+        regret=None if problem.instance.timed else regret,
         review=gate,
         rate_notes=rate_notes or {},
     )
@@ -172,6 +183,14 @@ def graph_times(
     }
 
 
+def decision_teams(
+    problem: Problem, decisions: Sequence[DecisionRecord]
+) -> dict[int, tuple[int, ...]]:
+    """Task index -> its members in unit order, for the team decisions."""
+    index = {r.name: i for i, r in enumerate(problem.instance.robots)}
+    return {d.task_index: tuple(index[m["robot"]] for m in d.team) for d in decisions if d.team}
+
+
 class LTAASolver(Solver):
     info = SolverInfo(
         name="ltaa",
@@ -183,6 +202,24 @@ class LTAASolver(Solver):
         "per task (per contested task with llm_scope 'contested')",
     )
     Options = LTAAOptions
+    # docs/allocation.md#teams: the graph forms teams on untimed instances (timed team tasks are
+    # refused by Solver.check_supported until the time model schedules teams).
+    forms_teams = True
+
+    def check_supported(self, problem: Problem) -> None:
+        # Its own refusal, whatever the list of methods that schedule teams in time says: the
+        # graph's time lines do not place teams yet (the seam: app.graph.context.team_facts).
+        instance = problem.instance
+        if instance.timed and instance.has_teams:
+            t = next(i for i, task in enumerate(instance.tasks) if task.team is not None)
+            raise DomainError(
+                f"tasks.{t}.team",
+                f"task {instance.tasks[t].id!r} needs a team on a timed instance, which the "
+                "LTAA graph does not schedule yet (docs/allocation.md#teams); drop the "
+                "durations to plan the teams untimed (with 'ltaa' or the exact solvers)",
+                code="unsupported_field",
+            )
+        super().check_supported(problem)
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         opts: LTAAOptions = options
@@ -226,6 +263,7 @@ class LTAASolver(Solver):
         assignment = problem.complete([d.robot for d in decisions])
         return Solution(
             assignment,
+            teams=decision_teams(problem, decisions),
             usage=used,
             details={
                 **graph_times(
@@ -251,6 +289,7 @@ class LTAASolver(Solver):
                         "fallback": d.fallback,
                         "regret": d.regret,
                         "confidence": d.confidence,
+                        **({"team": d.team} if d.team else {}),
                     }
                     for d in decisions
                 ],

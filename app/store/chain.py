@@ -127,6 +127,9 @@ TIME_FIELDS: dict[str, Normaliser] = {
     "seq": lambda v: None if v is None else int(v),
     "later_by": _float,
 }
+# docs/allocation.md#teams, a team decision's members ({"robot", "feature"} per unit): hashed only
+# when set, so single-robot decisions (and every link written before teams) keep their hashes.
+TEAM_FIELDS: dict[str, Normaliser] = {"team": _json}
 ATTEMPT_FIELDS: dict[str, Normaliser] = {
     "attempt": _int,
     "tier": _int,
@@ -231,7 +234,7 @@ def revision_anchor(link: Mapping[str, Any]) -> str:
 def decision_columns(row: Any) -> dict[str, Any]:
     """The hashed columns of a stored decision row (pin columns included when set)."""
     values = {name: getattr(row, name) for name in DECISION_FIELDS}
-    for name in (*PIN_FIELDS, *TIME_FIELDS):
+    for name in (*PIN_FIELDS, *TIME_FIELDS, *TEAM_FIELDS):
         value = getattr(row, name, None)
         if value is not None:
             values[name] = value
@@ -250,7 +253,7 @@ def decision_link(prev: str, decision: Mapping[str, Any], attempts: str) -> str:
         for name, normalise in DECISION_FIELDS.items()
         if name not in OPTIONAL_DECISION_FIELDS or decision.get(name) is not None
     }
-    for name, normalise in (*PIN_FIELDS.items(), *TIME_FIELDS.items()):
+    for name, normalise in (*PIN_FIELDS.items(), *TIME_FIELDS.items(), *TEAM_FIELDS.items()):
         if decision.get(name) is not None:
             content[name] = normalise(decision[name])
     return _sha256(canonical_json({"prev": prev, "decision": content, "attempts": attempts}))

@@ -123,11 +123,12 @@ def decisions_slice(
 
 
 def decision_outcomes(*, session: Session, run_id: str) -> list[Any]:
-    """(task_index, robot, regret, expected_success) of every decision in task order: the
-    few columns a run's totals need, without loading each row's record."""
+    """(task_index, robot, regret, expected_success, team) of every decision in task order:
+    the few columns a run's totals need, without loading each row's record."""
     return list(
         session.execute(
-            select(Decision.task_index, Decision.robot, Decision.regret, Decision.expected_success)
+            select(Decision.task_index, Decision.robot, Decision.regret)
+            .add_columns(Decision.expected_success, Decision.team)
             .where(Decision.run_id == run_id)
             .order_by(Decision.task_index)
         )

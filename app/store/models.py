@@ -216,6 +216,9 @@ class Decision(Base):
     travel: Mapped[float | None] = mapped_column(Float, nullable=True)
     seq: Mapped[int | None] = mapped_column(Integer, nullable=True)
     later_by: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # docs/allocation.md#teams, a team task: its members, one {"robot", "feature"} per unit in unit
+    # order (`robot` is the first). Null for a single-robot task; hashed only when set.
+    team: Mapped[list[Any] | None] = mapped_column(JSON(none_as_null=True), nullable=True)
 
 
 class ExecutionReport(Base):

@@ -1,12 +1,13 @@
 """The site's outcomes (docs/estimates.md#counting-each-report-once): one row per task reported done
-or failed, written in the same transaction as the report, so the estimates of a site with 100,000
-reports are one indexed aggregate rather than a walk over every run's record.
+or failed (a team task: one per member), written in the same transaction as the report, so the
+estimates of a site with 100,000 reports are one indexed aggregate rather than a walk over every
+run's record.
 
 The row is derived, never the record: `ltaa rebuild-estimates` recomputes the table from the
 execution-report events and annotations (app.sites.rebuild), and a test proves both agree.
 A report is counted on the run it was sent to; the copies a revision carries of its pinned
 tasks' reports are no reports and write no row (the unique key would refuse a second row
-for the same run and task anyway).
+for the same run, task and robot anyway).
 """
 
 from __future__ import annotations
@@ -33,7 +34,9 @@ from app.store.models import Base
 class SiteReport(Base):
     __tablename__ = "site_reports"
     __table_args__ = (
-        UniqueConstraint("run_id", "task_index", name="uq_site_reports_run_task"),
+        # One row per robot of a reported task: a team task has one per member
+        # (docs/estimates.md#teams-count-once-per-member).
+        UniqueConstraint("run_id", "task_index", "robot", name="uq_site_reports_run_task_robot"),
         # The estimates are one grouped scan of a site's rows up to a time: this index holds
         # every column the scan reads, in group order, so it never touches the table
         # (100,000 reports read in well under the 200 ms the issue asks for, on SQLite).

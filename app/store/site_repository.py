@@ -2,7 +2,7 @@
 the outcome rows written with each report, the aggregates the estimates are computed from, and the
 configured rates that serve as priors.
 
-One derivation turns a reported task into its row (`outcome_row`), used both when a report
+One derivation turns a reported task into its rows (`outcome_rows`), used both when a report
 arrives and when the table is rebuilt from the record, so the two cannot drift apart.
 """
 
@@ -87,8 +87,13 @@ def outcome_row(
     reported: Reported,
     decision: Decision,
     received_at: datetime,
+    member: tuple[str, str] | None = None,
 ) -> dict[str, Any]:
+    """The row of a reported task on its robot; `member` (robot, feature): the row of one member
+    of a team task, which counts on the feature that member covered
+    (docs/estimates.md#teams-count-once-per-member)."""
     task = _task_facts(run.request, reported.task_index)
+    robot = decision.robot_name if member is None else member[0]
     ended, started = as_utc(reported.at), reported.started_at
     minutes, unmeasured = None, None
     if started is not None and reported.together_without_at:
@@ -98,13 +103,14 @@ def outcome_row(
         minutes = span if span > 0 else None  # a zero-length task says nothing of duration
         unmeasured = None if span > 0 else Unmeasured.ZERO_LENGTH.value
     predicted = float(decision.expected_success)
-    features = json.dumps(sorted(task.get("features", [])))
+    covered = task.get("features", []) if member is None else [member[1]]
+    features = json.dumps(sorted(covered))
     return {
         "site": run.site,
         "run_id": run.id,
         "task_index": reported.task_index,
         "task_id": reported.task_id,
-        "robot": decision.robot_name,
+        "robot": robot,
         "task_type": str(task.get("type") or "Custom"),
         "features": features,
         "feature_set": hashlib.sha256(features.encode()).hexdigest(),
@@ -115,9 +121,25 @@ def outcome_row(
         "received_at": as_utc(received_at),
         "minutes": minutes,
         "log_minutes": None if minutes is None else math.log(minutes),
-        "planned_minutes": planned_minutes(task, decision.robot_name),
+        "planned_minutes": planned_minutes(task, robot),
         "unmeasured": unmeasured,
     }
+
+
+def outcome_rows(
+    *, run: Run, reported: Reported, decision: Decision, received_at: datetime
+) -> list[dict[str, Any]]:
+    """A reported task's rows: one, or for a team task one per member, each on the feature it
+    covered, with the same outcome and times (docs/estimates.md#teams-count-once-per-member)."""
+    members: list[tuple[str, str] | None] = (
+        [(str(m["robot"]), str(m["feature"])) for m in decision.team] if decision.team else [None]
+    )
+    return [
+        outcome_row(
+            run=run, reported=reported, decision=decision, received_at=received_at, member=m
+        )
+        for m in members
+    ]
 
 
 def _decisions(session: Session, run_id: str, indexes: Iterable[int]) -> dict[int, Decision]:
@@ -138,9 +160,12 @@ def record_outcomes(
     final = [r for r in reported if r.state in FINAL_STATES]
     decided = _decisions(session, run.id, (r.task_index for r in final))
     rows = [
-        outcome_row(run=run, reported=r, decision=decided[r.task_index], received_at=received_at)
+        row
         for r in final
         if r.task_index in decided
+        for row in outcome_rows(
+            run=run, reported=r, decision=decided[r.task_index], received_at=received_at
+        )
     ]
     for values in rows:
         session.add(SiteReport(**values))
@@ -323,7 +348,8 @@ def stored_rows(*, session: Session) -> list[dict[str, Any]]:
     """Every outcome row as plain values (without the surrogate id), for comparisons."""
     columns = [c for c in SiteReport.__table__.columns if c.name != "id"]
     out = []
-    for row in session.execute(select(*columns).order_by(SiteReport.run_id, SiteReport.task_index)):
+    order = (SiteReport.run_id, SiteReport.task_index, SiteReport.robot)
+    for row in session.execute(select(*columns).order_by(*order)):
         values = dict(row._mapping)
         for key in ("reported_at", "received_at"):
             values[key] = as_utc(values[key]).astimezone(UTC)

@@ -377,7 +377,12 @@ def test_every_audited_column_is_in_the_chain() -> None:
 
     # The pin and time columns are hashed too, only when set (so links written before them
     # hold).
-    hashed = set(chain.DECISION_FIELDS) | set(chain.PIN_FIELDS) | set(chain.TIME_FIELDS)
+    hashed = (
+        set(chain.DECISION_FIELDS)
+        | set(chain.PIN_FIELDS)
+        | set(chain.TIME_FIELDS)
+        | set(chain.TEAM_FIELDS)
+    )
     assert hashed == columns(Decision) - {
         "id",
         "run_id",

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Self
 
-from app.domain.decision import DecisionContext
+from app.domain.decision import DecisionContext, Members, TeamFacts
 from app.domain.modes import Mode, strategic_weights
 from app.domain.phases import Phase
 from app.reasoners.rules import compose_answer
@@ -137,10 +137,53 @@ _TASK = re.compile(r"^Task (\d+)/(\d+): (.*?)(?: \(([^()]*)\))?; features: (.+)$
 _ROBOT = re.compile(
     r"^- (.+?) \[([^\]]+)\]: S ([\d.]+)%, load (\d+) \(dev [^)]*\)(, NOT allowed)?$", re.M
 )
-_TARGET = re.compile(r"^Target load W = ([\d.]+);.*?(?:final loads in \[(\d+), (\d+)\])?", re.M)
+_TARGET = re.compile(
+    r"^Target load W = ([\d.]+)(?: \([^)]*\))?;.*?(?:final loads in \[(\d+), (\d+)\])?", re.M
+)
 _PHASE = re.compile(r"^Phase: (early|middle|late)\b|the (early|middle|late) phase of", re.M)
 _MODE = re.compile(r"^Mode: (\w+),|phase of (\w+) mode", re.M)
 _GUIDED = re.compile(r"^Optimizer guidance: (.+?) lies on", re.M)
+# docs/allocation.md#teams: a team task's prompt (app.graph.team_prompts).
+_TEAM_ROBOT = re.compile(r"^- (.+?) \[([^\]]+)\]: load (\d+) \(dev [^)]*\)(, NOT allowed)?$", re.M)
+_UNIT = re.compile(r"^- (\S+) x(\d+): (.*)$", re.M)
+_CANDIDATE = re.compile(r"^- (best|least-loaded): (.+) \(S [\d.]+%, loads \d+\)$", re.M)
+_GUIDED_TEAM = re.compile(r"^Optimizer guidance: the team (.+?) lies on", re.M)
+
+
+def _members(text: str, facts: TeamFacts, labels: tuple[str, ...]) -> Members:
+    """`heavy: Crane, Lifter; careful: Arm` -> the members in unit order."""
+    named = dict(part.split(": ", 1) for part in text.split("; "))
+    return tuple(labels.index(x) for f in facts.features for x in named[f].split(", "))
+
+
+def _team_context(prompt: str, base: dict[str, Any]) -> DecisionContext:
+    robots = _TEAM_ROBOT.findall(prompt)
+    labels = tuple(r[0] for r in robots)
+    units: list[str] = []
+    rates: list[tuple[float | None, ...]] = []
+    for feature, count, who in _UNIT.findall(prompt):
+        units += [feature] * int(count)
+        rate = {m[1]: float(m[2]) / 100 for m in re.finditer(r"(.+?) ([\d.]+)%(?:, |$)", who)}
+        rates.append(tuple(rate.get(label) for label in labels))
+    facts = TeamFacts(units=tuple(units), rates=tuple(rates))
+    found = dict(_CANDIDATE.findall(prompt))
+    guided = _GUIDED_TEAM.search(prompt)
+    facts = TeamFacts(
+        units=facts.units,
+        rates=facts.rates,
+        best=_members(found["best"], facts, labels),
+        fewest=_members(found["least-loaded"], facts, labels),
+        guided=_members(guided.group(1), facts, labels) if guided else None,
+    )
+    return DecisionContext(
+        **base,
+        robot_names=tuple(r[1] for r in robots),
+        robot_labels=labels,
+        success=(0.0,) * len(robots),
+        loads=tuple(int(r[2]) for r in robots),
+        feasible=tuple(i for i, r in enumerate(robots) if not r[3]),
+        team=facts,
+    )
 
 
 def context_from_prompt(prompt: str) -> DecisionContext:
@@ -149,10 +192,26 @@ def context_from_prompt(prompt: str) -> DecisionContext:
     robots = _ROBOT.findall(prompt)
     target = _TARGET.search(prompt)
     phase_m, mode_m = _PHASE.search(prompt), _MODE.search(prompt)
-    if not (task and robots and target and phase_m and mode_m):
+    team = "\nTeam task: " in prompt
+    if not (task and (robots or team) and target and phase_m and mode_m):
         raise ValueError("not an LTAA decision prompt")
     phase = Phase(phase_m.group(1) or phase_m.group(2))
     mode = Mode(mode_m.group(1) or mode_m.group(2))
+    if team:
+        return _team_context(
+            prompt,
+            {
+                "task_index": int(task.group(1)) - 1,
+                "total_tasks": int(task.group(2)),
+                "task_name": task.group(3),
+                "task_type": task.group(4) or "",
+                "features": tuple(f.strip() for f in task.group(5).split(",")),
+                "target": float(target.group(1)),
+                "phase": phase,
+                "mode": mode,
+                "weights": strategic_weights(mode, phase),
+            },
+        )
     labels = tuple(r[0] for r in robots)
     guided = _GUIDED.search(prompt)
     return DecisionContext(

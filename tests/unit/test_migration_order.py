@@ -34,6 +34,8 @@ RECORDED = [
     "0010_sites",
     "0011_times",
     "0012_unmeasured",
+    "0013_decision_team",
+    "0014_site_report_members",
 ]
 
 

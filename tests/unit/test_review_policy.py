@@ -103,6 +103,6 @@ def test_regret_above_is_measured_in_points_over_the_queue_not_per_task() -> Non
     guided = CompletionOracle(problem).guidance(0, [0, 0])
     assert guided is not None and guided.costs[1] == pytest.approx(cost)
     # The per-decision regret of the record is the per-task mean of the same give-away.
-    assert ctx.regret is not None and ctx.regret(0, [0, 0], 1) == pytest.approx(cost / 100 / 36)
+    assert ctx.regret is not None and ctx.regret(0, [0, 0], (1,)) == pytest.approx(cost / 100 / 36)
     fires = ReviewPolicy(regret_above=5.0).triggers(replace(PROPOSAL, regret_points=cost))
     assert fires == [Trigger.REGRET_ABOVE]

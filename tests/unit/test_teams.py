@@ -195,7 +195,7 @@ def test_the_answer_names_the_first_units_member_as_robot() -> None:
     assert solution.assignment[1] == solution.teams[1][0]
 
 
-@pytest.mark.parametrize("name", ["q_learning", "dqn", "ltaa"])
+@pytest.mark.parametrize("name", ["q_learning", "dqn"])
 def test_one_robot_methods_refuse_a_team_instance_with_a_sentence(name: str) -> None:
     with pytest.raises(DomainError) as err:
         get_solver(name).solve(Problem.build(_team_instance(), Mode.BALANCED))

@@ -33,6 +33,14 @@ def compose_feedback(verdict: Validation, dctx: DecisionContext, threshold: floa
     """First line: a one-line summary (it becomes the failure-log entry). Then one line per
     criterion that lost points, largest loss first."""
     labels = dctx.labels
+    if verdict.hard_invalid is not None and dctx.team is not None:
+        needs = ", ".join(f"{f} x{dctx.team.count(f)}" for f in dctx.team.features)
+        return (
+            f"Hard invalid (Q=0): {verdict.hard_invalid}.\n"
+            f"- Fix: under **Team** give one line per unit ({needs}), `- <feature>: <robot> — "
+            "<why>`, with distinct robots each listed for its unit above, then every section "
+            "of the required format."
+        )
     if verdict.hard_invalid is not None:
         allowed = ", ".join(labels[r] for r in dctx.feasible)
         return (

@@ -6,14 +6,21 @@ from typing import Any
 
 from langgraph.runtime import Runtime
 
+from app.domain.decision import DecisionContext
 from app.graph.context import decision_context
 from app.graph.nodes.common import cancellable, timing
+from app.graph.nodes.validate import judge
 from app.graph.recorder import AttemptRecord
 from app.graph.review import gate
 from app.graph.state import GraphContext, LTAAState
 from app.graph.timing import best_in_time, fallback_answer, time_record
 from app.graph.validation import validate_text
-from app.reasoners.rules import choose, compose_answer
+from app.reasoners.rules import choose, choose_team, compose_answer
+
+
+def _team_success(dctx: DecisionContext, team: tuple[int, ...]) -> float:
+    assert dctx.team is not None
+    return dctx.team.success(team)
 
 
 def failure_line(record: AttemptRecord, threshold: float) -> str:
@@ -38,12 +45,24 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
     # attempt): copying it into state would put it into several checkpoints per task.
     text: dict[str, Any]
     chosen = state.get("robot")
+    team: tuple[int, ...] | None = None
     if state.get("accepted") and chosen is not None:
         robot, fallback = chosen, False
         accepted = next(r for r in reversed(records) if r.accepted)
         quality = accepted.quality or 0.0
         confidence = (accepted.parsed or {}).get("confidence")
         text = {"text_attempt": accepted.attempt}
+        if dctx.team is not None:
+            # The members from the accepted reply, judged again (pure): never from state.
+            team = judge(accepted, dctx, ctx.quality_threshold).team
+    elif dctx.team is not None:
+        # docs/allocation.md#teams: the rules reasoner's team, which keeps the cap satisfiable.
+        team = choose_team(dctx)[0]
+        robot = team[0]
+        verdict = validate_text(compose_answer(dctx), dctx, ctx.quality_threshold)
+        fallback, quality = True, verdict.quality
+        confidence = verdict.parsed.confidence
+        text = {"reasoning": verdict.parsed.reasoning, "tradeoff": verdict.parsed.tradeoff}
     elif dctx.timing:
         # docs/schedules.md#validation-in-time: in time, the fallback takes the allowed robot with
         # the best success.
@@ -62,7 +81,7 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
         text = {"reasoning": verdict.parsed.reasoning, "tradeoff": verdict.parsed.tradeoff}
     decision = {
         **text,
-        "expected_success": dctx.success[robot],
+        "expected_success": dctx.success[robot] if team is None else _team_success(dctx, team),
         "confidence": confidence or "",
         "quality": quality,
         "fallback": fallback,
@@ -72,7 +91,9 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
         "loads_before": list(state["loads"]),
         "balance_before": state["view"]["balance"],
     }
-    if ctx.review is not None:
+    if team is not None:
+        decision["team"] = list(team)
+    if ctx.review is not None and team is None:  # reviews of team decisions: not yet
         # Last, and after nothing but reads: a resumed graph re-runs this node from its top.
         def texts() -> tuple[str, str]:
             if "text_attempt" in text:

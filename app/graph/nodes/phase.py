@@ -20,4 +20,8 @@ def detect_phase(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, 
     guided = ctx.guidance(t, tuple(loads)) if ctx.guidance is not None else None
     if guided is None or isinstance(guided, int):
         return {"view": task_view(ctx.problem, t, loads, guided, decided=decided)}
-    return {"view": task_view(ctx.problem, t, loads, guided.robot, guided.costs, decided=decided)}
+    costs = guided.costs if guided.team is None else None
+    view = task_view(
+        ctx.problem, t, loads, guided.robot, costs, decided=decided, guided_team=guided.team
+    )
+    return {"view": view}

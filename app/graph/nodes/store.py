@@ -20,6 +20,13 @@ def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
     if robot is None or d is None:
         raise RuntimeError(f"task index {t} reached store_and_route without a decision")
     task = inst.tasks[t]
+    members = tuple(d.get("team") or (robot,))
+    team = None
+    if d.get("team"):
+        team = [
+            {"robot": inst.robots[r].name, "feature": f}
+            for f, r in zip(inst.units[t], members, strict=True)
+        ]
     reasoning, tradeoff = d.get("reasoning"), d.get("tradeoff")
     if d.get("text_attempt") is not None:
         parsed = require_attempt(rec, t, d["text_attempt"]).parsed or {}
@@ -45,8 +52,9 @@ def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
             balance_before=d["balance_before"],
             balance_after=state["view"]["balance"],
             severity_after=state["view"]["severity"],
-            regret=ctx.regret(t, d["loads_before"], robot) if ctx.regret is not None else None,
+            regret=ctx.regret(t, d["loads_before"], members) if ctx.regret is not None else None,
             review=d.get("review"),
+            team=team,
             **(d.get("time") or {}),
         )
     )

@@ -17,7 +17,9 @@ def update_workload(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
     if robot is None:
         raise RuntimeError(f"task index {state['task_index']} reached update_workload undecided")
     loads = list(state["loads"])
-    loads[robot] += 1
+    # docs/allocation.md#teams: a team task adds one to each member's load.
+    for member in (state.get("decision") or {}).get("team") or [robot]:
+        loads[member] += 1
     view = {
         **state["view"],
         "balance": balance_of(ctx.problem, loads),

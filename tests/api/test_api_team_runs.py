@@ -1,0 +1,152 @@
+"""Durable LTAA runs with team tasks (docs/allocation.md#teams): an untimed team run completes
+with valid teams, its trace lists each team decision's members, the chain verifies online and
+offline (and the members are in it), a guided run reaches the exact optimum, and what the graph
+cannot do yet (teams in time, reviews of teams) is a 422 sentence with nothing stored."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.api.conftest import ClientFactory
+from tests.api.test_api_bad_requests import assert_error_shape
+from tests.api.test_api_teams import TEAM_BODY
+from tests.api.test_docs_check_trace import check_trace_source
+from tests.fakes.llm_providers import PROVIDERS
+from tests.offline_check import check_offline
+from tests.polling import wait_until
+
+SKILLS = {"crane": {"heavy"}}
+
+
+def completed(client: TestClient, **changes: Any) -> dict[str, Any]:
+    created = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), **changes})
+    assert created.status_code == 202, created.text
+    state = wait_until(client, created.json()["id"], timeout=120)
+    assert state["status"] == "completed", state
+    return state
+
+
+def check_teams(assignments: list[dict[str, Any]]) -> dict[str, int]:
+    """Every unit covered by a distinct robot that may cover it; the loads, counting members."""
+    loads = {r["name"]: 0 for r in TEAM_BODY["robots"]}
+    for task, a in zip(TEAM_BODY["tasks"], assignments, strict=True):
+        if "team" in task:
+            members = a["team"]
+            units = [f for f, c in task["team"].items() for _ in range(c)]
+            assert [m["feature"] for m in members] == units, a
+            robots = [m["robot"] for m in members]
+            assert len(set(robots)) == len(robots), a
+            assert robots[0] == a["robot"], "robot is the first unit's member"
+            for m in members:
+                assert m["feature"] in SKILLS.get(m["robot"], {m["feature"]}), m
+        else:
+            assert "team" not in a or a["team"] is None
+            robots = [a["robot"]]
+        for name in robots:
+            loads[name] += 1
+    return loads
+
+
+def test_a_durable_team_run_lists_members_and_verifies(
+    any_db_client: TestClient, tmp_path: Path
+) -> None:
+    client = any_db_client
+    state = completed(client, reasoner="rules")
+    run_id = state["id"]
+    run = client.get(f"/runs/{run_id}").json()
+    loads = check_teams(run["assignments"])
+    assert run["workload"] == loads and sum(loads.values()) == 6
+    assert all(1 <= x <= 3 for x in loads.values()), loads  # balanced: W 2, cap 1
+    trace = client.get(f"/runs/{run_id}/trace").json()
+    members = {d["task_index"]: d.get("team") for d in trace["decisions"]}
+    assert [len(members[t] or []) for t in range(4)] == [2, 2, 0, 0]
+    assert {d["task_index"]: d["team"] for d in run["assignments"] if d.get("team")} == {
+        t: m for t, m in members.items() if m
+    }
+    verify = client.get(f"/runs/{run_id}/trace/verify").json()
+    assert verify["ok"], verify
+
+    export = tmp_path / "run.jsonl"
+    export.write_text(client.get(f"/runs/{run_id}/trace", params={"format": "jsonl"}).text)
+    script = tmp_path / "check_trace.py"
+    script.write_text(check_trace_source())
+    assert check_offline(export, script=script).returncode == 0
+    # The members are in the chain: swapping a member breaks it offline.
+    lines = export.read_text().splitlines()
+    at = next(i for i, x in enumerate(lines) if json.loads(x).get("team"))
+    edited = json.loads(lines[at])
+    edited["team"][1]["robot"] = "arm" if edited["team"][1]["robot"] != "arm" else "lifter"
+    lines[at] = json.dumps(edited)
+    export.write_text("\n".join(lines) + "\n")
+    broken = check_offline(export, script=script)
+    assert broken.returncode == 1 and "decision" in broken.stdout + broken.stderr
+
+
+def test_a_guided_team_run_reaches_the_exact_optimum(client: TestClient) -> None:
+    optimal = client.post(
+        "/allocate", json={**copy.deepcopy(TEAM_BODY), "solver": "optimal", "mode": "balanced"}
+    ).json()
+    state = completed(client, reasoner="rules", guidance="optimizer")
+    run = client.get(f"/runs/{state['id']}").json()
+    check_teams(run["assignments"])
+    assert run["regret"] == 0.0
+    best = optimal["metrics"]["expected_success"]
+    assert abs(run["metrics"]["expected_success"] - best) < 1e-9
+    by_task = {a["task_index"]: a.get("team") for a in run["assignments"]}
+    assert [by_task[t] for t in range(4)] == [a.get("team") for a in optimal["assignments"]]
+
+
+def test_a_timed_team_run_is_still_refused_with_a_sentence(client: TestClient) -> None:
+    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
+    r = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks})
+    assert r.status_code == 422, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"][-3:] == ["tasks", 0, "team"]
+    assert "timed instance" in item["msg"] and "'optimal'" in item["msg"]
+    assert client.get("/runs").json() == []  # nothing stored
+
+
+def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
+    r = client.post(
+        "/runs", json={**copy.deepcopy(TEAM_BODY), "review": {"on": ["every_decision"]}}
+    )
+    assert r.status_code == 422, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"][-1] == "review" and "team" in item["msg"]
+    assert client.get("/runs").json() == []
+
+
+@pytest.mark.parametrize("name", list(PROVIDERS))
+def test_a_durable_llm_team_run_forms_teams_and_replays(
+    make_client: ClientFactory, name: str
+) -> None:
+    provider = PROVIDERS[name]
+    with provider.fake() as api:
+        client = make_client(**provider.settings(api))
+        state = completed(client, reasoner=name)
+        assert len(api.requests) == 4  # one call per decision: every team answer accepted
+    run = client.get(f"/runs/{state['id']}").json()
+    check_teams(run["assignments"])
+    trace = client.get(f"/runs/{state['id']}/trace").json()
+    assert all(not d["fallback"] and d["reasoner"] == name for d in trace["decisions"])
+    reference = client.get(f"/runs/{completed(client, reasoner='rules')['id']}").json()
+    assert run["assignments"] == reference["assignments"]  # the fakes answer as the rules do
+    replay = completed(client, reasoner="replay", replay_of=state["id"])
+    assert client.get(f"/runs/{replay['id']}").json()["assignments"] == run["assignments"]
+
+
+def test_ltaa_refuses_a_timed_team_instance_on_allocate(client: TestClient) -> None:
+    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
+    r = client.post(
+        "/allocate", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks, "solver": "ltaa"}
+    )
+    assert r.status_code == 422, r.text
+    (item,) = assert_error_shape(r.json())
+    assert item["loc"] == ["body", "tasks", 0, "team"]
+    assert "timed instance" in item["msg"] and "LTAA graph" in item["msg"]
