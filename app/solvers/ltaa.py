@@ -202,24 +202,10 @@ class LTAASolver(Solver):
         "per task (per contested task with llm_scope 'contested')",
     )
     Options = LTAAOptions
-    # docs/allocation.md#teams: the graph forms teams on untimed instances (timed team tasks are
-    # refused by Solver.check_supported until the time model schedules teams).
+    # docs/allocation.md#teams: the graph forms teams on untimed instances; timed team tasks
+    # are refused by Solver.check_supported (ltaa is not among TIMED_TEAM_METHODS) until the
+    # graph's time lines place teams (the seam: app.graph.context.team_facts).
     forms_teams = True
-
-    def check_supported(self, problem: Problem) -> None:
-        # Its own refusal, whatever the list of methods that schedule teams in time says: the
-        # graph's time lines do not place teams yet (the seam: app.graph.context.team_facts).
-        instance = problem.instance
-        if instance.timed and instance.has_teams:
-            t = next(i for i, task in enumerate(instance.tasks) if task.team is not None)
-            raise DomainError(
-                f"tasks.{t}.team",
-                f"task {instance.tasks[t].id!r} needs a team on a timed instance, which the "
-                "LTAA graph does not schedule yet (docs/allocation.md#teams); drop the "
-                "durations to plan the teams untimed (with 'ltaa' or the exact solvers)",
-                code="unsupported_field",
-            )
-        super().check_supported(problem)
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         opts: LTAAOptions = options

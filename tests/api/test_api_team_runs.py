@@ -149,4 +149,4 @@ def test_ltaa_refuses_a_timed_team_instance_on_allocate(client: TestClient) -> N
     assert r.status_code == 422, r.text
     (item,) = assert_error_shape(r.json())
     assert item["loc"] == ["body", "tasks", 0, "team"]
-    assert "timed instance" in item["msg"] and "LTAA graph" in item["msg"]
+    assert "timed instance" in item["msg"] and "solver 'ltaa'" in item["msg"]
