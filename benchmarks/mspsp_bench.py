@@ -1,0 +1,389 @@
+"""MSPSP-InstLib set 2c against its published optima (issue 30: `schedule` on team tasks).
+
+    python -m benchmarks.mspsp_bench [--dir FOLDER] [--pattern GLOB] [--limit N]
+
+Reads a local copy of MSPSP-InstLib (`--dir`, or $LTAA_MSPSP_DIR; not committed here: it
+has no licence; docs/benchmarks.md says where to get it), turns each set 2c instance
+matching `--pattern` (default the 44 instances with 20 activities) into a timed team
+instance (`benchmarks/mspsp.py`), solves it with the `schedule` method (objective
+`makespan`, no workload cap, `time_limit_s` 30: a deterministic budget) and checks each
+answer twice: with the app's own feasibility check and with `plan_problems`, which reads
+the plan against the `.dzn` data alone. Beside it, the plain CP-SAT model of the MSPSP
+written here (`plain_model`) is the independent reference: it shows the reading matches
+the published optima whatever the app's solver does.
+
+The section (its own, in docs/benchmarks.md, via `benchmarks.common.write_section`) holds
+per instance: tasks (teams), robots, the published optimum, our makespan, bound, status,
+proven or not, and time; and the acceptance line of issue 30: the published optimum
+reached on every instance run, proven optimal on at least two thirds, never a false
+"optimal" (status optimal with a makespan above the published optimum).
+Without the local copy the section says so in one line and nothing is measured.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from ortools.sat.python import cp_model
+
+from app.domain.errors import DomainError
+from app.domain.modes import Mode
+from app.domain.objective import Objective, ObjectiveKind
+from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
+from app.solvers.base import Solution
+from app.solvers.cpsat.common import DET_PER_S
+from app.solvers.registry import get_solver
+from benchmarks.common import Section, machine, table, write_section
+from benchmarks.mspsp import (
+    ENV,
+    Project,
+    Published,
+    local_copy,
+    plan_makespan,
+    plan_problems,
+    project_instance,
+    published_results,
+    read_dzn,
+    set_2c,
+)
+
+TITLE = "Multi-skill project scheduling: MSPSP-InstLib set 2c"
+HEADING = f"## {TITLE}"
+LIMIT_S = 30.0
+PLAIN_LIMIT_S = 30.0
+PATTERN = "inst_set2c_*_n20_*"
+SOURCE = "https://github.com/youngkd/MSPSP-InstLib"
+
+
+def problem_of(project: Project) -> Problem:
+    """The makespan alone: success is flat (1.0 on every skill), no floor, no cap."""
+    return Problem.build(
+        project_instance(project),
+        Mode.SUCCESS_FOCUSED,
+        uncapped=True,
+        objective=Objective(ObjectiveKind.MAKESPAN, 0.0),
+    )
+
+
+def plan_of(
+    project: Project, problem: Problem, solution: Solution
+) -> tuple[dict[int, float], dict[int, list[tuple[int, int]]], list[str]]:
+    """The answer's schedule as starts and (resource, skill) members per activity, 0-based,
+    for `plan_problems`: a slot's members cover its task's units in unit order (a one-robot
+    task: its robot, its feature); the `wait<a>` robots are no resource. Also what
+    disagrees between the schedule and the answer's assignment and teams."""
+    instance = problem.instance
+    schedule = solution.details["schedule"]
+    starts: dict[int, float] = {}
+    members: dict[int, list[tuple[int, int]]] = {}
+    disagree: list[str] = []
+    for slot in schedule.slots:
+        task = instance.tasks[slot.task]
+        starts[int(task.id)] = float(slot.start)
+        units = instance.units[slot.task] or task.features
+        robots = tuple(getattr(slot, "team", ()) or (slot.robot,))
+        if len(robots) != len(units):
+            disagree.append(f"activity {task.id}: {len(robots)} members for {len(units)} units")
+        answered = solution.teams.get(slot.task, (solution.assignment[slot.task],))
+        if tuple(answered) != robots:
+            disagree.append(f"activity {task.id}: the answer's team {answered} is not {robots}")
+        members[int(task.id)] = [
+            (r, int(f[1:]) - 1)
+            for f, r in zip(units, robots, strict=False)
+            if r < project.n_resources and f.startswith("s")
+        ]
+    return starts, members, disagree
+
+
+def solve_schedule_method(project: Project, limit_s: float) -> dict[str, Any]:
+    problem = problem_of(project)
+    wall, cpu = time.perf_counter(), time.process_time()
+    try:
+        solution = get_solver("schedule").solve(problem, options={"time_limit_s": limit_s})
+    except DomainError as exc:
+        return {"status": "refused", "error": exc.message}
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    details = solution.details
+    starts, members, problems = plan_of(project, problem, solution)
+    problems += plan_problems(project, starts, members)
+    problems += [str(v) for v in check_schedule(problem, details["schedule"])]
+    return {
+        "status": details["status"],
+        "makespan": float(details["objective_value"]),
+        "checked_makespan": plan_makespan(project, starts),
+        "bound": float(details["bound"]),
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "wall_cut": bool(details.get("budget", {}).get("wall_cut", False)),
+        "model": details.get("model", ""),
+        "problems": problems,
+    }
+
+
+def plain_model(project: Project, *, time_limit_s: float) -> dict[str, Any]:
+    """The textbook MSPSP in CP-SAT, on its own: per (activity, resource, skill) a
+    contribution literal, per skill the required count, a resource contributes at most
+    one skill per activity, an optional interval per (activity, resource) in a no-overlap
+    per resource, finish-to-start precedences, minimise the latest end. One worker."""
+    m = cp_model.CpModel()
+    horizon = sum(project.durations)
+    acts = [a for a in range(project.n_activities) if project.durations[a] > 0]
+    start = {a: m.new_int_var(0, horizon, f"s{a}") for a in range(project.n_activities)}
+    busy: list[list[cp_model.IntervalVar]] = [[] for _ in range(project.n_resources)]
+    for a in acts:
+        need = project.requirements[a]
+        contrib: dict[tuple[int, int], cp_model.IntVar] = {}
+        for r, row in enumerate(project.mastery):
+            for s, has in enumerate(row):
+                if has and need[s] > 0:
+                    contrib[r, s] = m.new_bool_var(f"c{a}_{r}_{s}")
+        for s, units in enumerate(need):
+            if units:
+                m.add(sum(v for (_, k), v in contrib.items() if k == s) == units)
+        for r in range(project.n_resources):
+            mine = [v for (q, _), v in contrib.items() if q == r]
+            if not mine:
+                continue
+            present = m.new_bool_var(f"x{a}_{r}")
+            m.add(sum(mine) == present)
+            busy[r].append(
+                m.new_optional_fixed_size_interval_var(
+                    start[a], project.durations[a], present, f"i{a}_{r}"
+                )
+            )
+    for intervals in busy:
+        m.add_no_overlap(intervals)
+    # The MiniZinc model's redundant cumulatives: per skill (its masters at once) and in
+    # all (the resources at once); without them the bound stalls on a third of set 2c.
+    spans = {
+        a: m.new_fixed_size_interval_var(start[a], project.durations[a], f"a{a}") for a in acts
+    }
+    for s in range(project.n_skills):
+        masters = sum(row[s] for row in project.mastery)
+        used = [a for a in acts if project.requirements[a][s]]
+        m.add_cumulative(
+            [spans[a] for a in used], [project.requirements[a][s] for a in used], masters
+        )
+    m.add_cumulative(
+        [spans[a] for a in acts], [sum(project.requirements[a]) for a in acts], project.n_resources
+    )
+    for before, after in project.precedences:
+        m.add(start[after - 1] >= start[before - 1] + project.durations[before - 1])
+    makespan = m.new_int_var(0, horizon, "makespan")
+    for a in range(project.n_activities):
+        m.add(makespan >= start[a] + project.durations[a])
+    m.minimize(makespan)
+    solver = cp_model.CpSolver()
+    # the same deterministic budget as `schedule` is given for `time_limit_s`
+    solver.parameters.max_deterministic_time = time_limit_s * DET_PER_S
+    solver.parameters.num_workers = 1
+    began = time.process_time()
+    status = solver.status_name(solver.solve(m))
+    found = status in ("OPTIMAL", "FEASIBLE")
+    return {
+        "status": status.lower(),
+        "makespan": int(solver.objective_value) if found else None,
+        "bound": solver.best_objective_bound,
+        "cpu_s": time.process_time() - began,
+    }
+
+
+def measure(folder: Path, pattern: str, limit: int | None, plain: bool) -> list[dict[str, Any]]:
+    published = published_results(folder)
+    rows = []
+    for path in set_2c(folder, pattern)[:limit]:
+        project = read_dzn(path)
+        instance = project_instance(project)
+        row: dict[str, Any] = {
+            "name": project.name,
+            "tasks": instance.n_tasks,
+            "teams": sum(1 for t in instance.tasks if t.team is not None),
+            "robots": project.n_resources,
+            "skills": project.n_skills,
+            "published": published.get(project.name, Published(-1, False)).__dict__,
+            "load": os.getloadavg()[0],
+        }
+        row["schedule"] = solve_schedule_method(project, LIMIT_S)
+        if plain:
+            row["plain"] = plain_model(project, time_limit_s=PLAIN_LIMIT_S)
+        rows.append(row)
+        print(f"{project.name}: {row['published']} {row}", file=sys.stderr)
+    return rows
+
+
+# -- the section -----------------------------------------------------------------------------
+
+
+def _num(v: float | None) -> str:
+    return "-" if v is None else f"{v:g}"
+
+
+def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
+    """The instances in each class the acceptance counts."""
+    out: dict[str, list[str]] = {k: [] for k in ("run", "reached", "proven", "false", "below")}
+    out.update(refused=[], broken=[], bound_over=[])
+    for r in rows:
+        s, best = r["schedule"], r["published"]["makespan"]
+        if s["status"] == "refused":
+            out["refused"].append(r["name"])
+            continue
+        out["run"].append(r["name"])
+        if s["problems"]:
+            out["broken"].append(r["name"])
+        if s["makespan"] <= best + 1e-6:
+            out["reached"].append(r["name"])
+        if s["makespan"] < best - 1e-6:
+            out["below"].append(r["name"])
+        if s["status"] == "optimal":
+            out["proven"].append(r["name"])
+            if s["makespan"] > best + 1e-6:
+                out["false"].append(r["name"])
+        if s["bound"] > best + 1e-6 and r["published"]["proven"]:
+            out["bound_over"].append(r["name"])
+    return out
+
+
+def _row(r: dict[str, Any]) -> tuple[Any, ...]:
+    s, plain = r["schedule"], r.get("plain")
+    ref = "-" if plain is None else f"{plain['status']} {_num(plain['makespan'])}"
+    if s["status"] == "refused":
+        ours: tuple[Any, ...] = ("refused", "-", "-", "-", "-")
+    else:
+        flag = (
+            " **FALSE OPTIMAL**"
+            if s["status"] == "optimal" and (s["makespan"] > r["published"]["makespan"] + 1e-6)
+            else ""
+        )
+        flag += " **INFEASIBLE**" if s["problems"] else ""
+        ours = (
+            f"{s['makespan']:g}{flag}",
+            f"{s['bound']:g}",
+            s["status"] + (" (wall cut)" if s["wall_cut"] else ""),
+            "yes" if s["status"] == "optimal" else "no",
+            f"{s['cpu_s']:.1f} s / {s['wall_s']:.1f} s",
+        )
+    return (
+        r["name"].removeprefix("inst_set2c_"),
+        f"{r['tasks']} ({r['teams']})",
+        r["robots"],
+        r["published"]["makespan"],
+        *ours,
+        ref,
+    )
+
+
+def body(rows: list[dict[str, Any]], folder_note: str) -> str:
+    v = verdicts(rows)
+    n = len(v["run"])
+    lines = [
+        f"Set 2c of MSPSP-InstLib ({SOURCE}; Young, Feydy & Schutt, CP 2017), read from a "
+        f"local copy ({folder_note}; not committed: the library has no licence). Each "
+        "instance is a timed team instance (`benchmarks/mspsp.py`): resources as robots whose "
+        "`skills` are their masteries (success 1.0, so only the makespan counts), each "
+        "activity a task with its duration, `after` its predecessors and `team: {skill: "
+        "units}` (one unit of one skill: a one-robot task); the dummy start and end dropped. "
+        f"`schedule` with objective `makespan`, no cap, `time_limit_s` {LIMIT_S:g} (a "
+        "deterministic budget; wall time depends on the machine's load). Every answer is "
+        "checked by the app's feasibility check and by an independent check against the "
+        "`.dzn` data. The last column is the plain CP-SAT MSPSP model written in the "
+        f"benchmark (one worker, {PLAIN_LIMIT_S:g} s): it shows the reading matches the "
+        f"published optima. Machine: {machine()}.",
+        "",
+        table(
+            [
+                "instance",
+                "tasks (teams)",
+                "robots",
+                "published optimum",
+                "makespan",
+                "bound",
+                "status",
+                "proven",
+                "CPU / wall",
+                "plain model",
+            ],
+            [_row(r) for r in rows],
+        ),
+        "",
+    ]
+    lines += _summary(v, n)
+    return "\n".join(lines) + "\n"
+
+
+def _summary(v: dict[str, list[str]], n: int) -> list[str]:
+    if v["refused"] and not n:
+        return [
+            f"**Not measured:** `schedule` refused all {len(v['refused'])} instances (timed "
+            "team tasks are not scheduled yet; docs/allocation.md#teams). The reading is "
+            "checked by the plain model's column."
+        ]
+    reached = len(v["reached"]) == n
+    proven = 3 * len(v["proven"]) >= 2 * n
+    out = [
+        f"**Acceptance (issue 30):** published optimum reached on {len(v['reached'])} of "
+        f"{n} instances run ({'met' if reached else '**missed**'}); proven optimal on "
+        f"{len(v['proven'])} of {n} (at least two thirds: {'met' if proven else '**missed**'}); "
+        + (
+            f"**FALSE OPTIMAL on {len(v['false'])}: {', '.join(v['false'])}**"
+            if v["false"]
+            else "no false optimal"
+        )
+        + "."
+    ]
+    for key, what in (
+        ("broken", "plans that break the MSPSP's rules (independent check)"),
+        ("below", "makespans below a published optimum (a reading or checking error)"),
+        ("bound_over", "bounds above a proven published optimum (a wrong bound)"),
+        ("refused", "instances refused"),
+    ):
+        if v[key]:
+            out.append(f"- **{len(v[key])} {what}:** {', '.join(v[key])}")
+    return out
+
+
+RESULTS = Path(os.environ.get("MSPSP_RESULTS", tempfile.gettempdir())) / "mspsp_set2c.json"
+
+
+def section(folder: str | None = None, pattern: str = PATTERN, limit: int | None = None) -> str:
+    found = local_copy(folder)
+    if found is None:
+        return (
+            f"{HEADING}\n\nSkipped: no local copy of MSPSP-InstLib. Clone {SOURCE} and set "
+            f"{ENV} to its folder (or pass `--dir`), then run `python -m benchmarks.mspsp_bench`.\n"
+        )
+    if os.environ.get("MSPSP_REUSE") == "1" and RESULTS.exists():
+        rows = json.loads(RESULTS.read_text())
+    else:
+        rows = measure(found, pattern, limit, plain=True)
+        RESULTS.write_text(json.dumps(rows))
+    note = f"{ENV} or `--dir`; instances `{pattern}`, {len(rows)} of them"
+    return f"{HEADING}\n\n{body(rows, note)}"
+
+
+def run() -> Section:
+    """For `make bench` (benchmarks/report.py): the folder from $LTAA_MSPSP_DIR."""
+    text = section()
+    return Section(TITLE, text.removeprefix(f"{HEADING}\n\n"))
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.mspsp_bench")
+    parser.add_argument("--dir", help=f"MSPSP-InstLib's folder (default ${ENV})")
+    parser.add_argument("--pattern", default=PATTERN, help="set 2c instances (a glob)")
+    parser.add_argument("--limit", type=int, default=None, help="at most this many")
+    args = parser.parse_args(argv)
+    text = section(args.dir, args.pattern, args.limit)
+    write_section(HEADING, text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
