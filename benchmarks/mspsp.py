@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -361,7 +362,7 @@ def plan_problems(
             out.append(f"activity {after} starts at {start_after:g}, before {before} ends")
     for r, busy in spans.items():
         busy.sort()
-        for (_, end, a), (start, _, b) in zip(busy, busy[1:], strict=False):
+        for (_, end, a), (start, _, b) in itertools.pairwise(busy):
             if start < end - 1e-6:
                 out.append(f"resource {r + 1} works on activities {a} and {b} at once")
     return out
