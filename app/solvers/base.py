@@ -42,7 +42,11 @@ class SolverOptions(BaseModel):
 
 
 # The methods that plan team tasks (docs/allocation.md#teams); the others refuse them.
-TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy")
+TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule")
+# ... and those that plan them on a timed instance: the exact scheduler, and the methods
+# whose team assignment the shared list scheduler times. A method that forms teams its own
+# way in time (the LTAA graph's time lines) refuses until it schedules them itself.
+TIMED_TEAM_METHODS = TEAM_METHODS
 
 
 class Solver(ABC):
@@ -73,7 +77,7 @@ class Solver(ABC):
         self.check_supported(problem)
         solution = self._solve(problem, seed=seed, options=self.parse_options(options))
         if problem.instance.timed:  # untimed answers are exactly what they always were
-            attach_schedule(problem, solution.assignment, solution.details)
+            attach_schedule(problem, solution.assignment, solution.details, solution.teams)
         return solution
 
     def check_supported(self, problem: Problem) -> None:
@@ -84,12 +88,12 @@ class Solver(ABC):
             return
         t = next(i for i, task in enumerate(instance.tasks) if task.team is not None)
         task = instance.tasks[t]
-        if instance.timed:
+        if instance.timed and self.forms_teams and self.info.name not in TIMED_TEAM_METHODS:
             raise DomainError(
                 f"tasks.{t}.team",
-                f"task {task.id!r} needs a team on a timed instance, which no method schedules "
-                "yet (docs/allocation.md#teams); drop the durations to plan the teams "
-                f"untimed with {_listed(TEAM_METHODS)}",
+                f"task {task.id!r} needs a team on a timed instance, which solver "
+                f"'{self.info.name}' does not schedule yet (docs/allocation.md#teams); use "
+                f"{_listed(TIMED_TEAM_METHODS)}",
                 code="unsupported_field",
             )
         if not self.forms_teams:

@@ -55,6 +55,7 @@ class ScheduleSolver(Solver):
         "budget (the same answer on any machine load)",
     )
     Options = ScheduleOptions
+    forms_teams = True  # docs/allocation.md#teams: the multi-skill model, exact
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         if not problem.instance.timed:
@@ -69,7 +70,8 @@ class ScheduleSolver(Solver):
             hint=hint,
             seed=seed,
         )
-        return Solution(outcome.schedule.assignment, details=outcome.details())
+        schedule = outcome.schedule
+        return Solution(schedule.assignment, details=outcome.details(), teams=schedule.teams)
 
 
 def _hint_schedule(problem: Problem, entries: list[HintEntry]) -> Schedule | None:

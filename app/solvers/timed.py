@@ -19,17 +19,25 @@ from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.list_schedule import list_schedule
+from app.domain.teams import Teams
 
 LIST_SCHEDULER = "list scheduler (earliest start, precedence order) on the method's assignment"
 
 
-def attach_schedule(problem: Problem, assignment: Sequence[int], details: dict[str, Any]) -> None:
-    """Add the list scheduler's schedule of `assignment` to an answer's `details`."""
+def attach_schedule(
+    problem: Problem,
+    assignment: Sequence[int],
+    details: dict[str, Any],
+    teams: Teams | None = None,
+) -> None:
+    """Add the list scheduler's schedule of `assignment` (and its `teams`: every member
+    works on the task over the same times, docs/allocation.md#teams) to an answer's
+    `details`."""
     if not problem.instance.timed or "schedule" in details:
         return
     details["schedule_model"] = LIST_SCHEDULER
     try:
-        schedule = list_schedule(problem, assignment)
+        schedule = list_schedule(problem, assignment, teams)
     except DomainError as exc:
         details["schedule"] = None
         details["schedule_error"] = exc.message

@@ -19,7 +19,8 @@ from enum import StrEnum
 
 from app.domain.metrics import workload
 from app.domain.problem import Problem
-from app.domain.scheduling.schedule import EPS, Schedule
+from app.domain.scheduling.schedule import EPS, Schedule, Slot
+from app.domain.teams import team_problem
 
 
 class Rule(StrEnum):
@@ -36,6 +37,7 @@ class Rule(StrEnum):
     PIN = "pin"  # pinned tasks keep their robot and, when fixed, their start
     UNAVAILABLE = "unavailable"  # an unavailable robot takes no new task
     CAP = "cap"  # the workload cap of docs/allocation.md#the-workload-cap (loads count tasks)
+    TEAM = "team"  # every unit of a team task covered by a distinct robot able to cover it
 
 
 @dataclass(frozen=True)
@@ -68,20 +70,30 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
 
     for s in slots:
         t, r = s.task, s.robot
-        if not 0 <= r < tm.n_robots:
+        if not all(0 <= m < tm.n_robots for m in s.members):
             add(Rule.COMPLETE, f"{task(t)} is on robot index {r}, outside the fleet", t)
             continue
         name = robots[r].name
-        d = tm.durations[t][r]
-        if d is None:
-            add(Rule.ELIGIBILITY, f"{task(t)} is on '{name}', which cannot take it", t, r)
-        elif abs((s.end - s.start) - d) > EPS:
-            add(
-                Rule.DURATION,
-                f"{task(t)} runs {s.end - s.start:g} min on '{name}', which takes {d:g}",
-                t,
-                r,
-            )
+        why = _team_rule(problem, s)
+        if why is not None:
+            add(Rule.TEAM, f"{task(t)}: {why}", t, r)
+        for m in s.members:
+            d = tm.durations[t][m]
+            if d is None:
+                add(
+                    Rule.ELIGIBILITY,
+                    f"{task(t)} is on '{robots[m].name}', which cannot take it",
+                    t,
+                    m,
+                )
+            elif abs((s.end - s.start) - d) > EPS:
+                add(
+                    Rule.DURATION,
+                    f"{task(t)} runs {s.end - s.start:g} min on '{robots[m].name}', which "
+                    f"takes {d:g}",
+                    t,
+                    m,
+                )
         fixed = problem.pinned_starts.get(t)  # a fact (see the module docstring)
         if fixed is None and s.start < tm.release[t] - EPS:
             add(
@@ -97,15 +109,16 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                 t,
                 r,
             )
-        a, b = tm.shifts[r]
-        if fixed is None and (s.start < a - EPS or s.end > b + EPS):
-            add(
-                Rule.SHIFT,
-                f"{task(t)} runs [{s.start:g}, {s.end:g}], outside the shift "
-                f"[{a:g}, {b:g}] of '{name}'",
-                t,
-                r,
-            )
+        for m in s.members:
+            a, b = tm.shifts[m]
+            if fixed is None and (s.start < a - EPS or s.end > b + EPS):
+                add(
+                    Rule.SHIFT,
+                    f"{task(t)} runs [{s.start:g}, {s.end:g}], outside the shift "
+                    f"[{a:g}, {b:g}] of '{robots[m].name}'",
+                    t,
+                    m,
+                )
         if fixed is None and s.start < problem.not_before - EPS:
             add(
                 Rule.NOT_BEFORE,
@@ -123,8 +136,10 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                 t,
                 r,
             )
-        if pin is None and r in problem.unavailable:
-            add(Rule.UNAVAILABLE, f"{task(t)} is a new task on unavailable robot '{name}'", t, r)
+        for m in s.members if pin is None else ():
+            if m in problem.unavailable:
+                off = robots[m].name
+                add(Rule.UNAVAILABLE, f"{task(t)} is a new task on unavailable robot '{off}'", t, m)
         for p in tm.predecessors[t] if fixed is None else ():
             if s.start < slots[p].end - EPS:
                 add(
@@ -134,7 +149,10 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                     r,
                 )
     out.extend(_check_robots(problem, schedule))
-    loads = workload([s.robot for s in slots if 0 <= s.robot < tm.n_robots], tm.n_robots)
+    placed = [s for s in slots if all(0 <= m < tm.n_robots for m in s.members)]
+    loads = workload(
+        [s.robot for s in placed], tm.n_robots, {s.task: s.team for s in placed if s.team}
+    )
     if not problem.cap.respected_by(loads):
         lo, hi = problem.cap.lower, problem.cap.upper
         add(Rule.CAP, f"loads {loads} break the workload cap: each robot needs {lo} to {hi} tasks")
@@ -148,8 +166,9 @@ def _check_robots(problem: Problem, schedule: Schedule) -> list[Violation]:
     tasks, robots = problem.instance.tasks, problem.instance.robots
     by_robot: list[list[int]] = [[] for _ in range(tm.n_robots)]
     for s in schedule.slots:
-        if 0 <= s.robot < tm.n_robots:
-            by_robot[s.robot].append(s.task)
+        for m in s.members:
+            if 0 <= m < tm.n_robots:
+                by_robot[m].append(s.task)
     for r, mine in enumerate(by_robot):
         mine.sort(key=lambda t: (schedule.slots[t].start, schedule.slots[t].end, t))
         name = robots[r].name
@@ -162,7 +181,7 @@ def _check_robots(problem: Problem, schedule: Schedule) -> list[Violation]:
                 message = f"'{name}' runs {label} while task {other!r} still runs"
                 out.append(Violation(Rule.OVERLAP, message, t, r))
             else:
-                move = tm.travel_to_task(zone, t)
+                move = tm.travel_to_task(zone, t)  # each member travels on its own way
                 fact = previous is None and t in problem.pinned_starts  # it was there
                 if move > 0 and not fact and s.start < free + move - EPS:
                     where = "its start zone" if previous is None else f"task {tasks[previous].id!r}"
@@ -173,3 +192,16 @@ def _check_robots(problem: Problem, schedule: Schedule) -> list[Violation]:
                     out.append(Violation(Rule.TRAVEL, message, t, r))
             free, zone, previous = max(free, s.end), tm.task_zone[t], t
     return out
+
+
+def _team_rule(problem: Problem, slot: Slot) -> str | None:
+    """Why the slot's robots do not cover its task as docs/allocation.md#teams asks, or None."""
+    task = problem.instance.tasks[slot.task]
+    if task.team is None:
+        return None if not slot.team else "a single-robot task has a team"
+    if not slot.team:
+        return "a team task has no team"
+    why = team_problem(task, problem.instance.robots, slot.team)
+    if why is None and slot.team[0] != slot.robot:
+        why = "its robot is not the member covering the first unit"
+    return why

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
 from app.domain.scheduling.schedule import EPS, Schedule, build_schedule
+from app.domain.teams import Teams
 from app.domain.time_model import TimeModel
 
 
@@ -52,12 +53,17 @@ class Timeline:
         self.free, self.zone = start + tm.duration(task, robot), tm.task_zone[task]
 
 
-def _check_assignment(problem: Problem, assignment: Sequence[int]) -> TimeModel:
+def _check_assignment(
+    problem: Problem, assignment: Sequence[int], teams: Teams | None = None
+) -> TimeModel:
     instance = problem.instance
     tm = instance.timing
     if len(assignment) != tm.n_tasks:
         raise ValueError(f"{len(assignment)} robots for {tm.n_tasks} tasks; one each")
-    for t, r in enumerate(assignment):
+    missing = [t for t, task in enumerate(instance.tasks) if task.team and t not in (teams or {})]
+    if missing:
+        raise ValueError(f"team task {missing[0]} has no team: its members are needed to time it")
+    for t, r in _pairs(assignment, teams):
         if tm.durations[t][r] is None:
             raise DomainError(
                 f"assignment.{t}",
@@ -69,9 +75,36 @@ def _check_assignment(problem: Problem, assignment: Sequence[int]) -> TimeModel:
     return tm
 
 
-def list_schedule(problem: Problem, assignment: Sequence[int]) -> Schedule:
-    """Earliest-start serial list schedule of an assignment (robot index per task)."""
-    tm = _check_assignment(problem, assignment)
+def _pairs(assignment: Sequence[int], teams: Teams | None) -> list[tuple[int, int]]:
+    """Every (task, robot working on it): a team task once per member."""
+    teams = teams or {}
+    return [(t, m) for t, r in enumerate(assignment) for m in teams.get(t) or (r,)]
+
+
+def _team_start(
+    lines: Sequence[Timeline], tm: TimeModel, t: int, members: Sequence[int], ready: float
+) -> float:
+    """The earliest start every member can make: a member's earliest start only grows with
+    `ready`, so raising `ready` to the latest of them until they agree ends (the task
+    starts when its last member can begin, docs/allocation.md#teams)."""
+    while True:
+        start = max(lines[m].earliest(tm, t, m, ready) for m in members)
+        if start <= ready + EPS:
+            return ready
+        ready = start
+
+
+def list_schedule(
+    problem: Problem, assignment: Sequence[int], teams: Teams | None = None
+) -> Schedule:
+    """Earliest-start serial list schedule of an assignment (robot index per task; a team
+    task's robot per unit in `teams`)."""
+    tm = _check_assignment(problem, assignment, teams)
+    teams = teams or {}
+
+    def members(t: int) -> tuple[int, ...]:
+        return tuple(teams.get(t) or (assignment[t],))
+
     n = tm.n_tasks
     starts = [0.0] * n
     ends = [0.0] * n
@@ -88,6 +121,8 @@ def list_schedule(problem: Problem, assignment: Sequence[int]) -> Schedule:
         return max(ready, tm.release[t], problem.not_before)
 
     def estimate(t: int) -> float:
+        if t in teams:
+            return _team_start(lines, tm, t, teams[t], ready_time(t))
         return lines[assignment[t]].earliest(tm, t, assignment[t], ready_time(t))
 
     heap = [(estimate(t), t) for t in range(n) if not done[t] and waiting[t] == 0]
@@ -99,7 +134,8 @@ def list_schedule(problem: Problem, assignment: Sequence[int]) -> Schedule:
         if now > est + EPS:  # its robot filled up since: estimates only grow
             heapq.heappush(heap, (now, t))
             continue
-        lines[assignment[t]].place(tm, t, assignment[t], now)
+        for m in members(t):
+            lines[m].place(tm, t, m, now)
         starts[t], ends[t], done[t] = now, now + tm.duration(t, assignment[t]), True
         placed += 1
         for s in tm.successors[t]:
@@ -110,28 +146,47 @@ def list_schedule(problem: Problem, assignment: Sequence[int]) -> Schedule:
         for t in range(n):
             if not done[t]:
                 raise ValueError(f"task {t} was never ready; the precedence graph is broken")
-    return build_schedule(problem, list(assignment), starts, ends)
+    return build_schedule(problem, list(assignment), starts, ends, teams)
 
 
-def sequence_schedule(problem: Problem, sequences: Sequence[Sequence[int]]) -> Schedule:
+def sequence_schedule(
+    problem: Problem, sequences: Sequence[Sequence[int]], teams: Teams | None = None
+) -> Schedule:
     """Earliest times for fixed per-robot task orders (every task once, in some robot's
-    order). A task with a pinned start keeps it. ValueError if the orders contradict
-    the precedence (no order of placing them works)."""
+    order; a team task in each of its members', `teams` saying which unit each covers).
+    A task with a pinned start keeps it. ValueError if the orders contradict the
+    precedence or each other (no order of placing them works)."""
     tm = problem.instance.timing
     n = tm.n_tasks
+    teams = teams or {}
     assignment = [-1] * n
+    holders: list[set[int]] = [set() for _ in range(n)]
     for r, seq in enumerate(sequences):
         for t in seq:
+            holders[t].add(r)
             assignment[t] = r
-    if -1 in assignment:
-        raise ValueError(f"task {assignment.index(-1)} is in no robot's sequence")
-    _check_assignment(problem, assignment)
+    for t in range(n):
+        if assignment[t] == -1:
+            raise ValueError(f"task {t} is in no robot's sequence")
+        if t in teams:
+            if holders[t] != set(teams[t]):
+                raise ValueError(f"team task {t} is not in exactly its members' sequences")
+            assignment[t] = teams[t][0]
+        elif len(holders[t]) != 1:
+            raise ValueError(f"task {t} is in {len(holders[t])} robots' sequences")
+    _check_assignment(problem, assignment, teams)
     starts = [0.0] * n
     ends = [0.0] * n
     done = [False] * n
     cursor = [0] * len(sequences)
     free = [a for a, _ in tm.shifts]
     zone = list(tm.robot_zone)
+
+    def at_front(t: int) -> bool:
+        return all(
+            cursor[m] < len(sequences[m]) and sequences[m][cursor[m]] == t for m in holders[t]
+        )
+
     progress = True
     while progress:
         progress = False
@@ -141,16 +196,22 @@ def sequence_schedule(problem: Problem, sequences: Sequence[Sequence[int]]) -> S
                 fixed = problem.pinned_starts.get(t)  # a fact: it waits for nothing
                 if fixed is None and not all(done[p] for p in tm.predecessors[t]):
                     break
+                if not at_front(t):
+                    break  # a member is still busy with earlier tasks
+                members = sorted(holders[t])
                 if fixed is None:
                     ready = max((ends[p] for p in tm.predecessors[t]), default=0.0)
                     ready = max(ready, tm.release[t], problem.not_before)
-                    start = max(ready, free[r] + tm.travel_to_task(zone[r], t))
+                    start = max(
+                        [ready] + [free[m] + tm.travel_to_task(zone[m], t) for m in members]
+                    )
                 else:
                     start = fixed
-                starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
-                free[r], zone[r] = max(free[r], ends[t]), tm.task_zone[t]
-                cursor[r] += 1
+                starts[t], ends[t], done[t] = start, start + tm.duration(t, assignment[t]), True
+                for m in members:
+                    free[m], zone[m] = max(free[m], ends[t]), tm.task_zone[t]
+                    cursor[m] += 1
                 progress = True
     if not all(done):
         raise ValueError("the robot orders contradict the precedence: no task can go next")
-    return build_schedule(problem, assignment, starts, ends)
+    return build_schedule(problem, assignment, starts, ends, teams)

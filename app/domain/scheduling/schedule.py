@@ -17,7 +17,7 @@ start allowed it (a wait).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from enum import StrEnum
@@ -32,11 +32,26 @@ EPS = 1e-6  # minutes: equal within this, as solver times come back as scaled in
 @dataclass(frozen=True)
 class Slot:
     task: int
-    robot: int
+    robot: int  # a team task's: the member covering its first unit
     start: float
     end: float
     zone: str | None
     travel: float  # minutes the robot moved just before this task
+    # A team task (docs/allocation.md#teams): the robot covering each unit, in unit order,
+    # and the minutes each of them moved just before it; () for a single-robot task.
+    team: tuple[int, ...] = ()
+    team_travel: tuple[float, ...] = ()
+
+    @property
+    def members(self) -> tuple[int, ...]:
+        """Every robot busy with the task over [start, end]."""
+        return self.team or (self.robot,)
+
+    def travel_of(self, robot: int) -> float:
+        """Minutes `robot` (a member) moved just before this task."""
+        if not self.team:
+            return self.travel
+        return self.team_travel[self.team.index(robot)]
 
 
 @dataclass(frozen=True)
@@ -74,11 +89,17 @@ class Schedule:
     def assignment(self) -> list[int]:
         return [s.robot for s in self.slots]
 
+    @property
+    def teams(self) -> dict[int, tuple[int, ...]]:
+        """Task -> the robot covering each unit, for the team tasks."""
+        return {s.task: s.team for s in self.slots if s.team}
+
     def sequences(self, n_robots: int) -> list[list[int]]:
-        """Per robot, its tasks in time order."""
+        """Per robot, its tasks in time order (a team task in every member's)."""
         out: list[list[int]] = [[] for _ in range(n_robots)]
         for slot in sorted(self.slots, key=lambda s: (s.start, s.end, s.task)):
-            out[slot.robot].append(slot.task)
+            for r in slot.members:
+                out[r].append(slot.task)
         return out
 
     def wall_clock(self, minute: float) -> str | None:
@@ -111,6 +132,7 @@ class Schedule:
                     "zone": s.zone,
                     "travel": s.travel,
                 }
+                | _team_dict(problem, s)
                 for s in self.slots
             ],
             "robots": {
@@ -131,31 +153,52 @@ class Schedule:
         }
 
 
+def _team_dict(problem: Problem, slot: Slot) -> dict[str, Any]:
+    """A team task's members as JSON: one entry per unit (robot, feature, its travel)."""
+    if not slot.team:
+        return {}
+    robots, units = problem.instance.robots, problem.instance.units[slot.task]
+    return {
+        "team": [
+            {"robot": robots[r].name, "feature": f, "travel": m}
+            for r, f, m in zip(slot.team, units, slot.team_travel, strict=True)
+        ]
+    }
+
+
+# Per task, per member: (member, the member's previous task or None, its travel before).
+Previous = tuple[tuple[int, int | None, float], ...]
+
+
 def build_schedule(
     problem: Problem,
     robots: Sequence[int],
     starts: Sequence[float],
     ends: Sequence[float] | None = None,
+    teams: Mapping[int, tuple[int, ...]] | None = None,
 ) -> Schedule:
     """The schedule of one robot and one start per task (queue order). Ends default to
-    start + the robot's duration; pass them for a plan made elsewhere (e.g. a reply)."""
+    start + the robot's duration; pass them for a plan made elsewhere (e.g. a reply).
+    `teams` gives a team task's robot per unit (docs/allocation.md#teams): every member
+    works over the same [start, end] and travels to the task's zone on its own way."""
     tm = problem.instance.timing
     n = tm.n_tasks
+    teams = teams or {}
     if len(robots) != n or len(starts) != n:
         raise ValueError(f"a schedule needs one robot and one start for each of the {n} tasks")
     if ends is None:
         ends = [starts[t] + tm.duration(t, robots[t]) for t in range(n)]
-    travel = [0.0] * n
-    previous: list[int | None] = [None] * n
+    previous: list[Previous] = [()] * n
     order = sorted(range(n), key=lambda t: (starts[t], ends[t], t))
     last: dict[int, int] = {}
     for t in order:
-        r = robots[t]
-        q = last.get(r)
-        zone_from = tm.robot_zone[r] if q is None else tm.task_zone[q]
-        travel[t] = tm.travel_to_task(zone_from, t)
-        previous[t] = q
-        last[r] = t
+        mine = []
+        for r in teams.get(t) or (robots[t],):
+            q = last.get(r)
+            zone_from = tm.robot_zone[r] if q is None else tm.task_zone[q]
+            mine.append((r, q, tm.travel_to_task(zone_from, t)))
+            last[r] = t
+        previous[t] = tuple(mine)
     slots = tuple(
         Slot(
             task=t,
@@ -163,7 +206,9 @@ def build_schedule(
             start=float(starts[t]),
             end=float(ends[t]),
             zone=None if tm.task_zone[t] is None else tm.zones[tm.task_zone[t]],  # type: ignore[index]
-            travel=travel[t],
+            travel=previous[t][0][2],
+            team=tuple(teams.get(t) or ()),
+            team_travel=tuple(m for _, _, m in previous[t]) if teams.get(t) else (),
         )
         for t in range(n)
     )
@@ -182,8 +227,9 @@ def _robot_time(problem: Problem, slots: Sequence[Slot], makespan: float) -> tup
     busy = [0.0] * tm.n_robots
     moved = [0.0] * tm.n_robots
     for s in slots:
-        busy[s.robot] += s.end - s.start
-        moved[s.robot] += s.travel
+        for r in s.members:
+            busy[r] += s.end - s.start
+            moved[r] += s.travel_of(r)
     out = []
     for r, (a, b) in enumerate(tm.shifts):
         window = max(0.0, min(b, makespan) - a)
@@ -192,7 +238,7 @@ def _robot_time(problem: Problem, slots: Sequence[Slot], makespan: float) -> tup
 
 
 def _critical_path(
-    problem: Problem, slots: Sequence[Slot], previous: Sequence[int | None]
+    problem: Problem, slots: Sequence[Slot], previous: Sequence[Previous]
 ) -> tuple[Step, ...]:
     if not slots:
         return ()
@@ -211,12 +257,13 @@ def _critical_path(
 def _explain_start(
     problem: Problem,
     slots: Sequence[Slot],
-    previous: Sequence[int | None],
+    previous: Sequence[Previous],
     t: int,
     steps: list[Step],
 ) -> int | None:
     """Append the steps before task t's start (in reverse) and return the task the chain
-    continues from, or None where it starts at a fixed time."""
+    continues from, or None where it starts at a fixed time. A team task starts when its
+    last member can begin: the member whose way there binds explains it."""
     tm = problem.instance.timing
     s = slots[t]
     if t in problem.pinned_starts:
@@ -225,16 +272,17 @@ def _explain_start(
     for p in tm.predecessors[t]:
         if abs(slots[p].end - s.start) <= EPS:
             return p
-    q = previous[t]
-    ready = (slots[q].end if q is not None else tm.shifts[s.robot][0]) + s.travel
-    if abs(ready - s.start) <= EPS:
-        if s.travel > 0:
-            steps.append(Step(StepKind.TRAVEL, s.start - s.travel, s.start, t, s.robot, "travel"))
+    for r, q, travel in previous[t]:
+        ready = (slots[q].end if q is not None else tm.shifts[r][0]) + travel
+        if abs(ready - s.start) > EPS:
+            continue
+        if travel > 0:
+            steps.append(Step(StepKind.TRAVEL, s.start - travel, s.start, t, r, "travel"))
         if q is not None:
             return q
-        shift_start = tm.shifts[s.robot][0]
+        shift_start = tm.shifts[r][0]
         if shift_start > EPS:
-            steps.append(Step(StepKind.WAIT, 0.0, shift_start, t, s.robot, "shift start"))
+            steps.append(Step(StepKind.WAIT, 0.0, shift_start, t, r, "shift start"))
         return None
     # A wait: the latest of release and not_before, else slack left by the solver.
     bounds = [
@@ -246,14 +294,15 @@ def _explain_start(
         steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, cause))
         return None
     # Nothing binds: the solver left slack. The latest of the other causes explains the rest.
-    ends = [(slots[p].end, p) for p in tm.predecessors[t]]
-    if q is not None:
-        ends.append((slots[q].end + s.travel, q))
+    ends: list[tuple[float, int, int | None, float]] = [
+        (slots[p].end, p, None, 0.0) for p in tm.predecessors[t]
+    ]
+    ends += [(slots[q].end + m, q, r, m) for r, q, m in previous[t] if q is not None]
     if not ends or max(ends)[0] < limit:
         steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, "slack"))
         return None
-    when, via = max(ends)
+    when, via, member, travel = max(ends, key=lambda e: (e[0], e[1]))
     steps.append(Step(StepKind.WAIT, when, s.start, t, s.robot, "slack"))
-    if via == q and s.travel > 0:
-        steps.append(Step(StepKind.TRAVEL, when - s.travel, when, t, s.robot, "travel"))
+    if member is not None and travel > 0:
+        steps.append(Step(StepKind.TRAVEL, when - travel, when, t, member, "travel"))
     return via

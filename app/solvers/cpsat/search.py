@@ -47,6 +47,7 @@ from app.solvers.cpsat.lns import improve
 from app.solvers.cpsat.model import ScheduleModel, Travel
 from app.solvers.cpsat.outcome import ScheduleOutcome, Setup, outcome
 from app.solvers.cpsat.success_pairs import success_optimal_pairs
+from app.solvers.cpsat.team_search import solve_team_schedule
 from app.solvers.cpsat.time_scale import TimeScale
 
 # The exact model runs while it has at most this many literals: a presence literal per
@@ -119,6 +120,15 @@ def solve_schedule(
     kept if nothing better is found and it is still feasible. `wall_cap_s` overrides the
     wall-clock safety net. DomainError when CP-SAT proves no schedule exists, or none is
     found in time."""
+    if problem.instance.has_teams:  # docs/schedules.md#teams-in-time: the multi-skill model
+        return solve_team_schedule(
+            problem,
+            time_limit_s=time_limit_s,
+            workers=workers,
+            hint=hint,
+            seed=seed,
+            wall_cap_s=wall_cap_s,
+        )
     search = Search(time_limit_s, workers, seed, wall_cap_s=wall_cap_s)
     setup = _setup(problem, search, hint)
     if not fits_exact(problem):

@@ -1,0 +1,304 @@
+"""The CP-SAT model of a timed problem with team tasks: multi-skill project scheduling
+(docs/allocation.md#teams, docs/schedules.md#teams-in-time).
+
+Per task a start and an end; per (task, robot that may take it) a presence literal and an
+optional interval on the task's start, as in `app.solvers.cpsat.model`. A single-robot task
+has exactly one present robot. A team task's interval is shared by one optional interval
+per eligible robot (PyJobShop's mode with several resources): assignment literals
+x[t][r][f] say robot r covers a unit of feature f, a robot covers at most one unit and is
+present exactly when it covers one (sum over f of x = presence), and each feature's units
+are covered (sum over r of x = count). Per robot a NoOverlap over its intervals, and
+between two tasks in different zones the travel (an order literal, as the one-robot
+model). Precedence, releases, deadlines, shifts, pins, `not_before` and the cap (a team
+task adds one to each member's load) always hold.
+
+Redundant, for the bound: a cumulative over every task's interval with its team size as
+demand and the available robots as capacity; per feature of a team, a cumulative over the
+team tasks needing it (demand: their count of it) with the robots able to cover it as
+capacity; per robot, shift start + its work <= makespan.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from functools import reduce
+
+from ortools.sat.python import cp_model
+
+from app.domain.problem import Problem
+from app.domain.teams import covers
+from app.solvers.cpsat.model import add_after
+from app.solvers.cpsat.time_scale import TimeScale
+from app.solvers.units import UnitView
+
+
+class TeamWeights:
+    """Integer expected success per (task, robot) of a single-robot task and per (task,
+    robot, feature) of a team unit: the integers `optimal` compares (`UnitView`), over the
+    free tasks, divided by their common divisor."""
+
+    def __init__(self, problem: Problem) -> None:
+        view = UnitView.of(problem)
+        raw: dict[tuple[int, int, str | None], int] = {}
+        for i, t in enumerate(view.tasks):
+            units = view.units[i]
+            for c, r in enumerate(view.robots):
+                if not view.eligible[i, c]:
+                    continue
+                if not units:
+                    raw[t, r, None] = int(view.single_weights[i, c])
+                for f in dict.fromkeys(units):
+                    if covers(problem.instance.robots[r], f):
+                        raw[t, r, f] = view.unit_weight(i, f, c)
+        divisor = reduce(math.gcd, raw.values(), 0) or 1
+        self.table = {k: v // divisor for k, v in raw.items()}
+        # mean success = sum of weights * per_unit / number of tasks
+        self.per_unit = divisor / (view.scale * view.multiple)
+        self.n_tasks = problem.instance.n_tasks
+        self.pinned_success = float(
+            sum(problem.instance.success[t, r] for t, r in problem.pinned.items())
+        )
+
+    def of(
+        self,
+        assignment: Sequence[int],
+        teams: Mapping[int, tuple[int, ...]],
+        units: Sequence[Sequence[str]],
+    ) -> int:
+        """The integer ES of the free part of a plan."""
+        total = 0
+        for t, r in enumerate(assignment):
+            if t in teams:
+                total += sum(
+                    self.table.get((t, m, f), 0) for m, f in zip(teams[t], units[t], strict=True)
+                )
+            else:
+                total += self.table.get((t, r, None), 0)
+        return total
+
+
+class TeamModel:
+    def __init__(self, problem: Problem, scale: TimeScale, weights: TeamWeights) -> None:
+        self.problem, self.scale = problem, scale
+        tm = problem.instance.timing
+        self.tm = tm
+        self.units = problem.instance.units
+        self.model = cp_model.CpModel()
+        self.candidates = [self._candidates(t) for t in range(tm.n_tasks)]
+        self.horizon = self._horizon()
+        self.start: list[cp_model.IntVar] = []
+        self.end: list[cp_model.IntVar] = []
+        self.present: dict[tuple[int, int], cp_model.IntVar] = {}
+        self.cover: dict[tuple[int, int, str], cp_model.IntVar] = {}
+        self._intervals: list[list[cp_model.IntervalVar]] = [[] for _ in range(tm.n_robots)]
+        self._tasks_on: list[list[int]] = [[] for _ in range(tm.n_robots)]
+        self._orders: list[tuple[int, int, cp_model.IntVar]] = []
+        self._task_intervals: list[cp_model.IntervalVar] = []
+        for t in range(tm.n_tasks):
+            self._add_task(t)
+        self.makespan = self.model.new_int_var(0, self.horizon, "makespan")
+        for e in self.end:
+            self.model.add(self.makespan >= e)
+        for r in range(tm.n_robots):
+            self.model.add_no_overlap(self._intervals[r])
+            if tm.has_travel:
+                self._add_travel(r)
+            self._add_energy(r)
+        for t, preds in enumerate(tm.predecessors):
+            if t not in problem.pinned_starts:
+                for p in preds:
+                    self.model.add(self.start[t] >= self.end[p])
+        self._add_cap()
+        self._add_cumulatives()
+        terms, coeffs = [], []
+        for (t, r, f), w in weights.table.items():
+            lit = self.present.get((t, r)) if f is None else self.cover.get((t, r, f))
+            if lit is not None and w:
+                terms.append(lit)
+                coeffs.append(w)
+        self.es = cp_model.LinearExpr.weighted_sum(terms, coeffs)
+
+    def _candidates(self, t: int) -> list[int]:
+        pin = self.problem.pinned.get(t)
+        if pin is not None:
+            return [pin]
+        off = self.problem.unavailable
+        return [r for r in self.tm.eligible_robots(t) if r not in off]
+
+    def _horizon(self) -> int:
+        """Everything one after another from the latest fixed time, with the longest travel
+        before each task: no schedule worth having ends later."""
+        tm, up = self.tm, self.scale.up
+        longest = max((m for row in tm.travel_minutes for m in row), default=0.0)
+        anchor = max(
+            [*tm.release, self.problem.not_before, *(a for a, _ in tm.shifts)]
+            + [
+                s + tm.duration(t, self.problem.pinned[t])
+                for t, s in self.problem.pinned_starts.items()
+            ]
+        )
+        total = sum(
+            max(up(tm.duration(t, r)) for r in self.candidates[t]) for t in range(tm.n_tasks)
+        )
+        return max(0, up(anchor) + total + tm.n_tasks * up(longest))
+
+    def _add_task(self, t: int) -> None:
+        tm, m, up, down = self.tm, self.model, self.scale.up, self.scale.down
+        fixed = self.problem.pinned_starts.get(t)
+        if fixed is not None:
+            lo = hi = round(fixed * self.scale.units_per_minute)
+        else:
+            lo, hi = max(up(tm.release[t]), up(self.problem.not_before)), self.horizon
+        end_hi = self.horizon if not math.isfinite(tm.deadline[t]) else down(tm.deadline[t])
+        if fixed is not None:
+            end_hi = max(end_hi, hi + max(up(tm.duration(t, r)) for r in self.candidates[t]))
+            self.horizon = max(self.horizon, end_hi)
+        start = m.new_int_var(lo, max(lo, hi), f"s{t}")
+        end = m.new_int_var(lo, max(lo, end_hi), f"e{t}")
+        lits, sizes = [], []
+        for r in self.candidates[t]:
+            d = up(tm.duration(t, r))
+            lit = m.new_bool_var(f"x{t}_{r}")
+            self.present[t, r] = lit
+            lits.append(lit)
+            sizes.append(d)
+            self._intervals[r].append(
+                m.new_optional_fixed_size_interval_var(start, d, lit, f"i{t}_{r}")
+            )
+            self._tasks_on[r].append(t)
+            a, b = tm.shifts[r]
+            if fixed is None and up(a) > lo:
+                m.add(start >= up(a)).only_enforce_if(lit)
+            if fixed is None and math.isfinite(b):
+                m.add(end <= down(b)).only_enforce_if(lit)
+        size = m.new_int_var(min(sizes), max(sizes), f"d{t}")
+        if not self.units[t]:
+            m.add_exactly_one(lits)
+            m.add(size == cp_model.LinearExpr.weighted_sum(lits, sizes))
+        else:
+            self._add_team(t)
+            m.add(size == sizes[0])  # a team task's duration is one number
+        self.start.append(start)
+        self.end.append(end)
+        self._task_intervals.append(m.new_interval_var(start, size, end, f"task{t}"))
+
+    def _add_team(self, t: int) -> None:
+        """Unit coverage: each unit by one present robot able to cover its feature, a robot
+        covering at most one unit of the task; every member busy over the same interval."""
+        m, robots = self.model, self.problem.instance.robots
+        counts = dict.fromkeys(self.units[t], 0)
+        for f in self.units[t]:
+            counts[f] += 1
+        by_feature: dict[str, list[cp_model.IntVar]] = {f: [] for f in counts}
+        for r in self.candidates[t]:
+            mine = []
+            for f in counts:
+                if covers(robots[r], f):
+                    x = m.new_bool_var(f"c{t}_{r}_{f}")
+                    self.cover[t, r, f] = x
+                    by_feature[f].append(x)
+                    mine.append(x)
+            m.add(cp_model.LinearExpr.sum(mine) == self.present[t, r])
+        for f, count in counts.items():
+            m.add(cp_model.LinearExpr.sum(by_feature[f]) == count)
+
+    def _add_travel(self, r: int) -> None:
+        """First task: from the start zone; two tasks in different zones: an order literal."""
+        tm, m, up = self.tm, self.model, self.scale.up
+        mine = self._tasks_on[r]
+        for i, t in enumerate(mine):
+            a = up(tm.travel_to_task(tm.robot_zone[r], t))
+            if a and t not in self.problem.pinned_starts:
+                m.add(self.start[t] >= up(tm.shifts[r][0]) + a).only_enforce_if(self.present[t, r])
+            for u in mine[i + 1 :]:
+                if tm.task_zone[t] == tm.task_zone[u]:
+                    continue
+                both = [self.present[t, r], self.present[u, r]]
+                before = m.new_bool_var(f"b{r}_{t}_{u}")
+                self._orders.append((t, u, before))
+                args = (m, self.problem, self.scale, self.start, self.end)
+                add_after(*args, (r, t, u), [*both, before])
+                add_after(*args, (r, u, t), [*both, before.Not()])
+
+    def _add_energy(self, r: int) -> None:
+        mine = [t for t in self._tasks_on[r] if t not in self.problem.pinned_starts]
+        if mine:
+            load = cp_model.LinearExpr.weighted_sum(
+                [self.present[t, r] for t in mine],
+                [self.scale.up(self.tm.duration(t, r)) for t in mine],
+            )
+            self.model.add(self.makespan >= self.scale.up(self.tm.shifts[r][0]) + load)
+
+    def _add_cap(self) -> None:
+        cap = self.problem.cap
+        for r in self.problem.available:
+            load = cp_model.LinearExpr.sum([self.present[t, r] for t in self._tasks_on[r]])
+            self.model.add_linear_constraint(load, cap.lower, cap.upper)
+
+    def _add_cumulatives(self) -> None:
+        """Redundant: robots at work at once never exceed the fleet, per feature the robots
+        able to cover it (the bound's strength on team instances)."""
+        # The whole fleet as capacity: a pinned task may hold an unavailable robot.
+        robots = self.problem.instance.robots
+        demand = [len(u) or 1 for u in self.units]
+        self.model.add_cumulative(self._task_intervals, demand, len(robots))
+        features = {f for u in self.units for f in u}
+        for f in sorted(features):
+            tasks = [t for t, u in enumerate(self.units) if f in u]
+            able = sum(1 for r in robots if covers(r, f))
+            self.model.add_cumulative(
+                [self._task_intervals[t] for t in tasks],
+                [self.units[t].count(f) for t in tasks],
+                able,
+            )
+
+    def hint(
+        self,
+        assignment: Sequence[int],
+        teams: Mapping[int, tuple[int, ...]],
+        starts: Sequence[float],
+    ) -> None:
+        m, tm, units = self.model, self.tm, self.scale.units_per_minute
+        m.clear_hints()
+        members = [set(teams.get(t) or (r,)) for t, r in enumerate(assignment)]
+        if any((t, r) not in self.present for t, ms in enumerate(members) for r in ms):
+            return
+        at = [round(s * units) for s in starts]
+        ends = [at[t] + self.scale.up(tm.duration(t, assignment[t])) for t in range(tm.n_tasks)]
+        for t in range(tm.n_tasks):
+            for r in self.candidates[t]:
+                m.add_hint(self.present[t, r], r in members[t])
+            m.add_hint(self.start[t], at[t])
+            m.add_hint(self.end[t], ends[t])
+        covered = {
+            (t, r, f) for t, ms in teams.items() for r, f in zip(ms, self.units[t], strict=True)
+        }
+        for key, x in self.cover.items():
+            m.add_hint(x, key in covered)
+        for t, u, before in self._orders:
+            m.add_hint(before, (at[t], t) < (at[u], u))
+        m.add_hint(self.makespan, max(ends, default=0))
+
+    def read(self, solver: cp_model.CpSolver) -> tuple[list[list[int]], dict[int, tuple[int, ...]]]:
+        """Per robot its tasks in the solver's time order, and each team's robot per unit."""
+        starts = [solver.value(s) for s in self.start]
+        sequences: list[list[int]] = [[] for _ in range(self.tm.n_robots)]
+        for t in sorted(range(self.tm.n_tasks), key=lambda k: (starts[k], k)):
+            for r in self.candidates[t]:
+                if solver.boolean_value(self.present[t, r]):
+                    sequences[r].append(t)
+        teams: dict[int, tuple[int, ...]] = {}
+        for t, units in enumerate(self.units):
+            if not units:
+                continue
+            free = {
+                f: [
+                    r
+                    for r in self.candidates[t]
+                    if (t, r, f) in self.cover and solver.boolean_value(self.cover[t, r, f])
+                ]
+                for f in dict.fromkeys(units)
+            }
+            teams[t] = tuple(free[f].pop(0) for f in units)
+        return sequences, teams
