@@ -23,6 +23,7 @@ Without the local copy the section says so in one line and nothing is measured.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -44,6 +45,7 @@ from app.solvers.registry import get_solver
 from benchmarks.common import Section, machine, table, write_section
 from benchmarks.mspsp import (
     ENV,
+    RESULTS_2C,
     Project,
     Published,
     local_copy,
@@ -196,6 +198,15 @@ def plain_model(project: Project, *, time_limit_s: float) -> dict[str, Any]:
     }
 
 
+RESULTS = Path(os.environ.get("MSPSP_RESULTS", tempfile.gettempdir())) / "mspsp_set2c.json"
+
+
+def _published(published: dict[str, Published], name: str) -> Published:
+    if name not in published:
+        raise ValueError(f"{name}: no row for it in the local copy's {RESULTS_2C}")
+    return published[name]
+
+
 def measure(folder: Path, pattern: str, limit: int | None, plain: bool) -> list[dict[str, Any]]:
     published = published_results(folder)
     rows = []
@@ -208,14 +219,16 @@ def measure(folder: Path, pattern: str, limit: int | None, plain: bool) -> list[
             "teams": sum(1 for t in instance.tasks if t.team is not None),
             "robots": project.n_resources,
             "skills": project.n_skills,
-            "published": published.get(project.name, Published(-1, False)).__dict__,
+            "published": dataclasses.asdict(_published(published, project.name)),
             "load": os.getloadavg()[0],
         }
         row["schedule"] = solve_schedule_method(project, LIMIT_S)
         if plain:
             row["plain"] = plain_model(project, time_limit_s=PLAIN_LIMIT_S)
         rows.append(row)
-        print(f"{project.name}: {row['published']} {row}", file=sys.stderr)
+        # kept as it goes: MSPSP_REUSE=1 renders a cut run from what it measured
+        RESULTS.write_text(json.dumps(rows))
+        print(f"{project.name}: {row}", file=sys.stderr)
     return rows
 
 
@@ -228,8 +241,8 @@ def _num(v: float | None) -> str:
 
 def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
     """The instances in each class the acceptance counts."""
-    out: dict[str, list[str]] = {k: [] for k in ("run", "reached", "proven", "false", "below")}
-    out.update(refused=[], broken=[], bound_over=[])
+    keys = ("run", "reached", "proven", "false", "below", "refused", "broken", "bound_over")
+    out: dict[str, list[str]] = {k: [] for k in keys}
     for r in rows:
         s, best = r["schedule"], r["published"]["makespan"]
         if s["status"] == "refused":
@@ -349,9 +362,6 @@ def _summary(v: dict[str, list[str]], n: int) -> list[str]:
     return out
 
 
-RESULTS = Path(os.environ.get("MSPSP_RESULTS", tempfile.gettempdir())) / "mspsp_set2c.json"
-
-
 def section(folder: str | None = None, pattern: str = PATTERN, limit: int | None = None) -> str:
     found = local_copy(folder)
     if found is None:
@@ -363,7 +373,6 @@ def section(folder: str | None = None, pattern: str = PATTERN, limit: int | None
         rows = json.loads(RESULTS.read_text())
     else:
         rows = measure(found, pattern, limit, plain=True)
-        RESULTS.write_text(json.dumps(rows))
     note = f"{ENV} or `--dir`; instances `{pattern}`, {len(rows)} of them"
     return f"{HEADING}\n\n{body(rows, note)}"
 

@@ -23,7 +23,13 @@ from benchmarks.mspsp import (
     published_results,
     set_2c,
 )
-from benchmarks.mspsp_bench import body, plain_model, problem_of, section
+from benchmarks.mspsp_bench import (
+    body,
+    plain_model,
+    problem_of,
+    section,
+    solve_schedule_method,
+)
 
 # Activities 1 and 7 are the dummies. 2 needs one s1; 3 one s1 and one s2 (a team of two);
 # 4 two s2 (a team of two of the same skill); 5 has duration 0 (dropped, bridged); 6
@@ -253,6 +259,15 @@ def test_plain_model_equals_the_brute_force() -> None:
     assert got["status"] == "optimal" and got["makespan"] == want == 5
 
 
+def test_schedule_method_proves_the_brute_force_optimum_and_passes_both_checks() -> None:
+    """The benchmark's whole path on the tiny project: `schedule` on the team instance, its
+    plan read back per activity and checked against the `.dzn` data."""
+    got = solve_schedule_method(project(), 5.0)
+    assert got["status"] == "optimal", got
+    assert got["makespan"] == got["checked_makespan"] == brute_force_makespan(project())
+    assert got["problems"] == []
+
+
 def test_problem_is_the_makespan_without_a_cap() -> None:
     problem = problem_of(project())
     assert problem.objective.kind.value == "makespan"
@@ -260,7 +275,7 @@ def test_problem_is_the_makespan_without_a_cap() -> None:
 
 
 def test_the_section_flags_a_false_optimal_loudly() -> None:
-    def row(name: str, status: str, makespan: float, problems: list[str]) -> dict:  # type: ignore[type-arg]
+    def row(name: str, status: str, makespan: float, problems: list[str]) -> dict:
         return {
             "name": name,
             "tasks": 20,
