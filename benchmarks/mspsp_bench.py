@@ -207,10 +207,19 @@ def _published(published: dict[str, Published], name: str) -> Published:
     return published[name]
 
 
-def measure(folder: Path, pattern: str, limit: int | None, plain: bool) -> list[dict[str, Any]]:
+def measure(folder: Path, pattern: str, limit: int | None) -> list[dict[str, Any]]:
+    """One row per instance, kept in RESULTS as it goes. With MSPSP_REUSE=1 the rows
+    already kept there are reused and only the other instances measured (a cut run
+    resumes; a finished one re-renders without measuring)."""
     published = published_results(folder)
+    kept: dict[str, dict[str, Any]] = {}
+    if os.environ.get("MSPSP_REUSE") == "1" and RESULTS.exists():
+        kept = {row["name"]: row for row in json.loads(RESULTS.read_text())}
     rows = []
     for path in set_2c(folder, pattern)[:limit]:
+        if path.stem in kept:
+            rows.append(kept[path.stem])
+            continue
         project = read_dzn(path)
         instance = project_instance(project)
         row: dict[str, Any] = {
@@ -223,11 +232,10 @@ def measure(folder: Path, pattern: str, limit: int | None, plain: bool) -> list[
             "load": os.getloadavg()[0],
         }
         row["schedule"] = solve_schedule_method(project, LIMIT_S)
-        if plain:
-            row["plain"] = plain_model(project, time_limit_s=PLAIN_LIMIT_S)
+        row["plain"] = plain_model(project, time_limit_s=PLAIN_LIMIT_S)
         rows.append(row)
-        # kept as it goes: MSPSP_REUSE=1 renders a cut run from what it measured
-        RESULTS.write_text(json.dumps(rows))
+        kept[project.name] = row
+        RESULTS.write_text(json.dumps(list(kept.values())))
         print(f"{project.name}: {row}", file=sys.stderr)
     return rows
 
@@ -369,10 +377,7 @@ def section(folder: str | None = None, pattern: str = PATTERN, limit: int | None
             f"{HEADING}\n\nSkipped: no local copy of MSPSP-InstLib. Clone {SOURCE} and set "
             f"{ENV} to its folder (or pass `--dir`), then run `python -m benchmarks.mspsp_bench`.\n"
         )
-    if os.environ.get("MSPSP_REUSE") == "1" and RESULTS.exists():
-        rows = json.loads(RESULTS.read_text())
-    else:
-        rows = measure(found, pattern, limit, plain=True)
+    rows = measure(found, pattern, limit)
     note = f"{ENV} or `--dir`; instances `{pattern}`, {len(rows)} of them"
     return f"{HEADING}\n\n{body(rows, note)}"
 

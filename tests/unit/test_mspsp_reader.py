@@ -6,6 +6,7 @@ and the plain CP-SAT model against a brute force over activity orders and teams.
 from __future__ import annotations
 
 import itertools
+import json
 from pathlib import Path
 
 import pytest
@@ -307,3 +308,29 @@ def test_the_section_flags_a_false_optimal_loudly() -> None:
     assert "proven optimal on 2 of 3 (at least two thirds: met)" in text
     assert "break the MSPSP's rules (independent check):** inst_set2c_c_00" in text
     assert "26 **FALSE OPTIMAL**" in text and "25 **INFEASIBLE**" in text
+
+
+def test_measure_keeps_each_row_and_a_resumed_run_measures_only_the_rest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from benchmarks import mspsp_bench
+
+    (tmp_path / SET_2C).mkdir(parents=True)
+    (tmp_path / RESULTS_2C).mkdir(parents=True)
+    for group in ("g1", "g2"):
+        (tmp_path / SET_2C / f"inst_set2c_{group}_00.dzn").write_text(DZN)
+        (tmp_path / RESULTS_2C / f"results_set2c_{group}_pris.txt").write_text(
+            "instNum,optimal,LB,makespan\n0,1,3,5"
+        )
+    kept = tmp_path / "kept.json"
+    monkeypatch.setattr(mspsp_bench, "RESULTS", kept)
+    first = mspsp_bench.measure(tmp_path, "*_g1_*", None)
+    assert [r["name"] for r in first] == ["inst_set2c_g1_00"]
+    assert first[0]["schedule"]["makespan"] == first[0]["plain"]["makespan"] == 5
+    marked = dict(first[0], load=-1.0)  # a row measured "before": reused as it is
+    kept.write_text(json.dumps([marked]))
+    monkeypatch.setenv("MSPSP_REUSE", "1")
+    both = mspsp_bench.measure(tmp_path, "*", None)
+    assert [r["name"] for r in both] == ["inst_set2c_g1_00", "inst_set2c_g2_00"]
+    assert both[0]["load"] == -1.0 and both[1]["load"] >= 0
+    assert [r["name"] for r in json.loads(kept.read_text())] == [r["name"] for r in both]
