@@ -207,10 +207,13 @@ def _published(published: dict[str, Published], name: str) -> Published:
     return published[name]
 
 
-def measure(folder: Path, pattern: str, limit: int | None) -> list[dict[str, Any]]:
+def measure(
+    folder: Path, pattern: str, limit: int | None, *, kept_only: bool = False
+) -> list[dict[str, Any]]:
     """One row per instance, kept in RESULTS as it goes. With MSPSP_REUSE=1 the rows
     already kept there are reused and only the other instances measured (a cut run
-    resumes; a finished one re-renders without measuring)."""
+    resumes; a finished one re-renders without measuring); `kept_only` measures nothing
+    and renders the kept rows of the selection (a run cut for good)."""
     published = published_results(folder)
     kept: dict[str, dict[str, Any]] = {}
     if os.environ.get("MSPSP_REUSE") == "1" and RESULTS.exists():
@@ -219,6 +222,8 @@ def measure(folder: Path, pattern: str, limit: int | None) -> list[dict[str, Any
     for path in set_2c(folder, pattern)[:limit]:
         if path.stem in kept:
             rows.append(kept[path.stem])
+            continue
+        if kept_only:
             continue
         project = read_dzn(path)
         instance = project_instance(project)
@@ -370,14 +375,20 @@ def _summary(v: dict[str, list[str]], n: int) -> list[str]:
     return out
 
 
-def section(folder: str | None = None, pattern: str = PATTERN, limit: int | None = None) -> str:
+def section(
+    folder: str | None = None,
+    pattern: str = PATTERN,
+    limit: int | None = None,
+    *,
+    kept_only: bool = False,
+) -> str:
     found = local_copy(folder)
     if found is None:
         return (
             f"{HEADING}\n\nSkipped: no local copy of MSPSP-InstLib. Clone {SOURCE} and set "
             f"{ENV} to its folder (or pass `--dir`), then run `python -m benchmarks.mspsp_bench`.\n"
         )
-    rows = measure(found, pattern, limit)
+    rows = measure(found, pattern, limit, kept_only=kept_only)
     note = f"{ENV} or `--dir`; instances `{pattern}`, {len(rows)} of them"
     return f"{HEADING}\n\n{body(rows, note)}"
 
@@ -393,8 +404,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--dir", help=f"MSPSP-InstLib's folder (default ${ENV})")
     parser.add_argument("--pattern", default=PATTERN, help="set 2c instances (a glob)")
     parser.add_argument("--limit", type=int, default=None, help="at most this many")
+    parser.add_argument(
+        "--kept-only",
+        action="store_true",
+        help="measure nothing: render the rows kept by earlier runs (with MSPSP_REUSE=1)",
+    )
     args = parser.parse_args(argv)
-    text = section(args.dir, args.pattern, args.limit)
+    text = section(args.dir, args.pattern, args.limit, kept_only=args.kept_only)
     write_section(HEADING, text)
     print(text)
 
