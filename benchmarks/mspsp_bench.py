@@ -42,7 +42,7 @@ from app.domain.scheduling.feasibility import check_schedule
 from app.solvers.base import Solution
 from app.solvers.cpsat.common import DET_PER_S
 from app.solvers.registry import get_solver
-from benchmarks.common import Section, machine, table, write_section
+from benchmarks.common import IMG, Section, machine, table, write_section
 from benchmarks.mspsp import (
     ENV,
     RESULTS_2C,
@@ -248,6 +248,53 @@ def measure(
 # -- the section -----------------------------------------------------------------------------
 
 
+def cpu_figure(rows: list[dict[str, Any]], directory: Path = IMG) -> str:
+    """CPU seconds per instance: `schedule` against the plain model (log-log), each point
+    marked by what `schedule` answered."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # headless
+    import matplotlib.pyplot as plt
+
+    from benchmarks.plots import PALETTE, save
+
+    fig, ax = plt.subplots(figsize=(5.2, 4.4))
+    kinds = {
+        "proven optimal": (PALETTE[2], "o"),
+        "published optimum, not proven": (PALETTE[1], "s"),
+        "above the published optimum": (PALETTE[3], "X"),
+    }
+    for label, (colour, marker) in kinds.items():
+        xs, ys = [], []
+        for r in rows:
+            s, plain = r["schedule"], r.get("plain")
+            if s["status"] == "refused" or plain is None:
+                continue
+            reached = s["makespan"] <= r["published"]["makespan"] + 1e-6
+            kind = (
+                "proven optimal"
+                if s["status"] == "optimal"
+                else "published optimum, not proven"
+                if reached
+                else "above the published optimum"
+            )
+            if kind == label:
+                xs.append(max(plain["cpu_s"], 0.01))
+                ys.append(max(s["cpu_s"], 0.01))
+        ax.scatter(xs, ys, c=colour, marker=marker, label=f"{label} ({len(xs)})", alpha=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    lo, hi = 0.01, 100.0
+    ax.plot([lo, hi], [lo, hi], color="black", linewidth=0.8, linestyle="--")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_xlabel("plain CP-SAT model, CPU s")
+    ax.set_ylabel("schedule, CPU s")
+    ax.set_title("MSPSP set 2c: CPU per instance (30 s budget each)")
+    ax.legend(fontsize=8, loc="upper left")
+    return save(fig, "mspsp_set2c_cpu.png", directory)
+
+
 def _num(v: float | None) -> str:
     return "-" if v is None else f"{v:g}"
 
@@ -255,6 +302,7 @@ def _num(v: float | None) -> str:
 def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
     """The instances in each class the acceptance counts."""
     keys = ("run", "reached", "proven", "false", "below", "refused", "broken", "bound_over")
+    keys += ("plain_only",)
     out: dict[str, list[str]] = {k: [] for k in keys}
     for r in rows:
         s, best = r["schedule"], r["published"]["makespan"]
@@ -274,6 +322,9 @@ def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
                 out["false"].append(r["name"])
         if s["bound"] > best + 1e-6 and r["published"]["proven"]:
             out["bound_over"].append(r["name"])
+        plain = r.get("plain") or {}
+        if s["status"] != "optimal" and plain.get("status") == "optimal":
+            out["plain_only"].append(r["name"])
     return out
 
 
@@ -306,7 +357,7 @@ def _row(r: dict[str, Any]) -> tuple[Any, ...]:
     )
 
 
-def body(rows: list[dict[str, Any]], folder_note: str) -> str:
+def body(rows: list[dict[str, Any]], folder_note: str, image: str | None = None) -> str:
     v = verdicts(rows)
     n = len(v["run"])
     lines = [
@@ -341,6 +392,8 @@ def body(rows: list[dict[str, Any]], folder_note: str) -> str:
         "",
     ]
     lines += _summary(v, n)
+    if image:
+        lines += ["", f"![CPU per instance, schedule against the plain model]({image})"]
     return "\n".join(lines) + "\n"
 
 
@@ -369,6 +422,7 @@ def _summary(v: dict[str, list[str]], n: int) -> list[str]:
         ("below", "makespans below a published optimum (a reading or checking error)"),
         ("bound_over", "bounds above a proven published optimum (a wrong bound)"),
         ("refused", "instances refused"),
+        ("plain_only", "instances the plain model proves and `schedule` does not"),
     ):
         if v[key]:
             out.append(f"- **{len(v[key])} {what}:** {', '.join(v[key])}")
@@ -390,13 +444,15 @@ def section(
         )
     rows = measure(found, pattern, limit, kept_only=kept_only)
     note = f"{ENV} or `--dir`; instances `{pattern}`, {len(rows)} of them"
-    return f"{HEADING}\n\n{body(rows, note)}"
+    image = cpu_figure(rows) if rows else None
+    return f"{HEADING}\n\n{body(rows, note, image)}"
 
 
 def run() -> Section:
     """For `make bench` (benchmarks/report.py): the folder from $LTAA_MSPSP_DIR."""
     text = section()
-    return Section(TITLE, text.removeprefix(f"{HEADING}\n\n"))
+    images = ["img/mspsp_set2c_cpu.png"] if "mspsp_set2c_cpu.png" in text else []
+    return Section(TITLE, text.removeprefix(f"{HEADING}\n\n"), images)
 
 
 def main(argv: list[str] | None = None) -> None:

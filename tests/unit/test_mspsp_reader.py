@@ -295,19 +295,34 @@ def test_the_section_flags_a_false_optimal_loudly() -> None:
             "plain": {"status": "optimal", "makespan": 25},
         }
 
-    text = body(
-        [
-            row("inst_set2c_a_00", "optimal", 25, []),
-            row("inst_set2c_b_00", "optimal", 26, []),
-            row("inst_set2c_c_00", "feasible", 25, ["resource 1 works on 2 and 3 at once"]),
-        ],
-        "a test",
-    )
+    rows = [
+        row("inst_set2c_a_00", "optimal", 25, []),
+        row("inst_set2c_b_00", "optimal", 26, []),
+        row("inst_set2c_c_00", "feasible", 25, ["resource 1 works on 2 and 3 at once"]),
+    ]
+    text = body(rows, "a test", "img/x.png")
     assert "**FALSE OPTIMAL on 1: inst_set2c_b_00**" in text
     assert "reached on 2 of 3 instances run (**missed**)" in text
     assert "proven optimal on 2 of 3 (at least two thirds: met)" in text
     assert "break the MSPSP's rules (independent check):** inst_set2c_c_00" in text
     assert "26 **FALSE OPTIMAL**" in text and "25 **INFEASIBLE**" in text
+    assert "plain model proves and `schedule` does not:** inst_set2c_c_00" in text
+    assert text.rstrip().endswith("(img/x.png)")
+
+
+def test_cpu_figure_is_written(tmp_path: Path) -> None:
+    from benchmarks.mspsp_bench import cpu_figure
+
+    rows = [
+        {
+            "published": {"makespan": 25},
+            "schedule": {"status": s, "makespan": m, "cpu_s": 0.5},
+            "plain": {"cpu_s": 0.2},
+        }
+        for s, m in (("optimal", 25), ("feasible", 25), ("feasible", 27), ("refused", 0))
+    ]
+    assert cpu_figure(rows, tmp_path) == "img/mspsp_set2c_cpu.png"
+    assert (tmp_path / "mspsp_set2c_cpu.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_measure_keeps_each_row_and_a_resumed_run_measures_only_the_rest(
