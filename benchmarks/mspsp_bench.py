@@ -301,8 +301,17 @@ def _num(v: float | None) -> str:
 
 def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
     """The instances in each class the acceptance counts."""
-    keys = ("run", "reached", "proven", "false", "below", "refused", "broken", "bound_over")
-    keys += ("plain_only",)
+    keys = [
+        "run",
+        "reached",
+        "proven",
+        "false",
+        "below",
+        "refused",
+        "broken",
+        "bound_over",
+        "plain_only",
+    ]
     out: dict[str, list[str]] = {k: [] for k in keys}
     for r in rows:
         s, best = r["schedule"], r["published"]["makespan"]
