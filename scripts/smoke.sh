@@ -76,6 +76,18 @@ check 'd["assignments"][0]["team"] == [{"robot": "crane", "feature": "heavy"}, {
 check '[m["feature"] for m in d["assignments"][1]["team"]] == ["heavy", "careful"] and "team" not in d["assignments"][2] and sum(d["metrics"]["workload"].values()) == 5' "team answer: one member per unit, loads count units"
 echo "smoke: team /allocate ok (optimal forms the teams)"
 
+# Teams in time (docs/schedules.md#teams-in-time): the beam's two members travel to it and
+# work it together; `schedule` proves the plan and shows the panel in both members' lanes.
+tteam='{"solver":"schedule","mode":"success_focused","start":"2026-12-07T07:00:00+01:00","travel":{"north":{"south":6}},
+ "tasks":[{"id":"beam","team":{"heavy":2},"duration":30,"zone":"north"},{"id":"panel","team":{"heavy":1,"careful":1},"duration":20,"zone":"south","after":["beam"]},
+  {"id":"sweep","features":["careful"],"duration":15,"zone":"south"},{"id":"carry","features":["heavy"],"duration":10,"zone":"north"}],
+ "robots":[{"name":"crane","success":{"heavy":0.9,"careful":0.2},"skills":["heavy"],"zone":"north"},{"name":"arm","success":{"heavy":0.3,"careful":0.95},"zone":"south"},{"name":"lifter","success":{"heavy":0.8,"careful":0.4},"zone":"north"}]}'
+code=$(call POST /allocate "$tteam" "${CLIENT[@]}")
+[ "$code" = 200 ] || fail "timed team /allocate schedule -> $code $(head -c 300 "$TMP/out")"
+check 'd["status"] == "optimal" and d["schedule"]["makespan"] == 66 and d["schedule_violations"] == []' "timed team schedule: optimal makespan 66"
+check 'all(any(i.get("task_id") == "panel" for i in d["schedule"]["robots"][m["robot"]]["lane"]) for m in d["assignments"][1]["team"])' "timed team schedule: the panel in each member's lane"
+echo "smoke: timed team /allocate ok (schedule optimal, makespan 66)"
+
 code=$(call POST /runs '{"scenario":"baseline","mode":"balanced","reasoner":"rules"}' "${CLIENT[@]}")
 [ "$code" = 202 ] || fail "POST /runs -> $code"
 run_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")

@@ -51,12 +51,18 @@ def list_solvers(caller: ClientDep) -> list[SolverOut]:
 def list_scenarios(caller: ClientDep) -> list[ScenarioOut]:
     """List the built-in scenarios: the 36 TEACh tasks and each scenario's robot success
     rates; the timed ones (`timed: true`) add durations, zones, precedence, releases and
-    deadlines, the robots' start zones and shifts, travel times and the start."""
+    deadlines, the robots' start zones and shifts, travel times and the start; those with
+    team tasks (`team: true`, docs/allocation.md#teams) give each such task its `team`."""
     listed = [(sc, False) for sc in catalog.scenarios().values()]
     listed += [(sc, True) for sc in catalog.timed_scenarios().values()]
     return [
         ScenarioOut.model_validate(
-            {"name": sc.name, "description": sc.description, "timed": timed}
+            {
+                "name": sc.name,
+                "description": sc.description,
+                "timed": timed,
+                "team": sc.instance.has_teams,
+            }
             | instance_to_dict(sc.instance)
         )
         for sc, timed in listed

@@ -12,15 +12,27 @@ from typing import Literal
 from pydantic import BaseModel, Field
 
 
+class ScheduledMemberOut(BaseModel):
+    robot: str
+    feature: str = Field(description="The feature of the unit this member covers")
+    travel: float = Field(description="Minutes this member moved just before the task")
+
+
 class ScheduledTaskOut(BaseModel):
     task_id: int | str
-    robot: str
+    robot: str = Field(description="The robot; for a team task the member covering its first unit")
     start: float = Field(description="Minutes from the plan's start")
     end: float
     start_at: str | None = Field(description="RFC 3339, in the offset of the plan's start")
     end_at: str | None
     zone: str | None
     travel: float = Field(description="Minutes the robot moved just before this task")
+    team: list[ScheduledMemberOut] | None = Field(
+        None,
+        description="Team tasks only (docs/allocation.md#teams): every member, one per unit "
+        "in the team's key order, busy over the same start and end",
+        exclude_if=lambda members: members is None,
+    )
 
 
 class LaneItemOut(BaseModel):

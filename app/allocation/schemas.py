@@ -413,6 +413,9 @@ class TaskOut(BaseModel):
     zone: str | None = None
     release: float | None = None
     deadline: float | None = None
+    team: dict[str, int] | None = Field(
+        None, description="Robots needed at once, per feature (docs/allocation.md#teams)"
+    )
 
 
 class RobotOut(BaseModel):
@@ -431,6 +434,11 @@ class ScenarioOut(BaseModel):
         description="Its tasks have durations, zones and precedence (docs/api.md#plans-in-time): "
         "every answer "
         "about it carries a schedule"
+    )
+    team: bool = Field(
+        False,
+        description="Some of its tasks need several robots at once (docs/allocation.md#teams); "
+        "plan it with optimal, dp, brute_force, greedy or schedule",
     )
     tasks: list[TaskOut]
     robots: list[RobotOut]

@@ -81,6 +81,9 @@ def timed_scenarios() -> dict[str, Scenario]:
     Where each number comes from: docs/schedules.md."""
     out: dict[str, Scenario] = {}
     for sc in _load("timed_scenarios.json")["scenarios"]:
+        if "based_on" in sc:  # a variant of a timed scenario listed before it
+            out[sc["name"]] = _team_variant(sc, out[sc["based_on"]].instance)
+            continue
         base = scenarios()[sc["success_from"]].instance
         timing = {str(t["id"]): t for t in sc["tasks"]}
         tasks = tuple(
@@ -110,6 +113,24 @@ def timed_scenarios() -> dict[str, Scenario]:
         )
         out[sc["name"]] = Scenario(sc["name"], sc["description"], instance)
     return out
+
+
+def _team_variant(sc: dict[str, Any], base: Instance) -> Scenario:
+    """`baseline_team` (docs/schedules.md#the-team-scenario): the timed scenario it is based
+    on, where the tasks listed under `teams` need several robots at once, each busy for the
+    reference minutes of the task's type (`team_duration_rule`)."""
+    teams = {str(entry["id"]): dict(entry["team"]) for entry in sc["teams"]}
+    listed = _load("timed_scenarios.json")["scenarios"]
+    rule = next(other["duration_rule"] for other in listed if other["name"] == sc["based_on"])
+    minutes = rule["base_minutes"]
+    tasks = tuple(
+        replace(task, team=teams[str(task.id)], duration=float(minutes[task.type]))
+        if str(task.id) in teams
+        else task
+        for task in base.tasks
+    )
+    instance = Instance(tasks=tasks, robots=base.robots, travel=base.travel, start=base.start)
+    return Scenario(sc["name"], sc["description"], instance)
 
 
 def timed_scenario(name: str) -> Scenario:

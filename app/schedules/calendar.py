@@ -1,4 +1,5 @@
-"""A schedule as iCalendar (RFC 5545): one VEVENT per task, the robot as its RESOURCES.
+"""A schedule as iCalendar (RFC 5545): one VEVENT per task, the robot as its RESOURCES (a
+team task's members all in one RESOURCES list, docs/allocation.md#teams).
 
 Written here rather than with a library: the format asks for little (a dozen properties,
 text escaping, line folding), and the tests read what this writes with an independent
@@ -92,6 +93,12 @@ def schedule_ics(
         description = f"Task {task.id} on robot {robot.name}"
         if slot.travel:
             description += f" after {slot.travel:g} min of travel"
+        who = robot.display
+        if slot.team:
+            names = [robots[m].name for m in slot.team]
+            pairs = zip(names, problem.instance.units[slot.task], strict=True)
+            description = f"Task {task.id} by a team: " + ", ".join(f"{n} ({f})" for n, f in pairs)
+            who = f"team of {len(names)}: " + ", ".join(names)
         if slot.task in critical:
             description += "; on the critical path"
         # Whole seconds (iCalendar has no finer time); an event ends after it starts.
@@ -103,8 +110,9 @@ def schedule_ics(
             f"DTSTAMP:{stamp}",
             f"DTSTART:{at(begin)}",
             f"DTEND:{at(end)}",
-            f"SUMMARY:{_text(f'{task.name} ({robot.display})')}",
-            f"RESOURCES:{_text(robot.name)}",
+            f"SUMMARY:{_text(f'{task.name} ({who})')}",
+            # RFC 5545 3.8.1.10: a comma-separated list; each name escaped on its own.
+            "RESOURCES:" + ",".join(_text(robots[m].name) for m in slot.members),
             f"DESCRIPTION:{_text(description)}",
         ]
         if slot.zone is not None:

@@ -5,6 +5,11 @@ bars on the critical path carry the class `critical`; travel and idle are drawn 
 path each per lane, so a 1,000-task chart stays light (one element per task, not three).
 The page that embeds the chart may restyle it through the classes; the chart carries its
 own defaults and a legend.
+
+A team task (docs/allocation.md#teams) has a bar in every member's lane, each with the
+class `team`, the same `data-task` and the same title naming the whole team; a thin
+connector (`team-link`) joins them across the lanes at the task's start, so the eye reads
+one task held by several robots.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ STYLE = (
     ".task.critical{fill:#d62728}.travel{fill:#f2b447}.idle{fill:url(#idle-hatch)}"
     ".axis{stroke:#aab;stroke-width:.5}.end{stroke:#d62728;stroke-dasharray:4 3}"
     "text{font:11px sans-serif;fill:#222}.bar-label{fill:#fff;font-size:9px}"
+    ".task.team{stroke:#1b1f24;stroke-width:1}.team-link{stroke:#1b1f24;stroke-width:1.5}"
 )
 
 
@@ -115,6 +121,7 @@ def gantt_svg(problem: Problem, schedule: Schedule) -> str:
             if it.kind is LaneKind.TASK and it.task is not None:
                 out.append(_bar(problem, schedule, it.task, critical, scale, bar_y))
         out.append("</g>")
+    out.extend(_team_links(problem, schedule, scale))
     end_x = GUTTER + schedule.makespan * scale
     bottom = TOP + LANE * instance.n_robots
     out.append(
@@ -142,11 +149,18 @@ def _bar(
     if start_at and end_at:
         when += f" ({start_at[11:16]}-{end_at[11:16]})"
     hover = f"{task.id} {task.name} on {robot.name}: {when}"
+    if slot.team:  # the same title in every member's lane
+        names = [problem.instance.robots[m].name for m in slot.team]
+        units = problem.instance.units[t]
+        team = ", ".join(f"{n} ({f})" for n, f in zip(names, units, strict=True))
+        hover = f"{task.id} {task.name} by a team of {len(names)}, {team}: {when}"
     if slot.zone is not None:
         hover += f", zone {slot.zone}"
-    if slot.travel:
+    if slot.travel and not slot.team:
         hover += f", after {slot.travel:g} min travel"
     classes = "task critical" if t in critical else "task"
+    if slot.team:
+        classes += " team"
     if t in critical:
         hover += ", critical path"
     label = ""
@@ -160,6 +174,23 @@ def _bar(
         f'y="{_n(y)}" width="{_n(width)}" height="{BAR}"><title>{escape(hover)}</title></rect>'
         f"{label}"
     )
+
+
+def _team_links(problem: Problem, schedule: Schedule, scale: float) -> list[str]:
+    """Per team task, a vertical line from its first to its last member's bar."""
+    out = []
+    tasks = problem.instance.tasks
+    for slot in schedule.slots:
+        if not slot.team:
+            continue
+        lanes_y = sorted(TOP + r * LANE + (LANE - BAR) / 2 for r in slot.team)
+        x = GUTTER + slot.start * scale + 1
+        out.append(
+            f'<line class="team-link" data-task={quoteattr(str(tasks[slot.task].id))} '
+            f'x1="{_n(x)}" y1="{_n(lanes_y[0] + BAR)}" x2="{_n(x)}" y2="{_n(lanes_y[-1])}">'
+            f"<title>team of {len(slot.team)}</title></line>"
+        )
+    return out
 
 
 def _legend(y: float) -> str:

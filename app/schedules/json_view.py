@@ -1,5 +1,8 @@
 """The JSON view of a schedule, and the per-robot lanes every other view draws from.
 
+A team task (docs/allocation.md#teams) is in every member's lane over the same times, each
+member's travel before it its own.
+
 A lane is a robot's time from its shift start to the end of its shift or the makespan,
 whichever comes first, cut into its tasks, the travel just before each task and the idle
 gaps left over. Travel is drawn right before the task it leads to: a schedule fixes when a
@@ -43,10 +46,11 @@ def lanes(problem: Problem, schedule: Schedule) -> list[list[LaneItem]]:
         lane: list[LaneItem] = []
         for t in sequence:
             slot = schedule.slots[t]
-            leave = slot.start - slot.travel
+            travel = slot.travel_of(r)  # a team task: this member's own way there
+            leave = slot.start - travel
             if leave - cursor > EPS:
                 lane.append(LaneItem(LaneKind.IDLE, cursor, leave, None))
-            if slot.travel > EPS:
+            if travel > EPS:
                 lane.append(LaneItem(LaneKind.TRAVEL, leave, slot.start, t))
             lane.append(LaneItem(LaneKind.TASK, slot.start, slot.end, t))
             cursor = max(cursor, slot.end)

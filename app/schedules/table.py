@@ -1,4 +1,6 @@
-"""A schedule as CSV: a header and one row per task, in queue order, for spreadsheets."""
+"""A schedule as CSV: a header and one row per task, in queue order, for spreadsheets; a team
+task (docs/allocation.md#teams) has one row per member, its `feature` the unit it covers and
+`travel_min` that member's own way there, so a filter on `robot` reads a robot's day."""
 
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ COLUMNS = (
     "start_at",
     "end_at",
     "critical",
+    "feature",  # last, so readers of the earlier columns read them where they were
 )
 
 
@@ -44,21 +47,26 @@ def schedule_csv(problem: Problem, schedule: Schedule) -> str:
     # RFC 4180 line ends; the csv module quotes a name holding a comma or a quote.
     writer = csv.writer(buffer, lineterminator="\r\n")
     writer.writerow(COLUMNS)
+    units = problem.instance.units
     for slot in schedule.slots:
         task = tasks[slot.task]
-        writer.writerow(
-            (
-                _cell(task.id),
-                _cell(task.name),
-                _cell(robots[slot.robot].name),
-                _cell(slot.zone or ""),
-                _number(slot.start),
-                _number(slot.end),
-                _number(slot.end - slot.start),
-                _number(slot.travel),
-                schedule.wall_clock(slot.start) or "",
-                schedule.wall_clock(slot.end) or "",
-                "yes" if slot.task in critical else "no",
+        # One row per (task, member); a single-robot task's feature cell stays empty.
+        features = units[slot.task] if slot.team else ("",)
+        for robot, feature in zip(slot.members, features, strict=True):
+            writer.writerow(
+                (
+                    _cell(task.id),
+                    _cell(task.name),
+                    _cell(robots[robot].name),
+                    _cell(slot.zone or ""),
+                    _number(slot.start),
+                    _number(slot.end),
+                    _number(slot.end - slot.start),
+                    _number(slot.travel_of(robot)),
+                    schedule.wall_clock(slot.start) or "",
+                    schedule.wall_clock(slot.end) or "",
+                    "yes" if slot.task in critical else "no",
+                    _cell(feature),
+                )
             )
-        )
     return buffer.getvalue()

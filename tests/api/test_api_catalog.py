@@ -39,8 +39,9 @@ def test_scenarios_include_tasks_and_robots(client: TestClient) -> None:
     assert r.status_code == 200
     scenarios = {s["name"]: s for s in r.json()}
     untimed = {"baseline", "heavy_excels", "medium_excels", "light_excels"}
-    assert set(scenarios) == untimed | {"baseline_timed"}
+    assert set(scenarios) == untimed | {"baseline_timed", "baseline_team"}
     assert {name for name, s in scenarios.items() if not s["timed"]} == untimed
+    assert {name for name, s in scenarios.items() if s["team"]} == {"baseline_team"}
     baseline = scenarios["baseline"]
     assert "travel" not in baseline and "start" not in baseline
     assert baseline["description"]

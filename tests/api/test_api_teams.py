@@ -157,14 +157,6 @@ def test_a_task_needs_features_or_a_team(client: TestClient) -> None:
     assert "features" in r.text and "team" in r.text
 
 
-def test_a_timed_team_instance_is_refused_with_a_sentence(client: TestClient) -> None:
-    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
-    r = client.post("/allocate", json=body(tasks=tasks, solver="optimal"))
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"] == ["body", "tasks", 0, "team"] and "timed" in item["msg"]
-
-
 def test_a_durable_run_refuses_team_tasks_with_a_sentence(client: TestClient) -> None:
     r = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), "reasoner": "rules"})
     assert r.status_code == 422, r.text

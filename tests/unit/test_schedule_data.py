@@ -21,7 +21,7 @@ def _doc() -> dict[str, Any]:
 
 def test_the_timed_scenario_is_the_paper_instance_in_time() -> None:
     assert set(scenarios()) == {"baseline", "heavy_excels", "medium_excels", "light_excels"}
-    assert list(timed_scenarios()) == ["baseline_timed"]
+    assert list(timed_scenarios()) == ["baseline_timed", "baseline_team"]
     timed = timed_scenario("baseline_timed").instance
     base = scenario("baseline").instance
     assert [(t.id, t.name, t.features) for t in timed.tasks] == [

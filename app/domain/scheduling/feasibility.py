@@ -74,26 +74,7 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
             add(Rule.COMPLETE, f"{task(t)} is on robot index {r}, outside the fleet", t)
             continue
         name = robots[r].name
-        why = _team_rule(problem, s)
-        if why is not None:
-            add(Rule.TEAM, f"{task(t)}: {why}", t, r)
-        for m in s.members:
-            d = tm.durations[t][m]
-            if d is None:
-                add(
-                    Rule.ELIGIBILITY,
-                    f"{task(t)} is on '{robots[m].name}', which cannot take it",
-                    t,
-                    m,
-                )
-            elif abs((s.end - s.start) - d) > EPS:
-                add(
-                    Rule.DURATION,
-                    f"{task(t)} runs {s.end - s.start:g} min on '{robots[m].name}', which "
-                    f"takes {d:g}",
-                    t,
-                    m,
-                )
+        out.extend(_member_rules(problem, s))
         fixed = problem.pinned_starts.get(t)  # a fact (see the module docstring)
         if fixed is None and s.start < tm.release[t] - EPS:
             add(
@@ -109,16 +90,6 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                 t,
                 r,
             )
-        for m in s.members:
-            a, b = tm.shifts[m]
-            if fixed is None and (s.start < a - EPS or s.end > b + EPS):
-                add(
-                    Rule.SHIFT,
-                    f"{task(t)} runs [{s.start:g}, {s.end:g}], outside the shift "
-                    f"[{a:g}, {b:g}] of '{robots[m].name}'",
-                    t,
-                    m,
-                )
         if fixed is None and s.start < problem.not_before - EPS:
             add(
                 Rule.NOT_BEFORE,
@@ -136,10 +107,6 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
                 t,
                 r,
             )
-        for m in s.members if pin is None else ():
-            if m in problem.unavailable:
-                off = robots[m].name
-                add(Rule.UNAVAILABLE, f"{task(t)} is a new task on unavailable robot '{off}'", t, m)
         for p in tm.predecessors[t] if fixed is None else ():
             if s.start < slots[p].end - EPS:
                 add(
@@ -191,6 +158,57 @@ def _check_robots(problem: Problem, schedule: Schedule) -> list[Violation]:
                     )
                     out.append(Violation(Rule.TRAVEL, message, t, r))
             free, zone, previous = max(free, s.end), tm.task_zone[t], t
+    return out
+
+
+def _member_rules(problem: Problem, s: Slot) -> list[Violation]:
+    """The rules each robot on the task keeps: the team's coverage, eligibility, the
+    duration, its shift, and no new task while unavailable (docs/allocation.md#teams)."""
+    out: list[Violation] = []
+    tm, tasks, robots = problem.instance.timing, problem.instance.tasks, problem.instance.robots
+    t, r = s.task, s.robot
+    fixed = problem.pinned_starts.get(t)
+    pin = problem.pinned.get(t)
+
+    def task(t: int) -> str:
+        return f"task {tasks[t].id!r} ({tasks[t].name})"
+
+    def add(rule: Rule, message: str, t: int | None = None, r: int | None = None) -> None:
+        out.append(Violation(rule, message, t, r))
+
+    why = _team_rule(problem, s)
+    if why is not None:
+        add(Rule.TEAM, f"{task(t)}: {why}", t, r)
+    for m in s.members:
+        d = tm.durations[t][m]
+        if d is None:
+            add(
+                Rule.ELIGIBILITY,
+                f"{task(t)} is on '{robots[m].name}', which cannot take it",
+                t,
+                m,
+            )
+        elif abs((s.end - s.start) - d) > EPS:
+            add(
+                Rule.DURATION,
+                f"{task(t)} runs {s.end - s.start:g} min on '{robots[m].name}', which takes {d:g}",
+                t,
+                m,
+            )
+    for m in s.members:
+        a, b = tm.shifts[m]
+        if fixed is None and (s.start < a - EPS or s.end > b + EPS):
+            add(
+                Rule.SHIFT,
+                f"{task(t)} runs [{s.start:g}, {s.end:g}], outside the shift "
+                f"[{a:g}, {b:g}] of '{robots[m].name}'",
+                t,
+                m,
+            )
+    for m in s.members if pin is None else ():
+        if m in problem.unavailable:
+            off = robots[m].name
+            add(Rule.UNAVAILABLE, f"{task(t)} is a new task on unavailable robot '{off}'", t, m)
     return out
 
 
