@@ -117,6 +117,11 @@ def solve_schedule_method(project: Project, limit_s: float) -> dict[str, Any]:
     starts, members, problems = plan_of(project, problem, solution)
     problems += plan_problems(project, starts, members)
     problems += [str(v) for v in check_schedule(problem, details["schedule"])]
+    if abs(plan_makespan(project, starts) - float(details["objective_value"])) > 1e-6:
+        problems.append(
+            f"the answer's makespan {details['objective_value']:g} is not its plan's "
+            f"{plan_makespan(project, starts):g}"
+        )
     return {
         "status": details["status"],
         "makespan": float(details["objective_value"]),
