@@ -6,7 +6,8 @@ Reads a local copy of MSPSP-InstLib (`--dir`, or $LTAA_MSPSP_DIR; not committed 
 has no licence; docs/benchmarks.md says where to get it), turns each set 2c instance
 matching `--pattern` (default the 44 instances with 20 activities) into a timed team
 instance (`benchmarks/mspsp.py`), solves it with the `schedule` method (objective
-`makespan`, no workload cap, `time_limit_s` 30: a deterministic budget) and checks each
+`makespan`, no workload cap, `time_limit_s` 30: a deterministic budget; the wall-clock
+net widened to 900 s, as for Brandimarte, so a loaded machine does not cut it) and checks each
 answer twice: with the app's own feasibility check and with `plan_problems`, which reads
 the plan against the `.dzn` data alone. Beside it, the plain CP-SAT model of the MSPSP
 written here (`plain_model`) is the independent reference: it shows the reading matches
@@ -41,6 +42,7 @@ from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.solvers.base import Solution
 from app.solvers.cpsat.common import DET_PER_S
+from app.solvers.cpsat.search import solve_schedule
 from app.solvers.registry import get_solver
 from benchmarks.common import IMG, Section, machine, table, write_section
 from benchmarks.mspsp import (
@@ -61,6 +63,7 @@ TITLE = "Multi-skill project scheduling: MSPSP-InstLib set 2c"
 HEADING = f"## {TITLE}"
 LIMIT_S = 30.0
 PLAIN_LIMIT_S = 30.0
+WALL_CAP_S = 900.0  # the benchmark measures the deterministic budget, not the safety net
 PATTERN = "inst_set2c_*_n20_*"
 SOURCE = "https://github.com/youngkd/MSPSP-InstLib"
 
@@ -91,7 +94,7 @@ def plan_of(
         task = instance.tasks[slot.task]
         starts[int(task.id)] = float(slot.start)
         units = instance.units[slot.task] or task.features
-        robots = tuple(getattr(slot, "team", ()) or (slot.robot,))
+        robots = slot.members
         if len(robots) != len(units):
             disagree.append(f"activity {task.id}: {len(robots)} members for {len(units)} units")
         answered = solution.teams.get(slot.task, (solution.assignment[slot.task],))
@@ -109,9 +112,16 @@ def solve_schedule_method(project: Project, limit_s: float) -> dict[str, Any]:
     problem = problem_of(project)
     wall, cpu = time.perf_counter(), time.process_time()
     try:
-        solution = get_solver("schedule").solve(problem, options={"time_limit_s": limit_s})
+        # What `schedule` runs on a timed instance (app/solvers/schedule.py), with the
+        # wall-clock net widened as in the Brandimarte benchmark: the figures are the
+        # deterministic budget's, not the machine load's.
+        get_solver("schedule").check_supported(problem)
+        outcome = solve_schedule(problem, time_limit_s=limit_s, wall_cap_s=WALL_CAP_S)
     except DomainError as exc:
         return {"status": "refused", "error": exc.message}
+    solution = Solution(
+        outcome.schedule.assignment, details=outcome.details(), teams=outcome.schedule.teams
+    )
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     details = solution.details
     starts, members, problems = plan_of(project, problem, solution)
@@ -382,7 +392,9 @@ def body(rows: list[dict[str, Any]], folder_note: str, image: str | None = None)
         "activity a task with its duration, `after` its predecessors and `team: {skill: "
         "units}` (one unit of one skill: a one-robot task); the dummy start and end dropped. "
         f"`schedule` with objective `makespan`, no cap, `time_limit_s` {LIMIT_S:g} (a "
-        "deterministic budget; wall time depends on the machine's load). Every answer is "
+        "deterministic budget, one worker; wall time depends on the machine's load, and the "
+        f"wall-clock net is widened to {WALL_CAP_S:g} s; a status marked *wall cut* stopped "
+        "at that net before its budget was spent). Every answer is "
         "checked by the app's feasibility check and by an independent check against the "
         "`.dzn` data. The last column is the plain CP-SAT MSPSP model written in the "
         f"benchmark (one worker, {PLAIN_LIMIT_S:g} s): it shows the reading matches the "
