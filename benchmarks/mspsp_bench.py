@@ -469,7 +469,8 @@ def section(
             f"{ENV} to its folder (or pass `--dir`), then run `python -m benchmarks.mspsp_bench`.\n"
         )
     rows = measure(found, pattern, limit, kept_only=kept_only)
-    note = f"{ENV} or `--dir`; instances `{pattern}`, {len(rows)} of them"
+    selected = len(set_2c(found, pattern)[:limit])
+    note = f"{ENV} or `--dir`; instances `{pattern}`: {len(rows)} of {selected} measured"
     image = cpu_figure(rows) if rows else None
     return f"{HEADING}\n\n{body(rows, note, image)}"
 
