@@ -52,6 +52,7 @@ from app.domain.models import Instance, Robot, Task
 ENV = "LTAA_MSPSP_DIR"
 SET_2C = Path("instances") / "set-2" / "set-2c"
 RESULTS_2C = Path("results") / "set-2" / "set-2c" / "results"
+OUTPUT_2C = Path("results") / "set-2" / "set-2c" / "full-output"
 _NAME = re.compile(r"^inst_(?P<group>.+)_(?P<number>\d+)$")
 
 
@@ -297,6 +298,47 @@ def published_results(folder: Path) -> dict[str, Published]:
                     f"{path}: row {k + 2} lacks a whole 'makespan' and an 'optimal' flag"
                 ) from None
     return out
+
+
+def published_plan(
+    project: Project, text: str
+) -> tuple[dict[int, float], dict[int, list[tuple[int, int]]]]:
+    """The last solution of a full-output file (MiniZinc's output, solutions separated by
+    `----------`): `start times = [...]` per activity and `contribution = [...]`, the
+    booleans of contrib[ACT, RESOURCE, SKILL] flattened row-major, as starts and
+    (resource, skill) members for `plan_problems`. ValueError when it holds none."""
+    solutions = [part for part in text.split("----------") if "start times" in part]
+    if not solutions:
+        raise ValueError("no solution with start times in the output")
+    last = solutions[-1]
+    found = re.search(r"start times = \[([^\]]*)\]", last)
+    flags = re.search(r"contribution = \[([^\]]*)\]", last)
+    if found is None or flags is None:
+        raise ValueError("the last solution lacks start times or contributions")
+    times = [int(v) for v in found.group(1).split(",")]
+    given = [v.strip() == "true" for v in flags.group(1).split(",")]
+    n_r, n_s = project.n_resources, project.n_skills
+    if len(times) != project.n_activities or len(given) != project.n_activities * n_r * n_s:
+        raise ValueError("the solution's arrays do not fit the instance")
+    starts = {
+        a: float(times[a - 1])
+        for a in range(1, project.n_activities + 1)
+        if project.durations[a - 1] > 0
+    }
+    members = {
+        a: [(r, s) for r in range(n_r) for s in range(n_s) if given[((a - 1) * n_r + r) * n_s + s]]
+        for a in starts
+    }
+    return starts, members
+
+
+def published_output(folder: Path, name: str) -> str | None:
+    """The full-output text of instance `name` (`inst_<group>_<k>`), if the copy has it."""
+    match = _NAME.match(name)
+    if match is None:
+        return None
+    path = folder / OUTPUT_2C / f"full-output_{match['group']}_pris_{match['number']}.txt"
+    return path.read_text(encoding="utf-8") if path.is_file() else None
 
 
 def local_copy(given: str | None = None) -> Path | None:

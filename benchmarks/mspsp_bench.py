@@ -54,6 +54,8 @@ from benchmarks.mspsp import (
     plan_makespan,
     plan_problems,
     project_instance,
+    published_output,
+    published_plan,
     published_results,
     read_dzn,
     set_2c,
@@ -213,6 +215,21 @@ def plain_model(project: Project, *, time_limit_s: float) -> dict[str, Any]:
     }
 
 
+def _published_plans(rows: list[dict[str, Any]]) -> list[str]:
+    """How the library's own optimal plans fare in the independent check: the check of
+    our answers is only as good as this."""
+    checked = [r for r in rows if r.get("published_plan", "absent") != "absent"]
+    if not checked:
+        return []
+    failed = [r["name"] for r in checked if r["published_plan"] != "ok"]
+    line = (
+        f"The library's own optimal plans (the last solution of each full-output file) pass "
+        f"the independent check on {len(checked) - len(failed)} of {len(checked)} instances, "
+        "at their published makespans"
+    )
+    return ["", line + (f"; **not on {', '.join(failed)}**." if failed else ".")]
+
+
 RESULTS = Path(os.environ.get("MSPSP_RESULTS", tempfile.gettempdir())) / "mspsp_set2c.json"
 
 
@@ -220,6 +237,26 @@ def _published(published: dict[str, Published], name: str) -> Published:
     if name not in published:
         raise ValueError(f"{name}: no row for it in the local copy's {RESULTS_2C}")
     return published[name]
+
+
+def row_best(row: dict[str, Any]) -> int:
+    return int(row["published"]["makespan"])
+
+
+def _published_plan_check(folder: Path, project: Project, best: int) -> str:
+    """The library's own optimal plan through the independent check: "ok" when it passes
+    at its published makespan, else what is wrong; "absent" without its output file."""
+    text = published_output(folder, project.name)
+    if text is None:
+        return "absent"
+    try:
+        starts, members = published_plan(project, text)
+    except ValueError as exc:
+        return str(exc)
+    problems = plan_problems(project, starts, members)
+    if plan_makespan(project, starts) != best:
+        problems.append(f"makespan {plan_makespan(project, starts):g}, published {best}")
+    return "ok" if not problems else "; ".join(problems[:3])
 
 
 def measure(
@@ -236,7 +273,10 @@ def measure(
     rows = []
     for path in set_2c(folder, pattern)[:limit]:
         if path.stem in kept:
-            rows.append(kept[path.stem])
+            row = kept[path.stem]
+            if "published_plan" not in row:  # kept by a run before this check existed
+                row["published_plan"] = _published_plan_check(folder, read_dzn(path), row_best(row))
+            rows.append(row)
             continue
         if kept_only:
             continue
@@ -251,6 +291,7 @@ def measure(
             "published": dataclasses.asdict(_published(published, project.name)),
             "load": os.getloadavg()[0],
         }
+        row["published_plan"] = _published_plan_check(folder, project, row_best(row))
         row["schedule"] = solve_schedule_method(project, LIMIT_S)
         row["plain"] = plain_model(project, time_limit_s=PLAIN_LIMIT_S)
         rows.append(row)
@@ -418,6 +459,7 @@ def body(rows: list[dict[str, Any]], folder_note: str, image: str | None = None)
         "",
     ]
     lines += _summary(v, n)
+    lines += _published_plans(rows)
     if image:
         lines += ["", f"![CPU per instance, schedule against the plain model]({image})"]
     return "\n".join(lines) + "\n"

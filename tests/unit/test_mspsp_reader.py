@@ -349,3 +349,37 @@ def test_measure_keeps_each_row_and_a_resumed_run_measures_only_the_rest(
     assert [r["name"] for r in both] == ["inst_set2c_g1_00", "inst_set2c_g2_00"]
     assert both[0]["load"] == -1.0 and both[1]["load"] >= 0
     assert [r["name"] for r in json.loads(kept.read_text())] == [r["name"] for r in both]
+
+
+def minizinc_output(starts: list[int], pairs: dict[int, list[tuple[int, int]]]) -> str:
+    """A full-output text as the library's MiniZinc runs print it: solutions separated by
+    `----------`, contrib[ACT, RESOURCE, SKILL] flattened row-major."""
+    flags = [
+        "true" if (r, s) in pairs.get(a, []) else "false"
+        for a in range(1, 8)
+        for r in range(3)
+        for s in range(2)
+    ]
+    return (
+        f"makespan = {max(starts)}\nstart times = [{', '.join(map(str, starts))}]\n"
+        f"assignment = [false]\ncontribution = [{', '.join(flags)}]\n"
+    )
+
+
+def test_the_librarys_own_plan_is_read_and_checked(tmp_path: Path) -> None:
+    from benchmarks.mspsp import OUTPUT_2C, published_output, published_plan
+
+    _, members = feasible_plan()
+    worse = minizinc_output([0, 0, 2, 5, 5, 5, 7], members)  # a first, longer solution
+    best = minizinc_output([0, 0, 0, 3, 3, 3, 5], members)
+    text = worse + "----------\n% time elapsed: 1 ms\n" + best + "----------\n==========\n"
+    starts, got = published_plan(project(), text)
+    assert starts == {2: 0.0, 3: 0.0, 4: 3.0, 6: 3.0}
+    assert got == members
+    assert plan_problems(project(), starts, got) == []
+    with pytest.raises(ValueError, match="no solution"):
+        published_plan(project(), "=====UNKNOWN=====")
+    (tmp_path / OUTPUT_2C).mkdir(parents=True)
+    (tmp_path / OUTPUT_2C / "full-output_set2c_g1_pris_01.txt").write_text(text)
+    assert published_output(tmp_path, "inst_set2c_g1_01") == text
+    assert published_output(tmp_path, "inst_set2c_g1_00") is None
