@@ -273,10 +273,11 @@ def measure(
     rows = []
     for path in set_2c(folder, pattern)[:limit]:
         if path.stem in kept:
-            row = kept[path.stem]
-            if "published_plan" not in row:  # kept by a run before this check existed
-                row["published_plan"] = _published_plan_check(folder, read_dzn(path), row_best(row))
-            rows.append(row)
+            old = kept[path.stem]
+            if "published_plan" not in old:  # kept by a run before this check existed
+                best = row_best(old)
+                old["published_plan"] = _published_plan_check(folder, read_dzn(path), best)
+            rows.append(old)
             continue
         if kept_only:
             continue
