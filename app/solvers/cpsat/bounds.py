@@ -28,8 +28,11 @@ HEADS_TAILS = "heads and tails over the robots able"
 MAX_GROUPS = 40  # distinct eligibility sets examined (the most common first)
 
 
-def bound_floors(problem: Problem, pairs: set[tuple[int, int]] | None = None) -> dict[str, float]:
-    """Named lower bounds (minutes) on the makespan of any schedule using only `pairs`."""
+def chains(
+    problem: Problem, pairs: set[tuple[int, int]] | None = None
+) -> tuple[list[list[int]], np.ndarray, np.ndarray, np.ndarray]:
+    """Per task: the robots able (within `pairs`), its shortest duration, its head (the
+    earliest it can start) and its tail (the least chain of work after it ends)."""
     tm = problem.instance.timing
     n = tm.n_tasks
     options = [_options(problem, t, pairs) for t in range(n)]
@@ -49,6 +52,14 @@ def bound_floors(problem: Problem, pairs: set[tuple[int, int]] | None = None) ->
             (shortest[s] + tails[s] for s in tm.successors[t] if s not in problem.pinned_starts),
             default=0.0,
         )
+    return options, shortest, heads, tails
+
+
+def bound_floors(problem: Problem, pairs: set[tuple[int, int]] | None = None) -> dict[str, float]:
+    """Named lower bounds (minutes) on the makespan of any schedule using only `pairs`."""
+    tm = problem.instance.timing
+    n = tm.n_tasks
+    options, shortest, heads, tails = chains(problem, pairs)
     out = {CRITICAL_PATH: float(np.max(heads + shortest + tails, initial=0.0))}
     free = np.array([t not in problem.pinned_starts for t in range(n)])
     sets = Counter(frozenset(o) for t, o in enumerate(options) if free[t])

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from app.domain.errors import DomainError
 from app.solvers.cpsat.assignment_model import AssignmentModel
-from app.solvers.cpsat.bounds import best_bound, bound_floors
+from app.solvers.cpsat.bounds import best_bound, bound_floors, chains
 from app.solvers.cpsat.common import assignment_schedules, model_cost, none_found
 from app.solvers.cpsat.lns import improve
 from app.solvers.cpsat.load_bound import load_lower_bound
@@ -76,6 +76,7 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     tm = problem.instance.timing
     candidates = [_candidates(setup, t) for t in range(tm.n_tasks)]
     floors = bound_floors(problem, setup.pairs)
+    _, _, heads, tails = chains(problem, setup.pairs)
     floors[LOAD_LP] = load_lower_bound(
         problem,
         candidates,
@@ -83,6 +84,9 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
         es_target=setup.es_target,
         es_floor=setup.es_floor,
         time_limit_s=max(0.1, search.wall_left() / 4),
+        heads=heads,
+        tails=tails,
+        scale=setup.scale,
     )
     search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
     ran = _assign(setup, candidates, floors)
