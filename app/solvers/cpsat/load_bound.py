@@ -94,7 +94,9 @@ class _Lp:
         """work + entries + extra * y - T <= -shift start, per robot."""
         tm, k, m = self.tm, self.k, self.m
         robot_of = np.array([r for _, r in self.pairs], dtype=int)
-        work = [0.0 if t in self.problem.pinned_starts else tm.duration(t, r) for t, r in self.pairs]
+        work = [
+            0.0 if t in self.problem.pinned_starts else tm.duration(t, r) for t, r in self.pairs
+        ]
         rows = [robot_of, np.array([r for r, *_ in self.visits], dtype=int)]
         cols = [np.arange(k), k + np.arange(self.nv)]
         vals = [np.array(work), np.array([w for _, _, w, _ in self.visits])]
