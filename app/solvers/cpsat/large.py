@@ -111,7 +111,7 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
         if _sequence(setup, SEQUENCE_UNITS):
             ran += SEQUENCING_MODEL
             search.mark(feasible.best().makespan)  # type: ignore[union-attr]
-        report = improve(setup, candidates)
+        report = improve(setup, candidates, loaded_first=True)
         if report is not None:
             ran += (
                 f"{LNS_MODEL} ({report.neighbourhoods} neighbourhoods, {report.improved} improved)"
