@@ -60,6 +60,9 @@ ASSIGN_UNITS = 0.3
 SEQUENCE_UNITS = 0.5
 SEQUENCE_BUILD = 0.1  # room kept for building the sequencing model
 LP_COST_PER_PAIR = 2e-5  # the LP's modelled cost in deterministic units, per (task, robot)
+# The full load LP from this budget (deterministic units: a time limit of about 1.5 s) on:
+# below it, the plain one (0.1-0.3 s of CPU at 1,000 x 20), so a 1 s answer stays quick.
+FULL_LP_FROM = 0.5
 BUSY_DISPATCH = ", earliest-finish dispatch with the busiest robots' durations weighted"
 # Robots with more work than this share of the most loaded one's count as busy. Measured
 # at 1,000 x 20 (from 3,823 minutes): the outcome of one weight is erratic (3,771 at 0.3,
@@ -115,22 +118,25 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
 
 
 def _load_lp(setup: Setup, candidates: list[list[int]]) -> float:
-    """The load LP with zone entries, first heads and last tails; the plain load LP (its
-    rows without those) if HiGHS does not finish it before a third of the wall-clock net
-    (on a machine loaded far past its cores: 2.6 s of CPU at 1,000 x 20)."""
+    """The load LP with zone entries, first heads and last tails from a budget of
+    `FULL_LP_FROM` units; the plain load LP (its rows without those) below it, or if
+    HiGHS does not finish the full one before a third of the wall-clock net (on a machine
+    loaded far past its cores: it takes 1.5-2.6 s of CPU at 1,000 x 20)."""
     problem, search = setup.problem, setup.search
-    _, _, heads, tails = chains(problem, setup.pairs)
-    full = load_lower_bound(
-        problem,
-        candidates,
-        setup.weights,
-        es_target=setup.es_target,
-        es_floor=setup.es_floor,
-        time_limit_s=max(0.1, search.wall_left() / 3),
-        heads=heads,
-        tails=tails,
-        scale=setup.scale,
-    )
+    full = 0.0
+    if search.budget >= FULL_LP_FROM:
+        _, _, heads, tails = chains(problem, setup.pairs)
+        full = load_lower_bound(
+            problem,
+            candidates,
+            setup.weights,
+            es_target=setup.es_target,
+            es_floor=setup.es_floor,
+            time_limit_s=max(0.1, search.wall_left() / 3),
+            heads=heads,
+            tails=tails,
+            scale=setup.scale,
+        )
     if full > 0:
         return full
     return load_lower_bound(
