@@ -9,12 +9,14 @@ each with a fixed deterministic budget, so a larger `time_limit_s` runs the smal
 stages first and then more LNS (docs/schedules.md#anytime):
 
 1. Bound: the floors of `bounds` (critical path, heads and tails over the robots able)
-   and the LP relaxation of the assignment (`load_bound`, HiGHS: deterministic).
+   and the LP relaxation of the assignment (`load_bound`, HiGHS: deterministic; with
+   each robot's zone entries, first head and last tail from a budget of `FULL_LP_FROM`).
 2. Assign: the `AssignmentModel` (ES held at its target, or above the floor; the cap; per
    robot: shift start + work + one entry into each zone it visits <= T; minimise T) for
    `ASSIGN_UNITS`; its bound on T is one more floor. Then time it: the assignment (and
    the time-free optimum, already in hand) by the list scheduler and by earliest-finish
-   dispatch within its per-class quotas.
+   dispatch within its per-class quotas, and dispatched again with the busiest robots'
+   durations weighted (`_dispatch_busy`).
 3. Sequence, for `SEQUENCE_UNITS`: the exact model on the best assignment so far, each
    task fixed to its robot: CP-SAT improves the per-robot orders and start times, hinted
    with the best schedule (at 200 x 20 it proves that assignment's optimum in under a
