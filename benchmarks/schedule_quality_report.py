@@ -136,7 +136,8 @@ def targets(mk: list[dict[str, Any]], limits: dict[str, Any]) -> str:
         r = runs.get(label)
         if r is not None:
             lines.append(
-                f"- {label} gap at most {limit:.0%} at 60 s: {_pct(r['gap'])} "
+                # two decimals: a gap of 10.03% reads "10.0%" with one
+                f"- {label} gap at most {limit:.0%} at 60 s: {100 * r['gap']:.2f}% "
                 f"({_met(r['gap'] <= limit)})"
             )
     return "\n".join(lines)
