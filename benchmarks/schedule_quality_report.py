@@ -136,7 +136,8 @@ def targets(mk: list[dict[str, Any]], limits: dict[str, Any]) -> str:
         r = runs.get(label)
         if r is not None:
             lines.append(
-                f"- {label} gap at most {limit:.0%} at 60 s: {_pct(r['gap'])} "
+                # two decimals: a gap of 10.03% reads "10.0%" with one
+                f"- {label} gap at most {limit:.0%} at 60 s: {100 * r['gap']:.2f}% "
                 f"({_met(r['gap'] <= limit)})"
             )
     return "\n".join(lines)
@@ -181,3 +182,27 @@ def body(
         targets(mk, limits),
     ]
     return "\n\n".join(parts) + "\n"
+
+
+SITE_TARGETS = ("- 600 x 12 x 4 zones", "- 1,000 x 20")
+
+
+def with_new_limits(section: str, limits: dict[str, Any], image: str, note: str) -> str:
+    """The section as it stands with its gap-by-limit table, its figure and the generated
+    sites' targets replaced by `limits` (Brandimarte and LTAA rows as measured before)."""
+    start = section.index("| site | 1 s |")
+    end = section.index("\n\n", start)
+    section = section[:start] + limits_table(limits["runs"]) + section[end:]
+    figure = section.index("![gap against the time limit](")
+    section = (
+        section[:figure]
+        + f"![gap against the time limit]({image})"
+        + section[section.index("\n", figure) :]
+    )
+    new = [line for line in targets([], limits).splitlines() if line.startswith(SITE_TARGETS)]
+    lines = [line for line in section.splitlines() if not line.startswith(SITE_TARGETS)]
+    at = next(i for i, line in enumerate(lines) if line.startswith("- at 60 s, Mk01-Mk10"))
+    lines[at + 1 : at + 1] = new
+    out = "\n".join(lines) + "\n"
+    stamp = out.index("\n\n_Section measured in")
+    return out[:stamp] + "\n\n" + note + out[stamp:]

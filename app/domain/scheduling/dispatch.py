@@ -30,10 +30,15 @@ def quotas_of(assignment: Sequence[int], classes: Sequence[int]) -> dict[tuple[i
 
 
 def dispatch_schedule(
-    problem: Problem, classes: Sequence[int], quotas: Mapping[tuple[int, int], int]
+    problem: Problem,
+    classes: Sequence[int],
+    quotas: Mapping[tuple[int, int], int],
+    penalty: Sequence[float] | None = None,
 ) -> Schedule:
     """Schedule every task, choosing its robot among those with quota left for its class
-    (`classes[t]`); pinned tasks keep their robot (and count against its quota)."""
+    (`classes[t]`); pinned tasks keep their robot (and count against its quota).
+    `penalty[r]` lengthens robot r's durations by that share when choosing (not when
+    timing): a busy robot then takes the tasks it is quick at."""
     tm = problem.instance.timing
     n = tm.n_tasks
     left = dict(quotas)
@@ -63,7 +68,8 @@ def dispatch_schedule(
         for r in choices(t):
             ready = max(tm.ready(t, tm.duration(t, r), starts, ends), floor)
             s = lines[r].earliest(tm, t, r, ready)
-            options.append((s + tm.duration(t, r), s, r))
+            slower = 1.0 if penalty is None else 1.0 + penalty[r]
+            options.append((s + tm.duration(t, r) * slower, s, r))
         if not options:
             raise ValueError(f"no robot has quota left for task {t} (class {classes[t]})")
         finish, s, r = min(options)

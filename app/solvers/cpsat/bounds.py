@@ -18,6 +18,7 @@ largest, `makespan >= floor`), and each answer says which one bounds its `bound`
 from __future__ import annotations
 
 from collections import Counter
+from typing import NamedTuple
 
 import numpy as np
 
@@ -29,8 +30,20 @@ HEADS_TAILS = "heads and tails over the robots able"
 MAX_GROUPS = 40  # distinct eligibility sets examined (the most common first)
 
 
-def bound_floors(problem: Problem, pairs: set[tuple[int, int]] | None = None) -> dict[str, float]:
-    """Named lower bounds (minutes) on the makespan of any schedule using only `pairs`."""
+class Chains(NamedTuple):
+    """Per task: the robots able (within `pairs`), its shortest duration, its head (the
+    earliest it can start), its tail (the least chain of work after it ends) and the
+    earliest it can end (a finish link can hold an end later than head + shortest)."""
+
+    options: list[list[int]]
+    shortest: np.ndarray
+    heads: np.ndarray
+    tails: np.ndarray
+    ends: np.ndarray
+
+
+def chains(problem: Problem, pairs: set[tuple[int, int]] | None = None) -> Chains:
+    """The heads, tails and ends of every task (`Chains`), within `pairs`."""
     tm = problem.instance.timing
     n = tm.n_tasks
     options = [_options(problem, t, pairs) for t in range(n)]
@@ -57,6 +70,14 @@ def bound_floors(problem: Problem, pairs: set[tuple[int, int]] | None = None) ->
             ),
             default=0.0,
         )
+    return Chains(options, shortest, heads, tails, ends)
+
+
+def bound_floors(problem: Problem, pairs: set[tuple[int, int]] | None = None) -> dict[str, float]:
+    """Named lower bounds (minutes) on the makespan of any schedule using only `pairs`."""
+    tm = problem.instance.timing
+    n = tm.n_tasks
+    options, shortest, heads, tails, ends = chains(problem, pairs)
     out = {CRITICAL_PATH: float(np.max(ends + tails, initial=0.0))}
     free = np.array([t not in problem.pinned_starts for t in range(n)])
     sets = Counter(frozenset(o) for t, o in enumerate(options) if free[t])

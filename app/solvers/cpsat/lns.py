@@ -73,6 +73,7 @@ def improve(
     start: Schedule | None = None,
     seconds: float | None = None,
     slice_units: float = SLICE,
+    loaded_first: bool = False,
 ) -> LnsReport | None:
     """Run LNS from `start` (default: the best schedule so far) for `seconds` of budget
     (default: all that is left); None if there is nothing to start from or no time.
@@ -104,7 +105,9 @@ def improve(
     ):
         search.need(search.spent + build + slice_units)
         kind = "robots" if rng.random() < ROBOTS_SHARE else "window"
-        free, robots = _choose(rng, current, movable, int(size[kind]), kind, candidates)
+        free, robots = _choose(
+            rng, current, movable, (int(size[kind]), kind), candidates, loaded_first
+        )
         allowed = candidates
         if robots is not None:  # an exchange among these robots only
             allowed = [[r for r in c if r in robots] for c in candidates]
@@ -139,12 +142,14 @@ def _choose(
     rng: random.Random,
     current: Schedule,
     movable: list[int],
-    size: int,
-    kind: str,
+    how: tuple[int, str],
     candidates: Sequence[Sequence[int]],
+    loaded_first: bool = False,
 ) -> tuple[list[int], set[int] | None]:
     """`size` movable tasks close in time to a centre: a task on the critical path, a random
-    minute, or (robots) the tasks of a robot that ends last and of two to four others."""
+    minute, or (robots) the tasks of a robot that ends last (with `loaded_first`: of one of
+    the three most loaded robots on the critical path) and of two to four others."""
+    size, kind = how
     slots = current.slots
     pool, chosen = movable, None
     if kind == "window" and rng.random() < 0.6:
@@ -161,7 +166,9 @@ def _choose(
         ends: dict[int, float] = {}
         for s in slots:
             ends[s.robot] = max(ends.get(s.robot, 0.0), s.end)
-        late = sorted(ends, key=lambda r: -ends[r])[:3]
+        late = (_loaded(current) if loaded_first else []) or sorted(ends, key=lambda r: -ends[r])[
+            :3
+        ]
         last = rng.choice(late)
         mine = [t for t in movable if slots[t].robot == last]
         centre = slots[rng.choice(mine)].start if mine else rng.uniform(0, current.makespan)
@@ -172,6 +179,16 @@ def _choose(
         chosen = {last, *rng.sample(partners[:6], min(len(partners[:6]), rng.randint(2, 4)))}
         pool = [t for t in movable if slots[t].robot in chosen]
     return sorted(pool, key=lambda t: (abs(slots[t].start - centre), t))[:size], chosen
+
+
+def _loaded(current: Schedule) -> list[int]:
+    """The three robots on the critical path with the most work and travel: where the
+    makespan is made (the robot that ends last often only does a chain's last task)."""
+    work = current.robot_time
+    on_path = {s.robot for s in current.critical_path if s.kind is StepKind.TASK}
+    return sorted(
+        (r for r in on_path if r is not None), key=lambda r: (-work[r].busy - work[r].travel, r)
+    )[:3]
 
 
 def _solve(
