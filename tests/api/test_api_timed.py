@@ -5,7 +5,6 @@ every schedule returned checked against the rules written out in tests/api/timed
 from __future__ import annotations
 
 import copy
-import time
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -166,17 +165,18 @@ def test_an_untimed_answer_has_no_schedule_fields(client: TestClient) -> None:
 def test_1000_tasks_answer_feasible_with_a_bound_within_the_limit(client: TestClient) -> None:
     instance = instance_to_dict(construction_site(1000, 20, seed=0))
     body = {"solver": "schedule", **instance, "options": {"time_limit_s": 1}}
-    started = time.perf_counter()
     answer = checked(client, body)
-    wall = time.perf_counter() - started
     assert answer["status"] == "feasible"
     assert 0 < answer["bound"] <= answer["schedule"]["makespan"]
     assert answer["gap"] == pytest.approx(
         (answer["schedule"]["makespan"] - answer["bound"]) / answer["schedule"]["makespan"]
     )
-    # docs/schedules.md measured 1.6 s at load 15; the model's build and the answer's
-    # validation come on top of the limit, on two shared cores.
-    assert wall < 1 + 9, wall
+    # Within the limit as the search counts it (docs/schedules.md#deterministic-search): the
+    # deterministic budget, not the wall clock of a shared machine (benchmarks measure that).
+    # The bounds and a first assignment always run, so a 1 s budget is overrun by their cost.
+    search = answer["search"]
+    assert search["time_limit_s"] == 1
+    assert search["deterministic_used"] <= search["deterministic_budget"] + 0.5, search
 
 
 @pytest.mark.parametrize("minutes", [0.0001, 0.0004])
