@@ -4,6 +4,7 @@
     python -m benchmarks.console screenshots   # docs/img/console_*.png (make screenshots)
     python -m benchmarks.console bench         # the "Console" section of docs/benchmarks.md
     python -m benchmarks.console import        # docs/img/console_import.png alone
+    python -m benchmarks.console team          # docs/img/console_team_decision.png alone
 
 Both start the server as `make run` does (scripts/serve.sh) on a free loopback port and
 drive Debian's Chromium (/usr/bin/chromium) with Playwright.
@@ -144,7 +145,52 @@ def screenshots() -> list[Path]:
         out.append(_site_screenshot(page, url))
         out.append(gantt_screenshot(page, url))
         out.append(import_screenshot(page, url))
+        out.append(team_screenshot(page, url))
     return out
+
+
+# docs/allocation.md#teams: two lifts that need two heavy units, a panel that needs a heavy and
+# a careful one, and one-robot tasks around them.
+TEAM_SITE: dict[str, Any] = {
+    "tasks": [
+        {"id": "beam", "name": "Lift steel beam", "team": {"heavy": 2}},
+        {"id": "panel", "name": "Fix facade panel", "team": {"heavy": 1, "careful": 1}},
+        {"id": "sweep", "name": "Sweep level 2", "features": ["careful"]},
+        {"id": "carry", "name": "Carry rebar", "features": ["heavy"]},
+        {"id": "truss", "name": "Lift roof truss", "team": {"heavy": 2}},
+        {"id": "seal", "name": "Seal window joints", "features": ["careful"]},
+    ],
+    "robots": [
+        {"name": "crane", "success": {"heavy": 0.9, "careful": 0.2}, "skills": ["heavy"]},
+        {"name": "arm", "success": {"heavy": 0.3, "careful": 0.95}},
+        {"name": "lifter", "success": {"heavy": 0.8, "careful": 0.4}},
+    ],
+}
+
+
+def team_screenshot(page: Page, url: str) -> Path:
+    """A team decision on its run page (docs/allocation.md#teams): the members, one per unit,
+    each with the reason the rules reasoner's **Team** block gave for it."""
+    run_id = _start(url, {**TEAM_SITE, "mode": "balanced"})
+    _wait(url, run_id)
+    page.set_viewport_size({"width": 1280, "height": 800})
+    page.goto(f"{url}/console/runs/{run_id}?decision=1#decision-1")
+    decision = page.locator("details#decision-1")
+    decision.locator("table.team").wait_for()
+    path = IMG / "console_team_decision.png"
+    decision.screenshot(path=path)
+    return path
+
+
+def team_screenshot_alone() -> Path:
+    with (
+        tempfile.TemporaryDirectory(prefix="ltaa-console-") as tmp,
+        served(Path(tmp), {"LTAA_API_KEYS": KEYS}) as (url, _log),
+        _browser() as browser,
+    ):
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        _sign_in(page, url)
+        return team_screenshot(page, url)
 
 
 def import_screenshot(page: Page, url: str) -> Path:
@@ -299,12 +345,14 @@ def main(argv: list[str]) -> None:
             print(path)
     elif what == "import":
         print(import_screenshot_alone())
+    elif what == "team":
+        print(team_screenshot_alone())
     elif what == "bench":
         text = bench()
         write_section(SECTION_TITLE, text)
         print(text)
     else:
-        raise SystemExit("usage: python -m benchmarks.console screenshots|import|bench")
+        raise SystemExit("usage: python -m benchmarks.console screenshots|import|team|bench")
 
 
 if __name__ == "__main__":

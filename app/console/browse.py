@@ -69,9 +69,16 @@ def overview(*, sessions: sessionmaker[Session], run_id: str) -> RunOverview:
         signed = signoffs(session=session, run_id=run_id)
     spec = RunSpec.from_json(run.request)
     instance = spec.problem.instance
+    # docs/allocation.md#teams: a team decision counts once for each member, as the run's
+    # workload in GET /runs/{id} does; its success is the team's mean over its units.
+    index = {name: i for i, name in enumerate(r["name"] for r in spec.instance_data["robots"])}
+    teams = {
+        row.task_index: tuple(index[m["robot"]] for m in row.team) for row in outline if row.team
+    }
     loads = [0] * instance.n_robots
     for row in outline:
-        loads[row.robot] += 1
+        for robot in teams.get(row.task_index, (row.robot,)):
+            loads[robot] += 1
     assignment = [row.robot for row in outline]
     return RunOverview(
         run=run,
@@ -82,7 +89,7 @@ def overview(*, sessions: sessionmaker[Session], run_id: str) -> RunOverview:
         balance=[row.balance_after for row in outline],
         events=events,
         signoffs=signed,
-        expected_success=expected_success(instance, assignment) if assignment else None,
+        expected_success=expected_success(instance, assignment, teams) if assignment else None,
         balance_score=balance_score(loads, instance.target_load)
         if len(outline) == run.n_tasks
         else None,

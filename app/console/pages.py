@@ -132,6 +132,7 @@ async def run_page(
         "inline_tasks": views.INLINE_TASKS,
         "scores_of": views.scores_of,
         "final_attempt": views.final_attempt,
+        "team_lines": views.team_lines,
     }
     return finish(request, console.render(request, "run.html", context, signed=signed))
 

@@ -56,6 +56,31 @@ def final_attempt(attempts: list[Attempt]) -> Attempt | None:
 
 
 @dataclass(frozen=True)
+class TeamLine:
+    """One unit of a team decision (docs/allocation.md#teams): its feature, the member
+    covering it, and that member's sentence from the reasoner's **Team** block."""
+
+    feature: str
+    robot: str
+    reason: str | None
+
+
+def team_lines(team: list[dict[str, str]] | None, attempt: Attempt | None) -> list[TeamLine]:
+    """The decision's members in unit order, each with the reason its final attempt gave
+    (the parsed **Team** line of the same unit naming the same robot; None when it gave
+    none, as a fallback or an optimizer's team does). Empty for a one-robot decision."""
+    parsed = (attempt.parsed or {}).get("team") if attempt is not None else None
+    said = parsed if isinstance(parsed, list) else []
+    out = []
+    for i, member in enumerate(team or []):
+        line = said[i] if i < len(said) and isinstance(said[i], dict) else {}
+        same = line.get("feature") == member["feature"] and line.get("robot") == member["robot"]
+        reason = str(line.get("reason") or "") if same else ""
+        out.append(TeamLine(member["feature"], member["robot"], reason or None))
+    return out
+
+
+@dataclass(frozen=True)
 class FrontierView:
     svg: Markup
     points: list[charts.PlotPoint]

@@ -405,11 +405,11 @@ def decision_count(*, session: Session, run_id: str) -> int:
 
 
 def decision_outline(*, session: Session, run_id: str) -> list[Any]:
-    """(task_index, robot, balance_after) of every decision, in task order: the columns a
-    chart of the whole run needs, without the text of 10,000 reasonings."""
+    """(task_index, robot, balance_after, team) of every decision, in task order: the columns
+    a chart of the whole run needs, without the text of 10,000 reasonings."""
     return list(
         session.execute(
-            select(Decision.task_index, Decision.robot, Decision.balance_after)
+            select(Decision.task_index, Decision.robot, Decision.balance_after, Decision.team)
             .where(Decision.run_id == run_id)
             .order_by(Decision.task_index)
         )
