@@ -17,16 +17,12 @@ import re
 
 from app.domain.decision import DecisionContext, Members, TeamFacts, percent
 from app.domain.team_choice import TeamRule, describe_team, team_rule
+from app.graph.criteria_text import NUMBER_CITED, score_tradeoff
 from app.graph.parsing import ParsedResponse, count_sentences, mentioned_robots
 
 # Stated success within this of the true S is exact (rounding); beyond the outer bound, 0.
 ACCURACY_EXACT = 0.015
 ACCURACY_ZERO = 0.15
-_NUMBER_CITED = re.compile(
-    r"\d+(?:\.\d+)?\s*%|\b0?\.\d+\b|\b\d+(?:\.\d+)?\s*points?\b", re.IGNORECASE
-)
-_SUCCESS_TERMS = re.compile(r"success|\d\s*%|\bpoints?\b|\bgap\b", re.IGNORECASE)
-_LOAD_TERMS = re.compile(r"load|balance|\btasks?\b|least[- ]loaded|fewest", re.IGNORECASE)
 _MEMBER_FACTS = re.compile(r"\d|rate|success|load|skill|balance", re.IGNORECASE)
 _CONFIDENCE_RANK = {"low": 0, "medium": 1, "high": 2}
 
@@ -116,7 +112,7 @@ def _explanation(p: ParsedResponse, ctx: DecisionContext, members: Members) -> R
         whole += 0.25
     else:
         problems.append("the reasoning names no member of the team")
-    if _NUMBER_CITED.search(text):
+    if NUMBER_CITED.search(text):
         whole += 0.25
     else:
         problems.append("the reasoning cites no success rates or loads as numbers")
@@ -134,23 +130,14 @@ def _explanation(p: ParsedResponse, ctx: DecisionContext, members: Members) -> R
 
 def _tradeoff(p: ParsedResponse, ctx: DecisionContext, members: Members, rule: TeamRule) -> Result:
     text = p.tradeoff or ""
-    if not text.strip():
-        return 0.0, "the **Trade-Off Summary** section is missing"
-    q, problems = 0.25, []
-    if _SUCCESS_TERMS.search(text):
-        q += 0.25
-    else:
-        problems.append("it does not quantify the success side (team S or the gap in points)")
-    if _LOAD_TERMS.search(text):
-        q += 0.25
-    else:
-        problems.append("it does not mention loads or balance")
     others = mentioned_robots(text, ctx.robot_names, ctx.labels) - set(members)
-    if others or rule.best == rule.fewest or re.search(r"\bteam\b", text, re.IGNORECASE):
-        q += 0.25
-    else:
-        problems.append("it compares no alternative team")
-    return q, "; ".join(problems)
+    named_team = re.search(r"\bteam\b", text, re.IGNORECASE) is not None
+    return score_tradeoff(
+        text,
+        success_side="team S or the gap in points",
+        compares=bool(others) or rule.best == rule.fewest or named_team,
+        no_alternative="it compares no alternative team",
+    )
 
 
 def _workload(p: ParsedResponse, ctx: DecisionContext, members: Members) -> Result:

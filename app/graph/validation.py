@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 from app.domain.decision import DecisionContext
 from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
+from app.graph.criteria_text import NUMBER_CITED, score_tradeoff
 from app.graph.parsing import (
     ParsedResponse,
     count_sentences,
@@ -55,11 +56,6 @@ CRITERION_TITLES: dict[str, str] = {
 
 _CONFIDENCE_RANK = {"low": 0, "medium": 1, "high": 2}
 _PHASE_WORD = re.compile(r"\b(early|middle|mid|late)\b", re.IGNORECASE)
-_NUMBER_CITED = re.compile(
-    r"\d+(?:\.\d+)?\s*%|\b0?\.\d+\b|\b\d+(?:\.\d+)?\s*points?\b", re.IGNORECASE
-)
-_SUCCESS_TERMS = re.compile(r"success|\d\s*%|\bpoints?\b|\bgap\b", re.IGNORECASE)
-_LOAD_TERMS = re.compile(r"load|balance|\btasks?\b|least[- ]loaded|fewest", re.IGNORECASE)
 
 
 @dataclass
@@ -123,7 +119,7 @@ def _explanation(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[
         q += 0.25
     else:
         problems.append("it does not name the chosen robot")
-    if _NUMBER_CITED.search(text):
+    if NUMBER_CITED.search(text):
         q += 0.25
     else:
         problems.append("it cites no success rates or loads as numbers")
@@ -136,23 +132,13 @@ def _accuracy(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[flo
 
 def _tradeoff_analysis(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
     text = p.tradeoff or ""
-    if not text.strip():
-        return 0.0, "the **Trade-Off Summary** section is missing"
-    q, problems = 0.25, []
-    if _SUCCESS_TERMS.search(text):
-        q += 0.25
-    else:
-        problems.append("it does not quantify the success side (S or the gap in points)")
-    if _LOAD_TERMS.search(text):
-        q += 0.25
-    else:
-        problems.append("it does not mention loads or balance")
     others = mentioned_robots(text, ctx.robot_names, ctx.labels) - {choice}
-    if others or len(ctx.feasible) <= 1:
-        q += 0.25
-    else:
-        problems.append("it names no alternative robot to compare against")
-    return q, "; ".join(problems)
+    return score_tradeoff(
+        text,
+        success_side="S or the gap in points",
+        compares=bool(others) or len(ctx.feasible) <= 1,
+        no_alternative="it names no alternative robot to compare against",
+    )
 
 
 def _workload(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:

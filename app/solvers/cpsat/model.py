@@ -32,6 +32,7 @@ from ortools.sat.python import cp_model
 from app.domain.links import Arc, ancestors_through
 from app.domain.problem import Problem
 from app.solvers.cpsat.common import SuccessWeights, makespan_floor
+from app.solvers.cpsat.task_window import add_task_window
 from app.solvers.cpsat.time_scale import TimeScale
 
 
@@ -144,40 +145,13 @@ class ScheduleModel:
         return max(horizon, 0)
 
     def _add_tasks(self) -> None:
-        tm, m, up, down = self.tm, self.model, self.scale.up, self.scale.down
-        for t in range(tm.n_tasks):
-            fixed = self.problem.pinned_starts.get(t)
-            if fixed is not None:
-                lo = hi = round(fixed * self.scale.units_per_minute)
-            else:
-                lo = max(up(tm.release[t]), up(self.problem.not_before))
-                hi = self.horizon
-            end_hi = self.horizon if not math.isfinite(tm.deadline[t]) else down(tm.deadline[t])
-            if fixed is not None:
-                end_hi = max(end_hi, hi + max(up(tm.duration(t, r)) for r in self.candidates[t]))
-                self.horizon = max(self.horizon, end_hi)
-            start = m.new_int_var(lo, max(lo, hi), f"s{t}")
-            end = m.new_int_var(lo, max(lo, end_hi), f"e{t}")
-            lits, sizes = [], []
-            for r in self.candidates[t]:
-                d = up(tm.duration(t, r))
-                lit = m.new_bool_var(f"x{t}_{r}")
-                self.present[t, r] = lit
-                lits.append(lit)
-                sizes.append(d)
-                self._intervals[r].append(
-                    m.new_optional_fixed_size_interval_var(start, d, lit, f"i{t}_{r}")
-                )
-                self._tasks_on[r].append(t)
-                a, b = tm.shifts[r]
-                if fixed is None and up(a) > lo:
-                    m.add(start >= up(a)).only_enforce_if(lit)
-                if fixed is None and math.isfinite(b):
-                    m.add(end <= down(b)).only_enforce_if(lit)
-            m.add_exactly_one(lits)
-            m.add(end == start + cp_model.LinearExpr.weighted_sum(lits, sizes))
-            self.start.append(start)
-            self.end.append(end)
+        m = self.model
+        for t in range(self.tm.n_tasks):
+            w = add_task_window(self, t, self._intervals, self._tasks_on)
+            m.add_exactly_one(w.lits)
+            m.add(w.end == w.start + cp_model.LinearExpr.weighted_sum(w.lits, w.sizes))
+            self.start.append(w.start)
+            self.end.append(w.end)
 
     def _add_precedence(self) -> None:
         for t, arcs in enumerate(self.tm.links):

@@ -30,6 +30,7 @@ from app.domain.links import ancestors_through
 from app.domain.problem import Problem
 from app.domain.teams import covers
 from app.solvers.cpsat.model import add_after, add_link, zones_to_enter
+from app.solvers.cpsat.task_window import add_task_window
 from app.solvers.cpsat.time_scale import TimeScale
 from app.solvers.units import UnitView
 
@@ -172,44 +173,18 @@ class TeamModel:
         return max(0, up(anchor) + total + tm.n_tasks * up(longest) + lags)
 
     def _add_task(self, t: int) -> None:
-        tm, m, up, down = self.tm, self.model, self.scale.up, self.scale.down
-        fixed = self.problem.pinned_starts.get(t)
-        if fixed is not None:
-            lo = hi = round(fixed * self.scale.units_per_minute)
-        else:
-            lo, hi = max(up(tm.release[t]), up(self.problem.not_before)), self.horizon
-        end_hi = self.horizon if not math.isfinite(tm.deadline[t]) else down(tm.deadline[t])
-        if fixed is not None:
-            end_hi = max(end_hi, hi + max(up(tm.duration(t, r)) for r in self.candidates[t]))
-            self.horizon = max(self.horizon, end_hi)
-        start = m.new_int_var(lo, max(lo, hi), f"s{t}")
-        end = m.new_int_var(lo, max(lo, end_hi), f"e{t}")
-        lits, sizes = [], []
-        for r in self.candidates[t]:
-            d = up(tm.duration(t, r))
-            lit = m.new_bool_var(f"x{t}_{r}")
-            self.present[t, r] = lit
-            lits.append(lit)
-            sizes.append(d)
-            self._intervals[r].append(
-                m.new_optional_fixed_size_interval_var(start, d, lit, f"i{t}_{r}")
-            )
-            self._tasks_on[r].append(t)
-            a, b = tm.shifts[r]
-            if fixed is None and up(a) > lo:
-                m.add(start >= up(a)).only_enforce_if(lit)
-            if fixed is None and math.isfinite(b):
-                m.add(end <= down(b)).only_enforce_if(lit)
-        size = m.new_int_var(min(sizes), max(sizes), f"d{t}")
+        m = self.model
+        w = add_task_window(self, t, self._intervals, self._tasks_on)
+        size = m.new_int_var(min(w.sizes), max(w.sizes), f"d{t}")
         if not self.units[t]:
-            m.add_exactly_one(lits)
-            m.add(size == cp_model.LinearExpr.weighted_sum(lits, sizes))
+            m.add_exactly_one(w.lits)
+            m.add(size == cp_model.LinearExpr.weighted_sum(w.lits, w.sizes))
         else:
             self._add_team(t)
-            m.add(size == sizes[0])  # a team task's duration is one number
-        self.start.append(start)
-        self.end.append(end)
-        self._task_intervals.append(m.new_interval_var(start, size, end, f"task{t}"))
+            m.add(size == w.sizes[0])  # a team task's duration is one number
+        self.start.append(w.start)
+        self.end.append(w.end)
+        self._task_intervals.append(m.new_interval_var(w.start, size, w.end, f"task{t}"))
 
     def _add_team(self, t: int) -> None:
         """Unit coverage: each unit by one present robot able to cover its feature, a robot
