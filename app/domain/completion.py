@@ -15,6 +15,18 @@ from collections.abc import Sequence
 import numpy as np
 
 
+def _counts(
+    loads: Sequence[int], lower: int, upper: int, m: int
+) -> tuple[list[int], list[int], bool | None]:
+    """Per robot its shortfall to `lower` and its room to `upper`, and the answer when
+    counting `m` units alone settles it (None: the flow must tell)."""
+    need = [max(0, lower - x) for x in loads]
+    room = [upper - x for x in loads]
+    if min(room, default=0) < 0 or sum(need) > m or sum(room) < m:
+        return need, room, False
+    return need, room, (True if m == 0 else None)
+
+
 def completable(eligible: np.ndarray, loads: Sequence[int], lower: int, upper: int) -> bool:
     """eligible: (tasks left, robots); loads: per robot so far. A max flow source -> task
     classes -> robots -> sink where each robot's first `lower - load` units go straight to
@@ -24,12 +36,9 @@ def completable(eligible: np.ndarray, loads: Sequence[int], lower: int, upper: i
     from scipy.sparse.csgraph import maximum_flow
 
     m, r = eligible.shape
-    need = [max(0, lower - x) for x in loads]
-    room = [upper - x for x in loads]
-    if min(room, default=0) < 0 or sum(need) > m or sum(room) < m:
-        return False
-    if m == 0:
-        return True
+    need, room, settled = _counts(loads, lower, upper, m)
+    if settled is not None:
+        return settled
     rows, counts = np.unique(eligible, axis=0, return_counts=True)
     c = len(rows)
     source, spare, sink = 0, 1 + c + r, 2 + c + r
@@ -81,12 +90,9 @@ def units_completable(
 
     r = len(loads)
     m = len(singles) + sum(count for team in teams for count, _ in team)
-    need = [max(0, lower - x) for x in loads]
-    room = [upper - x for x in loads]
-    if min(room, default=0) < 0 or sum(need) > m or sum(room) < m:
-        return False
-    if m == 0:
-        return True
+    need, room, settled = _counts(loads, lower, upper, m)
+    if settled is not None:
+        return settled
     tails: list[int] = []
     heads: list[int] = []
     caps: list[int] = []

@@ -1,10 +1,11 @@
 """What the soft criteria look for in a response's text, shared by the one-robot and the
 team validation (docs/allocation.md#validation): numbers cited, the two sides of a
-trade-off, and the trade-off summary's score."""
+trade-off, the trade-off summary's score and the stated workload's."""
 
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping, Sequence
 
 NUMBER_CITED = re.compile(
     r"\d+(?:\.\d+)?\s*%|\b0?\.\d+\b|\b\d+(?:\.\d+)?\s*points?\b", re.IGNORECASE
@@ -35,3 +36,16 @@ def score_tradeoff(
     else:
         problems.append(no_alternative)
     return q, "; ".join(problems)
+
+
+def score_workload(
+    stated: Mapping[int, int] | None, after: Sequence[int], labels: Sequence[str]
+) -> tuple[float, str]:
+    """**Workload After Assignment**: the share of robots whose stated count is `after`'s."""
+    truth = ", ".join(f"{labels[r]}: {after[r]}" for r in range(len(after)))
+    if not stated:
+        return 0.0, f"no **Workload After Assignment** counts (true: {truth})"
+    right = sum(1 for r, n in enumerate(after) if stated.get(r) == n)
+    if right == len(after):
+        return 1.0, ""
+    return right / len(after), f"{right} of {len(after)} counts are right (true: {truth})"

@@ -17,7 +17,7 @@ import re
 
 from app.domain.decision import DecisionContext, Members, TeamFacts, percent
 from app.domain.team_choice import TeamRule, describe_team, team_rule
-from app.graph.criteria_text import NUMBER_CITED, score_tradeoff
+from app.graph.criteria_text import NUMBER_CITED, score_tradeoff, score_workload
 from app.graph.parsing import ParsedResponse, count_sentences, mentioned_robots
 
 # Stated success within this of the true S is exact (rounding); beyond the outer bound, 0.
@@ -144,14 +144,7 @@ def _workload(p: ParsedResponse, ctx: DecisionContext, members: Members) -> Resu
     after = list(ctx.loads)
     for r in members:
         after[r] += 1
-    labels = ctx.labels
-    truth = ", ".join(f"{labels[r]}: {after[r]}" for r in range(len(after)))
-    if not p.workload_after:
-        return 0.0, f"no **Workload After Assignment** counts (true: {truth})"
-    right = sum(1 for r, n in enumerate(after) if p.workload_after.get(r) == n)
-    if right == len(after):
-        return 1.0, ""
-    return right / len(after), f"{right} of {len(after)} counts are right (true: {truth})"
+    return score_workload(p.workload_after, after, ctx.labels)
 
 
 def _mode(ctx: DecisionContext, members: Members, rule: TeamRule) -> Result:

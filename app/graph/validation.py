@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from app.domain.decision import DecisionContext
 from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
-from app.graph.criteria_text import NUMBER_CITED, score_tradeoff
+from app.graph.criteria_text import NUMBER_CITED, score_tradeoff, score_workload
 from app.graph.parsing import (
     ParsedResponse,
     count_sentences,
@@ -144,14 +144,7 @@ def _tradeoff_analysis(p: ParsedResponse, ctx: DecisionContext, choice: int) -> 
 def _workload(p: ParsedResponse, ctx: DecisionContext, choice: int) -> tuple[float, str]:
     after = list(ctx.loads)
     after[choice] += 1
-    labels = ctx.labels
-    truth = ", ".join(f"{labels[r]}: {after[r]}" for r in range(len(after)))
-    if not p.workload_after:
-        return 0.0, f"no **Workload After Assignment** counts (true: {truth})"
-    right = sum(1 for r, n in enumerate(after) if p.workload_after.get(r) == n)
-    if right == len(after):
-        return 1.0, ""
-    return right / len(after), f"{right} of {len(after)} counts are right (true: {truth})"
+    return score_workload(p.workload_after, after, ctx.labels)
 
 
 def _mode(ctx: DecisionContext, choice: int, rule: TradeOff) -> tuple[float, str]:

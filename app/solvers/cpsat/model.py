@@ -32,7 +32,7 @@ from ortools.sat.python import cp_model
 from app.domain.links import Arc, ancestors_through
 from app.domain.problem import Problem
 from app.solvers.cpsat.common import SuccessWeights, makespan_floor
-from app.solvers.cpsat.task_window import add_task_window
+from app.solvers.cpsat.task_window import add_task_window, serial_horizon
 from app.solvers.cpsat.time_scale import TimeScale
 
 
@@ -120,25 +120,10 @@ class ScheduleModel:
         ]
 
     def _horizon(self) -> int:
-        """No schedule worth having ends later: everything one after another, from the
-        latest fixed time, with the longest travel before each task."""
-        tm, up = self.tm, self.scale.up
-        longest_travel = max((m for row in tm.travel_minutes for m in row), default=0.0)
-        anchor = max(
-            [*tm.release, self.problem.not_before, *(a for a, _ in tm.shifts)]
-            + [
-                s + tm.duration(t, self.problem.pinned[t])
-                for t, s in self.problem.pinned_starts.items()
-            ]
-        )
-        # Each duration rounded on its own: rounding the sum instead lost up to a unit per
-        # task, and with sub-unit durations proved a feasible instance infeasible.
-        total = sum(
-            max(up(tm.duration(t, r)) for r in self.candidates[t]) for t in range(tm.n_tasks)
-        )
-        # A positive lag is a wait no robot fills (docs/schedules.md#links).
-        lags = sum(up(a.lag) for arcs in tm.links for a in arcs if a.lag > 0)
-        horizon = up(anchor) + total + tm.n_tasks * up(longest_travel) + lags
+        """The serial horizon (task_window.serial_horizon), clipped by the latest shift end
+        when every shift ends."""
+        tm = self.tm
+        horizon = serial_horizon(self)
         shift_ends = [b for _, b in tm.shifts]
         if all(math.isfinite(b) for b in shift_ends):
             horizon = min(horizon, max(self.scale.down(b) for b in shift_ends))

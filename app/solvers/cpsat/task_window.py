@@ -28,6 +28,23 @@ class TaskHost(Protocol):
     present: dict[tuple[int, int], cp_model.IntVar]
 
 
+def serial_horizon(host: TaskHost) -> int:
+    """No schedule worth having ends later: everything one after another, from the latest
+    fixed time, with the longest travel before each task (before any shift's end clips it)."""
+    tm, up, problem = host.tm, host.scale.up, host.problem
+    longest_travel = max((m for row in tm.travel_minutes for m in row), default=0.0)
+    anchor = max(
+        [*tm.release, problem.not_before, *(a for a, _ in tm.shifts)]
+        + [s + tm.duration(t, problem.pinned[t]) for t, s in problem.pinned_starts.items()]
+    )
+    # Each duration rounded on its own: rounding the sum instead lost up to a unit per
+    # task, and with sub-unit durations proved a feasible instance infeasible.
+    total = sum(max(up(tm.duration(t, r)) for r in host.candidates[t]) for t in range(tm.n_tasks))
+    # A positive lag is a wait no robot fills (docs/schedules.md#links).
+    lags = sum(up(a.lag) for arcs in tm.links for a in arcs if a.lag > 0)
+    return max(0, up(anchor) + total + tm.n_tasks * up(longest_travel) + lags)
+
+
 @dataclass
 class TaskWindow:
     start: cp_model.IntVar

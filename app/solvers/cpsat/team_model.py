@@ -30,7 +30,7 @@ from app.domain.links import ancestors_through
 from app.domain.problem import Problem
 from app.domain.teams import covers
 from app.solvers.cpsat.model import add_after, add_link, zones_to_enter
-from app.solvers.cpsat.task_window import add_task_window
+from app.solvers.cpsat.task_window import add_task_window, serial_horizon
 from app.solvers.cpsat.time_scale import TimeScale
 from app.solvers.units import UnitView
 
@@ -154,23 +154,7 @@ class TeamModel:
         return [r for r in self.tm.eligible_robots(t) if r not in off]
 
     def _horizon(self) -> int:
-        """Everything one after another from the latest fixed time, with the longest travel
-        before each task: no schedule worth having ends later."""
-        tm, up = self.tm, self.scale.up
-        longest = max((m for row in tm.travel_minutes for m in row), default=0.0)
-        anchor = max(
-            [*tm.release, self.problem.not_before, *(a for a, _ in tm.shifts)]
-            + [
-                s + tm.duration(t, self.problem.pinned[t])
-                for t, s in self.problem.pinned_starts.items()
-            ]
-        )
-        total = sum(
-            max(up(tm.duration(t, r)) for r in self.candidates[t]) for t in range(tm.n_tasks)
-        )
-        # A positive lag is a wait no robot fills (docs/schedules.md#links).
-        lags = sum(up(a.lag) for arcs in tm.links for a in arcs if a.lag > 0)
-        return max(0, up(anchor) + total + tm.n_tasks * up(longest) + lags)
+        return serial_horizon(self)
 
     def _add_task(self, t: int) -> None:
         m = self.model
