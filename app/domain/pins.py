@@ -145,10 +145,11 @@ def _pin_shape(instance: Instance, t: int, pin: PinRequest, where: str) -> tuple
 def pinned_team(
     instance: Instance, t: int, entries: Sequence[tuple[str, str]], where: str
 ) -> tuple[int, ...]:
-    """A team as a request gives it, (robot, feature) per unit in any order, checked as a
-    team of task `t` (one distinct robot per unit, each eligible and able to cover its
-    unit's feature, every unit covered) and returned in unit order: the members of one
-    feature in the order given. DomainError naming the entry (`where`.j.robot, ...)."""
+    """A team as a request gives it (a pin, a review's override), (robot, feature) per unit in
+    any order, checked as a team of task `t` (one distinct robot per unit, each eligible and
+    able to cover its unit's feature, every unit covered) and returned in unit order: the
+    members of one feature in the order given. DomainError naming the entry (`where`.j.robot,
+    ...)."""
     task, robots = instance.tasks[t], instance.robots
     need = dict(task.team or {})
     given: dict[str, list[int]] = {f: [] for f in need}
@@ -158,7 +159,7 @@ def pinned_team(
             raise DomainError(
                 f"{where}.{j}.feature",
                 f"task {task.id!r} has no unit of '{feature}'; its team is {_needs(need)}",
-                code="team_pin",
+                code="invalid_team",
             )
         r = instance.robot_index(name)
         if r is None:
@@ -173,7 +174,7 @@ def pinned_team(
                 f"{where}.{j}.robot",
                 f"robot '{robots[r].name}' is already in this team ({where}.{seen[r]}); a "
                 "team's members are distinct",
-                code="team_pin",
+                code="invalid_team",
             )
         if not (instance.eligible[t, r] and covers(robots[r], feature)):
             raise DomainError(
@@ -184,7 +185,7 @@ def pinned_team(
                     if robots[r].skills is not None
                     else "it does not rate it above 0"
                 ),
-                code="ineligible_pin",
+                code="ineligible",
             )
         seen[r] = j
         given[feature].append(r)
@@ -192,9 +193,9 @@ def pinned_team(
         if len(given[feature]) != count:
             raise DomainError(
                 where,
-                f"task {task.id!r} needs {count} robot(s) for '{feature}' and the pin gives "
+                f"task {task.id!r} needs {count} robot(s) for '{feature}' and the team gives "
                 f"{len(given[feature])}; one entry per unit: {_needs(need)}",
-                code="team_pin",
+                code="invalid_team",
             )
     return tuple(given[f].pop(0) for f in units_of(task))
 

@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.allocation.service import resolve_instance
 from app.config import Settings
-from app.domain.errors import DomainError, RunStateConflictError
+from app.domain.errors import RunStateConflictError
 from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
 from app.domain.objective import Objective
@@ -176,14 +176,6 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
     # (members free in time is the validation seam still to fill).
     if instance.timed:
         refuse_teams(instance.tasks, "the LTAA graph on a timed instance", _TEAM_USE)
-    if instance.has_teams and order.review is not None:
-        raise DomainError(
-            "review",
-            "a review policy on an instance with team tasks is not supported yet (a review "
-            "overrides one robot, not a team); drop `review` or the team tasks "
-            "(docs/allocation.md#teams)",
-            code="unsupported_field",
-        )
     scope: dict[str, Any] = {}
     if order.llm_scope is not None:
         scope["llm_scope"] = order.llm_scope

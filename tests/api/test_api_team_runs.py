@@ -1,7 +1,8 @@
 """Durable LTAA runs with team tasks (docs/allocation.md#teams): an untimed team run completes
 with valid teams, its trace lists each team decision's members, the chain verifies online and
 offline (and the members are in it), a guided run reaches the exact optimum, and what the graph
-cannot do yet (teams in time, reviews of teams) is a 422 sentence with nothing stored."""
+cannot do yet (teams in time) is a 422 sentence with nothing stored (reviews of team decisions:
+tests/api/test_team_reviews.py)."""
 
 from __future__ import annotations
 
@@ -110,16 +111,6 @@ def test_a_timed_team_run_is_still_refused_with_a_sentence(client: TestClient) -
     assert item["loc"][-3:] == ["tasks", 0, "team"]
     assert "timed instance" in item["msg"] and "'optimal'" in item["msg"]
     assert client.get("/runs").json() == []  # nothing stored
-
-
-def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
-    r = client.post(
-        "/runs", json={**copy.deepcopy(TEAM_BODY), "review": {"on": ["every_decision"]}}
-    )
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"][-1] == "review" and "team" in item["msg"]
-    assert client.get("/runs").json() == []
 
 
 @pytest.mark.parametrize("name", list(PROVIDERS))

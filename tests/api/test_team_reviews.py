@@ -1,0 +1,314 @@
+"""Supervisor reviews of team decisions (docs/reviews.md#reviews-of-team-decisions), in process:
+the pending review lists the proposed team and the rules reasoner's candidate teams (success,
+cap-feasibility and exact regret if chosen), `approve` keeps the proposal, `override` takes a
+whole team (checked as a team; one robot on a team task is a 422 saying to send `team`), the
+decision records `overridden_from` and `overridden_from_team`, loads follow the reviewer's team,
+and the trace, its chains and a replay hold."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.api.test_api_teams import TEAM_BODY
+from tests.api.test_reviews import EVERY, WAITING, _approve_all, _awaiting, _pending
+from tests.polling import wait_until
+
+ROBOTS = ("crane", "arm", "lifter")
+
+
+def team_run(client: TestClient, **changes: Any) -> str:
+    body = {**copy.deepcopy(TEAM_BODY), "mode": "balanced", "review": EVERY, **changes}
+    r = client.post("/runs", json=body)
+    assert r.status_code == 202, r.text
+    return str(r.json()["id"])
+
+
+def key(team: list[dict[str, str]]) -> frozenset[tuple[str, str]]:
+    return frozenset((m["robot"], m["feature"]) for m in team)
+
+
+def test_the_review_of_a_team_decision_lists_the_team_and_candidate_teams_with_exact_regret(
+    client: TestClient,
+) -> None:
+    run_id = team_run(client)
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    assert (review["task_index"], review["task_id"]) == (0, "beam")
+    proposal = review["proposal"]
+    assert [m["feature"] for m in proposal["team"]] == ["heavy", "heavy"]
+    assert proposal["robot"] == proposal["team"][0]["robot"]
+    assert review["units"] == [
+        {"feature": "heavy", "count": 2, "robots": ["crane", "arm", "lifter"]}
+    ]
+    alts = {key(a["team"]): a for a in review["alternatives"]}
+    # Every pair of distinct robots covers the beam's two heavy units: three candidate teams,
+    # the best by success first, the proposal among them.
+    assert len(alts) == 3 and key(proposal["team"]) in alts
+    successes = [a["success"] for a in review["alternatives"]]
+    assert successes == sorted(successes, reverse=True)
+    rate = {"crane": 0.9, "arm": 0.3, "lifter": 0.8}
+    for a in review["alternatives"]:
+        members = [m["robot"] for m in a["team"]]
+        assert a["robot"] == members[0] and a["load"] == 0
+        assert a["success"] == pytest.approx(sum(rate[m] for m in members) / 2)
+    # Regret if chosen, in success points over the queue, against the exact optimum given that
+    # team: POST /allocate with the team pinned (docs/living-plans.md#pins-in-allocate).
+    plan = {**copy.deepcopy(TEAM_BODY), "mode": "balanced", "solver": "optimal"}
+    best = client.post("/allocate", json=plan).json()["metrics"]["expected_success"]
+    for a in review["alternatives"]:
+        assert a["cap_feasible"] is True
+        pinned = client.post(
+            "/allocate", json={**plan, "pinned": [{"task_id": "beam", "team": a["team"]}]}
+        )
+        es = pinned.json()["metrics"]["expected_success"]
+        assert a["regret_if_chosen"] == pytest.approx((best - es) * 4 * 100, abs=1e-6)
+
+
+def test_approving_every_team_decision_gives_the_plan_without_review(client: TestClient) -> None:
+    plain = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), "mode": "balanced"}).json()
+    plain_state = wait_until(client, plain["id"])
+    run_id = team_run(client)
+    reviews = _approve_all(client, run_id)
+    assert [r["task_index"] for r in reviews] == [0, 1, 2, 3]
+    assert "team" in reviews[1]["proposal"] and "team" not in reviews[2]["proposal"]
+    done = client.get(f"/runs/{run_id}").json()
+    assert [a.get("team") for a in done["assignments"]] == [
+        a.get("team") for a in plain_state["assignments"]
+    ]
+    trace = client.get(f"/runs/{run_id}/trace").json()
+    assert all(d["review"]["action"] == "approve" for d in trace["decisions"])
+    assert client.get(f"/runs/{run_id}/trace/verify").json()["ok"] is True
+
+
+def test_an_override_with_a_team_is_stored_and_the_rest_follows(client: TestClient) -> None:
+    run_id = team_run(client)
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    proposed = review["proposal"]["team"]
+    other = next(a["team"] for a in review["alternatives"] if key(a["team"]) != key(proposed))
+    answer = client.post(
+        f"/runs/{run_id}/reviews/0",
+        json={"action": "override", "team": other[::-1], "reason": "the lifter is on the slab"},
+    )
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    assert key(body["team"]) == key(other) and body["robot"] == body["team"][0]["robot"]
+    _awaiting(client, run_id)
+    second = _pending(client, run_id)
+    members = {m["robot"] for m in other}
+    loads = client.get(f"/runs/{run_id}/trace").json()["decisions"][0]["loads_after"]
+    assert loads == [1 if name in members else 0 for name in ROBOTS]  # the reviewer's team
+    assert second["task_index"] == 1
+    _approve_all(client, run_id)
+
+    trace = client.get(f"/runs/{run_id}/trace").json()
+    first = trace["decisions"][0]
+    assert first["team"] == body["team"] and first["robot"] == body["team"][0]["robot"]
+    assert first["review"]["overridden_from"] == proposed[0]["robot"]
+    assert first["review"]["overridden_from_team"] == proposed
+    assert first["review"]["reason"] == "the lifter is on the slab"
+    rate = {"crane": 0.9, "arm": 0.3, "lifter": 0.8}
+    assert first["expected_success"] == pytest.approx(sum(rate[m] for m in members) / 2)
+    run = client.get(f"/runs/{run_id}").json()
+    assert run["assignments"][0]["team"] == body["team"]
+    assert run["assignments"][0]["review"]["overridden_from_team"] == proposed
+    workload = {name: 0 for name in ROBOTS}
+    for a in run["assignments"]:
+        for m in a.get("team") or [{"robot": a["robot"]}]:
+            workload[m["robot"]] += 1
+    assert run["metrics"]["workload"] == workload
+    verify = client.get(f"/runs/{run_id}/trace/verify").json()
+    assert verify["ok"] is True, verify
+
+    # A replay re-applies the reviewer's team without waiting.
+    replay = client.post("/runs", json={"reasoner": "replay", "replay_of": run_id}).json()["id"]
+    state = wait_until(client, replay, WAITING)
+    assert state["status"] == "completed", state
+    replayed = client.get(f"/runs/{replay}/trace").json()["decisions"]
+    assert [d.get("team") for d in replayed] == [d.get("team") for d in trace["decisions"]]
+    assert [d["review"] for d in replayed] == [d["review"] for d in trace["decisions"]]
+
+
+BAD: list[tuple[str, dict[str, Any], list[Any], str]] = [
+    (
+        "one_robot_on_a_team_task",
+        {"action": "override", "robot": "arm", "reason": "r"},
+        ["robot"],
+        "send `team`",
+    ),
+    (
+        "approve_with_a_team",
+        {"action": "approve", "team": [{"robot": "arm", "feature": "heavy"}]},
+        ["team"],
+        "approval",
+    ),
+    (
+        "unknown_robot",
+        {
+            "action": "override",
+            "reason": "r",
+            "team": [{"robot": "arm", "feature": "heavy"}, {"robot": "zep", "feature": "heavy"}],
+        },
+        ["team", 1, "robot"],
+        "unknown robot 'zep'",
+    ),
+    (
+        "a_robot_twice",
+        {
+            "action": "override",
+            "reason": "r",
+            "team": [{"robot": "arm", "feature": "heavy"}, {"robot": "arm", "feature": "heavy"}],
+        },
+        ["team", 1, "robot"],
+        "distinct",
+    ),
+    (
+        "a_feature_the_task_lacks",
+        {"action": "override", "reason": "r", "team": [{"robot": "arm", "feature": "careful"}]},
+        ["team", 0, "feature"],
+        "no unit of 'careful'",
+    ),
+    (
+        "a_unit_left_uncovered",
+        {"action": "override", "reason": "r", "team": [{"robot": "arm", "feature": "heavy"}]},
+        ["team"],
+        "needs 2 robot(s) for 'heavy'",
+    ),
+    (
+        "robot_not_the_first_member",
+        {
+            "action": "override",
+            "reason": "r",
+            "robot": "lifter",
+            "team": [{"robot": "arm", "feature": "heavy"}, {"robot": "lifter", "feature": "heavy"}],
+        },
+        ["robot"],
+        "first unit",
+    ),
+    (
+        "no_reason",
+        {
+            "action": "override",
+            "team": [{"robot": "arm", "feature": "heavy"}, {"robot": "lifter", "feature": "heavy"}],
+        },
+        ["reason"],
+        "reason",
+    ),
+]
+
+
+def test_bad_team_overrides_are_a_422_naming_the_field_and_leave_the_review_pending(
+    client: TestClient,
+) -> None:
+    run_id = team_run(client)
+    _awaiting(client, run_id)
+    for name, body, loc, words in BAD:
+        r = client.post(f"/runs/{run_id}/reviews/0", json=body)
+        assert r.status_code == 422, (name, r.text)
+        detail = r.json()["detail"]
+        assert any(d["loc"] == ["body", *loc] and words in d["msg"] for d in detail), (name, detail)
+    assert _pending(client, run_id)["task_index"] == 0  # nothing half-written
+    # The same run's one-robot decision (the sweep) refuses a team.
+    for _ in range(2):
+        assert (
+            client.post(
+                f"/runs/{run_id}/reviews/{_pending(client, run_id)['task_index']}",
+                json={"action": "approve"},
+            ).status_code
+            == 200
+        )
+        _awaiting(client, run_id)
+    assert _pending(client, run_id)["task_index"] == 2
+    r = client.post(
+        f"/runs/{run_id}/reviews/2",
+        json={
+            "action": "override",
+            "reason": "r",
+            "team": [{"robot": "arm", "feature": "careful"}],
+        },
+    )
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "team"], r.text
+
+
+def test_a_team_the_cap_forbids_is_a_422_saying_why(client: TestClient) -> None:
+    """W = 1 with no slack: once the carry is on the crane, a beam team holding it breaks the
+    cap (a team not among the candidates: checked against the run's own problem)."""
+    body = {
+        "tasks": [
+            {"id": "carry", "name": "Carry", "features": ["heavy"]},
+            {"id": "beam", "name": "Lift beam", "team": {"heavy": 2}},
+        ],
+        "robots": [
+            {"name": "crane", "success": {"heavy": 0.9}},
+            {"name": "lifter", "success": {"heavy": 0.8}},
+            {"name": "arm", "success": {"heavy": 0.3}},
+        ],
+        "max_deviation": 0,
+        "review": {"task_ids": ["beam"]},
+    }
+    run_id = client.post("/runs", json=body).json()["id"]
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    carried = client.get(f"/runs/{run_id}/trace").json()["decisions"][0]["robot"]
+    assert all(carried not in {m["robot"] for m in a["team"]} for a in review["alternatives"])
+    partner = next(name for name in ("crane", "lifter", "arm") if name != carried)
+    team = [{"robot": carried, "feature": "heavy"}, {"robot": partner, "feature": "heavy"}]
+    r = client.post(
+        f"/runs/{run_id}/reviews/1", json={"action": "override", "reason": "r", "team": team}
+    )
+    assert r.status_code == 422, r.text
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["body", "team"] and "above the cap" in item["msg"], item
+    ok = client.post(
+        f"/runs/{run_id}/reviews/1",
+        json={"action": "override", "reason": "r", "team": review["alternatives"][-1]["team"]},
+    )
+    assert ok.status_code == 200, ok.text
+    assert wait_until(client, run_id, WAITING)["status"] == "completed"
+
+
+def test_a_robots_trigger_fires_for_any_member(client: TestClient) -> None:
+    run_id = team_run(client, review={"robots": ["arm"]})
+    state = wait_until(client, run_id, WAITING)
+    reviews = []
+    while state["status"] == "awaiting_review":
+        review = _pending(client, run_id)
+        reviews.append(review)
+        members = {m["robot"] for m in review["proposal"].get("team") or [review["proposal"]]}
+        assert "arm" in members and review["triggers"] == ["robots"]
+        client.post(f"/runs/{run_id}/reviews/{review['task_index']}", json={"action": "approve"})
+        state = wait_until(client, run_id, WAITING)
+    assert state["status"] == "completed"
+    done = client.get(f"/runs/{run_id}").json()["assignments"]
+    with_arm = [
+        a["task_index"]
+        for a in done
+        if "arm" in {m["robot"] for m in a.get("team") or [{"robot": a["robot"]}]}
+    ]
+    assert [r["task_index"] for r in reviews] == with_arm and with_arm
+
+
+def test_the_cli_shows_teams_and_reads_a_team_override(client: TestClient) -> None:
+    """`ltaa reviews` names a team decision's members; `ltaa review --team` reads
+    robot:feature per unit (the feature after the last colon)."""
+    from rich.console import Console
+
+    from app.cli.reviews import parse_team, print_reviews
+
+    run_id = team_run(client)
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    out = Console(record=True, width=400)
+    print_reviews([review], out)
+    text = out.export_text()
+    assert " + ".join(m["robot"] for m in review["proposal"]["team"]) in text
+    assert parse_team("crane:heavy, lift:er:heavy") == [
+        {"robot": "crane", "feature": "heavy"},
+        {"robot": "lift:er", "feature": "heavy"},
+    ]
+    with pytest.raises(Exception, match="robot:feature"):
+        parse_team("crane")
