@@ -8,13 +8,17 @@ and the trace, its chains and a replay hold."""
 from __future__ import annotations
 
 import copy
+import json
+from pathlib import Path
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
 from tests.api.test_api_teams import TEAM_BODY
+from tests.api.test_docs_check_trace import check_trace_source
 from tests.api.test_reviews import EVERY, WAITING, _approve_all, _awaiting, _pending
+from tests.offline_check import check_offline
 from tests.polling import wait_until
 
 ROBOTS = ("crane", "arm", "lifter")
@@ -84,7 +88,9 @@ def test_approving_every_team_decision_gives_the_plan_without_review(client: Tes
     assert client.get(f"/runs/{run_id}/trace/verify").json()["ok"] is True
 
 
-def test_an_override_with_a_team_is_stored_and_the_rest_follows(client: TestClient) -> None:
+def test_an_override_with_a_team_is_stored_and_the_rest_follows(
+    client: TestClient, tmp_path: Path
+) -> None:
     run_id = team_run(client)
     _awaiting(client, run_id)
     review = _pending(client, run_id)
@@ -123,6 +129,24 @@ def test_an_override_with_a_team_is_stored_and_the_rest_follows(client: TestClie
     assert run["metrics"]["workload"] == workload
     verify = client.get(f"/runs/{run_id}/trace/verify").json()
     assert verify["ok"] is True, verify
+    # Offline too; the proposed team is in the chain: editing it breaks the decision's link.
+    export = tmp_path / "run.jsonl"
+    export.write_text(client.get(f"/runs/{run_id}/trace", params={"format": "jsonl"}).text)
+    script = tmp_path / "check_trace.py"
+    script.write_text(check_trace_source())
+    assert check_offline(export, script=script).returncode == 0
+    lines = export.read_text().splitlines()
+    at = next(
+        i
+        for i, x in enumerate(lines)
+        if (json.loads(x).get("review") or {}).get("overridden_from_team")
+    )
+    edited = json.loads(lines[at])
+    edited["review"]["overridden_from_team"][0]["robot"] = "nobody"
+    lines[at] = json.dumps(edited)
+    export.write_text("\n".join(lines) + "\n")
+    broken = check_offline(export, script=script)
+    assert broken.returncode == 1 and "decision" in broken.stdout + broken.stderr
 
     # A replay re-applies the reviewer's team without waiting.
     replay = client.post("/runs", json={"reasoner": "replay", "replay_of": run_id}).json()["id"]
