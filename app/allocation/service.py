@@ -274,7 +274,9 @@ def _check_teams(problem: Problem, solution: Solution, solver: str) -> None:
         why = team_problem(task, instance.robots, members)
         if why is None and members[0] != solution.assignment[t]:
             why = "its robot is not the member covering the first unit"
-        if why is None and any(m in problem.unavailable for m in members):
+        # A pinned team keeps an unavailable member (docs/living-plans.md#pins-in-allocate).
+        free = t not in problem.pinned
+        if why is None and free and any(m in problem.unavailable for m in members):
             why = "a member is unavailable"
         if why is not None:
             raise RuntimeError(f"solver '{solver}' returned an invalid team for {task.id!r}: {why}")

@@ -53,6 +53,18 @@ def test_every_team_method_keeps_a_pinned_team(client: TestClient, solver: str) 
     assert all(1 <= x <= 3 for x in loads.values()), loads  # W = 2, the balanced cap 1
 
 
+@pytest.mark.parametrize("solver", TEAM_METHODS)
+def test_a_pinned_team_keeps_a_member_that_is_unavailable(client: TestClient, solver: str) -> None:
+    """The arm covers the pinned panel's careful unit and is off the site: the pin stays whole,
+    the arm takes no new task, and the balance is over the crane and the lifter."""
+    request = body(solver=solver, mode="success_focused", pinned=[PANEL_PIN], unavailable=["arm"])
+    r = client.post("/allocate", json=request)
+    assert r.status_code == 200, r.text
+    rows = {a["task_id"]: a for a in r.json()["assignments"]}
+    assert rows["panel"]["team"] == PANEL_TEAM and rows["panel"]["pinned"] is True
+    assert all("arm" not in members(a) for tid, a in rows.items() if tid != "panel")
+
+
 def test_the_exact_methods_agree_given_a_pinned_team(client: TestClient) -> None:
     es = {}
     for solver in ("optimal", "dp", "brute_force", "schedule"):

@@ -48,6 +48,8 @@ def _pinned_case(draw: st.DrawFn, instance: Instance) -> tuple[Problem, int, Mem
     assume(options)
     team = draw(st.sampled_from(options))
     capped = draw(st.booleans())
+    # Sometimes a robot is off the site (a pinned member keeps the pin, takes nothing new).
+    off = draw(st.one_of(st.just(()), st.tuples(st.integers(0, instance.n_robots - 1))))
     try:
         problem = Problem.build(
             instance,
@@ -55,6 +57,7 @@ def _pinned_case(draw: st.DrawFn, instance: Instance) -> tuple[Problem, int, Mem
             1 if capped else None,
             pinned={t: team[0]},
             pinned_teams={t: team},
+            unavailable=off,
         )
     except DomainError:
         assume(False)
@@ -87,7 +90,10 @@ def untimed_pins(draw: st.DrawFn) -> tuple[Problem, int, Members]:
 def staffings(problem: Problem, pinned: int, team: Members) -> list[tuple[Members, ...]]:
     """Every choice of robots per task within the cap, the pinned task on its pinned team."""
     inst = problem.instance
-    per_task = [[team] if t == pinned else choices(inst, t) for t in range(inst.n_tasks)]
+    per_task = [
+        [team] if t == pinned else [m for m in choices(inst, t) if not set(m) & problem.unavailable]
+        for t in range(inst.n_tasks)
+    ]
     out = []
     for members in itertools.product(*per_task):
         loads = [sum(r in m for m in members) for r in range(inst.n_robots)]
@@ -131,6 +137,8 @@ def assert_keeps_the_pin(problem: Problem, solution: Solution, pinned: int, team
         for r in range(inst.n_robots)
     ]
     assert problem.cap.respected_by(loads), loads
+    for t in problem.free_tasks:  # nothing new for a robot off the site
+        assert not set(solution.teams.get(t, (solution.assignment[t],))) & problem.unavailable
 
 
 @settings(
