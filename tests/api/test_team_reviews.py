@@ -15,6 +15,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from tests.api.conftest import ClientFactory
 from tests.api.test_api_teams import TEAM_BODY
 from tests.api.test_docs_check_trace import check_trace_source
 from tests.api.test_reviews import EVERY, WAITING, _approve_all, _awaiting, _pending
@@ -336,3 +337,31 @@ def test_the_cli_shows_teams_and_reads_a_team_override(client: TestClient) -> No
     ]
     with pytest.raises(Exception, match="robot:feature"):
         parse_team("crane")
+
+
+def test_a_restart_keeps_a_team_review_waiting_and_a_new_process_applies_the_team(
+    make_client: ClientFactory, settings: Any
+) -> None:
+    """The interrupt's payload (the team and its candidates) survives the process; the
+    resolution is applied by the new one (the graph re-runs finalize from its top)."""
+    first = make_client()
+    run_id = team_run(first)
+    _awaiting(first, run_id)
+    review = _pending(first, run_id)
+    first.__exit__(None, None, None)
+    again = make_client(data_dir=settings.data_dir)  # the same store, auto-resume on
+    assert again.get(f"/runs/{run_id}").json()["status"] == "awaiting_review"
+    assert _pending(again, run_id) == review
+    other = next(
+        a["team"]
+        for a in review["alternatives"]
+        if key(a["team"]) != key(review["proposal"]["team"])
+    )
+    answer = again.post(
+        f"/runs/{run_id}/reviews/0", json={"action": "override", "team": other, "reason": "r"}
+    )
+    assert answer.status_code == 200, answer.text
+    _approve_all(again, run_id)
+    first_decision = again.get(f"/runs/{run_id}/trace").json()["decisions"][0]
+    assert key(first_decision["team"]) == key(other)
+    assert again.get(f"/runs/{run_id}/trace/verify").json()["ok"] is True
