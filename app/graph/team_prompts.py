@@ -6,6 +6,8 @@ prompt: one line per robot, one per feature, two for the candidates.
 
 from __future__ import annotations
 
+import math
+
 from app.domain.decision import DecisionContext, TeamFacts, percent
 from app.domain.modes import tradeoff_threshold
 from app.domain.team_choice import by_rate, describe_team, team_summary
@@ -68,8 +70,43 @@ def team_facts_text(ctx: DecisionContext) -> str:
             *candidates,
             f"Target load W = {ctx.target:.1f} (units per robot); allocated {number}/"
             f"{ctx.total_tasks} tasks; {cap}.",
+            *team_time_facts(ctx),
         ]
     )
+
+
+def team_time_facts(ctx: DecisionContext) -> list[str]:
+    """docs/allocation.md#teams, a timed team task: per robot that may join, when it is next
+    free, its travel to the task's zone and the earliest it could begin; the candidate teams'
+    start (their last member's arrival) and end; the rule "members free in time"."""
+    facts = _facts_of(ctx)
+    if not ctx.timing or facts.timing is None:
+        return []
+    where = f"zone {ctx.zone}, " if ctx.zone is not None else ""
+    deadline = "no deadline" if ctx.deadline is None else f"deadline {ctx.deadline:g}"
+    rows = []
+    for o in ctx.timing:
+        if o.end != math.inf:  # a robot that may take the task at all
+            head = f"- {ctx.labels[o.robot]}: free {o.free:g}, travel {o.travel:g}"
+            rows.append(
+                f"{head}, could begin {o.start:g}, end {o.end:g}"
+                + ("" if o.allowed else f", NOT allowed: {o.why_not}")
+            )
+    teams = []
+    for name, members in (("best", facts.best), ("least-loaded", facts.fewest)):
+        if members is not None:
+            o = facts.timing(members)
+            slack = "" if ctx.deadline is None else f", slack {o.slack:g}"
+            teams.append(f"- {name} team: start {o.start:g}, end {o.end:g}{slack}")
+    return [
+        f"Time (minutes from the plan's start; {where}release {ctx.release:g}, {deadline}):",
+        *rows,
+        *(["Links (the starts above honour them): " + "; ".join(ctx.links)] if ctx.links else []),
+        "A team starts when its last member can begin and ends for all of them together:",
+        *teams,
+        "A team that misses the deadline or ends after a member's shift is not allowed. In the "
+        "Trade-Off Summary, say how many minutes later your team ends than the earliest end.",
+    ]
 
 
 def team_guidance(ctx: DecisionContext) -> list[str]:

@@ -13,6 +13,7 @@ the whole.
 
 from __future__ import annotations
 
+import math
 import re
 
 from app.domain.decision import DecisionContext, Members, TeamFacts, percent
@@ -83,6 +84,14 @@ def team_members(parsed: ParsedResponse, ctx: DecisionContext) -> tuple[Members 
         if facts.rate(f, r) is None:
             if r in ctx.feasible:
                 return None, f"{labels[r]} cannot cover {f} (its skills rule it out)"
+            if ctx.timing and not ctx.timing[r].allowed and ctx.timing[r].end != math.inf:
+                # docs/allocation.md#teams: members free in time; no team starts before any
+                # member could, so this member's own miss is the team's.
+                o = ctx.timing[r]
+                return None, (
+                    f"{labels[r]} is not free in time: with it the team could not start before "
+                    f"minute {o.start:g}, end before {o.end:g}, and {o.why_not}"
+                )
             return None, (
                 f"{labels[r]} cannot join this team (it may not take the task, or has no "
                 "room left under the workload cap)"
