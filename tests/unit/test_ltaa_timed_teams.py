@@ -18,6 +18,7 @@ from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.progress import TimedProgress
 from app.graph.context import decision_context
 from app.graph.prompts import user_prompt
+from app.graph.recorder import DecisionRecord
 from app.graph.state import task_view
 from app.graph.validation import validate_text
 from app.reasoners.anthropic import AnthropicReasoner
@@ -122,7 +123,7 @@ def test_a_member_whose_shift_ends_first_rules_the_team_out() -> None:
     assert not option.allowed and "lifter's shift" in option.why_not
 
 
-def _teams(decisions: list) -> list:
+def _teams(decisions: list[DecisionRecord]) -> list[tuple[object, ...]]:
     return [(d.task_index, d.team, d.start, d.end) for d in decisions]
 
 
@@ -160,7 +161,7 @@ def test_baseline_team_is_decided_in_precedence_order_with_a_feasible_schedule()
     solution = get_solver("ltaa").solve(problem)
     assert solution.details["schedule_violations"] == []
     tm = problem.instance.timing
-    order = {d.task_index: d.seq for d in decisions}  # its place in the decision order
+    order = {d.task_index: d.seq or 0 for d in decisions}  # its place in the decision order
     for t in range(tm.n_tasks):
         assert all(order[p] < order[t] for p in tm.predecessors[t])
 
