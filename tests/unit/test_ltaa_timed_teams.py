@@ -25,6 +25,7 @@ from app.reasoners.anthropic import AnthropicReasoner
 from app.reasoners.openai import OpenAIReasoner
 from app.reasoners.rules import RulesReasoner, compose_answer
 from app.solvers.registry import get_solver
+from app.solvers.timed_guidance import GuidancePlan, plan_guidance
 from tests.fakes.fake_chat_completions_api import FakeChatCompletionsAPI
 from tests.fakes.fake_messages_api import FakeMessagesAPI
 from tests.fakes.scripted_reasoner import GARBAGE, ScriptedReasoner
@@ -179,3 +180,17 @@ def test_both_sdk_fakes_answer_timed_team_decisions_as_the_rules_reasoner_does()
     for rec in (by_messages, by_chat):
         assert all(not d.fallback for d in rec.decisions())
         assert _teams(rec.decisions()) == _teams(rules.decisions())
+
+
+def test_guidance_in_time_follows_the_exact_team_schedule_and_stores_its_teams() -> None:
+    """docs/schedules.md#guidance-in-time on team tasks: the plan is the multi-skill model's,
+    solved on the deterministic budget; it keeps each team task's members (stored with the
+    plan, read back the same), and the guided graph follows them to the plan's makespan."""
+    plan = plan_guidance(PROBLEM)
+    assert plan.budget["deterministic_budget"] and plan.budget["workers"] == 1
+    assert set(plan.teams) == {0, 2} and plan.teams[0] == (CRANE, LIFTER)
+    assert GuidancePlan.from_json(plan.as_json()) == plan
+    solution = get_solver("ltaa").solve(PROBLEM, options={"guidance": "optimizer"})
+    assert solution.details["schedule_violations"] == []
+    assert solution.teams == dict(plan.teams)
+    assert solution.details["schedule"].makespan == plan.budget["makespan"]
