@@ -1,7 +1,8 @@
 """Durable LTAA runs with team tasks (docs/allocation.md#teams): an untimed team run completes
 with valid teams, its trace lists each team decision's members, the chain verifies online and
-offline (and the members are in it), a guided run reaches the exact optimum, and what the graph
-cannot do yet (teams in time, reviews of teams) is a 422 sentence with nothing stored."""
+offline (and the members are in it), a guided run reaches the exact optimum, a timed team run
+plans in time as /allocate does, and what the graph cannot do yet (reviews of teams) is a 422
+sentence with nothing stored."""
 
 from __future__ import annotations
 
@@ -102,14 +103,38 @@ def test_a_guided_team_run_reaches_the_exact_optimum(client: TestClient) -> None
     assert [by_task[t] for t in range(4)] == [a.get("team") for a in optimal["assignments"]]
 
 
-def test_a_timed_team_run_is_still_refused_with_a_sentence(client: TestClient) -> None:
-    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
-    r = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks})
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"][-3:] == ["tasks", 0, "team"]
-    assert "timed instance" in item["msg"] and "'optimal'" in item["msg"]
-    assert client.get("/runs").json() == []  # nothing stored
+def test_a_durable_timed_team_run_plans_as_allocate_and_shows_teams_in_every_lane(
+    client: TestClient,
+) -> None:
+    """docs/schedules.md#runs-in-time with team tasks: a durable run decides in time as the
+    synchronous solver does (same teams, same times), and its schedule puts each team task in
+    every member's lane over the same minutes."""
+    from tests.api.test_api_timed_teams import TIMED_TEAM_BODY
+
+    body = copy.deepcopy(TIMED_TEAM_BODY)
+    created = client.post("/runs", json={**body, "reasoner": "rules"})
+    assert created.status_code == 202, created.text
+    state = wait_until(client, created.json()["id"], timeout=120)
+    assert state["status"] == "completed", state
+    run = client.get(f"/runs/{state['id']}").json()
+    sync = client.post("/allocate", json={**body, "solver": "ltaa"}).json()
+    keys = ("task_id", "robot", "team", "start", "end")
+    assert [{k: a.get(k) for k in keys} for a in run["assignments"]] == [
+        {k: a.get(k) for k in keys} for a in sync["assignments"]
+    ]
+    schedule = client.get(f"/runs/{state['id']}/schedule").json()
+    for a in run["assignments"]:
+        for m in a.get("team") or []:
+            lane = schedule["robots"][m["robot"]]["lane"]
+            worked = [
+                (i["start"], i["end"])
+                for i in lane
+                if i["kind"] == "task" and i["task_id"] == a["task_id"]
+            ]
+            assert worked == [(a["start"], a["end"])], (a["task_id"], m)
+    trace = client.get(f"/runs/{state['id']}/trace").json()
+    teams = {d["task_id"]: d.get("team") for d in trace["decisions"]}
+    assert teams["beam"] and teams["panel"] and not teams["sweep"]
 
 
 def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
@@ -139,14 +164,3 @@ def test_a_durable_llm_team_run_forms_teams_and_replays(
     assert run["assignments"] == reference["assignments"]  # the fakes answer as the rules do
     replay = completed(client, reasoner="replay", replay_of=state["id"])
     assert client.get(f"/runs/{replay['id']}").json()["assignments"] == run["assignments"]
-
-
-def test_ltaa_refuses_a_timed_team_instance_on_allocate(client: TestClient) -> None:
-    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
-    r = client.post(
-        "/allocate", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks, "solver": "ltaa"}
-    )
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"] == ["body", "tasks", 0, "team"]
-    assert "timed instance" in item["msg"] and "solver 'ltaa'" in item["msg"]
