@@ -2,8 +2,10 @@
 
 Hard rules (Q = 0): a **Team** block naming one known robot per unit, every unit covered,
 no robot twice, each member able to cover its unit (skills, room under the cap), and the
-team leaving the cap satisfiable for the tasks after it (`TeamFacts.check`, the max-flow
-completion check; the seam where a timed decision will also check the members are free).
+team leaving the cap satisfiable for the tasks still to decide (`TeamFacts.check`, the
+max-flow completion check) and, on a timed instance, its members free in time: the team's
+end, from its last member's arrival, meets the task's deadline and every member's shift
+(docs/schedules.md#teams-in-a-run-in-time).
 The soft criteria are the eight of app.graph.validation, read for a team: the success is
 the team's (the mean over units of the covering member's rate), the workload adds one to
 each member, the trade-off rule compares the best-success and the least-loaded team
