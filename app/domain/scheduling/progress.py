@@ -34,11 +34,14 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from app.domain.decision import Members
 from app.domain.problem import Problem
 from app.domain.scheduling.list_schedule import Timeline, team_start
 from app.domain.scheduling.schedule import EPS
 from app.domain.time_model import TimeModel
+
+# A team in unit order, as app.domain.decision.Members (not imported: decision reads
+# TimeOption from here).
+Members = tuple[int, ...]
 
 
 @dataclass(frozen=True)
