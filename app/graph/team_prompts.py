@@ -10,6 +10,7 @@ import math
 
 from app.domain.decision import DecisionContext, TeamFacts, percent
 from app.domain.modes import tradeoff_threshold
+from app.domain.scheduling.progress import TimeOption
 from app.domain.team_choice import by_rate, describe_team, team_summary
 from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 
@@ -35,9 +36,12 @@ def team_facts_text(ctx: DecisionContext) -> str:
     need = ", ".join(f"{f} x{facts.count(f)}" for f in facts.features)
     number = ctx.task_index if ctx.allocated is None else ctx.allocated
     task_type = f" ({ctx.task_type})" if ctx.task_type else ""
+    timed = bool(ctx.timing) and facts.timing is not None
     rows = [
         f"- {labels[r]} [{ctx.robot_names[r]}]: load {ctx.loads[r]} "
-        f"(dev {ctx.loads[r] - ctx.target:+.1f})" + ("" if r in ctx.feasible else ", NOT allowed")
+        f"(dev {ctx.loads[r] - ctx.target:+.1f})"
+        + ("" if r in ctx.feasible else ", NOT allowed")
+        + (_robot_time(ctx.timing[r]) if timed else "")
         for r in range(len(labels))
     ]
     units = []
@@ -55,15 +59,18 @@ def team_facts_text(ctx: DecisionContext) -> str:
         candidates = [
             "Teams the cap allows (S = mean over units of the member's rate; loads = the "
             "members' tasks so far):",
-            f"- best: {team_summary(facts, labels, ctx.loads, facts.best)}",
-            f"- least-loaded: {team_summary(facts, labels, ctx.loads, facts.fewest)}",
+            f"- best: {team_summary(facts, labels, ctx.loads, facts.best)}"
+            + (_team_time(ctx, facts.best) if timed else ""),
+            f"- least-loaded: {team_summary(facts, labels, ctx.loads, facts.fewest)}"
+            + (_team_time(ctx, facts.fewest) if timed else ""),
         ]
     return "\n".join(
         [
             f"Task {number + 1}/{ctx.total_tasks}: {ctx.task_name}{task_type}; "
             f"features: {', '.join(ctx.features)}",
             f"Team task: {need}; {len(facts.units)} distinct robots at once, one per unit.",
-            "Robots (load = tasks so far; a team task adds one to each member's load):",
+            "Robots (load = tasks so far; a team task adds one to each member's load"
+            + ("; minutes: free, travel, own start-end):" if timed else "):"),
             *rows,
             "Units (robots that may cover each, with their rate for its feature):",
             *units,
@@ -75,37 +82,34 @@ def team_facts_text(ctx: DecisionContext) -> str:
     )
 
 
+def _robot_time(o: TimeOption) -> str:
+    if o.end == math.inf:
+        return f"; {o.why_not}"
+    why = "" if o.allowed else f" ({o.why_not})"
+    return f"; free {o.free:g}, travel {o.travel:g}, {o.start:g}-{o.end:g}{why}"
+
+
+def _team_time(ctx: DecisionContext, members: tuple[int, ...]) -> str:
+    assert ctx.team is not None and ctx.team.timing is not None
+    o = ctx.team.timing(members)
+    slack = "" if ctx.deadline is None else f", slack {o.slack:g}"
+    return f", in time {o.start:g}-{o.end:g}{slack}"
+
+
 def team_time_facts(ctx: DecisionContext) -> list[str]:
-    """docs/allocation.md#teams, a timed team task: per robot that may join, when it is next
-    free, its travel to the task's zone and the earliest it could begin; the candidate teams'
-    start (their last member's arrival) and end; the rule "members free in time"."""
+    """docs/schedules.md#teams-in-a-run-in-time, a timed team task (each robot's own time is on
+    its row, each candidate team's start and end on its line): the task's zone, release and
+    deadline, and the rule "members free in time"."""
     facts = _facts_of(ctx)
     if not ctx.timing or facts.timing is None:
         return []
     where = f"zone {ctx.zone}, " if ctx.zone is not None else ""
     deadline = "no deadline" if ctx.deadline is None else f"deadline {ctx.deadline:g}"
-    rows = []
-    for o in ctx.timing:
-        if o.end != math.inf:  # a robot that may take the task at all
-            head = f"- {ctx.labels[o.robot]}: free {o.free:g}, travel {o.travel:g}"
-            rows.append(
-                f"{head}, could begin {o.start:g}, end {o.end:g}"
-                + ("" if o.allowed else f", NOT allowed: {o.why_not}")
-            )
-    teams = []
-    for name, members in (("best", facts.best), ("least-loaded", facts.fewest)):
-        if members is not None:
-            o = facts.timing(members)
-            slack = "" if ctx.deadline is None else f", slack {o.slack:g}"
-            teams.append(f"- {name} team: start {o.start:g}, end {o.end:g}{slack}")
     return [
-        f"Time (minutes from the plan's start; {where}release {ctx.release:g}, {deadline}):",
-        *rows,
-        *(["Links (the starts above honour them): " + "; ".join(ctx.links)] if ctx.links else []),
-        "A team starts when its last member can begin and ends for all of them together:",
-        *teams,
-        "A team that misses the deadline or ends after a member's shift is not allowed. In the "
-        "Trade-Off Summary, say how many minutes later your team ends than the earliest end.",
+        f"In time ({where}release {ctx.release:g}, {deadline}): a team starts at its last "
+        "member's arrival, ends with all; missing the deadline or a shift: not allowed.",
+        *(["Links (the times above honour them): " + "; ".join(ctx.links)] if ctx.links else []),
+        "In the Trade-Off Summary, say how many minutes after the earliest end yours ends.",
     ]
 
 

@@ -17,7 +17,7 @@ from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.progress import TimedProgress
 from app.graph.context import decision_context
-from app.graph.prompts import user_prompt
+from app.graph.prompts import TARGET_USER_PROMPT_CHARS, user_prompt
 from app.graph.recorder import DecisionRecord
 from app.graph.state import task_view
 from app.graph.validation import validate_text
@@ -98,9 +98,12 @@ def test_the_prompt_gives_each_robots_time_and_the_teams_start_and_end() -> None
     ctx = first_team_context()
     assert ctx.team is not None and ctx.team.best == (CRANE, LIFTER)
     text = user_prompt(ctx)
-    assert "- Hauler: free 0, travel 30, could begin 30, end 60, NOT allowed: misses" in text
-    assert "- best team: start 0, end 30, slack 10" in text
-    assert "misses the deadline or ends after a member's shift is not allowed" in text
+    assert (
+        "- Hauler [hauler]: load 0 (dev -1.5), NOT allowed; free 0, travel 30, 30-60 (misses"
+        in text
+    )
+    assert "- best: heavy: Crane, Lifter (S 85.0%, loads 0), in time 0-30, slack 10" in text
+    assert "missing the deadline or a shift: not allowed" in text
 
 
 def test_a_team_that_misses_the_deadline_is_hard_invalid() -> None:
@@ -159,6 +162,8 @@ def test_baseline_team_is_decided_in_precedence_order_with_a_feasible_schedule()
     assert len(decisions) == problem.instance.n_tasks
     teams = [d for d in decisions if d.team]
     assert len(teams) == 7 and all(d.start is not None for d in teams)
+    first_tries = [a.user_prompt for a in rec.attempts() if a.attempt == 1]
+    assert max(len(p) for p in first_tries) < TARGET_USER_PROMPT_CHARS
     solution = get_solver("ltaa").solve(problem)
     assert solution.details["schedule_violations"] == []
     tm = problem.instance.timing
