@@ -137,6 +137,43 @@ def test_a_durable_timed_team_run_plans_as_allocate_and_shows_teams_in_every_lan
     assert teams["beam"] and teams["panel"] and not teams["sweep"]
 
 
+def test_a_guided_timed_team_run_follows_its_stored_plans_teams_and_replays(
+    client: TestClient,
+) -> None:
+    """docs/schedules.md#teams-in-a-run-in-time: the plan (the exact team schedule) is stored
+    with its teams in `guidance_planned`; the guided run forms those teams; a replay of the run
+    reproduces its plan, teams and times included."""
+    from tests.api.test_api_timed_teams import TIMED_TEAM_BODY
+
+    body = {**copy.deepcopy(TIMED_TEAM_BODY), "reasoner": "rules", "guidance": "optimizer"}
+    created = client.post("/runs", json=body)
+    assert created.status_code == 202, created.text
+    run_id = created.json()["id"]
+    state = wait_until(client, run_id, timeout=120)
+    assert state["status"] == "completed", state
+    events = client.get(f"/runs/{run_id}/trace").json()["events"]
+    (planned,) = [e["detail"] for e in events if e["kind"] == "guidance_planned"]
+    plan = planned.get("plan", planned)
+    names = [r["name"] for r in TIMED_TEAM_BODY["robots"]]
+    run = client.get(f"/runs/{run_id}").json()
+    by_index = {a["task_index"]: a for a in run["assignments"]}
+    assert set(plan["teams"]) == {"0", "1"}
+    for t, members in plan["teams"].items():
+        assert [m["robot"] for m in by_index[int(t)]["team"]] == [names[r] for r in members]
+    assert [a["start"] for a in run["assignments"]] == [
+        plan["starts"][a["task_index"]] for a in run["assignments"]
+    ]
+    replay = client.post("/runs", json={"reasoner": "replay", "replay_of": run_id})
+    assert replay.status_code == 202, replay.text
+    again = wait_until(client, replay.json()["id"], timeout=120)
+    assert again["status"] == "completed", again
+    keys = ("task_id", "robot", "team", "start", "end")
+    replayed = client.get(f"/runs/{replay.json()['id']}").json()["assignments"]
+    assert [{k: a.get(k) for k in keys} for a in replayed] == [
+        {k: a.get(k) for k in keys} for a in run["assignments"]
+    ]
+
+
 def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
     r = client.post(
         "/runs", json={**copy.deepcopy(TEAM_BODY), "review": {"on": ["every_decision"]}}

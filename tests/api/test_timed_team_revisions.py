@@ -144,6 +144,13 @@ def test_a_reported_team_is_pinned_whole_and_an_unavailable_member_re_forms_a_te
             assert gone not in members(a), task_id
             assert a["start"] >= now, task_id
     lanes_hold_teams(client, created["id"], revision)
+    # The diff names who left the panel's team and shows the schedule's moves in time.
+    diff = client.get(f"/runs/{created['id']}/diff").json()
+    (change,) = [c for c in diff["robot_changes"] if c["task_id"] == "panel"]
+    assert gone in change["members_left"] and change["members_joined"]
+    moved = {m["task_id"]: m for m in diff["schedule"]["moves"]}
+    # The beam was at its reported times in the parent's current schedule already: no move.
+    assert "beam" not in moved and moved["panel"]["start_after"] == reformed["start"]
 
 
 def test_a_team_task_added_to_a_timed_run_is_planned_as_a_team_in_time(
