@@ -135,6 +135,9 @@ def test_a_durable_timed_team_run_plans_as_allocate_and_shows_teams_in_every_lan
     trace = client.get(f"/runs/{state['id']}/trace").json()
     teams = {d["task_id"]: d.get("team") for d in trace["decisions"]}
     assert teams["beam"] and teams["panel"] and not teams["sweep"]
+    # The console's run page draws the Gantt chart with the team's bars in each lane.
+    page = client.get(f"/console/runs/{state['id']}")
+    assert page.status_code == 200 and f"makespan of {schedule['makespan']:,.0f} min" in page.text
 
 
 def test_a_guided_timed_team_run_follows_its_stored_plans_teams_and_replays(
