@@ -7,6 +7,9 @@ answer timed team decisions as the rules reasoner does."""
 from __future__ import annotations
 
 import functools
+import random
+
+import pytest
 
 from app.domain.catalog import timed_scenario
 from app.domain.decision import DecisionContext
@@ -199,3 +202,54 @@ def test_guidance_in_time_follows_the_exact_team_schedule_and_stores_its_teams()
     assert solution.details["schedule_violations"] == []
     assert solution.teams == dict(plan.teams)
     assert solution.details["schedule"].makespan == plan.budget["makespan"]
+
+
+def _random_timed_team_instance(rng: random.Random) -> Instance:
+    zones = ["a", "b", "c"]
+    robots = tuple(
+        Robot(
+            f"r{i}",
+            {f: round(rng.uniform(0.2, 0.95), 2) for f in ("heavy", "careful")},
+            zone=rng.choice(zones),
+        )
+        for i in range(rng.randint(3, 5))
+    )
+    tasks: list[Task] = []
+    for k in range(rng.randint(5, 9)):
+        earlier = [t.id for t in tasks]
+        after: tuple[str | Link, ...] = ()
+        if earlier and rng.random() < 0.6:
+            pred = rng.choice(earlier)
+            after = (Link(pred, rng.choice(["FS", "SS", "FF"]), rng.choice([0, 5, -5])),)
+        team = rng.choice([None, {"heavy": 2}, {"heavy": 1, "careful": 1}])
+        features = tuple(team) if team else (rng.choice(["heavy", "careful"]),)
+        duration = rng.randint(5, 30)
+        tasks.append(
+            Task(
+                f"t{k}",
+                f"T{k}",
+                features,
+                duration=duration,
+                zone=rng.choice(zones),
+                after=after,
+                team=team,
+            )
+        )
+    travel = {"a": {"b": 4, "c": 9}, "b": {"c": 6}}
+    return Instance(tuple(tasks), robots, travel=travel)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_timed_team_instances_get_feasible_schedules_with_valid_teams(seed: int) -> None:
+    """No deadlines or shifts here, so nothing excuses a broken rule: precedence and typed
+    links, one place at a time with travel, every team's units covered by distinct robots."""
+    instance = _random_timed_team_instance(random.Random(seed))
+    problem = Problem.build(instance, Mode.BALANCED)
+    solution = get_solver("ltaa").solve(problem, seed=seed)
+    schedule = solution.details["schedule"]
+    assert check_schedule(problem, schedule) == [], seed
+    for t, task in enumerate(instance.tasks):
+        if task.team:
+            members = solution.teams[t]
+            assert len(set(members)) == len(members) == sum(task.team.values())
+            assert schedule.slots[t].team == members
