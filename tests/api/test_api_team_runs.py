@@ -177,6 +177,33 @@ def test_a_guided_timed_team_run_follows_its_stored_plans_teams_and_replays(
     ]
 
 
+def test_a_durable_timed_team_run_over_an_sdk_forms_the_rules_teams(
+    make_client: ClientFactory,
+) -> None:
+    """The OpenAI-compatible SDK against its loopback fake on a timed team instance: the fake
+    reads the timed team prompt (each robot's time, each candidate team's start and end) and
+    answers as the rules do, every answer accepted at the first attempt."""
+    from tests.api.test_api_timed_teams import TIMED_TEAM_BODY
+
+    provider = PROVIDERS["openai"]
+    with provider.fake() as api:
+        client = make_client(**provider.settings(api))
+        body = {**copy.deepcopy(TIMED_TEAM_BODY), "reasoner": "openai"}
+        created = client.post("/runs", json=body)
+        assert created.status_code == 202, created.text
+        state = wait_until(client, created.json()["id"], timeout=120)
+        assert state["status"] == "completed", state
+        assert len(api.requests) == 4  # one call per decision
+        rules = client.post("/runs", json={**body, "reasoner": "rules"}).json()["id"]
+        assert wait_until(client, rules, timeout=120)["status"] == "completed"
+    keys = ("task_id", "robot", "team", "start", "end")
+    by_sdk, by_rules = (
+        [{k: a.get(k) for k in keys} for a in client.get(f"/runs/{i}").json()["assignments"]]
+        for i in (state["id"], rules)
+    )
+    assert by_sdk == by_rules
+
+
 def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
     r = client.post(
         "/runs", json={**copy.deepcopy(TEAM_BODY), "review": {"on": ["every_decision"]}}
