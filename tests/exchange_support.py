@@ -47,16 +47,21 @@ def files() -> dict[str, bytes]:
 
 
 def plan_of(draft: Draft) -> tuple[Problem, Schedule]:
-    """A plan of a draft as a caller would make it: rates filled in, each task on the first
-    robot the file assigned it, its typed links honoured (docs/schedules.md#links). A team
-    is planned as one robot here (the list scheduler's assignment is one robot a task)."""
+    """A plan of a draft as a caller would make it: rates filled in, each task on the robots
+    the file assigned it (a team task on all of them, docs/allocation.md#teams), its typed
+    links honoured (docs/schedules.md#links)."""
     features = sorted({f for t in draft.tasks for f in t["features"]})
     request: dict[str, Any] = {
-        "tasks": [{k: v for k, v in t.items() if k != "team"} for t in draft.tasks],
+        "tasks": draft.tasks,
         "robots": [{**r, "success": dict.fromkeys(features, 0.9)} for r in draft.robots],
         "start": draft.start,
     }
     problem = Problem.build(instance_from_dict(request), Mode.BALANCED, uncapped=True)
     names = [r["name"] for r in draft.robots]
     assignment = [names.index(t["planned_robots"][0]) for t in draft.tasks]
-    return problem, list_schedule(problem, assignment)
+    teams = {
+        i: tuple(names.index(n) for n in t["planned_robots"])
+        for i, t in enumerate(draft.tasks)
+        if t.get("team")
+    }
+    return problem, list_schedule(problem, assignment, teams)

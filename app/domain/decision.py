@@ -27,9 +27,12 @@ class TeamFacts:
     best: Members | None = None  # the best-success team the cap allows
     fewest: Members | None = None  # the least-loaded team the cap allows
     guided: Members | None = None  # the optimizer's team, when the run is guided
-    # Why a team breaks the cap for the tasks after this one (None: it does not). The seam
-    # where a timed decision will also check that the members are free in time.
+    # Why a team breaks the cap for the tasks after this one, or (timed) misses the task's
+    # deadline or a member's shift: "members free in time" (None: it does neither).
     check: Callable[[Members], str | None] | None = field(default=None, compare=False)
+    # A timed decision: what a team would make of the task in time (its start and end, the
+    # last member to arrive); None untimed.
+    timing: Callable[[Members], TimeOption] | None = field(default=None, compare=False)
 
     @property
     def features(self) -> tuple[str, ...]:

@@ -39,6 +39,8 @@ from app.domain.teams import covers
 _NO_PINS: Mapping[int, int] = MappingProxyType({})
 _NO_STARTS: Mapping[int, float] = MappingProxyType({})
 _NO_TEAMS: Mapping[int, tuple[int, ...]] = MappingProxyType({})
+Later = Sequence[int] | None  # the free tasks still to decide; None: those after, in the queue
+Order = bool | Sequence[int]  # queue order, no order (no completion check), or Later's tasks
 
 
 @dataclass(frozen=True)
@@ -151,16 +153,17 @@ class Problem:
         return sum(added[t] for t in self.free_tasks)
 
     def feasible_robots(
-        self, task_index: int, loads: Sequence[int], remaining_after: int, *, in_order: bool = True
+        self, task_index: int, loads: Sequence[int], remaining: int, *, in_order: Order = True
     ) -> list[int]:
         """Robots that may take task `task_index` and keep the cap satisfiable. With
         eligibility restrictions (docs/allocation.md#teams) only eligible robots, and when the
         free tasks are placed in queue order (`in_order`) only those after whose choice every
-        later free task still gets an eligible robot within the cap."""
+        later free task still gets an eligible robot within the cap (`in_order` may list the
+        free tasks still to decide, when a timed team run decides them in time order)."""
         eligible = self.instance.eligible
         if self.instance.has_teams:
             return self._unit_feasible(task_index, loads, in_order=in_order)
-        robots = self.cap.feasible_robots(loads, remaining_after)
+        robots = self.cap.feasible_robots(loads, remaining)
         if eligible.all():
             return robots
         robots = [r for r in robots if eligible[task_index, r]]
@@ -177,20 +180,23 @@ class Problem:
                 out.append(r)
         return out
 
-    def _unit_feasible(self, task_index: int, loads: Sequence[int], *, in_order: bool) -> list[int]:
+    def _unit_feasible(
+        self, task_index: int, loads: Sequence[int], *, in_order: Order
+    ) -> list[int]:
         """feasible_robots on an instance with team tasks, where loads count units. For a team
         task: the robots that may join its team (eligible, with room under the cap); the
         team is then checked whole (`team_problem`)."""
         eligible = self.instance.eligible[task_index]
         upper = self.cap.upper
         robots = [r for r in self.available if eligible[r] and loads[r] < upper]
-        if self.instance.units[task_index] or not in_order:
+        if self.instance.units[task_index] or in_order is False:
             return robots
+        later = None if in_order is True else in_order
         out = []
         for r in robots:
             after = list(loads)
             after[r] += 1
-            if self.completes_after(task_index, after):
+            if self.completes_after(task_index, after, later):
                 out.append(r)
         return out
 
@@ -211,14 +217,18 @@ class Problem:
                 ]
         return out
 
-    def completes_after(self, task_index: int, loads_after: Sequence[int]) -> bool:
+    def completes_after(
+        self, task_index: int, loads_after: Sequence[int], later: Later = None
+    ) -> bool:
         """Can every free task after `task_index` (every unit of a team) still get a distinct
-        eligible robot within the cap, from `loads_after` (docs/allocation.md#teams)?"""
+        eligible robot within the cap, from `loads_after` (docs/allocation.md#teams)? `later`:
+        the tasks still to decide, when they are not those after it in the queue."""
         balanced = tuple(loads_after[c] for c in self.available)
         memo = self._completion_memo  # the graph asks the same state several times per task
-        key = (task_index, balanced)
+        key = (task_index if later is None else tuple(later), balanced)
         if key not in memo:
-            later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
+            if later is None:
+                later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
             units = self.instance.units
             singles = [t for t in later if not units[t]]
             rows = self.instance.eligible[np.ix_(singles, self.available)]
@@ -229,11 +239,11 @@ class Problem:
         return memo[key]
 
     @cached_property
-    def _completion_memo(self) -> dict[tuple[int, tuple[int, ...]], bool]:
+    def _completion_memo(self) -> dict[tuple[object, tuple[int, ...]], bool]:
         return {}
 
     def team_problem(
-        self, task_index: int, loads: Sequence[int], members: Sequence[int]
+        self, task_index: int, loads: Sequence[int], members: Sequence[int], later: Later = None
     ) -> str | None:
         """Why giving team task `task_index` to `members` breaks the cap (None: it does not)."""
         names = self.instance.robots
@@ -247,7 +257,7 @@ class Problem:
                     f"{names[r].display} would carry {after[r]} tasks, above the cap's "
                     f"{self.cap.upper}"
                 )
-        if not self.completes_after(task_index, after):
+        if not self.completes_after(task_index, after, later):
             return (
                 "this team would make the workload cap infeasible for the tasks after it "
                 "(some later task could no longer get eligible robots within "

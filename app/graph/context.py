@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
-from app.domain.decision import DecisionContext, TeamFacts
+from app.domain.decision import DecisionContext, Members, TeamFacts
 from app.domain.links import explain
 from app.domain.modes import strategic_weights
 from app.domain.phases import Phase
@@ -33,15 +33,48 @@ def _rate_note(notes: Mapping[str, tuple[str, int]], features: tuple[str, ...]) 
     return "; ".join(parts)
 
 
+TeamTime = Callable[[Members], TimeOption]
+
+
 def team_facts(
-    problem: Problem, t: int, loads: tuple[int, ...], feasible: tuple[int, ...], guided: Any
-) -> TeamFacts | None:
-    """The team side of task t's decision (docs/allocation.md#teams); None for one robot.
-    Untimed only: a timed team decision would add "members free in time" to `check`."""
+    problem: Problem,
+    t: int,
+    loads: tuple[int, ...],
+    feasible: tuple[int, ...],
+    guided: Any,
+    *,
+    timing: Sequence[TimeOption] = (),
+    team_time: TeamTime | None = None,
+    later: Sequence[int] | None = None,
+) -> tuple[TeamFacts | None, tuple[int, ...]]:
+    """The team side of task t's decision (docs/allocation.md#teams); None for one robot. With
+    the robots that may join a team: on a timed instance those whose own earliest end meets the
+    deadline and their shift (a team never starts before any member could), and a team must
+    also be free in time as a whole (`team_time`), unless no team the cap allows is: then time
+    rules out no one, as for one robot (docs/schedules.md#validation-in-time)."""
+    units = problem.instance.units[t]
+    if not units:
+        return None, feasible
+    in_time = tuple(r for r in feasible if timing and timing[r].allowed)
+    if team_time is not None and in_time:
+        facts = _team_facts(problem, t, loads, in_time, guided, later, team_time)
+        if facts.best is not None:
+            return facts, in_time
+    return _team_facts(problem, t, loads, feasible, guided, later, None, team_time), feasible
+
+
+def _team_facts(
+    problem: Problem,
+    t: int,
+    loads: tuple[int, ...],
+    feasible: tuple[int, ...],
+    guided: Any,
+    later: Sequence[int] | None,
+    in_time: TeamTime | None,
+    team_time: TeamTime | None = None,
+) -> TeamFacts:
     inst = problem.instance
     units = inst.units[t]
-    if not units:
-        return None
     allowed = set(feasible)
     rates = tuple(
         tuple(
@@ -52,16 +85,24 @@ def team_facts(
     )
 
     def check(members: tuple[int, ...]) -> str | None:
-        # The seam for timed teams: validation, the candidate teams and the fallback all ask
-        # this one question, so "every member free in time (and the deadline met)" is added
-        # here, from the time model, once timed team tasks are scheduled.
-        return problem.team_problem(t, loads, members)
+        # Validation, the candidate teams and the fallback all ask this one question: the
+        # cap for the tasks after this one, then (timed) "members free in time".
+        why = problem.team_problem(t, loads, members, later)
+        if why is None and in_time is not None:
+            option = in_time(members)
+            if not option.allowed:
+                why = (
+                    f"the team would start at minute {option.start:g} and end at "
+                    f"{option.end:g}, which {option.why_not}"
+                )
+        return why
 
     facts = TeamFacts(
         units=units,
         rates=rates,
         guided=tuple(guided) if guided is not None else None,
         check=check,
+        timing=in_time or team_time,
     )
     best, fewest = best_and_fewest(facts, loads, feasible, check)
     return replace(facts, best=best, fewest=fewest)
@@ -75,6 +116,8 @@ def decision_context(
     rate_notes: RateNotes | None = None,
     timing: Sequence[TimeOption] = (),
     allocated: int | None = None,
+    team_time: TeamTime | None = None,
+    later: Sequence[int] | None = None,
 ) -> DecisionContext:
     """`timing`: on a timed instance, what each robot would make of the task in time
     (app.graph.timing); robots that would miss its deadline or break their shift are then
@@ -88,6 +131,18 @@ def decision_context(
     bounds = None if cap.max_deviation is None else (cap.lower, cap.upper)
     feasible = tuple(view["feasible"])
     in_time = tuple(r for r in feasible if timing and timing[r].allowed)
+    team, team_allowed = team_facts(
+        problem,
+        t,
+        loads,
+        feasible,
+        view.get("guided_team"),
+        timing=timing,
+        team_time=team_time,
+        later=later,
+    )
+    if team is not None:
+        in_time = team_allowed
     zone: str | None = None
     release = 0.0
     deadline: float | None = None
@@ -130,5 +185,5 @@ def decision_context(
         links=links,
         allocated=allocated,
         eligible=() if inst.eligible.all() else tuple(bool(x) for x in inst.eligible[t]),
-        team=team_facts(problem, t, loads, feasible, view.get("guided_team")),
+        team=team,
     )

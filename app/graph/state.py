@@ -120,9 +120,12 @@ def task_view(
     guided_costs: Sequence[float | None] | None = None,
     decided: int | None = None,
     guided_team: Sequence[int] | None = None,
+    later: Sequence[int] | None = None,
 ) -> TaskView:
     """`decided`: the graph's decisions so far, when it does not decide in queue order (a
-    timed instance); else they are the free tasks before `task_index`."""
+    timed instance); else they are the free tasks before `task_index`. `later`: the free
+    tasks still to decide after this one, on a timed instance with teams (whose completion
+    check then looks at them rather than at the tasks after it in the queue)."""
     n = problem.instance.n_tasks
     # docs/living-plans.md#balance-and-phases: p = (pins + tasks decided so far) / tasks; with no
     # pins, task_index / n.
@@ -142,7 +145,9 @@ def task_view(
         "weights": [weights.success, weights.balance],
         # Eligible robots only (docs/allocation.md#teams); in queue order, only those after
         # whose choice every later task keeps an eligible robot within the cap.
-        "feasible": problem.feasible_robots(task_index, loads, remaining, in_order=decided is None),
+        "feasible": problem.feasible_robots(
+            task_index, loads, remaining, in_order=decided is None if later is None else later
+        ),
         "guided_robot": guided_robot,
         "guided_costs": list(guided_costs) if guided_costs is not None else None,
         "guided_team": list(guided_team) if guided_team is not None else None,

@@ -6,8 +6,11 @@ prompt: one line per robot, one per feature, two for the candidates.
 
 from __future__ import annotations
 
+import math
+
 from app.domain.decision import DecisionContext, TeamFacts, percent
 from app.domain.modes import tradeoff_threshold
+from app.domain.scheduling.progress import TimeOption
 from app.domain.team_choice import by_rate, describe_team, team_summary
 from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 
@@ -33,9 +36,12 @@ def team_facts_text(ctx: DecisionContext) -> str:
     need = ", ".join(f"{f} x{facts.count(f)}" for f in facts.features)
     number = ctx.task_index if ctx.allocated is None else ctx.allocated
     task_type = f" ({ctx.task_type})" if ctx.task_type else ""
+    timed = bool(ctx.timing) and facts.timing is not None
     rows = [
         f"- {labels[r]} [{ctx.robot_names[r]}]: load {ctx.loads[r]} "
-        f"(dev {ctx.loads[r] - ctx.target:+.1f})" + ("" if r in ctx.feasible else ", NOT allowed")
+        f"(dev {ctx.loads[r] - ctx.target:+.1f})"
+        + ("" if r in ctx.feasible else ", NOT allowed")
+        + (_robot_time(ctx.timing[r]) if timed else "")
         for r in range(len(labels))
     ]
     units = []
@@ -53,23 +59,58 @@ def team_facts_text(ctx: DecisionContext) -> str:
         candidates = [
             "Teams the cap allows (S = mean over units of the member's rate; loads = the "
             "members' tasks so far):",
-            f"- best: {team_summary(facts, labels, ctx.loads, facts.best)}",
-            f"- least-loaded: {team_summary(facts, labels, ctx.loads, facts.fewest)}",
+            f"- best: {team_summary(facts, labels, ctx.loads, facts.best)}"
+            + (_team_time(ctx, facts.best) if timed else ""),
+            f"- least-loaded: {team_summary(facts, labels, ctx.loads, facts.fewest)}"
+            + (_team_time(ctx, facts.fewest) if timed else ""),
         ]
     return "\n".join(
         [
             f"Task {number + 1}/{ctx.total_tasks}: {ctx.task_name}{task_type}; "
             f"features: {', '.join(ctx.features)}",
             f"Team task: {need}; {len(facts.units)} distinct robots at once, one per unit.",
-            "Robots (load = tasks so far; a team task adds one to each member's load):",
+            "Robots (load = tasks so far; a team task adds one to each member's load"
+            + ("; minutes: free, travel, own start-end):" if timed else "):"),
             *rows,
             "Units (robots that may cover each, with their rate for its feature):",
             *units,
             *candidates,
             f"Target load W = {ctx.target:.1f} (units per robot); allocated {number}/"
             f"{ctx.total_tasks} tasks; {cap}.",
+            *team_time_facts(ctx),
         ]
     )
+
+
+def _robot_time(o: TimeOption) -> str:
+    if o.end == math.inf:
+        return f"; {o.why_not}"
+    why = "" if o.allowed else f" ({o.why_not})"
+    return f"; free {o.free:g}, travel {o.travel:g}, {o.start:g}-{o.end:g}{why}"
+
+
+def _team_time(ctx: DecisionContext, members: tuple[int, ...]) -> str:
+    assert ctx.team is not None and ctx.team.timing is not None
+    o = ctx.team.timing(members)
+    slack = "" if ctx.deadline is None else f", slack {o.slack:g}"
+    return f", in time {o.start:g}-{o.end:g}{slack}"
+
+
+def team_time_facts(ctx: DecisionContext) -> list[str]:
+    """docs/schedules.md#teams-in-a-run-in-time, a timed team task (each robot's own time is on
+    its row, each candidate team's start and end on its line): the task's zone, release and
+    deadline, and the rule "members free in time"."""
+    facts = _facts_of(ctx)
+    if not ctx.timing or facts.timing is None:
+        return []
+    where = f"zone {ctx.zone}, " if ctx.zone is not None else ""
+    deadline = "no deadline" if ctx.deadline is None else f"deadline {ctx.deadline:g}"
+    return [
+        f"In time ({where}release {ctx.release:g}, {deadline}): a team starts at its last "
+        "member's arrival, ends with all; missing the deadline or a shift: not allowed.",
+        *(["Links (the times above honour them): " + "; ".join(ctx.links)] if ctx.links else []),
+        "In the Trade-Off Summary, say how many minutes after the earliest end yours ends.",
+    ]
 
 
 def team_guidance(ctx: DecisionContext) -> list[str]:

@@ -2,8 +2,10 @@
 
 Hard rules (Q = 0): a **Team** block naming one known robot per unit, every unit covered,
 no robot twice, each member able to cover its unit (skills, room under the cap), and the
-team leaving the cap satisfiable for the tasks after it (`TeamFacts.check`, the max-flow
-completion check; the seam where a timed decision will also check the members are free).
+team leaving the cap satisfiable for the tasks still to decide (`TeamFacts.check`, the
+max-flow completion check) and, on a timed instance, its members free in time: the team's
+end, from its last member's arrival, meets the task's deadline and every member's shift
+(docs/schedules.md#teams-in-a-run-in-time).
 The soft criteria are the eight of app.graph.validation, read for a team: the success is
 the team's (the mean over units of the covering member's rate), the workload adds one to
 each member, the trade-off rule compares the best-success and the least-loaded team
@@ -13,6 +15,7 @@ the whole.
 
 from __future__ import annotations
 
+import math
 import re
 
 from app.domain.decision import DecisionContext, Members, TeamFacts, percent
@@ -83,6 +86,14 @@ def team_members(parsed: ParsedResponse, ctx: DecisionContext) -> tuple[Members 
         if facts.rate(f, r) is None:
             if r in ctx.feasible:
                 return None, f"{labels[r]} cannot cover {f} (its skills rule it out)"
+            if ctx.timing and not ctx.timing[r].allowed and ctx.timing[r].end != math.inf:
+                # docs/allocation.md#teams: members free in time; no team starts before any
+                # member could, so this member's own miss is the team's.
+                o = ctx.timing[r]
+                return None, (
+                    f"{labels[r]} is not free in time: with it the team could not start before "
+                    f"minute {o.start:g}, end before {o.end:g}, and {o.why_not}"
+                )
             return None, (
                 f"{labels[r]} cannot join this team (it may not take the task, or has no "
                 "room left under the workload cap)"

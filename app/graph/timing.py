@@ -9,13 +9,14 @@ resumes a run, or re-runs a node, rebuilds them from the recorder and finds the 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from app.domain.decision import DecisionContext, percent
+from app.domain.decision import DecisionContext, Members, percent
 from app.domain.problem import Problem
 from app.domain.scheduling.progress import TimedProgress, TimeOption
-from app.graph.recorder import Recorder
+from app.graph.recorder import DecisionRecord, Recorder
 
 
 @dataclass
@@ -30,10 +31,18 @@ class TimedCursor:
         first use in a process and whenever it disagrees with the graph's state."""
         progress = self.progress
         if progress is None or (task not in progress.placed and progress.current() != task):
-            robots = {d.task_index: d.robot for d in recorder.decisions()}
-            progress = TimedProgress.replay(problem, robots, until=task)
+            decisions = recorder.decisions()
+            robots = {d.task_index: d.robot for d in decisions}
+            teams = decision_teams(problem, decisions)
+            progress = TimedProgress.replay(problem, robots, until=task, teams=teams)
             self.progress = progress
         return progress
+
+
+def decision_teams(problem: Problem, decisions: Sequence[DecisionRecord]) -> dict[int, Members]:
+    """Task index -> its members in unit order, for the stored team decisions."""
+    index = {r.name: i for i, r in enumerate(problem.instance.robots)}
+    return {d.task_index: tuple(index[m["robot"]] for m in d.team) for d in decisions if d.team}
 
 
 def first_task(problem: Problem) -> int:
@@ -80,10 +89,27 @@ def fallback_answer(dctx: DecisionContext, robot: int) -> str:
     )
 
 
-def time_record(dctx: DecisionContext, robot: int, seq: int) -> dict[str, Any]:
+def time_record(
+    dctx: DecisionContext, robot: int, seq: int, team: Members | None = None
+) -> dict[str, Any]:
     """What a decision records in time: start, end, zone, travel, its place in the order,
     and the trade-off in minutes (how much later it ends than the earliest end among the
-    robots that were allowed)."""
+    robots that were allowed; a team: than the earlier of the two candidate teams')."""
+    facts = dctx.team
+    if team is not None and facts is not None and facts.timing is not None:
+        # docs/allocation.md#teams: the team's start is its last member's arrival; `travel`
+        # is the first member's, as the team's `robot` is.
+        timed = facts.timing
+        o = timed(team)
+        rivals = [timed(m).end for m in (facts.best, facts.fewest) if m is not None]
+        return {
+            "start": o.start,
+            "end": o.end,
+            "zone": dctx.zone,
+            "travel": dctx.timing[robot].travel,
+            "seq": seq,
+            "later_by": max(0.0, o.end - min(rivals, default=o.end)),
+        }
     o = dctx.timing[robot]
     earliest = min(dctx.timing[r].end for r in dctx.feasible)
     return {

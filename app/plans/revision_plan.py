@@ -18,7 +18,6 @@ from app.domain.models import Instance
 from app.domain.modes import Mode, default_max_deviation
 from app.domain.problem import Problem
 from app.domain.serialize import instance_from_dict
-from app.domain.teams import refuse_teams
 from app.plans.revision_changes import (
     FLEET_HANDLERS,
     QUEUE_HANDLERS,
@@ -223,14 +222,6 @@ def _problem(
     teams: dict[int, list[int]],
 ) -> Problem:
     try:
-        # docs/living-plans.md#teams-in-a-revision: the graph forms teams on untimed instances
-        # only; timed team runs are still refused until teams are scheduled in time.
-        if instance.timed:
-            refuse_teams(
-                instance.tasks,
-                "a run's revision on a timed instance",
-                "plan team tasks in time with POST /allocate",
-            )
         return Problem.build(
             instance,
             mode,

@@ -32,11 +32,17 @@ def choose_team(ctx: DecisionContext) -> tuple[Members, TeamRule]:
     return rule.choice, rule
 
 
-def compose_team_answer(ctx: DecisionContext) -> str:
-    """The answer in the team format: **Team** one line per unit, with its member's reason."""
+def compose_team_answer(
+    ctx: DecisionContext,
+    members: Members | None = None,
+    why: str = "Rule-based choice (the trade-off rule, not a language model)",
+) -> str:
+    """The answer in the team format: **Team** one line per unit, with its member's reason
+    (`members`: another team than the rule's, the graph's fallback in time, and `why` it)."""
     facts = ctx.team
     assert facts is not None
-    members, rule = choose_team(ctx)
+    chosen, rule = choose_team(ctx)
+    members = chosen if members is None else members
     names, loads = ctx.labels, ctx.loads
     s = facts.success(members)
     lines = [
@@ -45,15 +51,19 @@ def compose_team_answer(ctx: DecisionContext) -> str:
         for f, r in zip(facts.units, members, strict=True)
     ]
     guided = facts.guided is not None and members == facts.guided
+    when = ""  # untimed: the answer is exactly what it always was
+    if facts.timing is not None:  # docs/allocation.md#teams: when the last member can begin
+        o = facts.timing(members)
+        when = f"; the team would start at minute {o.start:g} and end at {o.end:g}"
     sentences = [
-        f"Rule-based choice (the trade-off rule, not a language model): the team "
+        f"{why}: the team "
         f"{describe_team(facts, names, members)} has success {percent(s)} on {ctx.task_name}, "
         f"the mean over its {len(facts.units)} units.",
         f"The best team the cap allows is {team_summary(facts, names, loads, rule.best)} and the "
         f"least-loaded is {team_summary(facts, names, loads, rule.fewest)}; "
         f"{rule.rule.rule_text.replace('robot', 'team')}.",
         f"This is the {ctx.phase.value} phase of {ctx.mode.value} mode, with a threshold of "
-        f"{rule.rule.threshold:g} points.",
+        f"{rule.rule.threshold:g} points{when}.",
     ]
     if guided:
         sentences.append("The optimizer's guidance names this team, and this choice follows it.")

@@ -16,6 +16,7 @@ from app.domain.phases import detect_phase
 from app.domain.problem import Problem
 from app.domain.scheduling.progress import TimedProgress, decision_order
 from app.graph.recorder import DecisionRecord
+from app.graph.timing import decision_teams
 from app.runs import lifecycle, records
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.spec import RunSpec
@@ -23,12 +24,14 @@ from app.store import decision_repository as decision_repo
 from app.store.models import Run
 
 
-def timed_order(problem: Problem, robots: Mapping[int, int]) -> tuple[int, ...]:
+def timed_order(problem: Problem, stored: Sequence[DecisionRecord]) -> tuple[int, ...]:
     """A timed run's free tasks in the order the graph decides them, as far as the stored
-    decisions fix it: those decisions replayed, then the task that comes next, then the rest
-    (in queue order: their order depends on decisions not yet made)."""
-    progress = TimedProgress.replay(problem, robots)
-    made = decision_order(problem, robots)
+    decisions fix it: those decisions replayed (a team in every member's lane), then the
+    task that comes next, then the rest (in queue order: they wait on decisions not made)."""
+    robots = {d.task_index: d.robot for d in stored}
+    teams = decision_teams(problem, stored)
+    progress = TimedProgress.replay(problem, robots, teams=teams)
+    made = decision_order(problem, robots, teams)
     nxt = progress.current()
     head = [*made, nxt] if nxt < problem.instance.n_tasks else made
     seen = set(head)
@@ -227,7 +230,7 @@ def checked_for_resume(
     problem = records.run_problem(session, run_id, spec.problem, spec.guidance)
     order = problem.free_tasks
     if instance.timed:
-        order = timed_order(problem, {d.task_index: d.robot for d in stored})
+        order = timed_order(problem, stored)
     report = check_integrity(
         decisions=stored,
         n_tasks=instance.n_tasks,

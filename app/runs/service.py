@@ -17,7 +17,6 @@ from app.domain.lifecycle import FINISHED
 from app.domain.objective import Objective
 from app.domain.problem import Problem
 from app.domain.serialize import instance_to_dict
-from app.domain.teams import refuse_teams
 from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, review_gate
@@ -146,12 +145,6 @@ def submit_run(
     )
 
 
-_TEAM_USE = (
-    "drop the durations to run the teams untimed, or plan them with POST /allocate and solver "
-    "'optimal', 'dp', 'brute_force' or 'greedy'"
-)
-
-
 def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Settings) -> RunSpec:
     """What a run will do: a replay copies its source; any other run takes the order's
     instance and parameters, with the server's defaults where the order left them out."""
@@ -172,10 +165,6 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         uncapped="max_deviation" in order.sent and order.max_deviation is None,
         objective=Objective(order.objective, order.min_expected_success),
     )
-    # docs/allocation.md#teams: the graph forms teams on untimed instances; in time it does not yet
-    # (members free in time is the validation seam still to fill).
-    if instance.timed:
-        refuse_teams(instance.tasks, "the LTAA graph on a timed instance", _TEAM_USE)
     scope: dict[str, Any] = {}
     if order.llm_scope is not None:
         scope["llm_scope"] = order.llm_scope

@@ -21,6 +21,7 @@ from app.domain.scheduling.progress import TimedProgress
 from app.domain.scheduling.schedule import Schedule, build_schedule
 from app.domain.usage import Usage
 from app.graph.recorder import DecisionRecord
+from app.graph.timing import decision_teams
 from app.runs import records
 from app.runs.lifecycle import RunStatus
 from app.runs.spec import LruCache, RunSpec
@@ -315,12 +316,14 @@ def run_schedule(
         )
     robots = {d.task_index: d.robot for d in rows}
     starts = {d.task_index: d.start for d in rows if d.start is not None}
+    # docs/allocation.md#teams: a team task sits in every member's lane.
+    teams = decision_teams(problem, [records.decision_record(d) for d in rows if d.team])
     if len(starts) < n:
         with sessions() as session:
             # A guided run placed them in its stored plan's order (app.solvers.timed_guidance).
             order = records.run_problem(session, run_id, problem, spec.guidance)
-        placed = TimedProgress.replay(order, robots).placed
+        placed = TimedProgress.replay(order, robots, teams=teams).placed
         starts = {t: starts.get(t, placed[t].start) for t in range(n)}
     return problem, build_schedule(
-        problem, [robots[t] for t in range(n)], [float(starts[t]) for t in range(n)]
+        problem, [robots[t] for t in range(n)], [float(starts[t]) for t in range(n)], teams=teams
     )

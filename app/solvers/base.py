@@ -43,10 +43,9 @@ class SolverOptions(BaseModel):
 
 # The methods that plan team tasks (docs/allocation.md#teams); the others refuse them.
 TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule", "ltaa")
-# ... and those that plan them on a timed instance: the exact scheduler, and the methods
-# whose team assignment the shared list scheduler times. The LTAA graph forms teams on its
-# own time lines, which do not place a team yet: it refuses timed team tasks.
-TIMED_TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule")
+# ... and those that plan them on a timed instance: the exact scheduler, the methods whose
+# team assignment the shared list scheduler times, and the LTAA graph on its own time lines.
+TIMED_TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule", "ltaa")
 
 
 class Solver(ABC):

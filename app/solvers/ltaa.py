@@ -27,6 +27,7 @@ from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import DecisionRecord, Recorder
 from app.graph.review import ReviewGate
 from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext, Guidance, Regret
+from app.graph.timing import decision_teams
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
 from app.reasoners.factory import make_reasoner
@@ -167,28 +168,25 @@ def graph_times(
 ) -> dict[str, Any]:
     """On a timed instance, the schedule the graph made as it decided
     (docs/schedules.md#runs-in-time), which the list-scheduler hook then leaves alone; nothing
-    untimed. Pins without a recorded start are placed as the graph placed them."""
+    untimed. Pins without a recorded start are placed as the graph placed them; a team task
+    sits in every member's lane (docs/allocation.md#teams)."""
     if not problem.instance.timed:
         return {}
     starts = {d.task_index: d.start for d in decisions if d.start is not None}
-    placed = TimedProgress.replay(problem, dict(enumerate(assignment))).placed
+    teams = {**problem.pinned_teams, **decision_teams(problem, decisions)}
+    placed = TimedProgress.replay(problem, dict(enumerate(assignment)), teams=teams).placed
     n = problem.instance.n_tasks
     schedule = build_schedule(
-        problem, list(assignment), [float(starts.get(t, placed[t].start)) for t in range(n)]
+        problem,
+        list(assignment),
+        [float(starts.get(t, placed[t].start)) for t in range(n)],
+        teams=teams,
     )
     return {
         "schedule": schedule,
         "schedule_model": GRAPH_TIMES,
         "schedule_violations": check_schedule(problem, schedule),
     }
-
-
-def decision_teams(
-    problem: Problem, decisions: Sequence[DecisionRecord]
-) -> dict[int, tuple[int, ...]]:
-    """Task index -> its members in unit order, for the team decisions."""
-    index = {r.name: i for i, r in enumerate(problem.instance.robots)}
-    return {d.task_index: tuple(index[m["robot"]] for m in d.team) for d in decisions if d.team}
 
 
 class LTAASolver(Solver):
@@ -202,9 +200,8 @@ class LTAASolver(Solver):
         "per task (per contested task with llm_scope 'contested')",
     )
     Options = LTAAOptions
-    # docs/allocation.md#teams: the graph forms teams on untimed instances; timed team tasks
-    # are refused by Solver.check_supported (ltaa is not among TIMED_TEAM_METHODS) until the
-    # graph's time lines place teams (the seam: app.graph.context.team_facts).
+    # docs/allocation.md#teams: the graph forms teams, in time too (its time lines place a
+    # team in every member's lane: app.domain.scheduling.progress).
     forms_teams = True
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
+from app.domain.decision import GuidedChoice
 from app.domain.errors import DomainError
 from app.domain.problem import Problem
 
@@ -48,12 +49,17 @@ class GuidancePlan:
 
     robots: tuple[int, ...]
     starts: tuple[float, ...]
+    # docs/allocation.md#teams: a team task's members in unit order (the exact team schedule's),
+    # by task index; empty without team tasks.
+    teams: Mapping[int, tuple[int, ...]] = dataclasses.field(default_factory=dict)
     # How it was solved: the budget (`time_limit_s`, deterministic units, workers, seed,
     # whether the wall-clock cap cut it), the model, status and makespan. Empty: not known.
     budget: Mapping[str, Any] = dataclasses.field(default_factory=dict, compare=False)
 
     def as_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"robots": list(self.robots), "starts": list(self.starts)}
+        if self.teams:  # only then: a plan without teams is stored as it always was
+            out["teams"] = {str(t): list(m) for t, m in sorted(self.teams.items())}
         if self.budget:
             out["budget"] = dict(self.budget)
         return out
@@ -63,6 +69,7 @@ class GuidancePlan:
         return cls(
             tuple(int(r) for r in data.get("robots") or ()),
             tuple(float(s) for s in data.get("starts") or ()),
+            {int(t): tuple(int(r) for r in m) for t, m in (data.get("teams") or {}).items()},
             dict(data.get("budget") or {}),
         )
 
@@ -88,7 +95,12 @@ def plan_guidance(problem: Problem, *, time_limit_s: float = GUIDANCE_TIME_LIMIT
         "status": outcome.status,
         "makespan": outcome.makespan,
     }
-    return GuidancePlan(tuple(s.robot for s in slots), tuple(float(s.start) for s in slots), budget)
+    return GuidancePlan(
+        tuple(s.robot for s in slots),
+        tuple(float(s.start) for s in slots),
+        {s.task: tuple(s.team) for s in slots if s.team},
+        budget,
+    )
 
 
 def guided_problem(problem: Problem, plan: GuidancePlan) -> Problem:
@@ -99,10 +111,18 @@ def guided_problem(problem: Problem, plan: GuidancePlan) -> Problem:
 
 
 class ScheduleGuidance:
-    """The graph's guidance: the plan's robot for the task being decided."""
+    """The graph's guidance: the plan's robot for the task being decided; for a team task the
+    plan's team (docs/allocation.md#teams), which the rules follow when it is still allowed
+    (the cap, and its members free in time on the graph's own time lines)."""
 
     def __init__(self, plan: GuidancePlan) -> None:
         self._robots = plan.robots
+        self._teams = plan.teams
 
-    def __call__(self, task_index: int, loads: Sequence[int]) -> int | None:
-        return self._robots[task_index] if task_index < len(self._robots) else None
+    def __call__(self, task_index: int, loads: Sequence[int]) -> int | GuidedChoice | None:
+        if task_index >= len(self._robots):
+            return None
+        team = self._teams.get(task_index)
+        if team:
+            return GuidedChoice(team[0], (), team)
+        return self._robots[task_index]

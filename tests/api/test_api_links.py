@@ -122,11 +122,11 @@ def test_a_cycle_names_its_tasks_types_and_lags(client: TestClient) -> None:
 
 
 def draft_request(draft: dict[str, Any]) -> dict[str, Any]:
-    """The imported draft with rates filled in. A team task is sent as a one-robot task: a
-    team's planning in time is another change (docs/allocation.md#teams)."""
+    """The imported draft with rates filled in, its team task (two resources on one feature)
+    sent as the team it is (docs/allocation.md#teams)."""
     features = sorted({f for t in draft["tasks"] for f in t["features"]})
     return {
-        "tasks": [{k: v for k, v in t.items() if k != "team"} for t in draft["tasks"]],
+        "tasks": draft["tasks"],
         "robots": [{**r, "success": dict.fromkeys(features, 0.8)} for r in draft["robots"]],
         "start": draft["start"],
     }
@@ -152,6 +152,16 @@ def test_an_mpxj_draft_with_all_four_types_and_a_lead_plans_feasibly(client: Tes
     wait_status(client, run_id, "completed")
     planned = client.get(f"/runs/{run_id}/schedule").json()
     assert feasibility_errors(sent, planned) == []
+    # The durable run planned the file's team task as a team: two robots, one start and end.
+    (rebar,) = [t for t in sent["tasks"] if t.get("team")]
+    assert rebar["team"] == {"lift": 2}
+    row = next(r for r in planned["tasks"] if str(r["task_id"]) == str(rebar["id"]))
+    crew = [m["robot"] for m in row["team"]]
+    assert [m["feature"] for m in row["team"]] == ["lift", "lift"] and len(set(crew)) == 2
+    for name in crew:
+        lane = planned["robots"][name]["lane"]
+        assert [(i["start"], i["end"]) for i in lane if i.get("task_id") == row["task_id"]
+                and i["kind"] == "task"] == [(row["start"], row["end"])]  # fmt: skip
 
 
 # -- living plans ------------------------------------------------------------------------------

@@ -1,8 +1,7 @@
 """Durable LTAA runs with team tasks (docs/allocation.md#teams): an untimed team run completes
 with valid teams, its trace lists each team decision's members, the chain verifies online and
-offline (and the members are in it), a guided run reaches the exact optimum, and what the graph
-cannot do yet (teams in time) is a 422 sentence with nothing stored (reviews of team decisions:
-tests/api/test_team_reviews.py)."""
+offline (and the members are in it), a guided run reaches the exact optimum, and a timed team run
+plans in time as /allocate does (reviews of team decisions: tests/api/test_team_reviews.py)."""
 
 from __future__ import annotations
 
@@ -15,7 +14,6 @@ import pytest
 from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
-from tests.api.test_api_bad_requests import assert_error_shape
 from tests.api.test_api_teams import TEAM_BODY
 from tests.api.test_docs_check_trace import check_trace_source
 from tests.fakes.llm_providers import PROVIDERS
@@ -103,14 +101,105 @@ def test_a_guided_team_run_reaches_the_exact_optimum(client: TestClient) -> None
     assert [by_task[t] for t in range(4)] == [a.get("team") for a in optimal["assignments"]]
 
 
-def test_a_timed_team_run_is_still_refused_with_a_sentence(client: TestClient) -> None:
-    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
-    r = client.post("/runs", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks})
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"][-3:] == ["tasks", 0, "team"]
-    assert "timed instance" in item["msg"] and "'optimal'" in item["msg"]
-    assert client.get("/runs").json() == []  # nothing stored
+def test_a_durable_timed_team_run_plans_as_allocate_and_shows_teams_in_every_lane(
+    client: TestClient,
+) -> None:
+    """docs/schedules.md#runs-in-time with team tasks: a durable run decides in time as the
+    synchronous solver does (same teams, same times), and its schedule puts each team task in
+    every member's lane over the same minutes."""
+    from tests.api.test_api_timed_teams import TIMED_TEAM_BODY
+
+    body = copy.deepcopy(TIMED_TEAM_BODY)
+    created = client.post("/runs", json={**body, "reasoner": "rules"})
+    assert created.status_code == 202, created.text
+    state = wait_until(client, created.json()["id"], timeout=120)
+    assert state["status"] == "completed", state
+    run = client.get(f"/runs/{state['id']}").json()
+    sync = client.post("/allocate", json={**body, "solver": "ltaa"}).json()
+    keys = ("task_id", "robot", "team", "start", "end")
+    assert [{k: a.get(k) for k in keys} for a in run["assignments"]] == [
+        {k: a.get(k) for k in keys} for a in sync["assignments"]
+    ]
+    schedule = client.get(f"/runs/{state['id']}/schedule").json()
+    for a in run["assignments"]:
+        for m in a.get("team") or []:
+            lane = schedule["robots"][m["robot"]]["lane"]
+            worked = [
+                (i["start"], i["end"])
+                for i in lane
+                if i["kind"] == "task" and i["task_id"] == a["task_id"]
+            ]
+            assert worked == [(a["start"], a["end"])], (a["task_id"], m)
+    trace = client.get(f"/runs/{state['id']}/trace").json()
+    teams = {d["task_id"]: d.get("team") for d in trace["decisions"]}
+    assert teams["beam"] and teams["panel"] and not teams["sweep"]
+    # The console's run page draws the Gantt chart with the team's bars in each lane.
+    page = client.get(f"/console/runs/{state['id']}")
+    assert page.status_code == 200 and f"makespan of {schedule['makespan']:,.0f} min" in page.text
+
+
+def test_a_guided_timed_team_run_follows_its_stored_plans_teams_and_replays(
+    client: TestClient,
+) -> None:
+    """docs/schedules.md#teams-in-a-run-in-time: the plan (the exact team schedule) is stored
+    with its teams in `guidance_planned`; the guided run forms those teams; a replay of the run
+    reproduces its plan, teams and times included."""
+    from tests.api.test_api_timed_teams import TIMED_TEAM_BODY
+
+    body = {**copy.deepcopy(TIMED_TEAM_BODY), "reasoner": "rules", "guidance": "optimizer"}
+    created = client.post("/runs", json=body)
+    assert created.status_code == 202, created.text
+    run_id = created.json()["id"]
+    state = wait_until(client, run_id, timeout=120)
+    assert state["status"] == "completed", state
+    events = client.get(f"/runs/{run_id}/trace").json()["events"]
+    (planned,) = [e["detail"] for e in events if e["kind"] == "guidance_planned"]
+    plan = planned.get("plan", planned)
+    names = [r["name"] for r in TIMED_TEAM_BODY["robots"]]
+    run = client.get(f"/runs/{run_id}").json()
+    by_index = {a["task_index"]: a for a in run["assignments"]}
+    assert set(plan["teams"]) == {"0", "1"}
+    for t, members in plan["teams"].items():
+        assert [m["robot"] for m in by_index[int(t)]["team"]] == [names[r] for r in members]
+    assert [a["start"] for a in run["assignments"]] == [
+        plan["starts"][a["task_index"]] for a in run["assignments"]
+    ]
+    replay = client.post("/runs", json={"reasoner": "replay", "replay_of": run_id})
+    assert replay.status_code == 202, replay.text
+    again = wait_until(client, replay.json()["id"], timeout=120)
+    assert again["status"] == "completed", again
+    keys = ("task_id", "robot", "team", "start", "end")
+    replayed = client.get(f"/runs/{replay.json()['id']}").json()["assignments"]
+    assert [{k: a.get(k) for k in keys} for a in replayed] == [
+        {k: a.get(k) for k in keys} for a in run["assignments"]
+    ]
+
+
+def test_a_durable_timed_team_run_over_an_sdk_forms_the_rules_teams(
+    make_client: ClientFactory,
+) -> None:
+    """The OpenAI-compatible SDK against its loopback fake on a timed team instance: the fake
+    reads the timed team prompt (each robot's time, each candidate team's start and end) and
+    answers as the rules do, every answer accepted at the first attempt."""
+    from tests.api.test_api_timed_teams import TIMED_TEAM_BODY
+
+    provider = PROVIDERS["openai"]
+    with provider.fake() as api:
+        client = make_client(**provider.settings(api))
+        body = {**copy.deepcopy(TIMED_TEAM_BODY), "reasoner": "openai"}
+        created = client.post("/runs", json=body)
+        assert created.status_code == 202, created.text
+        state = wait_until(client, created.json()["id"], timeout=120)
+        assert state["status"] == "completed", state
+        assert len(api.requests) == 4  # one call per decision
+        rules = client.post("/runs", json={**body, "reasoner": "rules"}).json()["id"]
+        assert wait_until(client, rules, timeout=120)["status"] == "completed"
+    keys = ("task_id", "robot", "team", "start", "end")
+    by_sdk, by_rules = (
+        [{k: a.get(k) for k in keys} for a in client.get(f"/runs/{i}").json()["assignments"]]
+        for i in (state["id"], rules)
+    )
+    assert by_sdk == by_rules
 
 
 @pytest.mark.parametrize("name", list(PROVIDERS))
@@ -130,14 +219,3 @@ def test_a_durable_llm_team_run_forms_teams_and_replays(
     assert run["assignments"] == reference["assignments"]  # the fakes answer as the rules do
     replay = completed(client, reasoner="replay", replay_of=state["id"])
     assert client.get(f"/runs/{replay['id']}").json()["assignments"] == run["assignments"]
-
-
-def test_ltaa_refuses_a_timed_team_instance_on_allocate(client: TestClient) -> None:
-    tasks = [{**t, "duration": 10} for t in TEAM_BODY["tasks"]]
-    r = client.post(
-        "/allocate", json={**copy.deepcopy(TEAM_BODY), "tasks": tasks, "solver": "ltaa"}
-    )
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"] == ["body", "tasks", 0, "team"]
-    assert "timed instance" in item["msg"] and "solver 'ltaa'" in item["msg"]

@@ -1,7 +1,8 @@
 """POST /allocate on a timed instance with team tasks (docs/allocation.md#teams,
 docs/schedules.md#teams-in-time): every team method answers valid teams with a feasible
-schedule that shows each team task in every member's lane; the methods that cannot form
-teams in time refuse with a sentence naming the field and the methods to use."""
+schedule that shows each team task in every member's lane (the LTAA graph on its own
+time lines, each team decision recording its members' start and end); the methods that
+cannot form teams in time refuse with a sentence naming the field and the methods to use."""
 
 from __future__ import annotations
 
@@ -31,8 +32,9 @@ TIMED_TEAM_BODY: dict[str, Any] = {
 }
 TIMED_TEAM_BODY["tasks"][1]["after"] = ["beam"]  # the panel is fixed once the beam is up
 
-# The methods that form teams and get a schedule (the list scheduler, or CP-SAT's own).
-SCHEDULED = {"optimal", "dp", "brute_force", "greedy", "schedule"}
+# The methods that form teams and get a schedule (the list scheduler, CP-SAT's own, or the
+# LTAA graph's time lines).
+SCHEDULED = {"optimal", "dp", "brute_force", "greedy", "schedule", "ltaa"}
 
 
 @pytest.mark.parametrize("solver", solver_names())
@@ -77,13 +79,30 @@ def test_every_method_schedules_valid_teams_or_refuses(client: TestClient, solve
         assert data["status"] == "optimal" and "multi-skill" in data["model"]
 
 
-def test_ltaa_refuses_a_timed_team_instance_naming_the_methods(client: TestClient) -> None:
+def test_ltaa_forms_teams_in_time_on_its_own_time_lines(client: TestClient) -> None:
+    """docs/allocation.md#teams: the graph decides in time order and a team starts when its
+    last member can begin: the beam's members both start north, and the panel (after the
+    beam) waits for the beam's member that must travel to the south."""
     request = {**copy.deepcopy(TIMED_TEAM_BODY), "solver": "ltaa"}
     r = client.post("/allocate", json=request)
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"] == ["body", "tasks", 0, "team"]
-    assert "'ltaa'" in item["msg"] and "'schedule'" in item["msg"]
+    assert r.status_code == 200, r.text
+    data = r.json()
+    assert data["schedule_violations"] == [] and data["schedule_model"].startswith("the LTAA")
+    by_id = {a["task_id"]: a for a in data["assignments"]}
+    zones = {robot["name"]: robot["zone"] for robot in TIMED_TEAM_BODY["robots"]}
+    beam, panel = by_id["beam"], by_id["panel"]
+    beam_team = [m["robot"] for m in beam["team"]]
+    assert beam["start"] == max(0 if zones[n] == "north" else 6 for n in beam_team)
+    arrivals = []
+    for m in panel["team"]:
+        name = m["robot"]
+        if name in beam_team:  # busy on the beam in the north, then 6 minutes south
+            arrivals.append(beam["end"] + 6)
+        else:
+            earlier = [a for a in data["assignments"] if a["robot"] == name and "team" not in a]
+            free = max((a["end"] for a in earlier if a["end"] <= panel["start"]), default=0)
+            arrivals.append(free + (0 if zones[name] == "south" else 6))
+    assert panel["start"] == max(arrivals)
 
 
 def test_baseline_team_is_listed_and_planned_by_every_team_method(client: TestClient) -> None:

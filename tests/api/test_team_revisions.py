@@ -216,7 +216,10 @@ def test_an_added_team_task_is_planned_with_a_team(client: TestClient, tmp_path:
     verified(client, created["id"], tmp_path)
 
 
-def test_a_team_task_added_to_a_timed_run_is_refused_with_a_sentence(client: TestClient) -> None:
+def test_a_team_task_added_to_a_timed_run_is_formed_in_time(client: TestClient) -> None:
+    """Once refused: the graph now forms teams in time (docs/living-plans.md#teams-in-a-revision),
+    so the added team task gets distinct members that may cover its units, and one start and
+    end that every member's lane holds."""
     tasks = [
         {"id": "pour", "features": ["heavy"], "duration": 30},
         {"id": "trim", "features": ["careful"], "duration": 20},
@@ -224,17 +227,25 @@ def test_a_team_task_added_to_a_timed_run_is_refused_with_a_sentence(client: Tes
     created = client.post("/runs", json={**BODY, "tasks": tasks})
     assert created.status_code == 202, created.text
     parent = wait_status(client, created.json()["id"], "completed")
-    before = client.get("/runs").json()
-    added = {"id": "mast", "team": {"heavy": 2}, "duration": 15}
-    r = client.post(
-        f"/runs/{parent['id']}/revisions",
-        json={"changes": [{"type": "add_tasks", "tasks": [added]}], "reason": "mast"},
+    added = {"id": "mast", "team": {"heavy": 2}, "duration": 15, "after": ["pour"]}
+    revision = revise(
+        client,
+        parent["id"],
+        {"changes": [{"type": "add_tasks", "tasks": [added]}], "reason": "mast"},
     )
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"][-1] == "changes"
-    assert "'mast' needs a team" in item["msg"] and "timed instance" in item["msg"]
-    assert client.get("/runs").json() == before
+    state = wait_status(client, revision["id"], "completed")
+    by_id = {str(a["task_id"]): a for a in state["assignments"]}
+    mast = by_id["mast"]
+    crew = members(mast)
+    assert [m["feature"] for m in mast["team"]] == ["heavy", "heavy"] and len(set(crew)) == 2
+    assert all("heavy" in SKILLS[name] for name in crew)
+    assert mast["start"] >= by_id["pour"]["end"] and abs(mast["end"] - mast["start"] - 15) < 1e-6
+    lanes = client.get(f"/runs/{revision['id']}/schedule").json()["robots"]
+    for name in crew:
+        worked = [
+            i for i in lanes[name]["lane"] if i.get("task_id") == "mast" and i["kind"] == "task"
+        ]
+        assert [(i["start"], i["end"]) for i in worked] == [(mast["start"], mast["end"])]
 
 
 def test_a_pinned_team_survives_a_member_re_rated_to_zero(client: TestClient) -> None:

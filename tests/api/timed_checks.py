@@ -86,6 +86,11 @@ def feasibility_errors(body: dict[str, Any], schedule: dict[str, Any]) -> list[s
     if [str(r["task_id"]) for r in rows] != [str(t["id"]) for t in site.tasks]:
         return ["not one row per task in queue order"]
     robot_of = [site.names.index(r["robot"]) for r in rows]
+    # A team task (docs/allocation.md#teams) holds every member: each is checked as its robot.
+    crew_of = [
+        [site.names.index(m["robot"]) for m in r.get("team") or []] or [robot_of[t]]
+        for t, r in enumerate(rows)
+    ]
     for t, row in enumerate(rows):
         r = robot_of[t]
         d = site.duration(t, r)
@@ -107,12 +112,13 @@ def feasibility_errors(body: dict[str, Any], schedule: dict[str, Any]) -> list[s
             errors.append(f"{row['task_id']}: starts before its release")
         if row["end"] > site.deadline(t) + EPS:
             errors.append(f"{row['task_id']}: ends after its deadline")
-        a, b = site.shift(r)
-        if row["start"] < a - EPS or row["end"] > b + EPS:
-            errors.append(f"{row['task_id']}: outside the shift of {row['robot']}")
+        for m in crew_of[t]:
+            a, b = site.shift(m)
+            if row["start"] < a - EPS or row["end"] > b + EPS:
+                errors.append(f"{row['task_id']}: outside the shift of {site.names[m]}")
     for r, robot in enumerate(site.robots):
         mine = sorted(
-            (t for t in range(len(rows)) if robot_of[t] == r), key=lambda t: rows[t]["start"]
+            (t for t in range(len(rows)) if r in crew_of[t]), key=lambda t: rows[t]["start"]
         )
         ready, here = site.shift(r)[0], robot.get("zone")
         for t in mine:

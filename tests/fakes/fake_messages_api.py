@@ -144,9 +144,14 @@ _PHASE = re.compile(r"^Phase: (early|middle|late)\b|the (early|middle|late) phas
 _MODE = re.compile(r"^Mode: (\w+),|phase of (\w+) mode", re.M)
 _GUIDED = re.compile(r"^Optimizer guidance: (.+?) lies on", re.M)
 # docs/allocation.md#teams: a team task's prompt (app.graph.team_prompts).
-_TEAM_ROBOT = re.compile(r"^- (.+?) \[([^\]]+)\]: load (\d+) \(dev [^)]*\)(, NOT allowed)?$", re.M)
+# A timed team prompt adds each robot's time after `; ` and each candidate's after `, in time`.
+_TEAM_ROBOT = re.compile(
+    r"^- (.+?) \[([^\]]+)\]: load (\d+) \(dev [^)]*\)(, NOT allowed)?(?:; .*)?$", re.M
+)
 _UNIT = re.compile(r"^- (\S+) x(\d+): (.*)$", re.M)
-_CANDIDATE = re.compile(r"^- (best|least-loaded): (.+) \(S [\d.]+%, loads \d+\)$", re.M)
+_CANDIDATE = re.compile(
+    r"^- (best|least-loaded): (.+) \(S [\d.]+%, loads \d+\)(?:, in time .*)?$", re.M
+)
 _GUIDED_TEAM = re.compile(r"^Optimizer guidance: the team (.+?) lies on", re.M)
 
 

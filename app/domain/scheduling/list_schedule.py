@@ -81,7 +81,7 @@ def _pairs(assignment: Sequence[int], teams: Teams | None) -> list[tuple[int, in
     return [(t, m) for t, r in enumerate(assignment) for m in teams.get(t) or (r,)]
 
 
-def _team_start(
+def team_start(
     lines: Sequence[Timeline], tm: TimeModel, t: int, members: Sequence[int], ready: float
 ) -> float:
     """The earliest start every member can make: a member's earliest start only grows with
@@ -123,7 +123,7 @@ def list_schedule(
 
     def estimate(t: int) -> float:
         if t in teams:
-            return _team_start(lines, tm, t, teams[t], ready_time(t))
+            return team_start(lines, tm, t, teams[t], ready_time(t))
         return lines[assignment[t]].earliest(tm, t, assignment[t], ready_time(t))
 
     heap = [(estimate(t), t) for t in range(n) if not done[t] and waiting[t] == 0]

@@ -16,6 +16,10 @@ order). Each robot that follows the plan then gets the plan's tasks in the plan'
 sequence, and placed at the earliest they end no later than in the plan
 (app.solvers.timed_guidance says why the order matters).
 
+A team task (docs/allocation.md#teams) takes the list scheduler's meaning too: its members
+travel to the task's zone, it starts when the last of them can begin (and its links allow)
+and it occupies every member's timeline until it ends for all of them together.
+
 Pinned tasks (a revision) are not the graph's to decide: a pin with a start is fixed on
 its robot from the outset; a pin without one is placed on its robot when it comes up in
 the order, like any task. Everything here is a deterministic function of the problem and
@@ -31,9 +35,13 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from app.domain.problem import Problem
-from app.domain.scheduling.list_schedule import Timeline
+from app.domain.scheduling.list_schedule import Timeline, team_start
 from app.domain.scheduling.schedule import EPS
 from app.domain.time_model import TimeModel
+
+# A team in unit order, as app.domain.decision.Members (not imported: decision reads
+# TimeOption from here).
+Members = tuple[int, ...]
 
 
 @dataclass(frozen=True)
@@ -59,6 +67,7 @@ class Placement:
     end: float
     travel: float
     seq: int  # the graph's decisions before it (pins are not counted)
+    team: Members = ()  # a team task's members in unit order (robot is the first); else empty
 
 
 class TimedProgress:
@@ -77,9 +86,11 @@ class TimedProgress:
         for t, start in sorted(problem.pinned_starts.items(), key=lambda item: item[1]):
             r = problem.pinned[t]
             end = start + tm.duration(t, r)
-            self._lines[r].fixed.append((start, end, t))
+            team = tuple(problem.pinned_teams.get(t, ()))
+            for m in team or (r,):  # a pinned team holds every member's lane
+                self._lines[m].fixed.append((start, end, t))
             self._starts[t], self._ends[t] = start, end
-            self.placed[t] = Placement(r, start, end, 0.0, -1)
+            self.placed[t] = Placement(r, start, end, 0.0, -1, team)
         self._waiting = [
             sum(1 for p in tm.predecessors[t] if p not in self.placed) for t in range(n)
         ]
@@ -103,6 +114,9 @@ class TimedProgress:
         return max(ready, tm.release[task], self.problem.not_before)
 
     def _estimate(self, task: int) -> float:
+        team = self.problem.pinned_teams.get(task)
+        if team and task in self.problem.pinned:
+            return self.team_start(task, tuple(team))
         return min(
             (
                 self._lines[r].earliest(self.tm, task, r, self.ready_time(task, r))
@@ -142,7 +156,15 @@ class TimedProgress:
             pinned = self.problem.pinned.get(t)
             if pinned is None:
                 return t
-            self._place(t, pinned)
+            self._place(t, pinned, tuple(self.problem.pinned_teams.get(t, ())))
+
+    def later(self, task: int) -> tuple[int, ...] | None:
+        """On an instance with team tasks, the free tasks still to decide after `task` (the
+        completion check's, docs/allocation.md#teams); None without teams, whose timed runs
+        keep no completion check."""
+        if not self.problem.instance.has_teams:
+            return None
+        return tuple(t for t in self.problem.free_tasks if t != task and t not in self.placed)
 
     # -- a choice ---------------------------------------------------------------------------
 
@@ -173,24 +195,59 @@ class TimedProgress:
             out.append(TimeOption(r, line.free, travel, start, end, slack, not why, why))
         return tuple(out)
 
-    def place(self, task: int, robot: int) -> Placement:
-        """Give the current task to `robot` (idempotent: a placed task keeps its place)."""
+    def team_start(self, task: int, members: Members) -> float:
+        """When a team could start the task: the last member's arrival, raised until every
+        member's timeline and the task's links agree (list_schedule.team_start)."""
+        return team_start(self._lines, self.tm, task, members, self.ready_time(task, members[0]))
+
+    def team_option(self, task: int, members: Members) -> TimeOption:
+        """What giving the task to a team would mean in time: the team's start and end, and
+        whether they meet the task's deadline and every member's shift ("members free in
+        time", docs/allocation.md#teams). `robot`, `free` and `travel` are the member who
+        arrives last (the one the start waits for)."""
+        tm = self.tm
+        deadline = tm.deadline[task]
+        start = self.team_start(task, members)
+        end = start + tm.duration(task, members[0])
+        arrivals = {
+            m: self._lines[m].earliest(tm, task, m, self.ready_time(task, m)) for m in members
+        }
+        last = max(members, key=lambda m: (arrivals[m], -m))
+        line = self._lines[last]
+        why = ""
+        if end > deadline + EPS:
+            why = f"misses the deadline (minute {deadline:g}) by {end - deadline:g} min"
+        else:
+            late = [m for m in members if end > tm.shifts[m][1] + EPS]
+            if late:
+                name = self.problem.instance.robots[late[0]].name
+                why = f"ends after {name}'s shift (minute {tm.shifts[late[0]][1]:g})"
+        travel = tm.travel_to_task(line.zone, task)
+        return TimeOption(last, line.free, travel, start, end, deadline - end, not why, why)
+
+    def place(self, task: int, robot: int, team: Members = ()) -> Placement:
+        """Give the current task to `robot` (a team task: to the members `team`, `robot` the
+        first); idempotent: a placed task keeps its place."""
         if task in self.placed:
             return self.placed[task]
         expected = self.current()
         if task != expected:
             raise ValueError(f"task {task} is not the next in the order ({expected} is)")
-        return self._place(task, robot)
+        return self._place(task, robot, team)
 
-    def _place(self, task: int, robot: int) -> Placement:
+    def _place(self, task: int, robot: int, team: Members = ()) -> Placement:
         tm = self.tm
         line = self._lines[robot]
         travel = tm.travel_to_task(line.zone, task)
-        start = line.earliest(tm, task, robot, self.ready_time(task, robot))
-        line.place(tm, task, robot, start)
+        if team:
+            start = self.team_start(task, team)
+        else:
+            start = line.earliest(tm, task, robot, self.ready_time(task, robot))
+        for m in team or (robot,):
+            self._lines[m].place(tm, task, m, start)
         end = start + tm.duration(task, robot)
         free = task not in self.problem.pinned
-        placement = Placement(robot, start, end, travel, self.decided if free else -1)
+        placement = Placement(robot, start, end, travel, self.decided if free else -1, team)
         heapq.heappop(self._heap)  # `task` is the heap's top: current() said so
         self.placed[task] = placement
         self._starts[task], self._ends[task] = start, end
@@ -206,21 +263,29 @@ class TimedProgress:
 
     @classmethod
     def replay(
-        cls, problem: Problem, robots: Mapping[int, int], *, until: int | None = None
+        cls,
+        problem: Problem,
+        robots: Mapping[int, int],
+        *,
+        until: int | None = None,
+        teams: Mapping[int, Members] | None = None,
     ) -> TimedProgress:
-        """The progress after the stored decisions (task -> robot), placed in the order;
-        stopping at `until` (the task a resumed graph is about to decide again) or at the
-        first task without a decision."""
+        """The progress after the stored decisions (task -> robot; a team task's members in
+        `teams`), placed in the order; stopping at `until` (the task a resumed graph is about
+        to decide again) or at the first task without a decision."""
         progress = cls(problem)
+        teams = teams or {}
         while True:
             t = progress.current()
             if t >= progress.tm.n_tasks or t == until or t not in robots:
                 return progress
-            progress._place(t, robots[t])
+            progress._place(t, robots[t], tuple(teams.get(t, ())))
 
 
-def decision_order(problem: Problem, robots: Mapping[int, int]) -> list[int]:
+def decision_order(
+    problem: Problem, robots: Mapping[int, int], teams: Mapping[int, Members] | None = None
+) -> list[int]:
     """The free tasks with a decision, in the order the graph decided them."""
-    progress = TimedProgress.replay(problem, robots)
+    progress = TimedProgress.replay(problem, robots, teams=teams)
     placed = [(p.seq, t) for t, p in progress.placed.items() if p.seq >= 0]
     return [t for _, t in sorted(placed)]

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from app.domain.problem import Problem
-from app.domain.scheduling.list_schedule import Timeline
+from app.domain.scheduling.list_schedule import Timeline, team_start
 from app.domain.scheduling.schedule import Schedule, build_schedule
 from app.domain.time_model import TimeModel
 
@@ -70,6 +70,9 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
     tm = problem.instance.timing
     n = tm.n_tasks
     robots = planned.assignment
+    # docs/allocation.md#teams: a team task holds every member's lane and starts when the
+    # last member can begin (list_schedule.team_start), whether a fact or re-timed.
+    teams = {s.task: s.team for s in planned.slots if s.team}
     fixed: dict[int, tuple[float, float]] = {}
     for t, report in reported.items():
         if 0 <= t < n:
@@ -82,12 +85,17 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
     done = [False] * n
     lines = [Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
     for t, (start, end) in sorted(fixed.items(), key=lambda item: item[1]):
-        lines[robots[t]].fixed.append((start, end, t))
+        for m in teams.get(t) or (robots[t],):
+            lines[m].fixed.append((start, end, t))
         starts[t], ends[t], done[t] = start, end, True
     orders = planned.sequences(tm.n_robots)
-    position = {t: k for seq in orders for k, t in enumerate(seq)}
+    positions = [{t: k for k, t in enumerate(seq)} for seq in orders]
     queues = [[t for t in seq if t not in fixed] for seq in orders]
     cursor = [0] * len(queues)
+
+    def at_front(t: int, crew: tuple[int, ...]) -> bool:
+        return all(cursor[m] < len(queues[m]) and queues[m][cursor[m]] == t for m in crew)
+
     progress = True
     forced = False
     while progress:
@@ -97,24 +105,33 @@ def retime(problem: Problem, planned: Schedule, reported: Mapping[int, Reported]
                 t = queue[cursor[r]]
                 if not all(done[p] for p in tm.predecessors[t]) and not forced:
                     break
+                crew = teams.get(t) or (r,)
+                if not at_front(t, crew):
+                    break  # a member has earlier tasks to do first
                 forced = False
                 ready = tm.ready(t, tm.duration(t, r), starts, ends)
                 ready = max(ready, tm.release[t], problem.not_before)
-                _pass_earlier_facts(tm, lines[r], position, t)
-                start = lines[r].earliest(tm, t, r, ready)
-                lines[r].place(tm, t, r, start)
+                for m in crew:
+                    _pass_earlier_facts(tm, lines[m], positions[m], t)
+                if len(crew) == 1:
+                    start = lines[r].earliest(tm, t, r, ready)
+                else:
+                    start = team_start(lines, tm, t, crew, ready)
+                for m in crew:
+                    lines[m].place(tm, t, m, start)
+                    cursor[m] += 1
                 starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
-                cursor[r] += 1
                 progress = True
-        if not progress and tm.typed and not all(done):
+        if not progress and tm.typed and not all(done) and not forced:
             # A lead let the plan put a successor before its predecessor on one robot:
             # the first robot's next task goes now, with the links placed so far, so the
-            # view keeps the order and the check names any link it breaks.
+            # view keeps the order and the check names any link it breaks (once per stall:
+            # a team whose members disagree on what comes next is not a lead).
             forced = progress = True
     if not all(done):
         # Only when the planned orders contradict the precedence: facts wait for nothing.
         raise ValueError("the robot orders contradict the precedence: no task can go next")
-    return build_schedule(problem, robots, starts, ends)
+    return build_schedule(problem, robots, starts, ends, teams)
 
 
 def _pass_earlier_facts(tm: TimeModel, line: Timeline, position: Mapping[int, int], t: int) -> None:

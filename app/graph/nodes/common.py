@@ -68,7 +68,16 @@ def timing(ctx: GraphContext, state: LTAAState) -> dict[str, Any]:
     t = state["task_index"]
     progress = ctx.timed.at(ctx.problem, ctx.recorder, t)
     options: tuple[TimeOption, ...] = progress.options(t)
-    return {"timing": options, "allocated": len(ctx.problem.pinned) + progress.decided}
+    out: dict[str, Any] = {
+        "timing": options,
+        "allocated": len(ctx.problem.pinned) + progress.decided,
+    }
+    if ctx.problem.instance.units[t]:
+        # docs/allocation.md#teams: a team's time is its last member's arrival, not any one
+        # robot's option; read while the progress still has `t` next (this node's lifetime).
+        out["team_time"] = functools.partial(progress.team_option, t)
+        out["later"] = progress.later(t)
+    return out
 
 
 def current_attempt(ctx: GraphContext, state: LTAAState) -> tuple[AttemptRecord, DecisionContext]:

@@ -15,7 +15,12 @@ from app.graph.review import gate
 from app.graph.state import GraphContext, LTAAState
 from app.graph.timing import best_in_time, fallback_answer, time_record
 from app.graph.validation import validate_text
-from app.reasoners.rules import choose, choose_team, compose_answer
+from app.reasoners.rules import choose, choose_team, compose_answer, compose_team_answer
+
+_TIMED_TEAM_FALLBACK = (
+    "Fallback after the attempts failed: the best-success team that keeps the workload cap "
+    "and whose members are free in time"
+)
 
 
 def _team_success(dctx: DecisionContext, team: tuple[int, ...]) -> float:
@@ -56,10 +61,16 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
             # The members from the accepted reply, judged again (pure): never from state.
             team = judge(accepted, dctx, ctx.quality_threshold).team
     elif dctx.team is not None:
-        # docs/allocation.md#teams: the rules reasoner's team, which keeps the cap satisfiable.
-        team = choose_team(dctx)[0]
+        # docs/allocation.md#teams: the rules reasoner's team, which keeps the cap satisfiable;
+        # in time, the best-success team that also is free in time (as for one robot).
+        answer = compose_answer(dctx)
+        if dctx.team.timing is not None and dctx.team.best is not None:
+            team = dctx.team.best
+            answer = compose_team_answer(dctx, team, _TIMED_TEAM_FALLBACK)
+        else:
+            team = choose_team(dctx)[0]
         robot = team[0]
-        verdict = validate_text(compose_answer(dctx), dctx, ctx.quality_threshold)
+        verdict = validate_text(answer, dctx, ctx.quality_threshold)
         fallback, quality = True, verdict.quality
         confidence = verdict.parsed.confidence
         text = {"reasoning": verdict.parsed.reasoning, "tradeoff": verdict.parsed.tradeoff}
@@ -123,5 +134,5 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
                 decision["team"] = list(team)
     if dctx.timing:
         seq = ctx.timed.at(ctx.problem, rec, t).decided
-        decision["time"] = time_record(dctx, robot, seq)
+        decision["time"] = time_record(dctx, robot, seq, team)
     return {"robot": robot, "fallback": fallback, "decision": decision}

@@ -64,7 +64,7 @@ def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
         # Placed after the write: a write refused (a lost fence) leaves the timelines as
         # the record has them.
         progress = ctx.timed.at(ctx.problem, rec, t)
-        progress.place(t, robot)
+        progress.place(t, robot, tuple(d.get("team") or ()))
         following = progress.current()
     else:
         following = next_task(ctx.problem, t)  # pinned tasks are not the graph's to decide
