@@ -365,3 +365,39 @@ def test_a_restart_keeps_a_team_review_waiting_and_a_new_process_applies_the_tea
     first_decision = again.get(f"/runs/{run_id}/trace").json()["decisions"][0]
     assert key(first_decision["team"]) == key(other)
     assert again.get(f"/runs/{run_id}/trace/verify").json()["ok"] is True
+
+
+def test_a_timed_team_decision_is_reviewed_and_the_reviewers_team_is_placed_in_time(
+    client: TestClient,
+) -> None:
+    """In time (docs/schedules.md#teams-in-a-run-in-time) the candidates' cap-feasibility also
+    holds "members free in time"; the reviewer's team is the one placed, in both its members'
+    lanes, from the last member's arrival."""
+    from tests.api.test_api_timed_teams import TIMED_TEAM_BODY
+
+    body = {**copy.deepcopy(TIMED_TEAM_BODY), "reasoner": "rules", "review": {"task_ids": ["beam"]}}
+    run_id = client.post("/runs", json=body).json()["id"]
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    proposed = review["proposal"]["team"]
+    other = next(
+        a["team"]
+        for a in review["alternatives"]
+        if a["cap_feasible"] and key(a["team"]) != key(proposed)
+    )
+    answer = client.post(
+        f"/runs/{run_id}/reviews/{review['task_index']}",
+        json={"action": "override", "team": other, "reason": "the lifter is on the slab"},
+    )
+    assert answer.status_code == 200, answer.text
+    assert wait_until(client, run_id, WAITING)["status"] == "completed"
+    run = client.get(f"/runs/{run_id}").json()
+    beam = next(a for a in run["assignments"] if a["task_id"] == "beam")
+    assert key(beam["team"]) == key(other)
+    assert beam["review"]["overridden_from_team"] == proposed
+    schedule = client.get(f"/runs/{run_id}/schedule").json()
+    for m in other:  # the reviewer's team in every member's lane, over the same minutes
+        lane = schedule["robots"][m["robot"]]["lane"]
+        worked = [i for i in lane if i["kind"] == "task" and i["task_id"] == "beam"]
+        assert [(i["start"], i["end"]) for i in worked] == [(beam["start"], beam["end"])]
+    assert client.get(f"/runs/{run_id}/trace/verify").json()["ok"] is True
