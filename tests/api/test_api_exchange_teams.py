@@ -2,7 +2,8 @@
 oracle, reads the plan POST /allocate answers for `baseline_team` with `optimal` with its start
 dates, one assignment per (task, member) over the task's own times (every member busy for all
 of it, docs/allocation.md#teams) and its links; importing the export gives back the tasks,
-durations, links and features, a one-feature team as a team of that many robots."""
+durations, links and features, a one-feature team as a team of that many robots; and a durable
+team run's export (GET /runs/{id}/schedule?format=mspdi) holds every member too."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from app.allocation.service import build_problem, load_solver
 from app.domain.catalog import timed_scenario
 from app.exchange import write_mspdi
 from tests.mpxj_oracle import read, to_datetime
+from tests.polling import wait_until
 
 pytestmark = pytest.mark.usefixtures("mpxj")
 
@@ -116,3 +118,27 @@ def test_the_team_plans_export_imports_back_to_its_tasks_and_teams(client: TestC
             assert got["team"] == task.team
         else:
             assert "team" not in got
+
+
+def test_a_durable_timed_team_runs_export_holds_every_member(client: TestClient) -> None:
+    """GET /runs/{id}/schedule?format=mspdi of a durable `baseline_team` run (the LTAA graph's
+    own teams in time): MPXJ reads each task at the run's start with one assignment per member."""
+    created = client.post("/runs", json={"scenario": "baseline_team", "reasoner": "rules"})
+    assert created.status_code == 202, created.text
+    run_id = created.json()["id"]
+    assert wait_until(client, run_id, timeout=120)["status"] == "completed"
+    plan = client.get(f"/runs/{run_id}/schedule").json()["tasks"]
+    exported = client.get(f"/runs/{run_id}/schedule", params={"format": "mspdi"})
+    assert exported.status_code == 200, exported.text
+    project = read(exported.content)
+    by_id = {str(t.getText(2)): t for t in project.getTasks() if t.getName() is not None}
+    assert len(by_id) == len(plan) == 36
+    teams = 0
+    for row in plan:
+        task = by_id[str(row["task_id"])]
+        start = datetime.fromisoformat(row["start_at"]).replace(tzinfo=None)
+        assert to_datetime(task.getStart()) == start
+        names = [str(a.getResource().getName()) for a in task.getResourceAssignments()]
+        assert names == members(row)
+        teams += len(names) > 1
+    assert teams == 7
