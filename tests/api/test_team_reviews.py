@@ -401,3 +401,36 @@ def test_a_timed_team_decision_is_reviewed_and_the_reviewers_team_is_placed_in_t
         worked = [i for i in lane if i["kind"] == "task" and i["task_id"] == "beam"]
         assert [(i["start"], i["end"]) for i in worked] == [(beam["start"], beam["end"])]
     assert client.get(f"/runs/{run_id}/trace/verify").json()["ok"] is True
+
+
+def test_a_large_fleet_lists_the_best_teams_and_takes_an_unlisted_one_checked_by_the_run(
+    client: TestClient,
+) -> None:
+    """Six robots make 15 two-robot teams: the review lists the best twelve (the proposal among
+    them); a team it does not list is checked against the run's own problem and taken."""
+    rates = {f"r{i}": round(0.95 - 0.1 * i, 2) for i in range(6)}
+    body = {
+        "tasks": [
+            {"id": "beam", "name": "Lift beam", "team": {"heavy": 2}},
+            *({"id": f"c{i}", "name": f"Carry {i}", "features": ["heavy"]} for i in range(4)),
+        ],
+        "robots": [{"name": n, "success": {"heavy": s}} for n, s in rates.items()],
+        "mode": "success_focused",
+        "review": {"task_ids": ["beam"]},
+    }
+    run_id = client.post("/runs", json=body).json()["id"]
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    listed = [key(a["team"]) for a in review["alternatives"]]
+    assert len(listed) == 12 and key(review["proposal"]["team"]) in listed
+    worst = [{"robot": "r5", "feature": "heavy"}, {"robot": "r4", "feature": "heavy"}]
+    assert key(worst) not in listed
+    answer = client.post(
+        f"/runs/{run_id}/reviews/0",
+        json={"action": "override", "team": worst, "reason": "the others are booked"},
+    )
+    assert answer.status_code == 200, answer.text
+    assert answer.json()["team"] == worst  # the members of one feature in the order sent
+    assert wait_until(client, run_id, WAITING)["status"] == "completed"
+    beam = client.get(f"/runs/{run_id}").json()["assignments"][0]
+    assert beam["team"] == worst and beam["success"] == pytest.approx((0.45 + 0.55) / 2)
