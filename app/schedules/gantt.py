@@ -15,8 +15,9 @@ Each typed link (docs/schedules.md#links) is an arrow from the predecessor's bar
 successor's, drawn in one path per type (`link`, with `link-fs`, `link-ss`, `link-ff` or
 `link-sf`; its heads in a `link-head` path beside it), at the ends the link ties: out of
 the predecessor's right end (FS, FF) or left end (SS, SF), into the successor's start (FS,
-SS) or end (FF, SF), lane to lane (a team task's: its first member's). Drawn after the
-lanes (their backgrounds are opaque); an arrow stops at the edge of the bar it enters.
+SS) or end (FF, SF), lane to lane (a team task's: its first member's), along the successor
+lane's margin. Drawn after the lanes (their backgrounds are opaque); an arrow stops at the
+edge of the bar it enters.
 """
 
 from __future__ import annotations
@@ -211,9 +212,9 @@ def _team_links(problem: Problem, schedule: Schedule, scale: float) -> list[str]
 def _links(problem: Problem, schedule: Schedule, scale: float) -> list[str]:
     """Per link type, one path of arrows and one of their heads (a 1,000-task chart stays
     light: two elements per type, not one per link), the links in task order and each task's
-    `after` order. An arrow leaves the predecessor's tied end by STUB px, crosses to the
-    successor's lane and enters its bar from outside: from the left into a start, from the
-    right into an end."""
+    `after` order. An arrow leaves the predecessor's tied end by STUB px, runs along the
+    successor lane's margin and enters its bar from outside: from the left into a start, from
+    the right into an end."""
     lines: dict[str, list[str]] = {kind: [] for kind in LINK_ENDS}
     heads: dict[str, list[str]] = {kind: [] for kind in LINK_ENDS}
     slots = schedule.slots
@@ -228,8 +229,13 @@ def _links(problem: Problem, schedule: Schedule, scale: float) -> list[str]:
             y2 = TOP + succ.robot * LANE + LANE / 2
             out_x = x1 + STUB if from_end else x1 - STUB
             side = 1 if to_end else -1  # where it comes from: right of an end, left of a start
+            # The long run goes along the successor lane's margin (above its bars when it
+            # comes from above or the same lane, below them from below), not through bars.
+            margin = (LANE - BAR) / 2 - 1
+            edge = y2 - BAR / 2 - margin if pred.robot <= succ.robot else y2 + BAR / 2 + margin
             lines[arc.type].append(
-                f"M{_n(x1)} {_n(y1)}H{_n(out_x)}V{_n(y2)}H{_n(x2 + side * STUB)}H{_n(x2)}"
+                f"M{_n(x1)} {_n(y1)}H{_n(out_x)}V{_n(edge)}H{_n(x2 + side * STUB)}"
+                f"V{_n(y2)}H{_n(x2)}"
             )
             heads[arc.type].append(f"M{_n(x2)} {_n(y2)}l{side * 4} -3v6z")
     out = []

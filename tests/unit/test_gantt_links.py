@@ -16,7 +16,7 @@ from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.schedules import gantt_svg
-from app.schedules.gantt import GUTTER, LANE, TOP, WIDTH
+from app.schedules.gantt import BAR, GUTTER, LANE, TOP, WIDTH
 from app.solvers.registry import get_solver
 
 SVG = "{http://www.w3.org/2000/svg}"
@@ -78,8 +78,13 @@ def test_each_link_is_an_arrow_between_the_ends_its_type_ties() -> None:
         tips = subpaths(heads[kind].get("d") or "")
         assert len(drawn) == len(tips) == len(pairs)
         at_pred, at_succ = ends[kind]
-        for (u, t), (x1, y1, out_x, y2, before, x2), tip in zip(pairs, drawn, tips, strict=True):
+        for (u, t), path, tip in zip(pairs, drawn, tips, strict=True):
+            x1, y1, out_x, edge, before, y2, x2 = path
             pred, succ = schedule.slots[u], schedule.slots[t]
+            # The long run in the successor lane's margin, outside its bars.
+            bar_top, bar_bottom = y2 - BAR / 2, y2 + BAR / 2
+            assert edge < bar_top or edge > bar_bottom
+            assert abs(edge - y2) < LANE / 2
             assert x1 == pytest.approx(GUTTER + getattr(pred, at_pred) * scale, abs=0.06)
             assert x2 == pytest.approx(GUTTER + getattr(succ, at_succ) * scale, abs=0.06)
             assert y1 == pytest.approx(TOP + pred.robot * LANE + LANE / 2, abs=0.06)
