@@ -19,7 +19,7 @@ import statistics
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -146,6 +146,7 @@ def screenshots() -> list[Path]:
         out.append(gantt_screenshot(page, url))
         out.append(import_screenshot(page, url))
         out.append(team_screenshot(page, url))
+        out.append(team_review_screenshot(page, url))
     return out
 
 
@@ -183,6 +184,26 @@ def team_screenshot(page: Page, url: str) -> Path:
 
 
 def team_screenshot_alone() -> Path:
+    return _alone(team_screenshot)
+
+
+def team_review_screenshot(page: Page, url: str) -> Path:
+    """A team decision waiting for review (docs/reviews.md#reviews-of-team-decisions): the
+    proposed team, the candidate teams with their success, load, cap and regret, and the
+    override form that picks one."""
+    run_id = _start(url, {**TEAM_SITE, "mode": "balanced", "review": {"task_ids": ["panel"]}})
+    _wait(url, run_id, "awaiting_review")
+    page.set_viewport_size({"width": 1280, "height": 800})
+    page.goto(f"{url}/console/reviews")
+    card = page.locator("article.review", has=page.locator(f'a[href*="{run_id}"]'))
+    card.locator(".proposed-team").wait_for()
+    path = IMG / "console_team_review.png"
+    card.screenshot(path=path)
+    return path
+
+
+def _alone(shot: Callable[[Page, str], Path]) -> Path:
+    """One screenshot function on a server of its own (`python -m benchmarks.console NAME`)."""
     with (
         tempfile.TemporaryDirectory(prefix="ltaa-console-") as tmp,
         served(Path(tmp), {"LTAA_API_KEYS": KEYS}) as (url, _log),
@@ -190,7 +211,7 @@ def team_screenshot_alone() -> Path:
     ):
         page = browser.new_page(viewport={"width": 1280, "height": 800})
         _sign_in(page, url)
-        return team_screenshot(page, url)
+        return shot(page, url)
 
 
 def import_screenshot(page: Page, url: str) -> Path:
@@ -222,14 +243,7 @@ def import_screenshot(page: Page, url: str) -> Path:
 
 
 def import_screenshot_alone() -> Path:
-    with (
-        tempfile.TemporaryDirectory(prefix="ltaa-console-") as tmp,
-        served(Path(tmp), {"LTAA_API_KEYS": KEYS}) as (url, _log),
-        _browser() as browser,
-    ):
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
-        _sign_in(page, url)
-        return import_screenshot(page, url)
+    return _alone(import_screenshot)
 
 
 def gantt_screenshot(page: Page, url: str) -> Path:
@@ -347,12 +361,18 @@ def main(argv: list[str]) -> None:
         print(import_screenshot_alone())
     elif what == "team":
         print(team_screenshot_alone())
+    elif what == "team_review":
+        print(_alone(team_review_screenshot))
+    elif what == "gantt":
+        print(_alone(gantt_screenshot))
     elif what == "bench":
         text = bench()
         write_section(SECTION_TITLE, text)
         print(text)
     else:
-        raise SystemExit("usage: python -m benchmarks.console screenshots|import|team|bench")
+        raise SystemExit(
+            "usage: python -m benchmarks.console screenshots|import|team|team_review|gantt|bench"
+        )
 
 
 if __name__ == "__main__":

@@ -21,7 +21,9 @@ from app.allocation.teams import (
     MEMBERS_FIELD,
     SKILLS_FIELD,
     TEAM_FIELD,
+    TEAM_IN_FIELD,
     Team,
+    TeamMemberIn,
     TeamMemberOut,
     task_features,
 )
@@ -176,13 +178,18 @@ class InstanceRequest(BaseModel):
 
 
 class PinIn(BaseModel):
-    """A task fixed on a robot (docs/living-plans.md#pins-in-allocate): every solver keeps it
-    there."""
+    """A task fixed on a robot, or a team task on its whole team
+    (docs/living-plans.md#pins-in-allocate): every solver keeps it there."""
 
     model_config = ConfigDict(extra="forbid")
 
     task_id: TaskId
-    robot: Name = Field(description="Robot name (or label)")
+    robot: Name | None = Field(
+        None,
+        description="Robot name (or label). Required for a one-robot task; for a team task "
+        "optional: the member covering its first unit, as answers read `robot`",
+    )
+    team: list[TeamMemberIn] | None = TEAM_IN_FIELD
     start: Minutes | None = Field(
         None, description="Timed instances: the task's fixed start (it started or is done)"
     )

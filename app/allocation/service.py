@@ -24,7 +24,7 @@ from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics, task_successes, workload
 from app.domain.models import Instance, Robot, Task
 from app.domain.objective import Objective, ObjectiveKind
-from app.domain.pins import resolve_pins
+from app.domain.pins import PinRequest, resolve_pins
 from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.schedule import Schedule
@@ -83,7 +83,16 @@ def build_problem(request: InstanceRequest) -> Problem:
     pins = None
     if request.pinned or request.unavailable:
         pins = resolve_pins(
-            instance, [(p.task_id, p.robot) for p in request.pinned], request.unavailable
+            instance,
+            [
+                PinRequest(
+                    p.task_id,
+                    p.robot,
+                    None if p.team is None else [(m.robot, m.feature) for m in p.team],
+                )
+                for p in request.pinned
+            ],
+            request.unavailable,
         )
     return Problem.build(
         instance,
@@ -94,6 +103,7 @@ def build_problem(request: InstanceRequest) -> Problem:
         unavailable=pins.unavailable if pins else (),
         objective=Objective(ObjectiveKind(request.objective), request.min_expected_success),
         pinned_starts=_pinned_starts(instance, request),
+        pinned_teams=pins.teams if pins else None,
     )
 
 
@@ -236,6 +246,7 @@ def _check_solution(problem: Problem, solution: Solution, solver: str) -> None:
     if len(a) != n or any(not 0 <= robot < r for robot in a):
         raise RuntimeError(f"solver '{solver}' returned {len(a)} robot indices for {n} tasks")
     moved = [t for t, robot in problem.pinned.items() if a[t] != robot]
+    moved += [t for t, team in problem.pinned_teams.items() if solution.teams.get(t) != team]
     if moved:
         raise RuntimeError(f"solver '{solver}' moved pinned task(s) {moved}")
     if problem.unavailable and any(a[t] in problem.unavailable for t in problem.free_tasks):
@@ -263,7 +274,9 @@ def _check_teams(problem: Problem, solution: Solution, solver: str) -> None:
         why = team_problem(task, instance.robots, members)
         if why is None and members[0] != solution.assignment[t]:
             why = "its robot is not the member covering the first unit"
-        if why is None and any(m in problem.unavailable for m in members):
+        # A pinned team keeps an unavailable member (docs/living-plans.md#pins-in-allocate).
+        free = t not in problem.pinned
+        if why is None and free and any(m in problem.unavailable for m in members):
             why = "a member is unavailable"
         if why is not None:
             raise RuntimeError(f"solver '{solver}' returned an invalid team for {task.id!r}: {why}")

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, Field, StrictInt, StrictStr
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 from pydantic_core import PydanticCustomError
 
 from app.domain.models import MAX_NAME_CHARS
+from app.http.fields import Name
 
 # Feature names: every one must be rated by the robots, whose rate keys refuse NUL already.
 Feature = Annotated[StrictStr, Field(min_length=1, max_length=MAX_NAME_CHARS)]
@@ -48,4 +49,23 @@ MEMBERS_FIELD = Field(
     description="Team tasks only (docs/allocation.md#teams): one entry per unit, in the team's "
     "key order",
     exclude_if=lambda members: members is None,
+)
+
+
+class TeamMemberIn(BaseModel):
+    """One unit of a team as a request gives it (a pin in /allocate, a review's override)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    robot: Name = Field(description="Robot name (or label)")
+    feature: Feature = Field(description="The feature of the unit this robot covers")
+
+
+# A team in a request: one entry per unit, the members of one feature in any order.
+TEAM_IN_FIELD = Field(
+    None,
+    min_length=1,
+    max_length=100,
+    description="Team tasks only (docs/allocation.md#teams): the whole team, one "
+    '{"robot", "feature"} per unit, each robot distinct and able to cover its feature',
 )

@@ -53,10 +53,13 @@ def resolve(
     *,
     override: str | None,
     reason: str | None,
+    team: list[dict[str, str]] | None = None,
 ) -> dict[str, Any]:
-    body: dict[str, Any] = {"action": "override" if override else "approve"}
+    body: dict[str, Any] = {"action": "override" if override or team else "approve"}
     if override:
         body["robot"] = override
+    if team:
+        body["team"] = team
     if reason:
         body["reason"] = reason
     response = client.post(f"/runs/{run_id}/reviews/{task_index}", json=body)
@@ -70,6 +73,23 @@ def _pct(x: float) -> str:
     return f"{x * 100:.1f}%"
 
 
+def _who(entry: dict[str, Any]) -> str:
+    """A robot, or a team's members (docs/reviews.md#reviews-of-team-decisions)."""
+    return " + ".join(m["robot"] for m in entry.get("team") or [entry])
+
+
+def parse_team(value: str) -> list[dict[str, str]]:
+    """`--team crane:heavy,lifter:heavy`: robot:feature per unit (the feature after the last
+    colon, so a robot name may hold one)."""
+    out = []
+    for part in value.split(","):
+        robot, _, feature = part.strip().rpartition(":")
+        if not robot or not feature:
+            raise typer.BadParameter(f"'{part}' is not robot:feature", param_hint="--team")
+        out.append({"robot": robot, "feature": feature})
+    return out
+
+
 def print_reviews(reviews: list[dict[str, Any]], console: Console) -> None:
     if not reviews:
         console.print("No decisions are waiting for review.")
@@ -80,11 +100,11 @@ def print_reviews(reviews: list[dict[str, Any]], console: Console) -> None:
         table.add_column(column)
     for r in reviews:
         p = r["proposal"]
-        proposal = f"{p['robot']} {_pct(p['success'])}" + (
+        proposal = f"{_who(p)} {_pct(p['success'])}" + (
             " [yellow]fallback[/]" if p["fallback"] else ""
         )
         alternatives = "\n".join(
-            f"{a['robot']}: {_pct(a['success'])}, load {a['load']}, "
+            f"{_who(a)}: {_pct(a['success'])}, load {a['load']}, "
             + (
                 f"regret {a['regret_if_chosen']:.1f} pts"
                 if a["cap_feasible"]
@@ -126,24 +146,37 @@ def review(
         str | None, typer.Option("--override", help="Use this robot instead", show_default=False)
     ] = None,
     reason: Annotated[
-        str | None, typer.Option("--reason", help="Why (required with --override)")
+        str | None, typer.Option("--reason", help="Why (required with --override or --team)")
+    ] = None,
+    team: Annotated[
+        str | None,
+        typer.Option(
+            "--team",
+            help="A team decision: use this team instead, robot:feature per unit "
+            "(crane:heavy,lifter:heavy)",
+            show_default=False,
+        ),
     ] = None,
     url: _URL = "http://127.0.0.1:8000",
     key: _KEY = None,
 ) -> None:
-    """Resolve a review: --approve, or --override ROBOT --reason TEXT."""
+    """Resolve a review: --approve, or --override ROBOT (a team decision: --team) --reason TEXT."""
 
-    if approve == (override is not None):
-        raise typer.BadParameter("give exactly one of --approve and --override ROBOT")
-    if override is not None and not (reason or "").strip():
-        raise typer.BadParameter("--override needs --reason", param_hint="--reason")
+    changes = override is not None or team is not None
+    if approve == changes or (override is not None and team is not None):
+        raise typer.BadParameter("give exactly one of --approve, --override ROBOT and --team")
+    if changes and not (reason or "").strip():
+        raise typer.BadParameter("--override and --team need --reason", param_hint="--reason")
+    members = None if team is None else parse_team(team)
     try:
         with make_client(url, key) as client:
-            done = resolve(client, run_id, task_index, override=override, reason=reason)
+            done = resolve(
+                client, run_id, task_index, override=override, reason=reason, team=members
+            )
     except (ApiFailed, httpx.HTTPError) as exc:
         Console(stderr=True).print(f"[bold red]error[/]: {exc}", highlight=False)
         raise typer.Exit(code=1) from None
-    what = f"overridden to {done['robot']}" if done["action"] == "override" else "approved"
+    what = f"overridden to {_who(done)}" if done["action"] == "override" else "approved"
     typer.echo(
         f"task {task_index} of run {run_id} {what} by {done['reviewer']}; the run is "
         f"{done['status']} again"

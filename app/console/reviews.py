@@ -3,6 +3,7 @@ override forms that resolve one (the same service as POST /runs/{id}/reviews/{ta
 
 from __future__ import annotations
 
+import json
 from typing import Annotated
 
 from fastapi import APIRouter, Form, Path, Request
@@ -46,17 +47,20 @@ async def resolve(
     action: Annotated[str, Form(max_length=16)] = "",
     robot: Annotated[str | None, Form(max_length=200)] = None,
     reason: Annotated[str | None, Form(max_length=2000)] = None,
+    team: Annotated[str | None, Form(max_length=20_000)] = None,
 ) -> Response:
     runs = request.app.state.runs
     try:
         chosen = ReviewAction(action)
+        override = chosen is ReviewAction.OVERRIDE
         resolved = await run_in_threadpool(
             review_service.resolve,
             sessions=runs.sessions,
             run_id=run_id,
             task_index=task_index,
             action=chosen,
-            robot=(robot or None) if chosen is ReviewAction.OVERRIDE else None,
+            robot=(robot or None) if override else None,
+            team=_team(team) if override and team else None,
             reason=reason,
             reviewer=signed.name,
         )
@@ -76,3 +80,13 @@ async def resolve(
     request.app.state.metrics.review_resolved(resolved.waited_s)
     runs.worker.submit(run_id)
     return RedirectResponse(f"/console/runs/{run_id}", status_code=303)
+
+
+def _team(value: str) -> list[tuple[str, str]]:
+    """The team form field: the chosen candidate team as JSON (the select's values), one
+    {"robot", "feature"} per unit; the service checks it as a team."""
+    try:
+        members = json.loads(value)
+        return [(str(m["robot"]), str(m["feature"])) for m in members]
+    except (ValueError, TypeError, KeyError) as exc:
+        raise DomainError("team", "not a team: choose one of the listed teams") from exc

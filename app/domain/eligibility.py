@@ -78,8 +78,8 @@ def check_pins_eligible(
         if tasks[t].team is not None and t not in teams:
             raise DomainError(
                 "pinned",
-                f"task {tasks[t].id!r} is a team task, which cannot be pinned yet "
-                "(docs/allocation.md#teams); leave it free",
+                f"task {tasks[t].id!r} is a team task: pin it with its whole team "
+                "(docs/living-plans.md#pins-in-allocate), or leave it free",
                 code="team_pin",
             )
     eligible = instance.eligible

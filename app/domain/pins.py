@@ -7,22 +7,34 @@ label). Every error names the offending entry by its dotted path in the request.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from app.domain.errors import DomainError
 from app.domain.models import Instance, TaskId
-from app.domain.teams import units_of
+from app.domain.teams import covers, units_of
 
 
 @dataclass(frozen=True)
 class Pins:
     pinned: dict[int, int]  # task index -> robot index
     unavailable: frozenset[int]
+    teams: dict[int, tuple[int, ...]] = field(default_factory=dict)  # task -> member per unit
+
+
+@dataclass(frozen=True)
+class PinRequest:
+    """One pin as a request names it: a task id and its robot, or for a team task its whole
+    team as (robot, feature) entries, one per unit (`robot` then optional: the member
+    covering the first unit, as answers read; docs/living-plans.md#pins-in-allocate)."""
+
+    task_id: TaskId
+    robot: str | None
+    team: Sequence[tuple[str, str]] | None = None
 
 
 def resolve_pins(
     instance: Instance,
-    pinned: Sequence[tuple[TaskId, str]],
+    pinned: Sequence[PinRequest],
     unavailable: Sequence[str],
     *,
     pinned_field: str = "pinned",
@@ -32,8 +44,10 @@ def resolve_pins(
     task_at = {str(task.id): t for t, task in enumerate(instance.tasks)}
     known_robots = ", ".join(r.name for r in instance.robots)
     pins: dict[int, int] = {}
+    teams: dict[int, tuple[int, ...]] = {}
     pinned_by: dict[int, int] = {}
-    for i, (task_id, robot_name) in enumerate(pinned):
+    for i, pin in enumerate(pinned):
+        task_id, robot_name = pin.task_id, pin.robot
         t = task_at.get(str(task_id))
         if t is None:
             raise DomainError(
@@ -48,14 +62,29 @@ def resolve_pins(
                 "pins it); pin each task once",
                 code="duplicate_pin",
             )
-        r = instance.robot_index(robot_name)
-        if r is None:
-            raise DomainError(
-                f"{pinned_field}.{i}.robot",
-                f"unknown robot '{robot_name}' (pin of task {task_id!r}); the fleet has: "
-                f"{known_robots}",
-                code="unknown_robot",
-            )
+        where = f"{pinned_field}.{i}"
+        members = _pin_shape(instance, t, pin, where)
+        r = None
+        if robot_name is not None:
+            r = instance.robot_index(robot_name)
+            if r is None:
+                raise DomainError(
+                    f"{where}.robot",
+                    f"unknown robot '{robot_name}' (pin of task {task_id!r}); the fleet has: "
+                    f"{known_robots}",
+                    code="unknown_robot",
+                )
+        if members is not None:
+            if r is not None and r != members[0]:
+                raise DomainError(
+                    f"{where}.robot",
+                    f"robot '{robot_name}' is not the member covering the first unit of task "
+                    f"{task_id!r} ('{instance.robots[members[0]].name}', as answers read "
+                    "`robot`); give that robot or leave `robot` out",
+                    code="team_pin",
+                )
+            r, teams[t] = members[0], members
+        assert r is not None  # _pin_shape refuses a pin with neither a robot nor a team
         pins[t], pinned_by[t] = r, i
     off: dict[int, int] = {}
     for i, robot_name in enumerate(unavailable):
@@ -81,7 +110,98 @@ def resolve_pins(
             "unpinned tasks",
             code="no_robot_left",
         )
-    return Pins(pinned=pins, unavailable=frozenset(off))
+    return Pins(pinned=pins, unavailable=frozenset(off), teams=teams)
+
+
+def _pin_shape(instance: Instance, t: int, pin: PinRequest, where: str) -> tuple[int, ...] | None:
+    """A pin's team in unit order (None for a one-robot pin): a team task is pinned with its
+    whole team, a one-robot task with its robot; DomainError naming the entry otherwise."""
+    task = instance.tasks[t]
+    if pin.team is None:
+        if task.team is not None:
+            raise DomainError(
+                f"{where}.team",
+                f"task {task.id!r} is a team task ({_needs(task.team)}); pin it with its whole "
+                'team, `team`: [{"robot", "feature"}, ...], one entry per unit '
+                "(docs/living-plans.md#pins-in-allocate)",
+                code="team_pin",
+            )
+        if pin.robot is None:
+            raise DomainError(
+                f"{where}.robot",
+                f"give the robot task {task.id!r} is pinned on",
+                code="missing_robot",
+            )
+        return None
+    if task.team is None:
+        raise DomainError(
+            f"{where}.team",
+            f"task {task.id!r} is a one-robot task; pin it with `robot`, not `team`",
+            code="not_a_team",
+        )
+    return pinned_team(instance, t, pin.team, f"{where}.team")
+
+
+def pinned_team(
+    instance: Instance, t: int, entries: Sequence[tuple[str, str]], where: str
+) -> tuple[int, ...]:
+    """A team as a request gives it (a pin, a review's override), (robot, feature) per unit in
+    any order, checked as a team of task `t` (one distinct robot per unit, each eligible and
+    able to cover its unit's feature, every unit covered) and returned in unit order: the
+    members of one feature in the order given. DomainError naming the entry (`where`.j.robot,
+    ...)."""
+    task, robots = instance.tasks[t], instance.robots
+    need = dict(task.team or {})
+    given: dict[str, list[int]] = {f: [] for f in need}
+    seen: dict[int, int] = {}
+    for j, (name, feature) in enumerate(entries):
+        if feature not in need:
+            raise DomainError(
+                f"{where}.{j}.feature",
+                f"task {task.id!r} has no unit of '{feature}'; its team is {_needs(need)}",
+                code="invalid_team",
+            )
+        r = instance.robot_index(name)
+        if r is None:
+            raise DomainError(
+                f"{where}.{j}.robot",
+                f"unknown robot '{name}' (team of task {task.id!r}); the fleet has: "
+                + ", ".join(robot.name for robot in robots),
+                code="unknown_robot",
+            )
+        if r in seen:
+            raise DomainError(
+                f"{where}.{j}.robot",
+                f"robot '{robots[r].name}' is already in this team ({where}.{seen[r]}); a "
+                "team's members are distinct",
+                code="invalid_team",
+            )
+        if not (instance.eligible[t, r] and covers(robots[r], feature)):
+            raise DomainError(
+                f"{where}.{j}.robot",
+                f"robot '{robots[r].name}' cannot cover '{feature}' on task {task.id!r}: "
+                + (
+                    "it is not in its skills"
+                    if robots[r].skills is not None
+                    else "it does not rate it above 0"
+                ),
+                code="ineligible",
+            )
+        seen[r] = j
+        given[feature].append(r)
+    for feature, count in need.items():
+        if len(given[feature]) != count:
+            raise DomainError(
+                where,
+                f"task {task.id!r} needs {count} robot(s) for '{feature}' and the team gives "
+                f"{len(given[feature])}; one entry per unit: {_needs(need)}",
+                code="invalid_team",
+            )
+    return tuple(given[f].pop(0) for f in units_of(task))
+
+
+def _needs(team: Mapping[str, int]) -> str:
+    return ", ".join(f"{count} x '{feature}'" for feature, count in team.items())
 
 
 def checked_pinned_teams(

@@ -61,6 +61,9 @@ class Proposal:
     # Success points given away over the rest of the queue against the exact optimum (the
     # unit of the guidance costs); None when unknown.
     regret_points: float | None
+    # A team decision (docs/reviews.md#reviews-of-team-decisions): every member's name; `robot`
+    # is the first unit's. Empty for one robot.
+    members: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -94,8 +97,8 @@ class ReviewPolicy:
             fired.append(Trigger.TASK_IDS)
         if set(p.features) & set(self.features):
             fired.append(Trigger.FEATURES)
-        if p.robot in self.robots:
-            fired.append(Trigger.ROBOTS)
+        if p.robot in self.robots or set(p.members) & set(self.robots):
+            fired.append(Trigger.ROBOTS)  # a team: any of its members
         return fired
 
     def to_json(self) -> dict[str, Any]:
@@ -123,9 +126,12 @@ class Resolution:
     triggers: tuple[str, ...] = field(default_factory=tuple)
     robot: str | None = None  # override only: the reviewer's robot (by name)
     reason: str | None = None  # required for an override
+    # Override of a team decision only: (robot, feature) per unit, in unit order; `robot` is
+    # then the first unit's member (docs/reviews.md#reviews-of-team-decisions).
+    team: tuple[tuple[str, str], ...] | None = None
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "action": self.action.value,
             "reviewer": self.reviewer,
             "at": self.at,
@@ -133,6 +139,9 @@ class Resolution:
             "robot": self.robot,
             "reason": self.reason,
         }
+        if self.team is not None:  # absent for one robot: those resolutions read as before
+            out["team"] = [{"robot": r, "feature": f} for r, f in self.team]
+        return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> Resolution:
@@ -143,6 +152,9 @@ class Resolution:
             triggers=tuple(data.get("triggers") or ()),
             robot=data.get("robot"),
             reason=data.get("reason"),
+            team=None
+            if data.get("team") is None
+            else tuple((str(m["robot"]), str(m["feature"])) for m in data["team"]),
         )
 
 

@@ -16,13 +16,16 @@ from typing import Any
 
 from langgraph.types import interrupt
 
-from app.domain.decision import DecisionContext
+from app.domain.decision import DecisionContext, Members
 from app.domain.models import TaskId
 from app.domain.review import Proposal, Resolution, ReviewAction, ReviewPolicy
+from app.graph.review_teams import members_of, team_alternatives, team_json, team_units
 
 # (task index, loads before, robot) -> success points given away over the rest of the queue
 # against the exact optimum (the unit of the guidance costs), or None if the cap forbids it.
-Cost = Callable[[int, Sequence[int], int], float | None]
+# On a team task the third argument is the team's members (a tuple), which the unit oracle
+# reads (app.solvers.unit_oracle.UnitOracle.loss); Any keeps one callable for both.
+Cost = Callable[[int, Sequence[int], Any], float | None]
 
 
 @dataclass(frozen=True)
@@ -37,6 +40,7 @@ class ReviewGate:
 class Reviewed:
     robot: int
     review: dict[str, Any]
+    team: Members | None = None  # a team decision: the members after the review
 
 
 def review_payload(
@@ -49,9 +53,36 @@ def review_payload(
     tradeoff: str,
     triggers: Sequence[str],
     costs: Sequence[float | None],
+    team: Members | None = None,
+    cost: Cost | None = None,
 ) -> dict[str, Any]:
-    """What a supervisor sees (GET /reviews); checkpointed with the interrupt, so plain JSON."""
+    """What a supervisor sees (GET /reviews); checkpointed with the interrupt, so plain JSON.
+    A team decision's proposal carries its team, and its alternatives are teams
+    (docs/reviews.md#reviews-of-team-decisions)."""
     names = dctx.robot_names
+    if team is not None and dctx.team is not None and cost is not None:
+        facts = dctx.team
+        return {
+            "task_index": dctx.task_index,
+            "task_id": task_id,
+            "task_name": dctx.task_name,
+            "proposal": {
+                "robot": names[team[0]],
+                "team": team_json(facts.units, names, team),
+                "success": facts.success(team),
+                "reasoning": reasoning,
+                "tradeoff": tradeoff,
+                "quality": decision["quality"],
+                "confidence": decision["confidence"],
+                "fallback": decision["fallback"],
+            },
+            "triggers": list(triggers),
+            "alternatives": team_alternatives(
+                dctx, team, lambda m: cost(dctx.task_index, dctx.loads, m)
+            ),
+            "units": team_units(facts, names),
+            "loads": dict(zip(names, dctx.loads, strict=True)),
+        }
     return {
         "task_index": dctx.task_index,
         "task_id": task_id,
@@ -79,7 +110,13 @@ def review_payload(
     }
 
 
-def apply(resolution: Resolution, proposed: int, names: Sequence[str]) -> Reviewed:
+def apply(
+    resolution: Resolution,
+    proposed: int,
+    names: Sequence[str],
+    team: Members | None = None,
+    units: Sequence[str] = (),
+) -> Reviewed:
     review: dict[str, Any] = {
         "action": resolution.action.value,
         "reviewer": resolution.reviewer,
@@ -88,10 +125,19 @@ def apply(resolution: Resolution, proposed: int, names: Sequence[str]) -> Review
         "triggers": list(resolution.triggers),
     }
     robot = proposed
-    if resolution.action is ReviewAction.OVERRIDE and resolution.robot is not None:
+    if resolution.action is not ReviewAction.OVERRIDE:
+        return Reviewed(robot=robot, review=review, team=team)
+    if team is not None and resolution.team is not None:
+        # The reviewer's team, in unit order (the service checked it as a team); the
+        # decision keeps the proposed one beside it, its first member as for one robot.
+        chosen = members_of(resolution.team, names)
+        review["overridden_from"] = names[proposed]
+        review["overridden_from_team"] = team_json(units, names, team)
+        return Reviewed(robot=chosen[0], review=review, team=chosen)
+    if resolution.robot is not None:
         robot = list(names).index(resolution.robot)
         review["overridden_from"] = names[proposed]
-    return Reviewed(robot=robot, review=review)
+    return Reviewed(robot=robot, review=review, team=team)
 
 
 def gate(
@@ -102,20 +148,23 @@ def gate(
     robot: int,
     decision: Mapping[str, Any],
     text: Callable[[], tuple[str, str]],
+    team: Members | None = None,
 ) -> Reviewed | None:
-    """None: the decision goes ahead as proposed. Otherwise the reviewed robot and the
-    review record; the first call for a decision that needs review does not return (the
-    graph pauses) until the run is resumed with the resolution."""
+    """None: the decision goes ahead as proposed. Otherwise the reviewed robot (and team, on
+    a team task) and the review record; the first call for a decision that needs review does
+    not return (the graph pauses) until the run is resumed with the resolution."""
     t, names = dctx.task_index, dctx.robot_names
+    units = dctx.team.units if dctx.team is not None else ()
     if g.recorded is not None:
         recorded = g.recorded.get(t)
-        return None if recorded is None else apply(recorded, robot, names)
+        return None if recorded is None else apply(recorded, robot, names, team, units)
     if g.policy is None:
         return None
-    costs = [
-        None if (c := g.cost(t, dctx.loads, r)) is None else round(max(0.0, c), 6)
-        for r in range(len(names))
-    ]
+    if team is None:
+        costs = [_rounded(g.cost(t, dctx.loads, r)) for r in range(len(names))]
+        regret = costs[robot]
+    else:
+        costs, regret = [], _rounded(g.cost(t, dctx.loads, tuple(team)))
     proposal = Proposal(
         task_id=str(task_id),  # the policy names tasks as strings, whatever the request's type
         features=dctx.features,
@@ -123,7 +172,8 @@ def gate(
         fallback=bool(decision["fallback"]),
         confidence=str(decision["confidence"]),
         quality=float(decision["quality"]),
-        regret_points=costs[robot],
+        regret_points=regret,
+        members=tuple(names[m] for m in team or ()),
     )
     triggers = [x.value for x in g.policy.triggers(proposal)]
     if not triggers:
@@ -139,6 +189,12 @@ def gate(
             tradeoff=tradeoff,
             triggers=triggers,
             costs=costs,
+            team=team,
+            cost=g.cost,
         )
     )
-    return apply(Resolution.from_json(answer), robot, names)
+    return apply(Resolution.from_json(answer), robot, names, team, units)
+
+
+def _rounded(cost: float | None) -> float | None:
+    return None if cost is None else round(max(0.0, cost), 6)

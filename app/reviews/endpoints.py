@@ -18,6 +18,7 @@ from app.reviews.schemas import (
     ProposalOut,
     ReviewRequest,
     ReviewResolvedOut,
+    TeamUnitOut,
 )
 from app.runs.deps import RunIdPath, RunsDep
 
@@ -39,6 +40,7 @@ def list_reviews(caller: SupervisorDep, runs: RunsDep) -> list[PendingReviewOut]
             proposal=ProposalOut(**r.proposal),
             triggers=r.triggers,
             alternatives=[AlternativeOut(**a) for a in r.alternatives],
+            units=None if r.units is None else [TeamUnitOut(**u) for u in r.units],
             requested_at=r.requested_at,
         )
         for r in reviews.pending_reviews(sessions=runs.sessions)
@@ -68,6 +70,7 @@ def resolve_review(
         task_index=task_index,
         action=body.action,
         robot=body.robot,
+        team=None if body.team is None else [(m.robot, m.feature) for m in body.team],
         reason=body.reason,
         reviewer=caller.name,
         idempotency=idempotency_of(idempotency_key, body),
@@ -82,6 +85,7 @@ def resolve_review(
         task_index=task_index,
         action=r["action"],
         robot=r["robot"],
+        team=r.get("team"),
         reason=r["reason"],
         reviewer=r["reviewer"],
         at=r["at"],

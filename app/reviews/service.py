@@ -8,6 +8,7 @@ side of a review (pausing, resuming with the resolution) is app.runs.review_gate
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -21,6 +22,7 @@ from app.domain.review import (
     ReviewAction,
     ReviewState,
 )
+from app.reviews.team_override import checked_team
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind, RunStatus
 from app.store import repository as repo
@@ -74,6 +76,13 @@ class PendingReview:
     def alternatives(self) -> list[dict[str, Any]]:
         return [dict(a) for a in self.payload["alternatives"]]
 
+    @property
+    def units(self) -> list[dict[str, Any]] | None:
+        """A team decision's units (docs/reviews.md#reviews-of-team-decisions); None for one
+        robot."""
+        units = self.payload.get("units")
+        return None if units is None else [dict(u) for u in units]
+
 
 # -- the supervisor's side -----------------------------------------------------------------
 
@@ -117,6 +126,7 @@ def resolve(
     reason: str | None,
     reviewer: str,
     idempotency: Idempotency | None = None,
+    team: Sequence[tuple[str, str]] | None = None,
 ) -> Resolved:
     """Store the resolution and queue the run again, in one transaction: of two concurrent
     resolutions the conditional UPDATE lets exactly one through (the other: 409). A retry
@@ -125,15 +135,19 @@ def resolve(
     refuse_nul("reason", reason)
     if action is ReviewAction.OVERRIDE and reason is None:
         raise DomainError("reason", "an override needs a reason", code="missing")
-    if action is ReviewAction.OVERRIDE and robot is None:
+    if action is ReviewAction.OVERRIDE and robot is None and team is None:
         raise DomainError("robot", "an override names the robot to use", code="missing")
-    if action is ReviewAction.APPROVE and robot is not None:
+    if action is ReviewAction.APPROVE and (robot is not None or team is not None):
         raise DomainError(
-            "robot", "an approval takes the proposed robot; send action 'override'", code="invalid"
+            "robot" if team is None else "team",
+            "an approval takes the proposal; send action 'override'",
+            code="invalid",
         )
     with sessions() as session:
-        if repo.get_run(session=session, run_id=run_id) is None:
+        run = repo.get_run(session=session, run_id=run_id)
+        if run is None:
             raise RunNotFoundError(run_id)
+        request = dict(run.request)
         review = session.scalar(
             select(Review).where(Review.run_id == run_id, Review.task_index == task_index)
         )
@@ -145,29 +159,16 @@ def resolve(
         if review.state != ReviewState.PENDING:
             raise ReviewConflictError(run_id, task_index, f"it is {review.state}")
         payload = dict(review.proposal)
-    if robot is not None:
-        alternatives = {a["robot"]: a for a in payload["alternatives"]}
-        if robot not in alternatives:
-            raise DomainError(
-                "robot",
-                f"unknown robot '{robot}'; the run's robots are: {', '.join(alternatives)}",
-                code="unknown_robot",
-            )
-        if not alternatives[robot]["cap_feasible"]:
-            raise DomainError(
-                "robot",
-                f"robot '{robot}' cannot take task index {task_index}: the workload cap "
-                "could no longer be met",
-                code="cap_infeasible",
-            )
+    units = _checked_choice(request, payload, task_index, action, robot, team)
     now = utcnow()
     resolution = Resolution(
         action=action,
         reviewer=reviewer,
         at=now.isoformat(),
         triggers=tuple(payload.get("triggers", [])),
-        robot=robot,
+        robot=robot if units is None else units[0][0],
         reason=reason,
+        team=None if units is None else tuple(units),
     ).to_json()
     with transaction(sessions) as session:
         # The first statement writes: on SQLite it takes the write lock at once (a stale read
@@ -204,6 +205,44 @@ def resolve(
         )
     waited = (now - as_utc(won.requested_at)).total_seconds()
     return Resolved(run_id=run_id, task_index=task_index, resolution=resolution, waited_s=waited)
+
+
+def _checked_choice(
+    request: dict[str, Any],
+    payload: dict[str, Any],
+    task_index: int,
+    action: ReviewAction,
+    robot: str | None,
+    team: Sequence[tuple[str, str]] | None,
+) -> list[tuple[str, str]] | None:
+    """An override's robot, checked against the alternatives the review listed, or its team
+    (docs/reviews.md#reviews-of-team-decisions) as (robot, feature) per unit; None but for a
+    team."""
+    if action is ReviewAction.APPROVE:
+        return None  # the proposal as it stands, one robot or a team
+    if "team" in payload["proposal"]:
+        return checked_team(request, payload, task_index, robot, team)
+    if team is not None:
+        raise DomainError(
+            "team",
+            f"task index {task_index} is a one-robot decision; an override sends `robot`",
+            code="not_a_team",
+        )
+    alternatives = {a["robot"]: a for a in payload["alternatives"]}
+    if robot not in alternatives:
+        raise DomainError(
+            "robot",
+            f"unknown robot '{robot}'; the run's robots are: {', '.join(alternatives)}",
+            code="unknown_robot",
+        )
+    if not alternatives[robot]["cap_feasible"]:
+        raise DomainError(
+            "robot",
+            f"robot '{robot}' cannot take task index {task_index}: the workload cap "
+            "could no longer be met",
+            code="cap_infeasible",
+        )
+    return None
 
 
 def _retried(review: Review, idempotency: Idempotency | None) -> Resolved | None:

@@ -106,6 +106,13 @@ def recorded_resolutions(*, session: Session, run_id: str) -> dict[int, Resoluti
             triggers=tuple(review.get("triggers") or ()),
             robot=d.robot_name if review["action"] == ReviewAction.OVERRIDE else None,
             reason=review.get("reason"),
+            # An overridden team decision: the stored team is the reviewer's
+            # (docs/reviews.md#reviews-of-team-decisions).
+            team=tuple((m["robot"], m["feature"]) for m in d.team)
+            if review["action"] == ReviewAction.OVERRIDE
+            and d.team
+            and "overridden_from_team" in review
+            else None,
         )
     return out
 

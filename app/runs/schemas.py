@@ -260,7 +260,13 @@ class DecisionReviewOut(BaseModel):
     at: Timestamp
     triggers: list[str]
     overridden_from: str | None = Field(
-        None, description="override: the robot the run had proposed"
+        None, description="override: the robot the run had proposed (a team: its first member)"
+    )
+    overridden_from_team: list[TeamMemberOut] | None = Field(
+        None,
+        description="override of a team decision: the team the run had proposed, in unit order "
+        "(docs/reviews.md#reviews-of-team-decisions)",
+        exclude_if=lambda members: members is None,
     )
 
 

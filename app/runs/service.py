@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.allocation.service import resolve_instance
 from app.config import Settings
-from app.domain.errors import DomainError, RunStateConflictError
+from app.domain.errors import RunStateConflictError
 from app.domain.estimates import RateSource
 from app.domain.lifecycle import FINISHED
 from app.domain.objective import Objective
@@ -165,14 +165,6 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         uncapped="max_deviation" in order.sent and order.max_deviation is None,
         objective=Objective(order.objective, order.min_expected_success),
     )
-    if instance.has_teams and order.review is not None:
-        raise DomainError(
-            "review",
-            "a review policy on an instance with team tasks is not supported yet (a review "
-            "overrides one robot, not a team); drop `review` or the team tasks "
-            "(docs/allocation.md#teams)",
-            code="unsupported_field",
-        )
     scope: dict[str, Any] = {}
     if order.llm_scope is not None:
         scope["llm_scope"] = order.llm_scope

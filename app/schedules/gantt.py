@@ -10,6 +10,14 @@ A team task (docs/allocation.md#teams) has a bar in every member's lane, each wi
 class `team`, the same `data-task` and the same title naming the whole team; a thin
 connector (`team-link`) joins them across the lanes at the task's start, so the eye reads
 one task held by several robots.
+
+Each typed link (docs/schedules.md#links) is an arrow from the predecessor's bar to the
+successor's, drawn in one path per type (`link`, with `link-fs`, `link-ss`, `link-ff` or
+`link-sf`; its heads in a `link-head` path beside it), at the ends the link ties: out of
+the predecessor's right end (FS, FF) or left end (SS, SF), into the successor's start (FS,
+SS) or end (FF, SF), lane to lane (a team task's: its first member's), along the successor
+lane's margin. Drawn after the lanes (their backgrounds are opaque); an arrow stops at the
+edge of the bar it enters.
 """
 
 from __future__ import annotations
@@ -35,7 +43,13 @@ STYLE = (
     ".axis{stroke:#aab;stroke-width:.5}.end{stroke:#d62728;stroke-dasharray:4 3}"
     "text{font:11px sans-serif;fill:#222}.bar-label{fill:#fff;font-size:9px}"
     ".task.team{stroke:#1b1f24;stroke-width:1}.team-link{stroke:#1b1f24;stroke-width:1.5}"
+    ".link{fill:none;stroke:#55606e;stroke-width:1}.link-ss,.link-ff,.link-sf"
+    "{stroke-dasharray:3 2}.link-head{fill:#55606e}"
 )
+# Which end of each bar a link ties (docs/schedules.md#links): the predecessor's, then the
+# successor's; True is the bar's end (right), False its start (left).
+LINK_ENDS = {"FS": (True, False), "SS": (False, False), "FF": (True, True), "SF": (False, True)}
+STUB = 5  # px a link leaves its bar before it turns, and enters the other bar after
 
 
 def _n(x: float) -> str:
@@ -80,7 +94,8 @@ def gantt_svg(problem: Problem, schedule: Schedule) -> str:
         # Idle is hatched, so it reads apart from the shift behind it in any palette.
         '<defs><pattern id="idle-hatch" width="6" height="6" patternUnits="userSpaceOnUse" '
         'patternTransform="rotate(45)"><rect width="6" height="6" fill="#e3e7ee"/>'
-        '<line x1="0" y1="0" x2="0" y2="6" stroke="#9aa3b0" stroke-width="2"/></pattern></defs>',
+        '<line x1="0" y1="0" x2="0" y2="6" stroke="#9aa3b0" stroke-width="2"/></pattern>'
+        "</defs>",
     ]
     step = _tick_step(span)
     for k in range(int(span // step) + 1):
@@ -122,6 +137,7 @@ def gantt_svg(problem: Problem, schedule: Schedule) -> str:
                 out.append(_bar(problem, schedule, it.task, critical, scale, bar_y))
         out.append("</g>")
     out.extend(_team_links(problem, schedule, scale))
+    out.extend(_links(problem, schedule, scale))  # after the lanes, whose backgrounds are opaque
     end_x = GUTTER + schedule.makespan * scale
     bottom = TOP + LANE * instance.n_robots
     out.append(
@@ -190,6 +206,47 @@ def _team_links(problem: Problem, schedule: Schedule, scale: float) -> list[str]
             f'x1="{_n(x)}" y1="{_n(lanes_y[0] + BAR)}" x2="{_n(x)}" y2="{_n(lanes_y[-1])}">'
             f"<title>team of {len(slot.team)}</title></line>"
         )
+    return out
+
+
+def _links(problem: Problem, schedule: Schedule, scale: float) -> list[str]:
+    """Per link type, one path of arrows and one of their heads (a 1,000-task chart stays
+    light: two elements per type, not one per link), the links in task order and each task's
+    `after` order. An arrow leaves the predecessor's tied end by STUB px, runs along the
+    successor lane's margin and enters its bar from outside: from the left into a start, from
+    the right into an end."""
+    lines: dict[str, list[str]] = {kind: [] for kind in LINK_ENDS}
+    heads: dict[str, list[str]] = {kind: [] for kind in LINK_ENDS}
+    slots = schedule.slots
+    for t, arcs in enumerate(problem.instance.timing.links):
+        succ = slots[t]
+        for arc in arcs:
+            pred = slots[arc.pred]
+            from_end, to_end = LINK_ENDS[arc.type]
+            x1 = GUTTER + (pred.end if from_end else pred.start) * scale
+            x2 = GUTTER + (succ.end if to_end else succ.start) * scale
+            y1 = TOP + pred.robot * LANE + LANE / 2
+            y2 = TOP + succ.robot * LANE + LANE / 2
+            out_x = x1 + STUB if from_end else x1 - STUB
+            side = 1 if to_end else -1  # where it comes from: right of an end, left of a start
+            # The long run goes along the successor lane's margin (above its bars when it
+            # comes from above or the same lane, below them from below), not through bars.
+            margin = (LANE - BAR) / 2 - 1
+            edge = y2 - BAR / 2 - margin if pred.robot <= succ.robot else y2 + BAR / 2 + margin
+            lines[arc.type].append(
+                f"M{_n(x1)} {_n(y1)}H{_n(out_x)}V{_n(edge)}H{_n(x2 + side * STUB)}"
+                f"V{_n(y2)}H{_n(x2)}"
+            )
+            heads[arc.type].append(f"M{_n(x2)} {_n(y2)}l{side * 4} -3v6z")
+    out = []
+    for kind, drawn in lines.items():
+        if drawn:
+            css = f"link link-{kind.lower()}"
+            out.append(
+                f'<path class="{css}" data-type="{kind}" d="{"".join(drawn)}">'
+                f"<title>{len(drawn)} {kind} link(s)</title></path>"
+                f'<path class="link-head" data-type="{kind}" d="{"".join(heads[kind])}"/>'
+            )
     return out
 
 

@@ -75,6 +75,8 @@ class Solver(ABC):
     ) -> Solution:
         self.check_supported(problem)
         solution = self._solve(problem, seed=seed, options=self.parse_options(options))
+        # Methods decide the free tasks; a pinned team is the answer's team as it was pinned.
+        solution.teams = {**problem.pinned_teams, **solution.teams}
         if problem.instance.timed:  # untimed answers are exactly what they always were
             attach_schedule(problem, solution.assignment, solution.details, solution.teams)
         return solution

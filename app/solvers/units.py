@@ -136,9 +136,11 @@ class UnitView:
         """The full answer from one choice per free task: fleet robots, teams, pins kept."""
         robots = self.robots
         firsts = [robots[m[0]] for m in choices]
-        teams = {
-            t: tuple(robots[c] for c in m)
+        # A pinned team task keeps its pinned team (docs/living-plans.md#pins-in-allocate).
+        teams = dict(self.problem.pinned_teams)
+        teams.update(
+            (t, tuple(robots[c] for c in m))
             for t, m, u in zip(self.tasks, choices, self.units, strict=True)
             if u
-        }
+        )
         return Solution(self.problem.complete(firsts), teams=teams, details=dict(details))

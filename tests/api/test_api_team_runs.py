@@ -1,8 +1,7 @@
 """Durable LTAA runs with team tasks (docs/allocation.md#teams): an untimed team run completes
 with valid teams, its trace lists each team decision's members, the chain verifies online and
-offline (and the members are in it), a guided run reaches the exact optimum, a timed team run
-plans in time as /allocate does, and what the graph cannot do yet (reviews of teams) is a 422
-sentence with nothing stored."""
+offline (and the members are in it), a guided run reaches the exact optimum, and a timed team run
+plans in time as /allocate does (reviews of team decisions: tests/api/test_team_reviews.py)."""
 
 from __future__ import annotations
 
@@ -15,7 +14,6 @@ import pytest
 from fastapi.testclient import TestClient
 
 from tests.api.conftest import ClientFactory
-from tests.api.test_api_bad_requests import assert_error_shape
 from tests.api.test_api_teams import TEAM_BODY
 from tests.api.test_docs_check_trace import check_trace_source
 from tests.fakes.llm_providers import PROVIDERS
@@ -202,16 +200,6 @@ def test_a_durable_timed_team_run_over_an_sdk_forms_the_rules_teams(
         for i in (state["id"], rules)
     )
     assert by_sdk == by_rules
-
-
-def test_a_review_policy_on_team_tasks_is_refused(client: TestClient) -> None:
-    r = client.post(
-        "/runs", json={**copy.deepcopy(TEAM_BODY), "review": {"on": ["every_decision"]}}
-    )
-    assert r.status_code == 422, r.text
-    (item,) = assert_error_shape(r.json())
-    assert item["loc"][-1] == "review" and "team" in item["msg"]
-    assert client.get("/runs").json() == []
 
 
 @pytest.mark.parametrize("name", list(PROVIDERS))

@@ -12,6 +12,7 @@ import pytest
 from axe_playwright_python.sync_playwright import Axe
 from playwright.sync_api import Page, expect
 
+from app.domain.catalog import timed_scenario
 from app.domain.serialize import instance_to_dict
 from benchmarks.timed_instances import construction_site
 from tests.browser.conftest import sign_in, start_run, wait_status
@@ -53,6 +54,14 @@ def test_a_timed_runs_page_shows_its_gantt_chart_and_an_untimed_one_does_not(
     fill = critical.first.evaluate("e => getComputedStyle(e).fill")
     assert fill == "rgb(214, 39, 40)", fill
     assert "makespan of" in (page.locator("figure.gantt-chart figcaption").text_content() or "")
+    # Every link an arrow (docs/schedules.md#the-consoles-gantt-chart), styled by console.css.
+    links = sum(len(t.after) for t in timed_scenario("baseline_timed").instance.tasks)
+    arrows = page.locator("figure.gantt-chart path.link-fs")  # baseline_timed: plain ids, FS
+    expect(arrows).to_have_count(1)
+    assert (arrows.get_attribute("d") or "").count("M") == links
+    assert arrows.evaluate("e => getComputedStyle(e).fill") == "none"
+    head = page.locator("figure.gantt-chart path.link-head")
+    assert head.evaluate("e => getComputedStyle(e).fill") == "rgb(85, 96, 110)"
     assert _serious(page) == []
 
     page.goto(f"{server.url}/console/runs/{untimed}")

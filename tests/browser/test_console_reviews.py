@@ -4,12 +4,14 @@ a completed run is signed off from its page, which then shows the verified heads
 
 from __future__ import annotations
 
+import copy
 import re
 
 import httpx
 import pytest
 from playwright.sync_api import Page, expect
 
+from tests.api.test_api_teams import TEAM_BODY
 from tests.browser.conftest import CLIENT_KEY, SUPERVISOR_KEY, sign_in, wait_status
 from tests.e2e.server import Server
 
@@ -95,3 +97,49 @@ def test_a_run_page_awaiting_review_follows_a_resolution_made_elsewhere(
     assert page.evaluate("window.__same_page") is True
     page.locator("#status-changed").get_by_role("link", name="reload this page").click()
     expect(page.get_by_role("button", name="Sign off")).to_be_visible()
+
+
+def test_a_team_decision_is_reviewed_with_its_team_and_overridden_with_another(
+    page: Page, server: Server
+) -> None:
+    """docs/reviews.md#reviews-of-team-decisions: the review shows the proposed team and the
+    candidate teams; overriding picks one of them, and the decision keeps both."""
+    body = {
+        **copy.deepcopy(TEAM_BODY),
+        "reasoner": "rules",
+        "review": {"task_ids": ["beam"]},
+    }
+    created = httpx.post(
+        f"{server.url}/runs", json=body, headers={"X-API-Key": CLIENT_KEY}, timeout=30
+    )
+    assert created.status_code == 202, created.text
+    run_id = str(created.json()["id"])
+    wait_status(server, run_id, "awaiting_review")
+    pending = httpx.get(
+        f"{server.url}/reviews", headers={"X-API-Key": SUPERVISOR_KEY}, timeout=30
+    ).json()
+    (review,) = [r for r in pending if r["run_id"] == run_id]
+    proposed = review["proposal"]["team"]
+    sign_in(page, server, then="/console/reviews")
+    card = page.locator("article.review", has=page.locator(f'a[href*="{run_id}"]'))
+    expect(card.locator(".proposed-team")).to_have_text(
+        " + ".join(f"{m['robot']} ({m['feature']})" for m in proposed)
+    )
+    table = card.get_by_role("table")
+    expect(table).to_contain_text("Candidate teams")
+    expect(table.locator("tbody tr")).to_have_count(len(review["alternatives"]))
+    choice = card.get_by_label("Give the task to the team")
+    options = choice.locator("option")
+    expect(options).to_have_count(len(review["alternatives"]) - 1)  # all but the proposal
+    label = options.first.inner_text()
+    choice.select_option(index=0)
+    card.get_by_label("Reason (recorded with the decision)").fill("the crane is booked")
+    card.get_by_role("button", name="Override").click()
+    expect(page.locator("#run-status")).to_have_text("completed", timeout=60_000)
+    decision = httpx.get(
+        f"{server.url}/runs/{run_id}/trace", headers={"X-API-Key": SUPERVISOR_KEY}, timeout=30
+    ).json()["decisions"][0]
+    chosen = [m["robot"] for m in decision["team"]]
+    assert label.startswith(" + ".join(chosen)), (label, chosen)
+    assert decision["review"]["overridden_from_team"] == proposed
+    assert decision["review"]["reason"] == "the crane is booked"

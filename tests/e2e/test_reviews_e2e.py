@@ -303,8 +303,35 @@ def test_the_cli_lists_and_resolves_reviews_against_a_real_server(tmp_path: Path
         state = _wait(server, run_id, ("completed", "failed"))
         again = runner.invoke(cli, ["review", run_id, "3", "--approve", *base])
         assert again.exit_code == 1 and "409" in again.output
+        team = _cli_team_override(runner, server, base)
     finally:
         server.stop()
     assert state["status"] == "completed"
     assert state["assignments"][3]["robot"] == "light"
     assert state["assignments"][3]["review"]["reviewer"] == "Dana Safety"
+    assert [m["robot"] for m in team["team"]] == ["arm", "lifter"]
+    assert team["review"]["overridden_from_team"] != team["team"]
+
+
+def _cli_team_override(runner: Any, server: Server, base: list[str]) -> dict[str, Any]:
+    """docs/reviews.md#reviews-of-team-decisions: `ltaa reviews` names the proposed team's
+    members, `ltaa review --team` overrides it; one robot on a team decision is refused."""
+    from app.cli import cli
+    from tests.api.test_api_teams import TEAM_BODY
+
+    with _client(server) as c:
+        created = c.post("/runs", json={**TEAM_BODY, "review": {"task_ids": ["beam"]}})
+        run_id = created.json()["id"]
+    _wait(server, run_id, ("awaiting_review",))
+    listed = runner.invoke(cli, ["reviews", *base], env={"COLUMNS": "240"})
+    assert listed.exit_code == 0 and "crane + lifter" in listed.output, listed.output
+    one = runner.invoke(cli, ["review", run_id, "0", "--override", "arm", "--reason", "r", *base])
+    assert one.exit_code == 1 and "send `team`" in one.output, one.output
+    done = runner.invoke(
+        cli,
+        ["review", run_id, "0", "--team", "arm:heavy,lifter:heavy", "--reason", "r", *base],
+    )
+    assert done.exit_code == 0 and "overridden to arm + lifter" in done.output, done.output
+    state = _wait(server, run_id, ("completed", "failed"))
+    assert state["status"] == "completed", state
+    return dict(state["assignments"][0])

@@ -102,6 +102,10 @@ def check_schedule(problem: Problem, schedule: Schedule) -> list[Violation]:
         pin = problem.pinned.get(t)
         if pin is not None and pin != r:
             add(Rule.PIN, f"{task(t)} is pinned on '{robots[pin].name}' but runs on '{name}'", t, r)
+        team = problem.pinned_teams.get(t)
+        if team is not None and tuple(s.members) != team:
+            pinned = " + ".join(robots[m].name for m in team)
+            add(Rule.PIN, f"{task(t)} is pinned on the team {pinned}, not the one it runs on", t, r)
         if fixed is not None and abs(s.start - fixed) > EPS:
             add(
                 Rule.PIN,

@@ -111,9 +111,10 @@ def list_schedule(
     done = [False] * n
     lines = [Timeline(a, tm.robot_zone[r]) for r, (a, _) in enumerate(tm.shifts)]
     for t, start in sorted(problem.pinned_starts.items(), key=lambda item: item[1]):
-        r = assignment[t]
-        lines[r].fixed.append((start, start + tm.duration(t, r), t))
-        starts[t], ends[t], done[t] = start, start + tm.duration(t, r), True
+        end = start + tm.duration(t, assignment[t])
+        for m in members(t):  # a pinned team holds every member over its times
+            lines[m].fixed.append((start, end, t))
+        starts[t], ends[t], done[t] = start, end, True
     waiting = [sum(1 for p in tm.predecessors[t] if not done[p]) for t in range(n)]
 
     def ready_time(t: int) -> float:

@@ -104,7 +104,7 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
     }
     if team is not None:
         decision["team"] = list(team)
-    if ctx.review is not None and team is None:  # reviews of team decisions: not yet
+    if ctx.review is not None:
         # Last, and after nothing but reads: a resumed graph re-runs this node from its top.
         def texts() -> tuple[str, str]:
             if "text_attempt" in text:
@@ -120,12 +120,18 @@ def finalize(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]
             robot=robot,
             decision=decision,
             text=texts,
+            team=team,
         )
         if reviewed is not None:
-            # Loads, balance, regret and every later decision follow the reviewed robot.
-            robot = reviewed.robot
-            decision["expected_success"] = dctx.success[robot]
+            # Loads, balance, regret and every later decision follow the reviewed robot (a
+            # team decision: the reviewed team, docs/reviews.md#reviews-of-team-decisions).
+            robot, team = reviewed.robot, reviewed.team
+            decision["expected_success"] = (
+                dctx.success[robot] if team is None else _team_success(dctx, team)
+            )
             decision["review"] = reviewed.review
+            if team is not None:
+                decision["team"] = list(team)
     if dctx.timing:
         seq = ctx.timed.at(ctx.problem, rec, t).decided
         decision["time"] = time_record(dctx, robot, seq, team)

@@ -28,7 +28,7 @@ from ortools.sat.python import cp_model
 
 from app.domain.links import ancestors_through
 from app.domain.problem import Problem
-from app.domain.teams import covers
+from app.domain.teams import covers, team_success
 from app.solvers.cpsat.model import add_after, add_link, zones_to_enter
 from app.solvers.cpsat.task_window import add_task_window, serial_horizon
 from app.solvers.cpsat.time_scale import TimeScale
@@ -44,7 +44,9 @@ def team_model_size(problem: Problem) -> int:
     total = 0
     for t in range(tm.n_tasks):
         pin = problem.pinned.get(t)
-        robots = [pin] if pin is not None else tm.eligible_robots(t)
+        robots = list(problem.pinned_teams.get(t, ())) or (
+            [pin] if pin is not None else tm.eligible_robots(t)
+        )
         for r in robots:
             if pin is None and r in problem.unavailable:
                 continue
@@ -80,8 +82,14 @@ class TeamWeights:
         # mean success = sum of weights * per_unit / number of tasks
         self.per_unit = divisor / (view.scale * view.multiple)
         self.n_tasks = problem.instance.n_tasks
+        inst = problem.instance
         self.pinned_success = float(
-            sum(problem.instance.success[t, r] for t, r in problem.pinned.items())
+            sum(
+                team_success(inst.tasks[t], inst.robots, problem.pinned_teams[t])
+                if t in problem.pinned_teams
+                else inst.success[t, r]
+                for t, r in problem.pinned.items()
+            )
         )
 
     def of(
@@ -147,6 +155,9 @@ class TeamModel:
         self.es = cp_model.LinearExpr.weighted_sum(terms, coeffs)
 
     def _candidates(self, t: int) -> list[int]:
+        team = self.problem.pinned_teams.get(t)
+        if team is not None:  # docs/living-plans.md#pins-in-allocate: the pinned members
+            return list(team)
         pin = self.problem.pinned.get(t)
         if pin is not None:
             return [pin]
@@ -178,10 +189,12 @@ class TeamModel:
         for f in self.units[t]:
             counts[f] += 1
         by_feature: dict[str, list[cp_model.IntVar]] = {f: [] for f in counts}
+        pinned = dict(zip(self.problem.pinned_teams.get(t, ()), self.units[t], strict=False))
         for r in self.candidates[t]:
             mine = []
             for f in counts:
-                if covers(robots[r], f):
+                # A pinned member covers its pinned unit, whatever its skills say now.
+                if (f == pinned[r]) if pinned else covers(robots[r], f):
                     x = m.new_bool_var(f"c{t}_{r}_{f}")
                     self.cover[t, r, f] = x
                     by_feature[f].append(x)
@@ -276,9 +289,16 @@ class TeamModel:
         demand = [len(u) or 1 for u in self.units]
         self.model.add_cumulative(self._task_intervals, demand, len(robots))
         features = {f for u in self.units for f in u}
+        pinned_on = {
+            (m, g)
+            for t, team in self.problem.pinned_teams.items()
+            for m, g in zip(team, self.units[t], strict=True)
+        }
         for f in sorted(features):
             tasks = [t for t, u in enumerate(self.units) if f in u]
-            able = sum(1 for r in robots if covers(r, f))
+            able = sum(
+                1 for r, robot in enumerate(robots) if covers(robot, f) or (r, f) in pinned_on
+            )
             self.model.add_cumulative(
                 [self._task_intervals[t] for t in tasks],
                 [self.units[t].count(f) for t in tasks],
