@@ -196,15 +196,3 @@ def _check_matching(i: int, task: Task, robots: Sequence[Robot]) -> None:
             f"{features}, but at most {matched} of the fleet can be matched to its units; "
             "lower a count or give more robots the skills",
         )
-
-
-def refuse_teams(tasks: Sequence[Task], who: str, use: str) -> None:
-    """A 422 naming the first team task, for a planner that plans one robot per task."""
-    for t, task in enumerate(tasks):
-        if task.team is not None:
-            raise DomainError(
-                f"tasks.{t}.team",
-                f"task {task.id!r} needs a team, and {who} plans one robot per task; {use} "
-                "(docs/allocation.md#teams)",
-                code="unsupported_field",
-            )

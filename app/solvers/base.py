@@ -43,9 +43,8 @@ class SolverOptions(BaseModel):
 
 # The methods that plan team tasks (docs/allocation.md#teams); the others refuse them.
 TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule", "ltaa")
-# ... and those that plan them on a timed instance: the exact scheduler, the methods whose
-# team assignment the shared list scheduler times, and the LTAA graph on its own time lines.
-TIMED_TEAM_METHODS = ("optimal", "dp", "brute_force", "greedy", "schedule", "ltaa")
+# Each plans them timed and untimed: the exact scheduler itself, the LTAA graph on its own
+# time lines, the others' team assignments timed by the shared list scheduler.
 
 
 class Solver(ABC):
@@ -89,14 +88,6 @@ class Solver(ABC):
             return
         t = next(i for i, task in enumerate(instance.tasks) if task.team is not None)
         task = instance.tasks[t]
-        if instance.timed and self.forms_teams and self.info.name not in TIMED_TEAM_METHODS:
-            raise DomainError(
-                f"tasks.{t}.team",
-                f"task {task.id!r} needs a team on a timed instance, which solver "
-                f"'{self.info.name}' does not schedule yet (docs/allocation.md#teams); use "
-                f"{_listed(TIMED_TEAM_METHODS)}",
-                code="unsupported_field",
-            )
         if not self.forms_teams:
             raise DomainError(
                 f"tasks.{t}.team",
