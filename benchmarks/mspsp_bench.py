@@ -4,7 +4,7 @@
 
 Reads a local copy of MSPSP-InstLib (`--dir`, or $LTAA_MSPSP_DIR; not committed here: it
 has no licence; docs/benchmarks.md says where to get it), turns each set 2c instance
-matching `--pattern` (default the 44 instances with 20 activities) into a timed team
+matching `--pattern` (default all 91) into a timed team
 instance (`benchmarks/mspsp.py`), solves it with the `schedule` method (objective
 `makespan`, no workload cap, `time_limit_s` 30: a deterministic budget; the wall-clock
 net widened to 900 s, as for Brandimarte, so a loaded machine does not cut it) and checks each
@@ -41,7 +41,15 @@ from app.solvers.base import Solution
 from app.solvers.cpsat.common import WALL_CAP_EXTRA_S, WALL_CAP_FACTOR
 from app.solvers.cpsat.search import solve_schedule
 from app.solvers.registry import get_solver
-from benchmarks.common import Section, machine, table, write_section
+from benchmarks.common import (
+    Section,
+    machine,
+    revision,
+    revision_line,
+    stale_mark,
+    table,
+    write_section,
+)
 from benchmarks.mspsp import (
     ENV,
     RESULTS_2C,
@@ -64,7 +72,7 @@ HEADING = f"## {TITLE}"
 LIMIT_S = 30.0
 PLAIN_LIMIT_S = 30.0
 WALL_CAP_S = 900.0  # the benchmark measures the deterministic budget, not the safety net
-PATTERN = "inst_set2c_*_n20_*"
+PATTERN = "inst_set2c_*"
 SOURCE = "https://github.com/youngkd/MSPSP-InstLib"
 
 
@@ -222,6 +230,7 @@ def measure(
             "skills": project.n_skills,
             "published": dataclasses.asdict(_published(published, project.name)),
             "load": os.getloadavg()[0],
+            "revision": revision(),
         }
         row["published_plan"] = _published_plan_check(folder, project, row_best(row))
         row["schedule"] = solve_schedule_method(project, LIMIT_S)
@@ -242,17 +251,8 @@ def _num(v: float | None) -> str:
 
 def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
     """The instances in each class the acceptance counts."""
-    keys = [
-        "run",
-        "reached",
-        "proven",
-        "false",
-        "below",
-        "refused",
-        "broken",
-        "bound_over",
-        "plain_only",
-    ]
+    keys = ["run", "reached", "proven", "false", "below", "refused", "broken"]
+    keys += ["bound_over", "plain_only"]
     out: dict[str, list[str]] = {k: [] for k in keys}
     for r in rows:
         s, best = r["schedule"], r["published"]["makespan"]
@@ -278,7 +278,7 @@ def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
     return out
 
 
-def _row(r: dict[str, Any]) -> tuple[Any, ...]:
+def _row(r: dict[str, Any], mark: str) -> tuple[Any, ...]:
     s, plain = r["schedule"], r.get("plain")
     ref = "-" if plain is None else f"{plain['status']} {_num(plain['makespan'])}"
     if s["status"] == "refused":
@@ -298,7 +298,7 @@ def _row(r: dict[str, Any]) -> tuple[Any, ...]:
             f"{s['cpu_s']:.1f} s / {s['wall_s']:.1f} s",
         )
     return (
-        r["name"].removeprefix("inst_set2c_") + (" †" if r.get("remeasured") else ""),
+        r["name"].removeprefix("inst_set2c_") + mark,
         f"{r['tasks']} ({r['teams']})",
         r["robots"],
         r["published"]["makespan"],
@@ -353,16 +353,11 @@ def body(rows: list[dict[str, Any]], folder_note: str, image: str | None = None)
                 "CPU / wall",
                 "plain model",
             ],
-            [_row(r) for r in rows],
+            [_row(r, stale_mark(rows, r)) for r in rows],
         ),
         "",
     ]
-    if again := [r for r in rows if r.get("remeasured")]:
-        lines += [
-            f"† {len(again)} rows re-measured after a change to `schedule`'s search ("
-            f"{again[0]['remeasured']}); every other row was proven optimal before it.",
-            "",
-        ]
+    lines += [revision_line(rows, "`schedule` (the app at commit {})"), ""]
     lines += _summary(v, n)
     lines += _published_plans(rows)
     lines += plain_line(rows)
