@@ -98,15 +98,16 @@ def write_section(title: str, text: str) -> None:
 
 
 def revision() -> str:
-    """The commit the app is measured at, "+changes" when app/ differs from it: a kept row
-    says which model produced it."""
+    """The app's revision: the last commit that changed app/, "+changes" when app/ has
+    uncommitted changes (a kept row says which model produced it; a docs or benchmark
+    commit leaves it)."""
     import subprocess
 
     def git(*args: str) -> str:
         done = subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
         return done.stdout.strip()
 
-    head = git("rev-parse", "--short", "HEAD") or "unknown"
+    head = git("log", "-1", "--format=%h", "--", "app") or "unknown"
     return head + ("+changes" if git("status", "--porcelain", "--", "app") else "")
 
 

@@ -203,24 +203,29 @@ def measure(
 ) -> list[dict[str, Any]]:
     """One row per instance, kept in RESULTS as it goes. With MSPSP_REUSE=1 the rows
     already kept there are reused and only the other instances measured (a cut run
-    resumes; a finished one re-renders without measuring); `kept_only` measures nothing
-    and renders the kept rows of the selection (a run cut for good)."""
+    resumes; a finished one re-renders without measuring); a kept row measured by another
+    revision of the app has `schedule` measured again (the plain model is not the app's,
+    its result is kept). `kept_only` measures nothing and renders the kept rows of the
+    selection (a run cut for good; stale rows marked)."""
     published = published_results(folder)
     kept: dict[str, dict[str, Any]] = {}
     if os.environ.get("MSPSP_REUSE") == "1" and RESULTS.exists():
         kept = {row["name"]: row for row in json.loads(RESULTS.read_text())}
-    rows = []
+    rows, now = [], revision()
     for path in set_2c(folder, pattern)[:limit]:
-        if path.stem in kept:
-            old = kept[path.stem]
-            if "published_plan" not in old:  # kept by a run before this check existed
-                best = row_best(old)
-                old["published_plan"] = _published_plan_check(folder, read_dzn(path), best)
+        old = kept.get(path.stem)
+        if old is not None and (kept_only or old.get("revision") == now):
             rows.append(old)
             continue
         if kept_only:
             continue
         project = read_dzn(path)
+        if old is not None:
+            old.update(schedule=solve_schedule_method(project, LIMIT_S), revision=now)
+            rows.append(old)
+            RESULTS.write_text(json.dumps(list(kept.values())))
+            print(f"{project.name} (schedule again): {old['schedule']}", file=sys.stderr)
+            continue
         instance = project_instance(project)
         row: dict[str, Any] = {
             "name": project.name,
@@ -230,7 +235,7 @@ def measure(
             "skills": project.n_skills,
             "published": dataclasses.asdict(_published(published, project.name)),
             "load": os.getloadavg()[0],
-            "revision": revision(),
+            "revision": now,
         }
         row["published_plan"] = _published_plan_check(folder, project, row_best(row))
         row["schedule"] = solve_schedule_method(project, LIMIT_S)
