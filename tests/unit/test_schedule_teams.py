@@ -39,6 +39,7 @@ from app.domain.scheduling.schedule import Schedule
 from app.domain.teams import covers
 from app.exchange.mspdi_write import write_mspdi
 from app.schedules import gantt_svg, schedule_csv, schedule_ics
+from app.solvers.cpsat.team_dispatch import team_dispatch
 from app.solvers.registry import get_solver
 from benchmarks.team_schedules import measure
 
@@ -505,3 +506,22 @@ def test_team_times_finer_than_the_models_unit_are_never_called_optimal() -> Non
 def test_the_team_benchmark_measures_a_method() -> None:
     row = measure(Mode.BALANCED, "optimal")
     assert row.method == "optimal" and row.broken == 0 and row.makespan > 0 and 0 < row.es <= 1
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(instances(max_tasks=7))
+def test_the_team_dispatch_gives_orders_the_list_scheduler_times_within_the_rules(
+    drawn: tuple[Instance, int],
+) -> None:
+    # The team model's second start (team_dispatch.py): orders and teams that
+    # `sequence_schedule` accepts, covering every unit with distinct able robots; only a
+    # deadline or a shift may break (the caller then drops the plan).
+    instance, _ = drawn
+    problem = Problem.build(instance, Mode.SUCCESS_FOCUSED)
+    candidates = [list(instance.timing.eligible_robots(t)) for t in range(instance.n_tasks)]
+    plan = team_dispatch(problem, candidates)
+    assert plan is not None
+    sequences, teams = plan
+    schedule = sequence_schedule(problem, sequences, teams)
+    assert {v.rule for v in check_schedule(problem, schedule)} <= KEPT
+    assert set(teams) == {t for t, task in enumerate(instance.tasks) if task.team}

@@ -35,6 +35,7 @@ from app.solvers.cpsat.common import (
     proved_none,
 )
 from app.solvers.cpsat.outcome import ScheduleOutcome
+from app.solvers.cpsat.team_dispatch import team_dispatch
 from app.solvers.cpsat.team_model import TeamModel, TeamWeights, team_model_size
 from app.solvers.cpsat.time_scale import TimeScale
 from app.solvers.unit_flow import best_units
@@ -121,6 +122,8 @@ def solve_team_schedule(
         found.offer_orders(hint.sequences(problem.instance.n_robots), hint.teams)
     model = TeamModel(problem, scale, weights)
     search.charge(model_cost(model.model))
+    if (plan := team_dispatch(problem, model.candidates)) is not None:
+        found.offer_orders(*plan)
     es_proven = True
     if problem.objective.kind is ObjectiveKind.MAKESPAN:
         found.floor = _es_floor(problem, weights, es_bound)
