@@ -94,7 +94,7 @@ def plain_line(rows: list[dict[str, Any]]) -> list[str]:
     below = sum(1 for p, best in found if p["makespan"] < best)
     proven = sum(1 for p, _ in plain if p["status"] == "optimal")
     ours = sum(r["schedule"].get("cpu_s", 0.0) for r in rows if r.get("plain"))
-    theirs = sum(p["cpu_s"] for p, _ in plain)
+    theirs = sum(p.get("cpu_s", 0.0) for p, _ in plain)
     return [
         "",
         f"The plain model reaches the published optimum on {reached} of {len(plain)}, proves "
