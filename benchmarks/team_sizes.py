@@ -351,12 +351,13 @@ def figure(rows: list[dict[str, Any]], directory: Path = IMG) -> str:
     left.set_xlabel("tasks")
     left.set_ylabel("ES regret vs optimal (points)")
     left.set_title("Untimed team instances")
-    left.legend(fontsize=7)
+    left.legend(fontsize=7, title="(optimal and guided: 0)", title_fontsize=7)
     right.set_xlabel("tasks")
     right.set_ylabel("CPU ms per decision")
     right.set_yscale("log")
     right.set_title("Time per decision")
-    right.legend(fontsize=6)
+    # beside the axes: inside, the legend hid the slowest points
+    right.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
     return save(fig, IMAGE, directory)
 
 
