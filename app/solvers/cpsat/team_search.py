@@ -135,7 +135,13 @@ def solve_team_schedule(
             found.target, es_proven = _stage_success(model, search, found, es_bound, scale)
         model.model.add(model.es == found.target)
     model.model.minimize(model.makespan)
-    _seed(model, found.best() or hint)
+    # Hinted with the first plans only where stage 2 holds ES at a target those plans reach
+    # (baseline_team at 10 s: 244 min hinted, 279 not). Under `makespan` the space is wide and
+    # the first plans far from short (MSPSP set 2c: 49-62 and 32-52 against optima of
+    # 22-43); hinted, the one-worker search followed them into worse plans (n30_l3_m8_01 40,
+    # n30_l10_m15_00 36, against 39 and 34 unhinted). A caller's own hint is always used.
+    automatic = problem.objective.kind is not ObjectiveKind.MAKESPAN
+    _seed(model, (found.best() if automatic else None) or hint)
     # The one-robot path's rule (search.py): strong disjunctive propagation and the
     # objective-bound search only where travel literals make the model disjunctive. Without
     # travel (MSPSP-InstLib set 2c) the objective-bound search cost proofs and plans:
