@@ -95,3 +95,42 @@ def write_section(title: str, text: str) -> None:
     else:
         report = report.rstrip("\n") + "\n\n" + text
     path.write_text(report, encoding="utf-8")
+
+
+def revision() -> str:
+    """The app's revision: the last commit that changed app/, "+changes" when app/ has
+    uncommitted changes (a kept row says which model produced it; a docs or benchmark
+    commit leaves it)."""
+    import subprocess
+
+    def git(*args: str) -> str:
+        done = subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+        return done.stdout.strip()
+
+    head = git("log", "-1", "--format=%h", "--", "app") or "unknown"
+    return head + ("+changes" if git("status", "--porcelain", "--", "app") else "")
+
+
+def _revisions(rows: Sequence[dict[str, Any]]) -> list[str]:
+    return list(dict.fromkeys(str(r.get("revision", "before revisions were kept")) for r in rows))
+
+
+def stale_mark(rows: Sequence[dict[str, Any]], row: dict[str, Any]) -> str:
+    """ " †" on a kept row measured at another revision than the newest row's."""
+    revisions = _revisions(rows)
+    return " †" if len(revisions) > 1 and row.get("revision") != revisions[-1] else ""
+
+
+def revision_line(rows: Sequence[dict[str, Any]], what: str) -> str:
+    """Which revision measured the rows (`what` with a {} for the commit)."""
+    revisions = _revisions(rows)
+    if not revisions:
+        return ""
+    newest = [r for r in rows if r.get("revision", "before revisions were kept") == revisions[-1]]
+    if len(revisions) == 1:
+        return f"Every row measured by {what.format(revisions[0])}."
+    older = len(rows) - len(newest)
+    return (
+        f"{len(newest)} rows measured by {what.format(revisions[-1])}; the {older} rows marked "
+        f"† by earlier revisions ({', '.join(revisions[:-1])})."
+    )

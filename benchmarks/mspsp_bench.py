@@ -4,7 +4,7 @@
 
 Reads a local copy of MSPSP-InstLib (`--dir`, or $LTAA_MSPSP_DIR; not committed here: it
 has no licence; docs/benchmarks.md says where to get it), turns each set 2c instance
-matching `--pattern` (default the 44 instances with 20 activities) into a timed team
+matching `--pattern` (default all 91) into a timed team
 instance (`benchmarks/mspsp.py`), solves it with the `schedule` method (objective
 `makespan`, no workload cap, `time_limit_s` 30: a deterministic budget; the wall-clock
 net widened to 900 s, as for Brandimarte, so a loaded machine does not cut it) and checks each
@@ -41,7 +41,15 @@ from app.solvers.base import Solution
 from app.solvers.cpsat.common import WALL_CAP_EXTRA_S, WALL_CAP_FACTOR
 from app.solvers.cpsat.search import solve_schedule
 from app.solvers.registry import get_solver
-from benchmarks.common import Section, machine, table, write_section
+from benchmarks.common import (
+    Section,
+    machine,
+    revision,
+    revision_line,
+    stale_mark,
+    table,
+    write_section,
+)
 from benchmarks.mspsp import (
     ENV,
     RESULTS_2C,
@@ -64,7 +72,7 @@ HEADING = f"## {TITLE}"
 LIMIT_S = 30.0
 PLAIN_LIMIT_S = 30.0
 WALL_CAP_S = 900.0  # the benchmark measures the deterministic budget, not the safety net
-PATTERN = "inst_set2c_*_n20_*"
+PATTERN = "inst_set2c_*"
 SOURCE = "https://github.com/youngkd/MSPSP-InstLib"
 
 
@@ -195,24 +203,29 @@ def measure(
 ) -> list[dict[str, Any]]:
     """One row per instance, kept in RESULTS as it goes. With MSPSP_REUSE=1 the rows
     already kept there are reused and only the other instances measured (a cut run
-    resumes; a finished one re-renders without measuring); `kept_only` measures nothing
-    and renders the kept rows of the selection (a run cut for good)."""
+    resumes; a finished one re-renders without measuring); a kept row measured by another
+    revision of the app has `schedule` measured again (the plain model is not the app's,
+    its result is kept). `kept_only` measures nothing and renders the kept rows of the
+    selection (a run cut for good; stale rows marked)."""
     published = published_results(folder)
     kept: dict[str, dict[str, Any]] = {}
     if os.environ.get("MSPSP_REUSE") == "1" and RESULTS.exists():
         kept = {row["name"]: row for row in json.loads(RESULTS.read_text())}
-    rows = []
+    rows, now = [], revision()
     for path in set_2c(folder, pattern)[:limit]:
-        if path.stem in kept:
-            old = kept[path.stem]
-            if "published_plan" not in old:  # kept by a run before this check existed
-                best = row_best(old)
-                old["published_plan"] = _published_plan_check(folder, read_dzn(path), best)
+        old = kept.get(path.stem)
+        if old is not None and (kept_only or old.get("revision") == now):
             rows.append(old)
             continue
         if kept_only:
             continue
         project = read_dzn(path)
+        if old is not None:
+            old.update(schedule=solve_schedule_method(project, LIMIT_S), revision=now)
+            rows.append(old)
+            RESULTS.write_text(json.dumps(list(kept.values())))
+            print(f"{project.name} (schedule again): {old['schedule']}", file=sys.stderr)
+            continue
         instance = project_instance(project)
         row: dict[str, Any] = {
             "name": project.name,
@@ -222,6 +235,7 @@ def measure(
             "skills": project.n_skills,
             "published": dataclasses.asdict(_published(published, project.name)),
             "load": os.getloadavg()[0],
+            "revision": now,
         }
         row["published_plan"] = _published_plan_check(folder, project, row_best(row))
         row["schedule"] = solve_schedule_method(project, LIMIT_S)
@@ -242,17 +256,8 @@ def _num(v: float | None) -> str:
 
 def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
     """The instances in each class the acceptance counts."""
-    keys = [
-        "run",
-        "reached",
-        "proven",
-        "false",
-        "below",
-        "refused",
-        "broken",
-        "bound_over",
-        "plain_only",
-    ]
+    keys = ["run", "reached", "proven", "false", "below", "refused", "broken"]
+    keys += ["bound_over", "plain_only"]
     out: dict[str, list[str]] = {k: [] for k in keys}
     for r in rows:
         s, best = r["schedule"], r["published"]["makespan"]
@@ -278,7 +283,7 @@ def verdicts(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
     return out
 
 
-def _row(r: dict[str, Any]) -> tuple[Any, ...]:
+def _row(r: dict[str, Any], mark: str) -> tuple[Any, ...]:
     s, plain = r["schedule"], r.get("plain")
     ref = "-" if plain is None else f"{plain['status']} {_num(plain['makespan'])}"
     if s["status"] == "refused":
@@ -298,7 +303,7 @@ def _row(r: dict[str, Any]) -> tuple[Any, ...]:
             f"{s['cpu_s']:.1f} s / {s['wall_s']:.1f} s",
         )
     return (
-        r["name"].removeprefix("inst_set2c_") + (" †" if r.get("remeasured") else ""),
+        r["name"].removeprefix("inst_set2c_") + mark,
         f"{r['tasks']} ({r['teams']})",
         r["robots"],
         r["published"]["makespan"],
@@ -353,16 +358,11 @@ def body(rows: list[dict[str, Any]], folder_note: str, image: str | None = None)
                 "CPU / wall",
                 "plain model",
             ],
-            [_row(r) for r in rows],
+            [_row(r, stale_mark(rows, r)) for r in rows],
         ),
         "",
     ]
-    if again := [r for r in rows if r.get("remeasured")]:
-        lines += [
-            f"† {len(again)} rows re-measured after a change to `schedule`'s search ("
-            f"{again[0]['remeasured']}); every other row was proven optimal before it.",
-            "",
-        ]
+    lines += [revision_line(rows, "`schedule` (the app at commit {})"), ""]
     lines += _summary(v, n)
     lines += _published_plans(rows)
     lines += plain_line(rows)

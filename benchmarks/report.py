@@ -23,6 +23,7 @@ SECTIONS = [
     "benchmarks.site_learning",
     "benchmarks.timed_schedules",
     "benchmarks.schedule_quality",
+    "benchmarks.team_sizes",
     # skipped (one line) without a local MSPSP-InstLib copy in $LTAA_MSPSP_DIR
     "benchmarks.mspsp_bench",
 ]

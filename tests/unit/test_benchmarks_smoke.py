@@ -177,3 +177,27 @@ def test_durable_cost_reads_the_cost_per_task_from_the_polls() -> None:
     # 96 / 10.5 = 9.1x the small run: met; 96 / 85 = 1.13x in memory: met.
     assert "| durable 10,000 tasks ≤ 10× 1,000 tasks | 9.1× CPU" in text
     assert "| durable ≤ 1.5× in-memory CPU, 10,000 tasks (polled) | 1.13× | met |" in text
+
+
+def test_team_sizes_on_a_tiny_instance(tmp_path: Path) -> None:
+    from benchmarks import team_sizes as ts
+
+    timed = ts.team_site(8, 3, seed=1)
+    assert any(t.team == {"heavy": 2} for t in timed.tasks) and timed.timed
+    assert not ts.team_site(8, 3, seed=1, timed=False).timed
+    rows = ts.measure(((8, 3),), (0,), 0.5)
+    by = {(r["timed"], r["method"]): r for r in rows}
+    assert by[False, "optimal"]["es_regret"] == 0.0
+    assert all(r["es"] <= by[False, "optimal"]["es"] + 1e-9 for r in rows if not r["timed"])
+    timed_rows = [r for r in rows if r["timed"] and "refused" not in r]
+    assert min(r["makespan_regret"] for r in timed_rows) == 0.0
+    assert all(r["broken"] == 0 for r in timed_rows)
+    # A method that refuses the timed instance (LTAA until it places teams) is a row, not a
+    # failure; one that accepts it has a makespan.
+    for label in ("LTAA unguided", "LTAA guided"):
+        row = by[True, label]
+        assert "refused" in row or "makespan" in row
+    text = ts.body(rows, None, 0.5)
+    assert "| 8 x 3 | 0 | greedy |" in text
+    assert ts.figure(rows, tmp_path) == "img/team_sizes.png"
+    assert (tmp_path / "team_sizes.png").exists()

@@ -14,6 +14,7 @@ least the floor.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import itertools
 import xml.etree.ElementTree as ET
@@ -38,6 +39,7 @@ from app.domain.scheduling.schedule import Schedule
 from app.domain.teams import covers
 from app.exchange.mspdi_write import write_mspdi
 from app.schedules import gantt_svg, schedule_csv, schedule_ics
+from app.solvers.cpsat.team_dispatch import team_dispatch
 from app.solvers.registry import get_solver
 from benchmarks.team_schedules import measure
 
@@ -52,7 +54,7 @@ class Case:
 
 
 @st.composite
-def instances(draw: st.DrawFn, max_tasks: int = 4) -> tuple[Instance, int]:
+def instances(draw: st.DrawFn, max_tasks: int = 4, twins: bool = False) -> tuple[Instance, int]:
     n_robots = draw(st.integers(2, 3))
     n_tasks = draw(st.integers(2, max_tasks))
     travel = draw(st.integers(0, 6))
@@ -71,6 +73,8 @@ def instances(draw: st.DrawFn, max_tasks: int = 4) -> tuple[Instance, int]:
                 skills=skills,
             )
         )
+    if twins:  # robot 1 interchangeable with robot 0: the model breaks that symmetry
+        robots[1] = dataclasses.replace(robots[0], name="r1")
     tasks = []
     for t in range(n_tasks):
         team = draw(st.one_of(st.none(), st.sampled_from(TEAMS)))
@@ -101,8 +105,8 @@ def instances(draw: st.DrawFn, max_tasks: int = 4) -> tuple[Instance, int]:
 
 
 @st.composite
-def cases(draw: st.DrawFn) -> Case:
-    instance, travel = draw(instances())
+def cases(draw: st.DrawFn, twins: bool = False) -> Case:
+    instance, travel = draw(instances(twins=twins))
     capped = draw(st.booleans())
     kind = draw(st.sampled_from(list(ObjectiveKind)))
     floor = draw(st.sampled_from([0.0, 0.4, 0.6])) if kind is ObjectiveKind.MAKESPAN else 0.0
@@ -236,6 +240,22 @@ def plan_success(
 )
 @given(cases())
 def test_schedule_matches_an_exhaustive_search_over_teams_and_orders(case: Case) -> None:
+    _matches_the_exhaustive_search(case)
+
+
+@settings(
+    max_examples=25,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+)
+@given(cases(twins=True))
+def test_schedule_with_interchangeable_robots_matches_an_exhaustive_search(case: Case) -> None:
+    # The symmetry the team model breaks among twins (team_model._break_symmetry) must
+    # keep an optimum: the exhaustive search here breaks nothing.
+    _matches_the_exhaustive_search(case)
+
+
+def _matches_the_exhaustive_search(case: Case) -> None:
     p = case.problem
     note(f"{p.instance}\n{p.mode} {p.cap} {p.objective}")
     expected = exhaustive(case)
@@ -486,3 +506,22 @@ def test_team_times_finer_than_the_models_unit_are_never_called_optimal() -> Non
 def test_the_team_benchmark_measures_a_method() -> None:
     row = measure(Mode.BALANCED, "optimal")
     assert row.method == "optimal" and row.broken == 0 and row.makespan > 0 and 0 < row.es <= 1
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(instances(max_tasks=7))
+def test_the_team_dispatch_gives_orders_the_list_scheduler_times_within_the_rules(
+    drawn: tuple[Instance, int],
+) -> None:
+    # The team model's second start (team_dispatch.py): orders and teams that
+    # `sequence_schedule` accepts, covering every unit with distinct able robots; only a
+    # deadline or a shift may break (the caller then drops the plan).
+    instance, _ = drawn
+    problem = Problem.build(instance, Mode.SUCCESS_FOCUSED)
+    candidates = [list(instance.timing.eligible_robots(t)) for t in range(instance.n_tasks)]
+    plan = team_dispatch(problem, candidates)
+    assert plan is not None
+    sequences, teams = plan
+    schedule = sequence_schedule(problem, sequences, teams)
+    assert {v.rule for v in check_schedule(problem, schedule)} <= KEPT
+    assert set(teams) == {t for t, task in enumerate(instance.tasks) if task.team}

@@ -20,6 +20,7 @@ capacity; per robot, shift start + its work <= makespan.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from functools import reduce
@@ -146,6 +147,8 @@ class TeamModel:
                     add_link(self.model, scale, arc, t, (self.start, self.end))
         self._add_cap()
         self._add_cumulatives()
+        self.twins = self._twins()
+        self._break_symmetry()
         terms, coeffs = [], []
         for (t, r, f), w in weights.table.items():
             lit = self.present.get((t, r)) if f is None else self.cover.get((t, r, f))
@@ -275,6 +278,43 @@ class TeamModel:
             entries.append((size, visit))
         return entries
 
+    def _twins(self) -> list[list[int]]:
+        """Groups of interchangeable robots: the same skills, success, shift, start zone and
+        duration per task (so the same presences), none pinned, none unavailable. Swapping two
+        of them robot for robot maps every plan to one of the same ES, loads and makespan."""
+        problem, tm = self.problem, self.tm
+        fixed = {m for t, r in problem.pinned.items() for m in problem.pinned_teams.get(t, (r,))}
+        success, robots = problem.instance.success, problem.instance.robots
+        groups: dict[tuple[object, ...], list[int]] = {}
+        for r in problem.available:
+            if r in fixed:
+                continue
+            key = (
+                robots[r].skills,
+                tuple(success[:, r].tolist()),
+                tm.shifts[r],
+                tm.robot_zone[r],
+                tuple(
+                    self.scale.up(tm.duration(t, r)) if (t, r) in self.present else -1
+                    for t in range(tm.n_tasks)
+                ),
+            )
+            groups.setdefault(key, []).append(r)
+        return [g for g in groups.values() if len(g) > 1]
+
+    def _break_symmetry(self) -> None:
+        """Of two interchangeable robots r < q, r's first task (in task order) comes no later
+        than q's, and q works only if r does: of each plan and its swaps one stays. Twins are
+        common in MSPSP-InstLib set 2c, where this closed proofs the search alone missed:
+        docs/benchmarks.md#multi-skill-project-scheduling-mspsp-instlib-set-2c."""
+        for group in self.twins:
+            for r, q in itertools.pairwise(group):
+                mine = [t for t in range(self.tm.n_tasks) if (t, r) in self.present]
+                for i, t in enumerate(mine):
+                    # q on t -> r on t or on an earlier task (a team may hold both)
+                    earlier = [self.present[u, r] for u in mine[: i + 1]]
+                    self.model.add_bool_or([*earlier, self.present[t, q].Not()])
+
     def _add_cap(self) -> None:
         cap = self.problem.cap
         for r in self.problem.available:
@@ -313,7 +353,8 @@ class TeamModel:
     ) -> None:
         m, tm, units = self.model, self.tm, self.scale.units_per_minute
         m.clear_hints()
-        members = [set(teams.get(t) or (r,)) for t, r in enumerate(assignment)]
+        swap = self._twin_labels(assignment, teams)
+        members = [{swap[m] for m in teams.get(t) or (r,)} for t, r in enumerate(assignment)]
         if any((t, r) not in self.present for t, ms in enumerate(members) for r in ms):
             return
         at = [round(s * units) for s in starts]
@@ -324,7 +365,9 @@ class TeamModel:
             m.add_hint(self.start[t], at[t])
             m.add_hint(self.end[t], ends[t])
         covered = {
-            (t, r, f) for t, ms in teams.items() for r, f in zip(ms, self.units[t], strict=True)
+            (t, swap[r], f)
+            for t, ms in teams.items()
+            for r, f in zip(ms, self.units[t], strict=True)
         }
         for key, x in self.cover.items():
             m.add_hint(x, key in covered)
@@ -335,6 +378,21 @@ class TeamModel:
             m.add_hint(visit, bool(there))
             m.add_hint(start, max(lo, min(there) - size) if there else lo)
         m.add_hint(self.makespan, max(ends, default=0))
+
+    def _twin_labels(
+        self, assignment: Sequence[int], teams: Mapping[int, tuple[int, ...]]
+    ) -> dict[int, int]:
+        """A plan's robots relabelled among twins so that it keeps `_break_symmetry`'s
+        order (a hint that breaks it would be repaired, not followed): robot -> its label."""
+        swap = {r: r for r in range(self.tm.n_robots)}
+        first: dict[int, int] = {}
+        for t, r in enumerate(assignment):
+            for m in teams.get(t) or (r,):
+                first.setdefault(m, t)
+        for group in self.twins:
+            by_first = sorted(group, key=lambda r: (first.get(r, self.tm.n_tasks), r))
+            swap.update(zip(by_first, group, strict=True))
+        return swap
 
     def read(self, solver: cp_model.CpSolver) -> tuple[list[list[int]], dict[int, tuple[int, ...]]]:
         """Per robot its tasks in the solver's time order, and each team's robot per unit."""

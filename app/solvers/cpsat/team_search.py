@@ -35,6 +35,7 @@ from app.solvers.cpsat.common import (
     proved_none,
 )
 from app.solvers.cpsat.outcome import ScheduleOutcome
+from app.solvers.cpsat.team_dispatch import team_dispatch
 from app.solvers.cpsat.team_model import TeamModel, TeamWeights, team_model_size
 from app.solvers.cpsat.time_scale import TimeScale
 from app.solvers.unit_flow import best_units
@@ -121,6 +122,8 @@ def solve_team_schedule(
         found.offer_orders(hint.sequences(problem.instance.n_robots), hint.teams)
     model = TeamModel(problem, scale, weights)
     search.charge(model_cost(model.model))
+    if (plan := team_dispatch(problem, model.candidates)) is not None:
+        found.offer_orders(*plan)
     es_proven = True
     if problem.objective.kind is ObjectiveKind.MAKESPAN:
         found.floor = _es_floor(problem, weights, es_bound)
@@ -132,7 +135,13 @@ def solve_team_schedule(
             found.target, es_proven = _stage_success(model, search, found, es_bound, scale)
         model.model.add(model.es == found.target)
     model.model.minimize(model.makespan)
-    _seed(model, found.best() or hint)
+    # Hinted with the first plans only where stage 2 holds ES at a target those plans reach
+    # (baseline_team at 10 s: 244 min hinted, 279 not). Under `makespan` the space is wide and
+    # the first plans far from short (MSPSP set 2c: 49-62 and 32-52 against optima of
+    # 22-43); hinted, the one-worker search followed them into worse plans (n30_l3_m8_01 40,
+    # n30_l10_m15_00 36, against 39 and 34 unhinted). A caller's own hint is always used.
+    automatic = problem.objective.kind is not ObjectiveKind.MAKESPAN
+    _seed(model, (found.best() if automatic else None) or hint)
     # The one-robot path's rule (search.py): strong disjunctive propagation and the
     # objective-bound search only where travel literals make the model disjunctive. Without
     # travel (MSPSP-InstLib set 2c) the objective-bound search cost proofs and plans:
