@@ -23,7 +23,8 @@ stages first and then more LNS (docs/schedules.md#anytime):
    with the best schedule (at 200 x 20 it proves that assignment's optimum in under a
    second).
 4. Improve, until the budget: the large-neighbourhood search (`lns`) over the exact model
-   from the best schedule so far, in whole slices.
+   from the best schedule so far, in whole slices (`loaded_first`: its robots neighbourhood
+   starts from the most loaded robots on the critical path, the tasks after it floating).
 
 `details["model"]` names the steps that ran (and the LNS's neighbourhoods and
 improvements), `bound_source` the floor that bounds the bound.
