@@ -96,8 +96,7 @@ def instances() -> list[tuple[str, Problem, float]]:
 def run_cpsat(label: str, problem: Problem, limit: float) -> tuple[CpSatRow, Any]:
     load = os.getloadavg()[0]
     wall, cpu = time.perf_counter(), time.process_time()
-    # The benchmark measures the deterministic budget, not the safety net (at load 10-15
-    # on 2 cores the service's net, 10 x the limit + 10 s, cut the 30 s rows).
+    # The deterministic budget, not the net (at load 10-15 the service's cut the 30 s rows)
     outcome = solve_schedule(problem, time_limit_s=limit, wall_cap_s=WALL_CAP_S)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     d = outcome.details()
@@ -277,104 +276,13 @@ def _figure(cp_rows: list[CpSatRow], method_rows: list[tuple[CpSatRow, MethodRow
     )
 
 
-def rows_only() -> None:
-    """Re-measure CP-SAT's rows, the LTAA rows and the `/allocate` lines (the scheduler
-    changed) and keep the other methods' rows as the section has them: their plans do not
-    depend on the scheduler, only their regret columns, which `body` recomputes."""
-    import datetime
-
-    from benchmarks.common import DOCS, write_section
-
-    report = (DOCS / "benchmarks.md").read_text(encoding="utf-8")
-    start = report.index(f"## {TITLE}")
-    end = report.find("\n## ", start + len(TITLE))
-    kept = _method_rows(report[start : None if end < 0 else end])
-    began, load = time.perf_counter(), os.getloadavg()[0]
-    cp_rows: list[CpSatRow] = []
-    method_rows: list[tuple[CpSatRow, MethodRow]] = []
-    problems = instances()
-    for label, problem, limit in problems:
-        row, _ = run_cpsat(label, problem, limit)
-        cp_rows.append(row)
-        print(f"{label}: {row.status} {row.makespan} bound {row.bound}", file=sys.stderr)
-        others = [m for m in kept if m.label == label and not m.method.startswith("ltaa")]
-        method_rows += [(row, m) for m in others + ltaa_rows(label, problem)]
-    api = {limit: api_seconds(problems[0][1], limit) for limit in API_LIMITS}
-    text = body(cp_rows, method_rows, api, _figure(cp_rows, method_rows))
-    note = (
-        f"_CP-SAT's rows, the LTAA rows and the `/allocate` lines re-measured on "
-        f"{datetime.date.today()} with `python -m benchmarks.timed_schedules --cpsat` (load "
-        f"{load:.1f}-{os.getloadavg()[0]:.1f}); the other methods' rows (ES, makespan, "
-        "violations, wall) as measured before, their regrets recomputed against these rows._"
-    )
-    took = time.perf_counter() - began
-    write_section(
-        f"## {TITLE}", f"## {TITLE}\n\n{text}\n{note}\n\n_Section measured in {took:.1f} s._\n"
-    )
-
-
-def _method_rows(section: str) -> list[MethodRow]:
-    """The methods table of the section as written (`body`'s columns)."""
-    lines = section.splitlines()
-    at = next(i for i, line in enumerate(lines) if line.startswith("| instance | method |"))
-    rows = []
-    for line in lines[at + 2 :]:
-        if not line.startswith("| "):
-            break
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        label, method, es, regret, makespan, _, _, violations, wall, note = cells
-        rows.append(
-            MethodRow(
-                label,
-                method,
-                None if es == "-" else float(es),
-                None if makespan == "-" else float(makespan.replace(",", "")),
-                int(violations),
-                float(wall.removesuffix(" s")),
-                note,
-                None if regret == "-" else float(regret),
-            )
-        )
-    return rows
-
-
 def body(
     cp_rows: list[CpSatRow],
     method_rows: list[tuple[CpSatRow, MethodRow]],
     api: dict[float, tuple[float | None, str]],
     image: str,
 ) -> str:
-    cp_table = table(
-        [
-            "instance",
-            "limit",
-            "status",
-            "makespan",
-            "before LNS",
-            "bound",
-            "gap",
-            "wall",
-            "CPU",
-            "load avg",
-            "wall cut",
-        ],
-        [
-            (
-                r.label,
-                f"{r.limit_s:.0f} s",
-                f"**{r.status}**" if r.status == "optimal" else r.status,
-                _fmt(r.makespan),
-                _fmt(r.before_lns),
-                _fmt(r.bound),
-                _pct(r.gap),
-                f"{r.wall_s:.1f} s",
-                f"{r.cpu_s:.1f} s",
-                f"{r.load:.1f}",
-                "**yes**" if r.wall_cut else "no",
-            )
-            for r in cp_rows
-        ],
-    )
+    cp_table = _cp_table(cp_rows)
     rows = []
     for cp, m in method_rows:
         es_regret = (
@@ -441,6 +349,40 @@ def body(
     )
 
 
+def _cp_table(cp_rows: list[CpSatRow]) -> str:
+    return table(
+        [
+            "instance",
+            "limit",
+            "status",
+            "makespan",
+            "before LNS",
+            "bound",
+            "gap",
+            "wall",
+            "CPU",
+            "load avg",
+            "wall cut",
+        ],
+        [
+            (
+                r.label,
+                f"{r.limit_s:.0f} s",
+                f"**{r.status}**" if r.status == "optimal" else r.status,
+                _fmt(r.makespan),
+                _fmt(r.before_lns),
+                _fmt(r.bound),
+                _pct(r.gap),
+                f"{r.wall_s:.1f} s",
+                f"{r.cpu_s:.1f} s",
+                f"{r.load:.1f}",
+                "**yes**" if r.wall_cut else "no",
+            )
+            for r in cp_rows
+        ],
+    )
+
+
 def targets(
     cp_rows: list[CpSatRow],
     method_rows: list[tuple[CpSatRow, MethodRow]],
@@ -495,6 +437,8 @@ def _api_line(limit: float, api: float | None, note: str) -> str:
 
 def main() -> None:
     if "--cpsat" in sys.argv[1:]:
+        from benchmarks.timed_rows import rows_only
+
         rows_only()
         return
     from benchmarks import report
