@@ -203,6 +203,20 @@ def with_new_limits(section: str, limits: dict[str, Any], image: str, note: str)
     lines = [line for line in section.splitlines() if not line.startswith(SITE_TARGETS)]
     at = next(i for i, line in enumerate(lines) if line.startswith("- at 60 s, Mk01-Mk10"))
     lines[at + 1 : at + 1] = new
-    out = "\n".join(lines) + "\n"
+    return _noted("\n".join(lines) + "\n", note)
+
+
+def with_new_ltaa(section: str, rows: list[dict[str, Any]], note: str) -> str:
+    """The section as it stands with its LTAA table replaced by `rows`."""
+    start = section.index("| durable rules run |")
+    end = section.index("\n\n", start)
+    return _noted(section[:start] + ltaa_table(rows) + section[end:], note)
+
+
+def _noted(section: str, note: str) -> str:
+    """`note` before the section's stamp, in place of an older note of the same part."""
+    head = note[: note.index(" re-measured")]
+    kept = [line for line in section.split("\n\n") if not line.startswith(head)]
+    out = "\n\n".join(kept)
     stamp = out.index("\n\n_Section measured in")
     return out[:stamp] + "\n\n" + note + out[stamp:]

@@ -2,8 +2,8 @@
 
 A relaxation of the schedule: each robot's work (its tasks' durations), plus the travel
 into every zone it visits other than its start zone (the shortest way in, once), plus its
-shift start, fits below T; precedence and order are dropped. So its proven bound on T is
-a valid lower bound on any schedule's makespan (with the same expected-success
+shift start if it works at all, fits below T; precedence and order are dropped. So its
+proven bound on T is a valid lower bound on any schedule's makespan (with the same expected-success
 condition), and its answer spreads the work, which is what the makespan needs when the
 success objective pushes the best robots up to the cap. One Boolean per allowed (task,
 robot) pair, the cap as load bounds, ES as a linear constraint: thousands of variables
@@ -63,12 +63,31 @@ class AssignmentModel:
             for size, visit in self._entries(r, on[r]):
                 terms.append(visit)
                 coeffs.append(size)
+            start, works = up(tm.shifts[r][0]), self._works(r, free)
+            if works is not None:  # the shift start only once the robot works
+                terms.append(works)
+                coeffs.append(start)
+                start = 0
             work = cp_model.LinearExpr.weighted_sum(terms, coeffs)
-            m.add(self.makespan >= up(tm.shifts[r][0]) + work)
+            m.add(self.makespan >= start + work)
         keys = list(self.x)
         self.es = cp_model.LinearExpr.weighted_sum(
             [self.x[k] for k in keys], [weights[k] for k in keys]
         )
+
+    def _works(self, r: int, free: list[int]) -> cp_model.IntVar | None:
+        """A literal true once robot r takes a task (a robot that takes nothing, or only a
+        fact, holds nothing up); None where its shift starts at 0 or the cap makes every
+        robot work."""
+        problem = self.problem
+        if problem.instance.timing.shifts[r][0] <= 0:
+            return None
+        if problem.cap.lower >= 1 and not problem.pinned_starts:
+            return None
+        works = self.model.new_bool_var(f"w{r}")
+        for t in free:
+            self.model.add_implication(self.x[t, r], works)
+        return works
 
     def _longest_travel(self) -> float:
         tm = self.problem.instance.timing

@@ -10,7 +10,8 @@ stages first and then more LNS (docs/schedules.md#anytime):
 
 1. Bound: the floors of `bounds` (critical path, heads and tails over the robots able)
    and the LP relaxation of the assignment (`load_bound`, HiGHS: deterministic; with
-   each robot's zone entries, first head and last tail from a budget of `FULL_LP_FROM`).
+   each robot's zone and group entries, first head and last tail from a budget of
+   `FULL_LP_FROM`).
 2. Assign: the `AssignmentModel` (ES held at its target, or above the floor; the cap; per
    robot: shift start + work + one entry into each zone it visits <= T; minimise T) for
    `ASSIGN_UNITS`; its bound on T is one more floor. Then time it: the assignment (and
@@ -22,7 +23,8 @@ stages first and then more LNS (docs/schedules.md#anytime):
    with the best schedule (at 200 x 20 it proves that assignment's optimum in under a
    second).
 4. Improve, until the budget: the large-neighbourhood search (`lns`) over the exact model
-   from the best schedule so far, in whole slices.
+   from the best schedule so far, in whole slices (`loaded_first`: its robots neighbourhood
+   starts from the most loaded robots on the critical path, the tasks after it floating).
 
 `details["model"]` names the steps that ran (and the LNS's neighbourhoods and
 improvements), `bound_source` the floor that bounds the bound.

@@ -81,7 +81,9 @@ def improve(
     Deterministic: the neighbourhoods, their sizes and CP-SAT's seeds follow from the seed
     and the answers alone, and a neighbourhood runs only when its whole slice (and its
     modelled build cost) fits in the budget, so a larger budget runs the same
-    neighbourhoods first and then more (docs/schedules.md#anytime)."""
+    neighbourhoods first and then more (docs/schedules.md#anytime). `loaded_first` (the
+    large path): the robots neighbourhood starts from the most loaded robots on the
+    critical path and lets the tasks after it float in time, as the window does."""
     search, feasible = setup.search, setup.feasible
     current = start or feasible.best()
     limit = search.remaining() if seconds is None else min(search.remaining(), seconds)
@@ -111,7 +113,10 @@ def improve(
         allowed = candidates
         if robots is not None:  # an exchange among these robots only
             allowed = [[r for r in c if r in robots] for c in candidates]
-        hood = Neighbourhood(setup, current, free, allowed, ancestors, kind == "window")
+        # On the large path the robots' tails float too: a task swapped onto a robot at the
+        # cap's load moves its successors instead of meeting them frozen in time.
+        floating = kind == "window" or loaded_first
+        hood = Neighbourhood(setup, current, free, allowed, ancestors, floating)
         build = model_cost(hood.model)
         search.charge(build)
         status, solver = _solve(hood.model, setup, rng, slice_units)

@@ -4,26 +4,32 @@ Each task split fractionally over the robots it may take; expected success held 
 target (or above its floor) and the cap kept; T above each robot's time line
 (docs/schedules.md#bounds):
 
-    T >= shift start + work + zone entries + (G_r + Q_r - shift start) * y_r
+    T >= work + zone entries + group entries + S_r * y_r
 
 - work: its (fractional) tasks' durations;
 - zone entries: every zone it works in other than its start zone must be entered once,
   at least the shortest way into that zone from any other (v_rz >= x_tr for each task t
   of zone z, as the CP-SAT assignment model counts them);
-- G_r and Q_r, when no task has a fixed start: the robot's first task cannot start
-  before its head nor before the robot gets there from its start zone (less the entry
-  into that zone, already counted), and its last task leaves at least its tail of
-  chain behind it; G_r the least of these starts, Q_r the least tail over the tasks it
-  may take. y_r >= x_tr for each of its pairs, y_r <= 1 (fixed at 1 where the cap makes
-  it take a task): in a whole assignment y_r is 1 when the robot works at all (a robot
-  that takes nothing has no first or last task).
+- group entries: zones joined by the shortest way between zones form groups (a floor
+  of the generated sites); the first way into a group other than the start zone's comes
+  from outside it, so it costs at least the shortest way in from outside, more than
+  the zone's entry by `into_g - max way_z` (u_rg >= v_rz for its zones);
+- S_r, what the line holds before and after the work: the shift start (less the first
+  zone's entry for a robot without a start zone: it starts there); with heads and tails
+  and no fixed start, G_r + Q_r: the robot's first task cannot start before its head
+  nor before the robot gets there from its start zone (less the entries of that zone
+  and its group, already counted), and its last task leaves at least its tail of chain
+  behind it; G_r the least of these starts, Q_r the least tail over the tasks it may
+  take. y_r >= x_tr for each of its pairs (but a fixed start's: a fact holds no shift),
+  y_r <= 1 (fixed at 1 where the cap makes it take a task): in a whole assignment y_r is
+  1 when the robot works at all, and a robot that takes nothing holds nothing up.
 
 Fixing ES at the optimum keeps the LP on the face of ES-optimal allocations, so it sees
 what pushes the makespan up when the best robots must take the most tasks, and the
-entries see that those tasks lie in many zones. Solved by HiGHS through SciPy (interior
-point, no presolve: measured at 1,000 x 20, 2.3 s of CPU where the dual simplex took 6);
-on the 1,000-task x 20-robot generated instance it proves 3,362 minutes where the plain
-load LP proved 3,116 (the integer program's optimum, 3,362, is no higher).
+entries see that those tasks lie in many zones and floors. Solved by HiGHS through SciPy
+(interior point, no presolve: measured at 1,000 x 20, 2.3 s of CPU where the dual
+simplex took 6); on the 1,000-task x 20-robot generated instance it proves 3,371
+minutes (3,362 without the group entries, 3,116 the plain load LP).
 """
 
 from __future__ import annotations
@@ -66,20 +72,39 @@ class _Lp:
                     way = min(tm.travel_minutes[y][z] for y in range(len(tm.zones)) if y != z)
                     if way > 0:
                         self.visits.append((r, z, way, tasks))
+        # (robot, group, minutes its first entry adds, the group's visit columns)
+        self.groups: list[tuple[int, int, float, list[int]]] = []
+        self.group_of: list[int] = []
+        if self.visits and not problem.pinned_starts:
+            self.group_of, self.groups = _group_entries(problem, self.visits)
         self.k, self.nv, self.m = len(self.pairs), len(self.visits), tm.n_robots
-        self.y0 = self.k + self.nv  # first y column
+        self.g0 = self.k + self.nv  # first group column
+        self.y0 = self.g0 + len(self.groups)  # first y column
         self.n_cols = self.y0 + self.m + 1
+
+    def _group_added(self, added: dict[tuple[int, int], float], r: int, z: int | None) -> float:
+        if z is None or not self.group_of:
+            return 0.0
+        return added.get((r, self.group_of[z]), 0.0)
 
     def col(self, values: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> csr_matrix:
         return csr_matrix((values, (rows, cols)), shape=(n, self.n_cols))
 
-    def first_and_last(self, heads: np.ndarray, tails: np.ndarray) -> np.ndarray:
-        """Per robot, G_r + Q_r less its shift start (0 where it does not apply)."""
+    def line_starts(self, heads: np.ndarray | None, tails: np.ndarray | None) -> np.ndarray:
+        """Per robot, what its time line adds to its work and entries if it works at all:
+        its shift start (less its first zone's entry when it has no start zone: it starts
+        there), or with `heads` and `tails` and no fact, G_r + Q_r."""
         tm, problem = self.tm, self.problem
-        extra = np.zeros(self.m)
-        if problem.pinned_starts:
-            return extra  # a fact puts the robot where its task was, not at its start zone
         entry = {(r, z): way for r, z, way, _ in self.visits}
+        starts = np.array([a for a, _ in tm.shifts], dtype=float)
+        for r in range(self.m):
+            if tm.robot_zone[r] is None:
+                starts[r] -= max((w for (q, _), w in entry.items() if q == r), default=0.0)
+        if heads is None or tails is None or problem.pinned_starts:
+            return starts  # a fact puts the robot where its task was, not at its start zone
+        # The first task's way there pays its group's entry too: left out of G as the
+        # zone's entry is (no leg counted twice).
+        added = {(r, g): w for r, g, w, _ in self.groups}
         for r, tasks in enumerate(self.mine):
             if not tasks:
                 continue
@@ -87,13 +112,14 @@ class _Lp:
             first = min(
                 max(heads[t], a + tm.travel_to_task(tm.robot_zone[r], t))
                 - entry.get((r, tm.task_zone[t]), 0.0)  # type: ignore[arg-type]
+                - self._group_added(added, r, tm.task_zone[t])
                 for t in tasks
             )
-            extra[r] = max(0.0, first + min(tails[t] for t in tasks) - a)
-        return extra
+            starts[r] = max(starts[r], first + min(tails[t] for t in tasks))
+        return starts
 
-    def time_rows(self, extra: np.ndarray) -> tuple[csr_matrix, np.ndarray]:
-        """work + entries + extra * y - T <= -shift start, per robot."""
+    def time_rows(self, starts: np.ndarray) -> tuple[csr_matrix, np.ndarray]:
+        """work + entries + group entries + start * y - T <= 0, per robot."""
         tm, k, m = self.tm, self.k, self.m
         robot_of = np.array([r for _, r in self.pairs], dtype=int)
         work = [
@@ -102,11 +128,14 @@ class _Lp:
         rows = [robot_of, np.array([r for r, *_ in self.visits], dtype=int)]
         cols = [np.arange(k), k + np.arange(self.nv)]
         vals = [np.array(work), np.array([w for _, _, w, _ in self.visits])]
+        rows.append(np.array([r for r, *_ in self.groups], dtype=int))
+        cols.append(self.g0 + np.arange(len(self.groups)))
+        vals.append(np.array([w for _, _, w, _ in self.groups]))
         rows += [np.arange(m), np.arange(m)]
         cols += [self.y0 + np.arange(m), np.full(m, self.n_cols - 1)]
-        vals += [extra, -np.ones(m)]
+        vals += [starts, -np.ones(m)]
         matrix = self.col(np.concatenate(vals), np.concatenate(rows), np.concatenate(cols), m)
-        return matrix, -np.array([a for a, _ in tm.shifts])
+        return matrix, np.zeros(m)
 
     def visit_rows(self) -> csr_matrix:
         """x_tr - v_rz <= 0 for every task t robot r may take in a zone z it must enter."""
@@ -120,13 +149,31 @@ class _Lp:
                 i += 1
         return self.col(np.array(vals), np.array(rows, dtype=int), np.array(cols, dtype=int), i)
 
+    def group_rows(self) -> csr_matrix:
+        """v_rz - u_rg <= 0 for every zone z of a group g robot r enters from outside."""
+        rows, cols, vals = [], [], []
+        i = 0
+        for j, (*_, visits) in enumerate(self.groups):
+            for v in visits:
+                rows += [i, i]
+                cols += [self.k + v, self.g0 + j]
+                vals += [1.0, -1.0]
+                i += 1
+        return self.col(np.array(vals), np.array(rows, dtype=int), np.array(cols, dtype=int), i)
+
     def loads(self) -> csr_matrix:
         robot_of = np.array([r for _, r in self.pairs], dtype=int)
         return self.col(np.ones(self.k), robot_of, np.arange(self.k), self.m)
 
-    def y_rows(self, extra: np.ndarray, fixed: set[int]) -> csr_matrix:
-        """x_tr - y_r <= 0 for every pair of a robot whose y counts and is not fixed at 1."""
-        keep = [i for i, (_, r) in enumerate(self.pairs) if extra[r] > 0 and r not in fixed]
+    def y_rows(self, starts: np.ndarray, fixed: set[int]) -> csr_matrix:
+        """x_tr - y_r <= 0 for every pair (but a fact's) of a robot whose y counts and is
+        not fixed at 1: y_r is 1 once it works (a fact alone does not hold its shift)."""
+        facts = self.problem.pinned_starts
+        keep = [
+            i
+            for i, (t, r) in enumerate(self.pairs)
+            if starts[r] > 0 and r not in fixed and t not in facts
+        ]
         rows = np.repeat(np.arange(len(keep)), 2)
         cols = np.array([[i, self.y0 + self.pairs[i][1]] for i in keep], dtype=int).reshape(-1)
         vals = np.tile([1.0, -1.0], len(keep))
@@ -153,20 +200,23 @@ def load_lower_bound(
     lp = _Lp(problem, candidates, heads is not None and tails is not None)
     n, k, m = problem.instance.n_tasks, lp.k, lp.m
     task_of = np.array([t for t, _ in lp.pairs], dtype=int)
-    extra = np.zeros(m) if heads is None or tails is None else lp.first_and_last(heads, tails)
-    time_rows, time_rhs = lp.time_rows(extra)
+    full = heads is not None and tails is not None
+    starts = lp.line_starts(heads, tails)
+    time_rows, time_rhs = lp.time_rows(starts)
     loads = lp.loads()
     available = list(problem.available)
     cap = problem.cap
-    # The cap's lower load makes every available robot work: its y is 1.
-    fixed = set(available) if cap.lower >= 1 else set()
-    visit_rows, y_rows = lp.visit_rows(), lp.y_rows(extra, fixed)
-    upper_rows = [loads[available], time_rows, visit_rows, y_rows]
+    # The cap's lower load makes every available robot work (y = 1); not so with a fact,
+    # which counts in the load but holds no shift.
+    fixed = set(available) if cap.lower >= 1 and not problem.pinned_starts else set()
+    visit_rows, y_rows, group_rows = lp.visit_rows(), lp.y_rows(starts, fixed), lp.group_rows()
+    upper_rows = [loads[available], time_rows, visit_rows, y_rows, group_rows]
     upper_rhs = [
         np.full(len(available), cap.upper),
         time_rhs,
         np.zeros(visit_rows.shape[0]),
         np.zeros(y_rows.shape[0]),
+        np.zeros(group_rows.shape[0]),
     ]
     lower_rows, lower_rhs = [loads[available]], [np.full(len(available), cap.lower)]
     es_row = lp.col(
@@ -191,11 +241,8 @@ def load_lower_bound(
         bounds=[(0, 1)] * lp.y0 + [(1 if r in fixed else 0, 1) for r in range(m)] + [(0, None)],
         # The full LP: interior point without presolve (2.3 s of CPU at 1,000 x 20 where
         # the dual simplex took 6); the plain one: HiGHS's default (0.24 s there).
-        method="highs-ipm" if lp.visits or extra.any() else "highs",
-        options={
-            "time_limit": max(0.1, time_limit_s),
-            "presolve": not lp.visits and not extra.any(),
-        },
+        method="highs-ipm" if full else "highs",
+        options={"time_limit": max(0.1, time_limit_s), "presolve": not full},
     )
     if result.status != 0:
         return 0.0
@@ -204,3 +251,60 @@ def load_lower_bound(
         units = scale.units_per_minute
         bound = math.ceil(bound * units - 1e-6) / units
     return bound
+
+
+def _group_entries(
+    problem: Problem, visits: Sequence[tuple[int, int, float, list[int]]]
+) -> tuple[list[int], list[tuple[int, int, float, list[int]]]]:
+    """Per robot and group of zones it may enter (zones joined by the shortest way
+    between zones: the floors of the generated sites), the minutes the group's first
+    entry adds to that zone's entry (docs/schedules.md#bounds) and its visit columns."""
+    tm = problem.instance.timing
+    ways = [w for row in tm.travel_minutes for w in row if w > 0]
+    if not ways:
+        return [], []
+    group = _components(tm.travel_minutes, min(ways))
+    zones = range(len(tm.zones))
+    into = {
+        g: min(
+            (
+                tm.travel_minutes[y][z]
+                for z in zones
+                if group[z] == g
+                for y in zones
+                if group[y] != g
+            ),
+            default=0.0,
+        )
+        for g in set(group)
+    }
+    out = []
+    by_robot_group: dict[tuple[int, int], list[int]] = {}
+    for j, (r, z, _, _) in enumerate(visits):
+        home = tm.robot_zone[r]
+        if home is None or group[home] == group[z]:
+            continue
+        by_robot_group.setdefault((r, group[z]), []).append(j)
+    for (r, g), columns in by_robot_group.items():
+        added = into[g] - max(visits[j][2] for j in columns)
+        if added > 0:
+            out.append((r, g, added, columns))
+    return group, out
+
+
+def _components(travel: Sequence[Sequence[float]], within: float) -> list[int]:
+    """Each zone's group: zones joined by a way of at most `within` minutes, transitively."""
+    n = len(travel)
+    group = list(range(n))
+
+    def find(z: int) -> int:
+        while group[z] != z:
+            group[z] = group[group[z]]
+            z = group[z]
+        return z
+
+    for a in range(n):
+        for b in range(a + 1, n):
+            if travel[a][b] <= within or travel[b][a] <= within:
+                group[find(a)] = find(b)
+    return [find(z) for z in range(n)]
