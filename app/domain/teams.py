@@ -172,22 +172,32 @@ def _check_single(i: int, task: Task, robots: Sequence[Robot]) -> None:
     )
 
 
-def _check_matching(i: int, task: Task, robots: Sequence[Robot]) -> None:
-    """Every unit by a distinct robot at once: a bipartite matching of units to robots."""
-    units = units_of(task)
-    owner: dict[int, int] = {}  # robot -> unit
+def unit_matching(options: Sequence[Sequence[int]]) -> dict[int, int]:
+    """A largest assignment of distinct robots to units, as robot -> unit (augmenting paths:
+    a team has a few units). `options[u]` lists the robots that may cover unit u, in the order
+    they are tried."""
+    holder: dict[int, int] = {}
 
-    def augment(u: int, seen: set[int]) -> bool:
-        for r, robot in enumerate(robots):
-            if r in seen or not covers(robot, units[u]):
+    def place(unit: int, seen: set[int]) -> bool:
+        for r in options[unit]:
+            if r in seen:
                 continue
             seen.add(r)
-            if r not in owner or augment(owner[r], seen):
-                owner[r] = u
+            if r not in holder or place(holder[r], seen):
+                holder[r] = unit
                 return True
         return False
 
-    matched = sum(augment(u, set()) for u in range(len(units)))
+    for unit in range(len(options)):
+        place(unit, set())
+    return holder
+
+
+def _check_matching(i: int, task: Task, robots: Sequence[Robot]) -> None:
+    """Every unit by a distinct robot at once: a bipartite matching of units to robots."""
+    units = units_of(task)
+    options = [[r for r, robot in enumerate(robots) if covers(robot, f)] for f in units]
+    matched = len(unit_matching(options))
     if matched < len(units):
         features = ", ".join(f"'{f}'" for f in task.team or {})
         raise DomainError(

@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from app.domain.problem import Problem
-from app.domain.teams import covers
+from app.domain.teams import covers, unit_matching
 
 
 def team_dispatch(
@@ -82,22 +82,10 @@ def _team(
 
 
 def _matching(options: Sequence[Sequence[int]]) -> list[int] | None:
-    """A robot per unit, all distinct (augmenting paths; a team has a few units)."""
-    holder: dict[int, int] = {}  # robot -> unit
-
-    def place(unit: int, seen: set[int]) -> bool:
-        for r in options[unit]:
-            if r in seen:
-                continue
-            seen.add(r)
-            if r not in holder or place(holder[r], seen):
-                holder[r] = unit
-                return True
-        return False
-
-    for unit in range(len(options)):
-        if not place(unit, set()):
-            return None
+    """A robot per unit, all distinct, or None where no such team exists."""
+    holder = unit_matching(options)
+    if len(holder) < len(options):
+        return None
     out = [0] * len(options)
     for r, unit in holder.items():
         out[unit] = r
