@@ -22,9 +22,10 @@ from app.domain.review import (
     ReviewAction,
     ReviewState,
 )
-from app.reviews.team_override import checked_team
+from app.reviews.team_override import Made, checked_team
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind, RunStatus
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
@@ -159,7 +160,12 @@ def resolve(
         if review.state != ReviewState.PENDING:
             raise ReviewConflictError(run_id, task_index, f"it is {review.state}")
         payload = dict(review.proposal)
-    units = _checked_choice(request, payload, task_index, action, robot, team)
+        # A team override on a timed run is checked in time from the decisions made so far.
+        made = [
+            (d.task_index, d.robot, d.team)
+            for d in decision_repo.decisions(session=session, run_id=run_id)
+        ]
+    units = _checked_choice(request, payload, task_index, action, robot, team, made)
     now = utcnow()
     resolution = Resolution(
         action=action,
@@ -214,6 +220,7 @@ def _checked_choice(
     action: ReviewAction,
     robot: str | None,
     team: Sequence[tuple[str, str]] | None,
+    made: Sequence[Made] = (),
 ) -> list[tuple[str, str]] | None:
     """An override's robot, checked against the alternatives the review listed, or its team
     (docs/reviews.md#reviews-of-team-decisions) as (robot, feature) per unit; None but for a
@@ -221,7 +228,7 @@ def _checked_choice(
     if action is ReviewAction.APPROVE:
         return None  # the proposal as it stands, one robot or a team
     if "team" in payload["proposal"]:
-        return checked_team(request, payload, task_index, robot, team)
+        return checked_team(request, payload, task_index, robot, team, made)
     if team is not None:
         raise DomainError(
             "team",

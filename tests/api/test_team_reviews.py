@@ -434,3 +434,50 @@ def test_a_large_fleet_lists_the_best_teams_and_takes_an_unlisted_one_checked_by
     assert wait_until(client, run_id, WAITING)["status"] == "completed"
     beam = client.get(f"/runs/{run_id}").json()["assignments"][0]
     assert beam["team"] == worst and beam["success"] == pytest.approx((0.45 + 0.55) / 2)
+
+
+def test_an_unlisted_timed_team_not_free_in_time_is_a_422_saying_why(client: TestClient) -> None:
+    """In time the review lists only teams whose members are free in time; a team it does not
+    list is checked against the run's problem in time too: two members whose shifts end before
+    the beam could (minute 20 against 30) are refused, not placed outside their shifts."""
+    from tests.api.timed_checks import feasibility_errors
+
+    rates = {f"r{i}": round(0.95 - 0.1 * i, 2) for i in range(6)}
+    short = {"r4", "r5"}
+    body = {
+        "tasks": [
+            {"id": "beam", "name": "Lift beam", "team": {"heavy": 2}, "duration": 30},
+            *(
+                {"id": f"c{i}", "name": f"Carry {i}", "features": ["heavy"], "duration": 10}
+                for i in range(4)
+            ),
+        ],
+        "robots": [
+            {"name": n, "success": {"heavy": s}, **({"available": [0, 20]} if n in short else {})}
+            for n, s in rates.items()
+        ],
+        "mode": "success_focused",
+        "reasoner": "rules",
+        "review": {"task_ids": ["beam"]},
+        "start": "2026-12-07T07:00:00+01:00",
+    }
+    run_id = client.post("/runs", json=body).json()["id"]
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    assert all(not short & {m["robot"] for m in a["team"]} for a in review["alternatives"])
+    late = [{"robot": "r5", "feature": "heavy"}, {"robot": "r4", "feature": "heavy"}]
+    r = client.post(
+        f"/runs/{run_id}/reviews/0", json={"action": "override", "reason": "r", "team": late}
+    )
+    assert r.status_code == 422, r.text
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["body", "team"] and "shift" in item["msg"], item
+    assert _pending(client, run_id)["task_index"] == 0  # nothing half-written
+    ok = [{"robot": "r3", "feature": "heavy"}, {"robot": "r2", "feature": "heavy"}]
+    answer = client.post(
+        f"/runs/{run_id}/reviews/0", json={"action": "override", "reason": "r", "team": ok}
+    )
+    assert answer.status_code == 200, answer.text
+    assert wait_until(client, run_id, WAITING)["status"] == "completed"
+    schedule = client.get(f"/runs/{run_id}/schedule").json()
+    assert feasibility_errors(body, schedule) == []
