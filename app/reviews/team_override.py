@@ -20,14 +20,13 @@ from app.domain.errors import DomainError
 from app.domain.pins import pinned_team
 from app.domain.problem import Problem
 from app.domain.scheduling.progress import TimedProgress
-from app.runs.spec import RunSpec
 
 # A stored decision: its task index, its robot (index) and a team's members ({"robot", ...}).
 Made = tuple[int, int, Sequence[Mapping[str, Any]] | None]
 
 
 def checked_team(
-    request: dict[str, Any],
+    problem: Problem,
     payload: Mapping[str, Any],
     task_index: int,
     robot: str | None,
@@ -35,7 +34,8 @@ def checked_team(
     made: Sequence[Made] = (),
 ) -> list[tuple[str, str]]:
     """The override's team as (robot, feature) per unit, in unit order; DomainError (422)
-    naming the field otherwise."""
+    naming the field otherwise. `problem`: the one the run decides (a guided timed run's in its
+    plan's order), `made`: its stored decisions."""
     needs = ", ".join(f"{u['count']} x '{u['feature']}'" for u in payload.get("units") or ())
     if team is None:
         raise DomainError(
@@ -44,7 +44,6 @@ def checked_team(
             'override it, send `team`, [{"robot", "feature"}] one per unit, not one robot',
             code="team_required",
         )
-    problem = RunSpec.from_json(request).problem
     instance = problem.instance
     members = pinned_team(instance, task_index, team, "team")
     names = [r.name for r in instance.robots]

@@ -481,3 +481,46 @@ def test_an_unlisted_timed_team_not_free_in_time_is_a_422_saying_why(client: Tes
     assert wait_until(client, run_id, WAITING)["status"] == "completed"
     schedule = client.get(f"/runs/{run_id}/schedule").json()
     assert feasibility_errors(body, schedule) == []
+
+
+def test_a_guided_timed_team_run_checks_an_unlisted_team_in_its_plans_order(
+    client: TestClient,
+) -> None:
+    """A guided timed run decides in its stored plan's order (here the second beam before the
+    first): the override's check in time replays the decisions in that order too, so a team
+    whose shifts end (minute 35) before the beam could is refused there as well."""
+    rates = {f"r{i}": round(0.95 - 0.1 * i, 2) for i in range(6)}
+    carries = [
+        {"id": f"c{i}", "name": f"Carry {i}", "features": ["heavy"], "duration": 10}
+        for i in range(4)
+    ]
+    carries[0]["duration"], carries[3]["after"] = 40, ["c0"]
+    body = {
+        "tasks": [
+            *carries,
+            {"id": "beam", "name": "Beam", "team": {"heavy": 2}, "duration": 30, "after": ["c1"]},
+            {"id": "beam2", "name": "Beam 2", "team": {"heavy": 2}, "duration": 20},
+        ],
+        "robots": [
+            {"name": n, "success": {"heavy": s}, **({"available": [0, 35]} if i >= 4 else {})}
+            for i, (n, s) in enumerate(rates.items())
+        ],
+        "mode": "balanced",
+        "reasoner": "rules",
+        "guidance": "optimizer",
+        "review": {"task_ids": ["beam"]},
+        "start": "2026-12-07T07:00:00+01:00",
+    }
+    run_id = client.post("/runs", json=body).json()["id"]
+    _awaiting(client, run_id)
+    review = _pending(client, run_id)
+    assert review["task_index"] == 4
+    decided = [d["task_index"] for d in client.get(f"/runs/{run_id}/trace").json()["decisions"]]
+    assert 5 in decided  # the plan's order, not the unguided one
+    late = [{"robot": "r5", "feature": "heavy"}, {"robot": "r4", "feature": "heavy"}]
+    r = client.post(
+        f"/runs/{run_id}/reviews/4", json={"action": "override", "reason": "r", "team": late}
+    )
+    assert r.status_code == 422, r.text
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["body", "team"] and "shift" in item["msg"], item
