@@ -524,3 +524,25 @@ def test_a_guided_timed_team_run_checks_an_unlisted_team_in_its_plans_order(
     assert r.status_code == 422, r.text
     (item,) = r.json()["detail"]
     assert item["loc"] == ["body", "team"] and "shift" in item["msg"], item
+
+
+def test_a_malformed_team_in_the_console_form_is_a_422_page_and_the_review_stays_pending(
+    client: TestClient,
+) -> None:
+    """The console's team field is JSON from its select; anything else sent to it (deeply
+    nested, not a list of members) is refused with a page naming the field, never a 500."""
+    from tests.api.test_console import TOKEN
+
+    run_id = team_run(client)
+    _awaiting(client, run_id)
+    token = TOKEN.search(client.get("/console/reviews").text)
+    assert token
+    for value in ("[" * 5000, "{}", '"crane"', "[[1, 2]]", '[{"robot": "crane"}]', "7"):
+        answer = client.post(
+            f"/console/runs/{run_id}/reviews/0",
+            data={"csrf_token": token[1], "action": "override", "team": value, "reason": "r"},
+            follow_redirects=False,
+        )
+        assert answer.status_code == 422, (value[:20], answer.status_code, answer.text[:300])
+        assert "team" in answer.text
+    assert _pending(client, run_id)["task_index"] == 0
