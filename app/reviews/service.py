@@ -23,7 +23,8 @@ from app.domain.review import (
     ReviewAction,
     ReviewState,
 )
-from app.reviews.team_override import Made, checked_team
+from app.graph.recorder import DecisionRecord
+from app.reviews.team_override import checked_team
 from app.runs import lifecycle, records
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.spec import RunSpec
@@ -212,7 +213,7 @@ def resolve(
 
 def _team_run(
     session: Session, run: Run, payload: dict[str, Any]
-) -> tuple[Problem, list[Made]] | None:
+) -> tuple[Problem, list[DecisionRecord]] | None:
     """What a team override is checked against (docs/reviews.md#reviews-of-team-decisions): the
     problem the run decides (a guided timed run's in its plan's order) and its decisions so
     far (a timed run's time lines); None for a one-robot decision."""
@@ -220,9 +221,8 @@ def _team_run(
         return None
     spec = RunSpec.from_json(run.request)
     problem = records.run_problem(session, run.id, spec.problem, spec.guidance)
-    made: list[Made] = [
-        (d.task_index, d.robot, d.team)
-        for d in decision_repo.decisions(session=session, run_id=run.id)
+    made = [
+        records.decision_record(d) for d in decision_repo.decisions(session=session, run_id=run.id)
     ]
     return problem, made
 
@@ -233,7 +233,7 @@ def _checked_choice(
     action: ReviewAction,
     robot: str | None,
     team: Sequence[tuple[str, str]] | None,
-    team_run: tuple[Problem, list[Made]] | None,
+    team_run: tuple[Problem, list[DecisionRecord]] | None,
 ) -> list[tuple[str, str]] | None:
     """An override's robot, checked against the alternatives the review listed, or its team
     (docs/reviews.md#reviews-of-team-decisions) as (robot, feature) per unit; None but for a

@@ -20,9 +20,8 @@ from app.domain.errors import DomainError
 from app.domain.pins import pinned_team
 from app.domain.problem import Problem
 from app.domain.scheduling.progress import TimedProgress
-
-# A stored decision: its task index, its robot (index) and a team's members ({"robot", ...}).
-Made = tuple[int, int, Sequence[Mapping[str, Any]] | None]
+from app.graph.recorder import DecisionRecord
+from app.graph.timing import decision_teams
 
 
 def checked_team(
@@ -31,7 +30,7 @@ def checked_team(
     task_index: int,
     robot: str | None,
     team: Sequence[tuple[str, str]] | None,
-    made: Sequence[Made] = (),
+    made: Sequence[DecisionRecord] = (),
 ) -> list[tuple[str, str]]:
     """The override's team as (robot, feature) per unit, in unit order; DomainError (422)
     naming the field otherwise. `problem`: the one the run decides (a guided timed run's in its
@@ -81,13 +80,12 @@ def checked_team(
     return chosen
 
 
-def _progress(problem: Problem, task: int, made: Sequence[Made]) -> TimedProgress | None:
+def _progress(problem: Problem, task: int, made: Sequence[DecisionRecord]) -> TimedProgress | None:
     """A timed run's time lines at `task`, the stored decisions placed; None untimed."""
     if not problem.instance.timed:
         return None
-    index = {r.name: i for i, r in enumerate(problem.instance.robots)}
-    robots = {t: r for t, r, _ in made}
-    teams = {t: tuple(index[m["robot"]] for m in team) for t, _, team in made if team}
+    robots = {d.task_index: d.robot for d in made}
+    teams = decision_teams(problem, made)
     progress = TimedProgress.replay(problem, robots, until=task, teams=teams)
     return progress if progress.current() == task else None
 
