@@ -87,6 +87,13 @@ def _team(value: str) -> list[tuple[str, str]]:
     {"robot", "feature"} per unit; the service checks it as a team."""
     try:
         members = json.loads(value)
-        return [(str(m["robot"]), str(m["feature"])) for m in members]
-    except (ValueError, TypeError, KeyError) as exc:
+    except (ValueError, RecursionError) as exc:  # deep nesting: RecursionError, not a 500
         raise DomainError("team", "not a team: choose one of the listed teams") from exc
+    if not isinstance(members, list) or not all(
+        isinstance(m, dict)
+        and isinstance(m.get("robot"), str)
+        and isinstance(m.get("feature"), str)
+        for m in members
+    ):
+        raise DomainError("team", "not a team: choose one of the listed teams")
+    return [(m["robot"], m["feature"]) for m in members]

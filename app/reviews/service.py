@@ -17,18 +17,22 @@ from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.errors import DomainError, RunNotFoundError, RunStateConflictError, refuse_nul
+from app.domain.problem import Problem
 from app.domain.review import (
     Resolution,
     ReviewAction,
     ReviewState,
 )
+from app.graph.recorder import DecisionRecord
 from app.reviews.team_override import checked_team
-from app.runs import lifecycle
+from app.runs import lifecycle, records
 from app.runs.lifecycle import EventKind, RunStatus
+from app.runs.spec import RunSpec
+from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
-from app.store.models import Review, as_utc, utcnow
+from app.store.models import Review, Run, as_utc, utcnow
 
 
 class ReviewConflictError(DomainError):
@@ -147,7 +151,6 @@ def resolve(
         run = repo.get_run(session=session, run_id=run_id)
         if run is None:
             raise RunNotFoundError(run_id)
-        request = dict(run.request)
         review = session.scalar(
             select(Review).where(Review.run_id == run_id, Review.task_index == task_index)
         )
@@ -159,7 +162,8 @@ def resolve(
         if review.state != ReviewState.PENDING:
             raise ReviewConflictError(run_id, task_index, f"it is {review.state}")
         payload = dict(review.proposal)
-    units = _checked_choice(request, payload, task_index, action, robot, team)
+        team_run = _team_run(session, run, payload) if action is ReviewAction.OVERRIDE else None
+    units = _checked_choice(payload, task_index, action, robot, team, team_run)
     now = utcnow()
     resolution = Resolution(
         action=action,
@@ -207,21 +211,38 @@ def resolve(
     return Resolved(run_id=run_id, task_index=task_index, resolution=resolution, waited_s=waited)
 
 
+def _team_run(
+    session: Session, run: Run, payload: dict[str, Any]
+) -> tuple[Problem, list[DecisionRecord]] | None:
+    """What a team override is checked against (docs/reviews.md#reviews-of-team-decisions): the
+    problem the run decides (a guided timed run's in its plan's order) and its decisions so
+    far (a timed run's time lines); None for a one-robot decision."""
+    if "team" not in payload["proposal"]:
+        return None
+    spec = RunSpec.from_json(run.request)
+    problem = records.run_problem(session, run.id, spec.problem, spec.guidance)
+    made = [
+        records.decision_record(d) for d in decision_repo.decisions(session=session, run_id=run.id)
+    ]
+    return problem, made
+
+
 def _checked_choice(
-    request: dict[str, Any],
     payload: dict[str, Any],
     task_index: int,
     action: ReviewAction,
     robot: str | None,
     team: Sequence[tuple[str, str]] | None,
+    team_run: tuple[Problem, list[DecisionRecord]] | None,
 ) -> list[tuple[str, str]] | None:
     """An override's robot, checked against the alternatives the review listed, or its team
     (docs/reviews.md#reviews-of-team-decisions) as (robot, feature) per unit; None but for a
     team."""
     if action is ReviewAction.APPROVE:
         return None  # the proposal as it stands, one robot or a team
-    if "team" in payload["proposal"]:
-        return checked_team(request, payload, task_index, robot, team)
+    if team_run is not None:
+        problem, made = team_run
+        return checked_team(problem, payload, task_index, robot, team, made)
     if team is not None:
         raise DomainError(
             "team",

@@ -255,7 +255,10 @@ class LTAASolver(Solver):
                     decisions,
                 ),
                 "reasoner": reasoner.name,
-                "mean_quality": round(statistics.fmean(d.quality for d in decisions), 4),
+                # None when every task is pinned: the graph decided nothing.
+                "mean_quality": (
+                    round(statistics.fmean(d.quality for d in decisions), 4) if decisions else None
+                ),
                 "fallbacks": sum(d.fallback for d in decisions),
                 "retries": sum(d.attempts - 1 for d in decisions),
                 "transport_retries": used.transport_retries,

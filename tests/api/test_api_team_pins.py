@@ -204,3 +204,28 @@ def test_bad_team_pins_are_a_422_naming_the_field(
         r = client.post("/allocate", json=body(solver=solver, pinned=[pin]))
         assert r.status_code == 422, r.text[:1000]
         assert_names(assert_error_shape(r.json()), ["body", *loc], words or None)
+
+
+@pytest.mark.parametrize("solver", TEAM_METHODS)
+def test_every_team_method_answers_when_every_task_is_pinned(
+    client: TestClient, solver: str
+) -> None:
+    """Nothing left to decide (both team tasks pinned with their teams, the rest on robots):
+    every method answers the pins as they stand, the graph with no decision of its own."""
+    pins = [
+        PANEL_PIN,
+        {
+            "task_id": "beam",
+            "team": [
+                {"robot": "lifter", "feature": "heavy"},
+                {"robot": "crane", "feature": "heavy"},
+            ],
+        },
+        {"task_id": "sweep", "robot": "arm"},
+        {"task_id": "carry", "robot": "lifter"},
+    ]
+    r = client.post("/allocate", json=body(solver=solver, pinned=pins))
+    assert r.status_code == 200, r.text
+    rows = {a["task_id"]: a for a in r.json()["assignments"]}
+    assert all(a["pinned"] is True for a in rows.values())
+    assert rows["panel"]["team"] == PANEL_TEAM and members(rows["beam"]) == ["lifter", "crane"]
