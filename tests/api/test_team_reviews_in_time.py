@@ -64,7 +64,7 @@ def test_a_guided_timed_team_run_checks_an_unlisted_team_in_its_plans_order(
 ) -> None:
     """A guided timed run decides in its stored plan's order (here the second beam before the
     first): the override's check in time replays the decisions in that order too, so a team
-    whose shifts end (minute 35) before the beam could is refused there as well."""
+    with a member whose shift ends (minute 35) before the beam could is refused there as well."""
     rates = {f"r{i}": round(0.95 - 0.1 * i, 2) for i in range(6)}
     carries = [
         {"id": f"c{i}", "name": f"Carry {i}", "features": ["heavy"], "duration": 10}
@@ -93,7 +93,7 @@ def test_a_guided_timed_team_run_checks_an_unlisted_team_in_its_plans_order(
     assert review["task_index"] == 4
     decided = [d["task_index"] for d in client.get(f"/runs/{run_id}/trace").json()["decisions"]]
     assert 5 in decided  # the plan's order, not the unguided one
-    late = [{"robot": "r5", "feature": "heavy"}, {"robot": "r4", "feature": "heavy"}]
+    late = [{"robot": "r5", "feature": "heavy"}, {"robot": "r2", "feature": "heavy"}]
     r = client.post(
         f"/runs/{run_id}/reviews/4", json={"action": "override", "reason": "r", "team": late}
     )
