@@ -10,7 +10,7 @@ before offering a robot, so they never walk into a queue they cannot finish.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -140,3 +140,38 @@ def units_completable(
         (np.array(caps, dtype=np.int32), (np.array(tails), np.array(heads))), shape=(size, size)
     )
     return int(maximum_flow(graph, source, sink).flow_value) == m
+
+
+class CompletionMemo:
+    """The completion check's answers for the states asked again (the graph asks the same one
+    several times per task). Answers keyed by a queue position are kept up to `size`; answers
+    for a named list of tasks still to decide (a timed run's order) only while that list is
+    the current one: it changes with every decision, and keys holding whole task lists grew
+    with the square of the run's length."""
+
+    def __init__(self, size: int = 4096) -> None:
+        self._size = size
+        self._by_position: dict[tuple[int, tuple[int, ...]], bool] = {}
+        self._later: tuple[int, ...] | None = None
+        self._by_loads: dict[tuple[int, ...], bool] = {}
+
+    def answer(
+        self,
+        position: int,
+        later: Sequence[int] | None,
+        loads: tuple[int, ...],
+        compute: Callable[[], bool],
+    ) -> bool:
+        if later is not None:
+            current = tuple(later)
+            if current != self._later:
+                self._later, self._by_loads = current, {}
+            if loads not in self._by_loads:
+                self._by_loads[loads] = compute()
+            return self._by_loads[loads]
+        key = (position, loads)
+        if key not in self._by_position:
+            self._by_position[key] = compute()
+            if len(self._by_position) > self._size:  # a run moves forward: the oldest go
+                self._by_position.pop(next(iter(self._by_position)))
+        return self._by_position[key]

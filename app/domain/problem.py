@@ -26,7 +26,7 @@ from types import MappingProxyType
 import numpy as np
 
 from app.domain.cap import WorkloadCap
-from app.domain.completion import TeamLeft, completable, units_completable
+from app.domain.completion import CompletionMemo, TeamLeft, completable, units_completable
 from app.domain.eligibility import check_time_arguments
 from app.domain.errors import DomainError, InfeasibleCapError
 from app.domain.metrics import BalanceScope
@@ -224,23 +224,21 @@ class Problem:
         eligible robot within the cap, from `loads_after` (docs/allocation.md#teams)? `later`:
         the tasks still to decide, when they are not those after it in the queue."""
         balanced = tuple(loads_after[c] for c in self.available)
-        memo = self._completion_memo  # the graph asks the same state several times per task
-        key = (task_index if later is None else tuple(later), balanced)
-        if key not in memo:
-            if later is None:
-                later = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
+
+        def compute() -> bool:
+            left = later
+            if left is None:
+                left = self.free_tasks[bisect.bisect_right(self.free_tasks, task_index) :]
             units = self.instance.units
-            singles = [t for t in later if not units[t]]
-            rows = self.instance.eligible[np.ix_(singles, self.available)]
-            teams = [self._team_left[t] for t in later if units[t]]
-            memo[key] = units_completable(rows, teams, balanced, self.cap.lower, self.cap.upper)
-            if len(memo) > 4096:  # a run moves forward: the oldest states are not asked again
-                memo.pop(next(iter(memo)), None)
-        return memo[key]
+            rows = self.instance.eligible[np.ix_([t for t in left if not units[t]], self.available)]
+            teams = [self._team_left[t] for t in left if units[t]]
+            return units_completable(rows, teams, balanced, self.cap.lower, self.cap.upper)
+
+        return self._completion_memo.answer(task_index, later, balanced, compute)
 
     @cached_property
-    def _completion_memo(self) -> dict[tuple[object, tuple[int, ...]], bool]:
-        return {}
+    def _completion_memo(self) -> CompletionMemo:
+        return CompletionMemo()
 
     def team_problem(
         self, task_index: int, loads: Sequence[int], members: Sequence[int], later: Later = None
