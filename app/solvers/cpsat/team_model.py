@@ -345,6 +345,13 @@ class TeamModel:
                 able,
             )
 
+    def branch_on_starts(self) -> None:
+        """Search by serial schedule generation: the task that can start earliest first, at
+        its earliest start (its robots then by CP-SAT's default search)."""
+        self.model.add_decision_strategy(
+            self.start, cp_model.CHOOSE_LOWEST_MIN, cp_model.SELECT_MIN_VALUE
+        )
+
     def hint(
         self,
         assignment: Sequence[int],
