@@ -5,10 +5,10 @@ satisfiable from the loads the decision was proposed at.
 
 The team is checked against the run's own problem (its spec, as the worker plans it): for a
 team the review listed, its `cap_feasible` is what the graph found; for any other team, the
-problem's cap check (`Problem.team_problem`), the one the graph's validation asks, and on a
-timed run "members free in time" (the decisions made so far replayed, as the graph's time
-lines hold them): unless no listed team the cap allows is free in time either, when time rules
-out no one, as in the graph (docs/schedules.md#teams-in-a-run-in-time).
+graph's own question (`app.graph.context.team_facts`, the one validation, the candidates and
+the fallback ask): the cap for the tasks still to decide and, on a timed run, "members free in
+time" from the decisions made so far replayed, unless no team the cap allows is free in time,
+when time rules out no one (docs/schedules.md#teams-in-a-run-in-time).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from app.domain.errors import DomainError
 from app.domain.pins import pinned_team
 from app.domain.problem import Problem
 from app.domain.scheduling.progress import TimedProgress
+from app.graph.context import team_facts
 from app.graph.recorder import DecisionRecord
 from app.graph.timing import decision_teams
 
@@ -64,12 +65,8 @@ def checked_team(
     if alt is not None:
         why = None if alt["cap_feasible"] else "the workload cap could no longer be met"
     else:
-        loads = [int(payload["loads"][name]) for name in names]
-        progress = _progress(problem, task_index, made)
-        later = None if progress is None else progress.later(task_index)
-        why = problem.team_problem(task_index, loads, members, later)
-        if why is None and progress is not None:
-            why = _not_in_time(progress, task_index, members, payload, names)
+        loads = tuple(int(payload["loads"][name]) for name in names)
+        why = _graph_check(problem, task_index, loads, members, made)
     if why is not None:
         raise DomainError(
             "team",
@@ -80,6 +77,34 @@ def checked_team(
     return chosen
 
 
+def _graph_check(
+    problem: Problem,
+    task: int,
+    loads: tuple[int, ...],
+    members: tuple[int, ...],
+    made: Sequence[DecisionRecord],
+) -> str | None:
+    """The graph's own question of a team (app.graph.context.team_facts): the cap for the tasks
+    still to decide and, on a timed run, members free in time (unless no team the cap allows
+    is), asked from the time lines of the decisions made so far."""
+    progress = _progress(problem, task, made)
+    later = None if progress is None else progress.later(task)
+    feasible = tuple(
+        problem.feasible_robots(task, loads, 0, in_order=True if later is None else later)
+    )
+    facts, _ = team_facts(
+        problem,
+        task,
+        loads,
+        feasible,
+        None,
+        timing=() if progress is None else progress.options(task),
+        team_time=None if progress is None else (lambda m: progress.team_option(task, m)),
+        later=later,
+    )
+    return None if facts is None else facts.problem(members)
+
+
 def _progress(problem: Problem, task: int, made: Sequence[DecisionRecord]) -> TimedProgress | None:
     """A timed run's time lines at `task`, the stored decisions placed; None untimed."""
     if not problem.instance.timed:
@@ -88,29 +113,3 @@ def _progress(problem: Problem, task: int, made: Sequence[DecisionRecord]) -> Ti
     teams = decision_teams(problem, made)
     progress = TimedProgress.replay(problem, robots, until=task, teams=teams)
     return progress if progress.current() == task else None
-
-
-def _not_in_time(
-    progress: TimedProgress,
-    task: int,
-    members: tuple[int, ...],
-    payload: Mapping[str, Any],
-    names: Sequence[str],
-) -> str | None:
-    """Why the team is not free in time (its end misses the deadline or a member's shift), when
-    some listed team the cap allows is (else time rules out no one, as in the graph)."""
-    option = progress.team_option(task, members)
-    if option.allowed:
-        return None
-    index = {name: i for i, name in enumerate(names)}
-    rivals = (
-        tuple(index[m["robot"]] for m in alt["team"])
-        for alt in payload["alternatives"]
-        if alt.get("team") and alt["cap_feasible"]
-    )
-    if not any(progress.team_option(task, m).allowed for m in rivals):
-        return None
-    return (
-        f"the team would start at minute {option.start:g} and end at {option.end:g}, which "
-        f"{option.why_not}"
-    )
