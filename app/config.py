@@ -54,6 +54,30 @@ class Settings(BaseSettings):
         description="Label of this process in leases and run events; default hostname",
     )
 
+    # The fleet bridge (docs/fleet.md): VDA 5050 orders out, robot state in, over MQTT. Off
+    # (no broker needed) unless mqtt_url is set.
+    mqtt_url: str | None = Field(
+        None,
+        pattern=r"^mqtts?://[^\s/:]+(:\d+)?/?$",
+        description="e.g. mqtt://127.0.0.1:1883; unset: no fleet bridge",
+    )
+    mqtt_interface: str = Field(
+        "uagv", pattern=r"^[A-Za-z0-9_-]+$", description="The first level of every topic"
+    )
+    mqtt_manufacturer: str = Field(
+        "ltaa-sim",
+        pattern=r"^[^/#+\s]+$",
+        description="The manufacturer a site's robots are addressed under (their serial "
+        "number is the robot's name)",
+    )
+    mqtt_sites: str = Field(
+        "default",
+        description="Comma-separated sites whose runs are sent to the robots; '*' for all",
+    )
+    mqtt_client_id: str | None = Field(
+        None, max_length=64, description="The bridge's MQTT client id; default ltaa-{hostname}"
+    )
+
     # The Anthropic SDK's own variable is honoured so an existing key just works.
     anthropic_api_key: SecretStr | None = Field(
         None, validation_alias=AliasChoices("LTAA_ANTHROPIC_API_KEY", "ANTHROPIC_API_KEY")

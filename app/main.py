@@ -20,6 +20,8 @@ from app.api.routers import body_limits, mount_routers
 from app.config import Settings, get_settings
 from app.console import install as install_console
 from app.console.imports import CONSOLE_IMPORT_PATH
+from app.fleet.bridge import Bridge
+from app.fleet.metrics import FleetMetrics
 from app.http.auth import InsecureBindError, KeyRing, check_bind
 from app.http.errors import BodySizeLimit, install_error_handlers
 from app.http.rounding import RoundedJSONResponse
@@ -80,6 +82,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         # ... starting as soon as the signal arrives, before uvicorn waits on open streams.
         resources.enter_context(drain_on_signal(partial(_begin_drain, worker)))
         app.state.runs = RunsContext(sessions=sessions, worker=worker)
+        app.state.fleet = _start_fleet(settings, sessions, worker, app.state.metrics, resources)
         resumed = await run_in_threadpool(worker.recover)
         if resumed:
             log.info("resuming %d interrupted run(s): %s", len(resumed), ", ".join(resumed))
@@ -107,6 +110,29 @@ def _start_webhooks(
     else:
         log.warning("webhook dispatch is off (LTAA_WEBHOOK_DISPATCH=false): deliveries wait")
     return WebhooksContext(sessions=sessions, box=box, dispatcher=dispatcher)
+
+
+def _start_fleet(
+    settings: Settings,
+    sessions: sessionmaker[Session],
+    worker: RunWorker,
+    metrics: Metrics,
+    resources: AsyncExitStack,
+) -> Bridge | None:
+    """The VDA 5050 bridge (docs/fleet.md), when a broker is configured; closed before the
+    worker (the stack unwinds in reverse), so no report arrives for a stopped worker."""
+    if settings.mqtt_url is None:
+        return None
+    bridge = Bridge(
+        settings=settings,
+        sessions=sessions,
+        worker=worker,
+        metrics=FleetMetrics(metrics.registry),
+    )
+    bridge.start()
+    resources.push_async_callback(bridge.close)
+    log.info("fleet bridge on: %s, interface %s", settings.mqtt_url, settings.mqtt_interface)
+    return bridge
 
 
 def _begin_drain(worker: RunWorker) -> None:

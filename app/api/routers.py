@@ -12,6 +12,7 @@ from app.allocation import catalog_endpoints
 from app.allocation import endpoints as allocation
 from app.config import Settings
 from app.exchange import endpoints as exchange
+from app.fleet import endpoints as fleet
 from app.http.deps import require_client
 from app.http.responses import CLIENT, ErrorOut, errors
 from app.operations import endpoints as operations
@@ -39,6 +40,7 @@ ROUTERS: tuple[APIRouter, ...] = (
     metrics_endpoints.router,
     webhooks.router,
     sites.router,
+    fleet.router,
     operations.router,
     audit_endpoints.router,
 )

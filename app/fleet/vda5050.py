@@ -89,7 +89,7 @@ def timestamp(at: datetime) -> str:
     return aware.astimezone(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-class _Message(BaseModel):
+class Message(BaseModel):
     """Fields every VDA 5050 message starts with."""
 
     model_config = ConfigDict(populate_by_name=True, extra="allow", frozen=True)
@@ -152,7 +152,7 @@ class Node(BaseModel):
     actions: list[Action] = Field(default_factory=list)
 
 
-class Order(_Message):
+class Order(Message):
     order_id: str = Field(alias="orderId", min_length=1)
     order_update_id: int = Field(alias="orderUpdateId", ge=0)
     nodes: list[Node]
@@ -163,7 +163,7 @@ class Order(_Message):
         return [a for node in self.nodes for a in node.actions]
 
 
-class InstantActions(_Message):
+class InstantActions(Message):
     actions: list[Action]
 
 
@@ -198,7 +198,7 @@ class SafetyState(BaseModel):
     field_violation: bool = Field(False, alias="fieldViolation")
 
 
-class State(_Message):
+class State(Message):
     order_id: str = Field(alias="orderId")  # "" while the robot has no order
     order_update_id: int = Field(alias="orderUpdateId", ge=0)
     last_node_id: str = Field(alias="lastNodeId")
@@ -218,5 +218,5 @@ class State(_Message):
         return [e for e in self.errors if e.error_level == ErrorLevel.FATAL]
 
 
-class Connection(_Message):
+class Connection(Message):
     connection_state: ConnectionState = Field(alias="connectionState")

@@ -15,7 +15,7 @@ from typing import Any
 from alembic import context
 from sqlalchemy import text
 
-from app.store import site_models, webhook_models  # noqa: F401  (registers their tables)
+from app.store import fleet_models, site_models, webhook_models  # noqa: F401  (registers their tables)
 from app.store.db import make_engine
 from app.store.models import Base
 

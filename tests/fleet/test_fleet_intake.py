@@ -1,0 +1,288 @@
+"""The bridge's logic in process (docs/fleet.md): orders from a completed run's plan, robot
+state back as execution reports, a robot gone as a revision, and every kind of bad message
+refused and counted with nothing stored. The broker is exercised in test_fleet_e2e.py."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import jsonschema
+import pytest
+from fastapi.testclient import TestClient
+from prometheus_client import CollectorRegistry
+from sqlalchemy import func, select
+
+from app.fleet import outbox
+from app.fleet.dispatch import FleetNames, dispatch
+from app.fleet.intake import Intake
+from app.fleet.metrics import FleetMetrics
+from app.fleet.states import Refusal
+from app.fleet.vda5050 import (
+    PROTOCOL_VERSION,
+    ActionState,
+    ActionStatus,
+    BatteryState,
+    Connection,
+    ConnectionState,
+    Order,
+    RobotError,
+    SafetyState,
+    State,
+    Topic,
+    topic,
+)
+from app.store.fleet_models import FleetOrder, FleetRobot
+from app.store.models import ExecutionReport
+from tests.api.test_revisions import BASELINE, completed_run, wait_status
+from tests.vda5050_schemas import validate
+
+MAKER = "acme"
+
+
+class Fleet:
+    """An Intake on a test client's store, with a clock and headerIds of its own per robot."""
+
+    def __init__(self, client: TestClient) -> None:
+        runs = client.app.state.runs  # type: ignore[attr-defined]
+        self.sessions = runs.sessions
+        self.names = FleetNames(interface="uagv", manufacturer=MAKER, sites=None)
+        self.metrics = FleetMetrics(CollectorRegistry())
+        self.intake = Intake(
+            sessions=runs.sessions,
+            worker=runs.worker,
+            settings=client.app.state.settings,  # type: ignore[attr-defined]
+            names=self.names,
+            metrics=self.metrics,
+        )
+        self.headers: dict[tuple[str, Topic], int] = {}
+        self.clock = datetime(2026, 12, 5, 8, 0, tzinfo=UTC)
+
+    def _header(self, robot: str, kind: Topic) -> tuple[int, datetime]:
+        self.headers[(robot, kind)] = self.headers.get((robot, kind), -1) + 1
+        self.clock += timedelta(seconds=1)
+        return self.headers[(robot, kind)], self.clock
+
+    def connection(self, robot: str, state: ConnectionState) -> Refusal | None:
+        header, at = self._header(robot, Topic.CONNECTION)
+        message = Connection(
+            header_id=header,
+            timestamp=at,
+            version=PROTOCOL_VERSION,
+            manufacturer=MAKER,
+            serial_number=robot,
+            connection_state=state,
+        )
+        return self.send(robot, Topic.CONNECTION, message.wire())
+
+    def state(
+        self,
+        robot: str,
+        order: Order | None,
+        status: ActionStatus | None = None,
+        *,
+        battery: float = 90.0,
+        fatal: bool = False,
+    ) -> Refusal | None:
+        header, at = self._header(robot, Topic.STATE)
+        actions = (
+            [ActionState(action_id=order.task_actions()[0].action_id, action_status=status)]
+            if order is not None and status is not None
+            else []
+        )
+        message = State(
+            header_id=header,
+            timestamp=at,
+            version=PROTOCOL_VERSION,
+            manufacturer=MAKER,
+            serial_number=robot,
+            order_id=order.order_id if order else "",
+            order_update_id=order.order_update_id if order else 0,
+            last_node_id="",
+            last_node_sequence_id=0,
+            node_states=[],
+            edge_states=[],
+            driving=False,
+            action_states=actions,
+            battery_state=BatteryState(battery_charge=battery, charging=False),
+            operating_mode="AUTOMATIC",
+            errors=[RobotError(error_type="motor", error_level="FATAL")] if fatal else [],
+            safety_state=SafetyState(),
+        )
+        return self.send(robot, Topic.STATE, message.wire())
+
+    def send(self, robot: str, kind: Topic, payload: bytes, **kw: Any) -> Refusal | None:
+        validate_payload = json.loads(payload) if payload.startswith(b"{") else None
+        if validate_payload is not None and kind in (Topic.STATE, Topic.CONNECTION):
+            try:
+                validate(kind.value, validate_payload)
+            except jsonschema.ValidationError:
+                pass  # the refusal tests send bad messages on purpose
+        return self.intake.receive(topic("uagv", MAKER, robot, kind), payload, **kw)
+
+    def dispatch(self) -> list[tuple[str, dict[str, Any]]]:
+        """Dispatch and take what it wrote from the outbox, each checked against the schema."""
+        dispatch(sessions=self.sessions, names=self.names)
+        sent = outbox.pending(sessions=self.sessions)
+        outbox.mark_published(sessions=self.sessions, ids=[m.id for m in sent])
+        out = []
+        for m in sent:
+            body = json.loads(m.payload)
+            validate(m.topic.rsplit("/", 1)[-1], body)
+            out.append((m.topic, body))
+        return out
+
+    def reports(self, run_id: str) -> dict[str, str]:
+        with self.sessions() as session:
+            rows = session.scalars(select(ExecutionReport).where(ExecutionReport.run_id == run_id))
+            return {r.task_id: r.state for r in rows}
+
+    def rows(self) -> tuple[int, int, int]:
+        with self.sessions() as session:
+            return (
+                session.scalar(select(func.count()).select_from(ExecutionReport)) or 0,
+                session.scalar(select(func.count()).select_from(FleetRobot)) or 0,
+                session.scalar(select(func.count()).select_from(FleetOrder)) or 0,
+            )
+
+
+@pytest.fixture
+def fleet(client: TestClient) -> Iterator[tuple[TestClient, Fleet, str, list[str]]]:
+    run_id = completed_run(client, BASELINE)
+    state = client.get(f"/runs/{run_id}").json()
+    robots = sorted({a["robot"] for a in state["assignments"]})
+    yield client, Fleet(client), run_id, robots
+
+
+def _orders(sent: list[tuple[str, dict[str, Any]]]) -> dict[str, Order]:
+    return {
+        body["serialNumber"]: Order.model_validate(body)
+        for name, body in sent
+        if name.endswith("/order")
+    }
+
+
+def test_one_order_per_online_robot_then_the_next_as_each_finishes(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    client, f, run_id, robots = fleet
+    assert f.dispatch() == []  # nobody online: nothing sent
+    for robot in robots:
+        assert f.connection(robot, ConnectionState.ONLINE) is None
+    orders = _orders(f.dispatch())
+    assert sorted(orders) == robots
+    assert f.dispatch() == []  # again: nothing new
+    robot = robots[0]
+    first = orders[robot]
+    action = first.task_actions()[0]
+    assert first.order_id == f"{run_id}:{action.action_id}:{robot}" and first.order_update_id == 0
+    assert action.parameter("taskId") == action.action_id and action.parameter("runId") == run_id
+    assert f.state(robot, first, ActionStatus.RUNNING) is None
+    assert f.reports(run_id) == {action.action_id: "started"}
+    assert f.dispatch() == []  # still busy
+    assert f.state(robot, first, ActionStatus.FINISHED) is None
+    assert f.reports(run_id) == {action.action_id: "done"}
+    following = _orders(f.dispatch())
+    assert list(following) == [robot]
+    assert following[robot].task_actions()[0].action_id != action.action_id
+    # The same state again changes nothing (idempotent per order, action and status).
+    before = f.rows()
+    assert f.state(robot, first, ActionStatus.FINISHED) is None
+    assert f.rows() == before
+    # The site's estimates learned from the robot's report.
+    estimates = client.get("/sites/default/estimates").json()
+    assert sum(r["successes"] for e in estimates["robots"] for r in e["features"]) >= 1
+
+
+def test_a_failed_action_is_a_failed_task(fleet: tuple[TestClient, Fleet, str, list[str]]) -> None:
+    _, f, run_id, robots = fleet
+    f.connection(robots[0], ConnectionState.ONLINE)
+    order = _orders(f.dispatch())[robots[0]]
+    assert f.state(robots[0], order, ActionStatus.FAILED) is None
+    assert f.reports(run_id) == {order.task_actions()[0].action_id: "failed"}
+
+
+def test_bad_messages_are_refused_counted_and_store_nothing(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    _, f, run_id, robots = fleet
+    robot = robots[0]
+    f.connection(robot, ConnectionState.ONLINE)
+    order = _orders(f.dispatch())[robot]
+    before = f.rows()
+    state_topic = Topic.STATE
+    # Not JSON; JSON but not VDA 5050; a header naming another robot.
+    assert f.send(robot, state_topic, b"\x00not json") == Refusal.MALFORMED
+    assert f.send(robot, state_topic, b'{"headerId": 1}') == Refusal.MALFORMED
+    # A robot that never said ONLINE.
+    assert f.state("ghost", None) == Refusal.UNKNOWN_ROBOT
+    # An order the bridge never sent.
+    fake = order.model_copy(update={"order_id": "not-ours"})
+    assert f.state(robot, fake, ActionStatus.RUNNING) == Refusal.UNKNOWN_ORDER
+    assert f.rows() == before and f.reports(run_id) == {}
+    # Accepted, then replayed (the same headerId), then from the past (a newer headerId with
+    # an older timestamp).
+    assert f.state(robot, order, ActionStatus.RUNNING) is None
+    after = f.rows()
+    f.headers[(robot, Topic.STATE)] -= 1
+    assert f.state(robot, order, ActionStatus.FINISHED) == Refusal.REPLAYED
+    f.clock -= timedelta(hours=1)
+    assert f.state(robot, order, ActionStatus.FINISHED) == Refusal.OUT_OF_ORDER
+    assert f.rows() == after
+    assert f.reports(run_id) == {order.task_actions()[0].action_id: "started"}
+    for why in (
+        Refusal.MALFORMED,
+        Refusal.UNKNOWN_ROBOT,
+        Refusal.UNKNOWN_ORDER,
+        Refusal.REPLAYED,
+        Refusal.OUT_OF_ORDER,
+    ):
+        assert f.metrics.refused_count(why) >= 1, why
+    assert f.metrics.refused_count(Refusal.MALFORMED) == 2
+    # And the intake still works.
+    f.clock += timedelta(hours=2)
+    assert f.state(robot, order, ActionStatus.FINISHED) is None
+
+
+def test_a_robot_gone_revises_its_tasks_to_the_others_and_cancels_its_order(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    client, f, run_id, robots = fleet
+    for robot in robots:
+        f.connection(robot, ConnectionState.ONLINE)
+    orders = _orders(f.dispatch())
+    gone = robots[1]
+    assert f.connection(gone, ConnectionState.CONNECTIONBROKEN) is None
+    head = wait_status(client, run_id, "completed")["superseded_by"]
+    assert head is not None
+    revised = wait_status(client, head, "completed")
+    assert gone not in {a["robot"] for a in revised["assignments"] if not a.get("pinned")}
+    sent = f.dispatch()
+    cancels = [b for name, b in sent if name.endswith("/instantActions")]
+    # The robot gone loses its order; another robot's order not yet started may move too
+    # (pin "reported" keeps only what the site reported), and is then cancelled as well.
+    cancelled = {c["serialNumber"]: c["actions"][0]["actionParameters"] for c in cancels}
+    assert cancelled[gone] == [{"key": "orderId", "value": orders[gone].order_id}]
+    now = {(str(a["task_id"]), a["robot"]) for a in revised["assignments"]}
+    for robot in cancelled:
+        task = orders[robot].task_actions()[0].action_id
+        assert (task, robot) not in now
+    # Again: the robot has no work left in the head, so no second revision.
+    assert f.connection(gone, ConnectionState.ONLINE) is None
+    assert f.connection(gone, ConnectionState.OFFLINE) is None
+    assert client.get(f"/runs/{head}").json()["superseded_by"] is None
+
+
+def test_a_fatal_error_makes_the_robot_unavailable(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    client, f, run_id, robots = fleet
+    f.connection(robots[0], ConnectionState.ONLINE)
+    order = _orders(f.dispatch())[robots[0]]
+    assert f.state(robots[0], order, ActionStatus.RUNNING, fatal=True) is None
+    assert wait_status(client, run_id, "completed")["superseded_by"] is not None
+    listed = client.get("/fleet/robots").json()
+    (row,) = [r for r in listed["robots"] if r["serial_number"] == robots[0]]
+    assert row["fatal"] == "motor" and row["battery_charge"] == 90.0
