@@ -238,6 +238,7 @@ class Intake:
             ]
         refused = None
         for status in moves:
+            assert current is not None  # moves come from the current order only
             refused = self._move(current, status, message.timestamp) or refused
         fatal = message.fatal()
         changed = self._robot_row(message, fatal[0].error_type if fatal else None, bool(moves))

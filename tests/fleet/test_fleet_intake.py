@@ -26,6 +26,7 @@ from app.fleet.vda5050 import (
     BatteryState,
     Connection,
     ConnectionState,
+    ErrorLevel,
     Order,
     RobotError,
     SafetyState,
@@ -107,7 +108,7 @@ class Fleet:
             action_states=actions,
             battery_state=BatteryState(battery_charge=battery, charging=False),
             operating_mode="AUTOMATIC",
-            errors=[RobotError(error_type="motor", error_level="FATAL")] if fatal else [],
+            errors=[RobotError(error_type="motor", error_level=ErrorLevel.FATAL)] if fatal else [],
             safety_state=SafetyState(),
         )
         return self.send(robot, Topic.STATE, message.wire())
