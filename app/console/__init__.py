@@ -10,7 +10,7 @@ from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
 from app.config import Settings
-from app.console import context, imports, pages, reviews, signin, sites
+from app.console import context, fleet, imports, pages, reviews, signin, sites
 from app.http.auth import KeyRing
 
 
@@ -26,7 +26,7 @@ def install(app: FastAPI, *, keyring: KeyRing, settings: Settings) -> None:
         StaticFiles(directory=context.HERE / "static"),
         name="console-static",
     )
-    for module in (signin, pages, reviews, sites, imports):
+    for module in (signin, pages, reviews, sites, fleet, imports):
         app.include_router(module.router)
 
 

@@ -280,3 +280,15 @@ def test_a_fatal_error_makes_the_robot_unavailable(
     listed = client.get("/fleet/robots").json()
     (row,) = [r for r in listed["robots"] if r["serial_number"] == robots[0]]
     assert row["fatal"] == "motor" and row["battery_charge"] == 90.0
+
+
+def test_the_console_shows_each_robots_battery(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    client, f, _, robots = fleet
+    page = client.get("/console/fleet")
+    assert page.status_code == 200 and "bridge is off" in page.text
+    f.connection(robots[0], ConnectionState.ONLINE)
+    f.state(robots[0], None, battery=57.0)
+    page = client.get("/console/fleet")
+    assert robots[0] in page.text and "57%" in page.text

@@ -1,0 +1,26 @@
+"""GET /console/fleet (docs/fleet.md#the-robots): the robots the fleet bridge has heard from, with
+their connection, battery and open orders."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import Response
+
+from app.console.context import ConsoleDep, SignedInDep, finish, sessions_of
+from app.fleet import service
+
+router = APIRouter(prefix="/console", include_in_schema=False)
+
+
+@router.get("/fleet")
+async def fleet_page(request: Request, console: ConsoleDep, signed: SignedInDep) -> Response:
+    robots = await run_in_threadpool(service.robots, sessions=sessions_of(request))
+    bridge = getattr(request.app.state, "fleet", None)
+    context = {
+        "title": "Fleet",
+        "robots": robots,
+        "enabled": bridge is not None,
+        "connected": bridge is not None and bridge.connected.is_set(),
+    }
+    return finish(request, console.render(request, "fleet.html", context, signed=signed))
