@@ -119,7 +119,8 @@ class Bridge:
                 await self._in_thread(
                     self.intake.receive, str(message.topic), data, retained=bool(message.retain)
                 )
-                self._wake.set()
+                if self.intake.take_changed():
+                    self._wake.set()
 
     async def _tick(self) -> None:
         while True:
@@ -132,7 +133,8 @@ class Bridge:
             await self._wake.wait()
             self._wake.clear()
             try:
-                await self._in_thread(dispatch, sessions=self.sessions, names=self.names)
+                if await self._in_thread(dispatch, sessions=self.sessions, names=self.names):
+                    self.intake.orders_changed()
             except Exception:  # a bad plan must not stop the robots' messages
                 log.exception("fleet dispatch failed; trying again at the next message")
             while True:

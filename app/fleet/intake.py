@@ -72,6 +72,19 @@ class Seen:
     at: datetime | None
 
 
+@dataclass
+class Snapshot:
+    """What a robot's row says of its battery and FATAL error."""
+
+    battery_charge: float | None
+    charging: bool | None
+    fatal: str | None
+
+    @classmethod
+    def of(cls, row: FleetRobot) -> Snapshot:
+        return cls(row.battery_charge, row.charging, row.fatal)
+
+
 class Intake:
     """Takes each message the bridge receives; `receive` is called from one thread at a time."""
 
@@ -92,7 +105,20 @@ class Intake:
         self.metrics = metrics
         self.on_change = on_change
         self._seen: dict[tuple[str, str, Topic], Seen] = {}
-        self._known: set[tuple[str, str]] = set()
+        # Each robot's orders and row as last read or written here: a heartbeat that changes
+        # nothing is answered from memory (docs/fleet.md#refused-messages). Dispatch writes
+        # orders in another transaction: the bridge calls `orders_changed` after it.
+        self._orders: dict[tuple[str, str], dict[str, FleetOrder]] = {}
+        self._rows: dict[tuple[str, str], Snapshot] = {}
+        self._dirty = False
+
+    def orders_changed(self) -> None:
+        self._orders.clear()
+
+    def take_changed(self) -> bool:
+        """Whether a message since the last call changed something (then dispatch)."""
+        dirty, self._dirty = self._dirty, False
+        return dirty
 
     def receive(self, topic: str, payload: bytes, *, retained: bool = False) -> Refusal | None:
         """Apply one message; the reason it was refused, or None."""
@@ -157,6 +183,7 @@ class Intake:
             row = session.get(FleetRobot, (manufacturer, serial))
         if row is None:
             return None
+        self._rows[(manufacturer, serial)] = Snapshot.of(row)
         if kind == Topic.STATE:
             seen = Seen(row.state_header_id, _aware(row.state_at))
         else:
@@ -198,6 +225,7 @@ class Intake:
             if message.connection_state == ConnectionState.ONLINE:
                 row.fatal = None
             self._accept(row, Topic.CONNECTION, message)
+            self._rows[key] = Snapshot.of(row)
         log.info(
             "fleet robot %s/%s is %s",
             message.manufacturer,
@@ -211,17 +239,22 @@ class Intake:
 
     # -- state -----------------------------------------------------------------------
 
-    def _state(self, topic: str, message: State) -> Refusal | None:
-        with self.sessions() as session:
-            orders = list(
-                session.scalars(
+    def _robot_orders(self, manufacturer: str, serial: str) -> dict[str, FleetOrder]:
+        key = (manufacturer, serial)
+        if key not in self._orders:
+            with self.sessions() as session:
+                rows = session.scalars(
                     select(FleetOrder).where(
-                        FleetOrder.manufacturer == message.manufacturer,
-                        FleetOrder.serial_number == message.serial_number,
+                        FleetOrder.manufacturer == manufacturer,
+                        FleetOrder.serial_number == serial,
                     )
                 )
-            )
-        by_id = {o.order_id: o for o in orders}
+                self._orders[key] = {o.order_id: o for o in rows}
+                session.expunge_all()
+        return self._orders[key]
+
+    def _state(self, topic: str, message: State) -> Refusal | None:
+        by_id = self._robot_orders(message.manufacturer, message.serial_number)
         if message.order_id and message.order_id not in by_id:
             return self._refuse(
                 Refusal.UNKNOWN_ORDER, topic, f"orderId '{message.order_id}' was never sent"
@@ -251,11 +284,23 @@ class Intake:
     def _robot_row(self, message: State, fatal: str | None, moved: bool) -> str | None:
         """Battery, FATAL error and the header on the robot's row when one of them changed
         (or an action moved); 'fatal' when a FATAL error is new."""
+        key = (message.manufacturer, message.serial_number)
+        known = self._rows.get(key)
+        battery = message.battery_state
+        if (
+            known is not None
+            and not moved
+            and (fatal is None) == (known.fatal is None)
+            and known.battery_charge is not None
+            and abs(known.battery_charge - battery.battery_charge) < BATTERY_STEP
+            and known.charging == battery.charging
+        ):
+            self._remember(message, Topic.STATE)
+            return None
         with transaction(self.sessions) as session:
             row = session.get(FleetRobot, (message.manufacturer, message.serial_number))
             if row is None:
                 return None
-            battery = message.battery_state
             new_fatal = fatal is not None and row.fatal is None
             changed = (
                 moved
@@ -272,6 +317,7 @@ class Intake:
             row.charging = battery.charging
             row.fatal = fatal
             self._accept(row, Topic.STATE, message)
+            self._rows[key] = Snapshot.of(row)
         return "fatal" if new_fatal else "row"
 
     def _move(self, order: FleetOrder, status: ActionStatus, at: datetime) -> Refusal | None:
@@ -307,6 +353,8 @@ class Intake:
                 if status in ORDER_STATE_OF:
                     row.state = ORDER_STATE_OF[status]
         order.action_status = status.value
+        if status in ORDER_STATE_OF:
+            order.state = ORDER_STATE_OF[status]
         return None
 
     def _team_states(self, session: Session, order: FleetOrder) -> dict[str, str | None]:
@@ -359,6 +407,7 @@ class Intake:
             return heads
 
     def _changed(self) -> None:
+        self._dirty = True
         if self.on_change is not None:
             self.on_change()
 

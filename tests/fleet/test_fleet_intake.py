@@ -118,7 +118,8 @@ class Fleet:
 
     def dispatch(self) -> list[tuple[str, dict[str, Any]]]:
         """Dispatch and take what it wrote from the outbox, each checked against the schema."""
-        dispatch(sessions=self.sessions, names=self.names)
+        if dispatch(sessions=self.sessions, names=self.names):
+            self.intake.orders_changed()  # as the bridge does
         sent = outbox.pending(sessions=self.sessions)
         outbox.mark_published(sessions=self.sessions, ids=[m.id for m in sent])
         out = []
