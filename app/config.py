@@ -75,7 +75,9 @@ class Settings(BaseSettings):
         description="Comma-separated sites whose runs are sent to the robots; '*' for all",
     )
     mqtt_client_id: str | None = Field(
-        None, max_length=64, description="The bridge's MQTT client id; default ltaa-{hostname}"
+        None,
+        max_length=64,
+        description="The bridge's MQTT client id; default ltaa-{hostname}-{a digest of the database URL}",
     )
 
     # The Anthropic SDK's own variable is honoured so an existing key just works.

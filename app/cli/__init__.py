@@ -1,6 +1,6 @@
 """The `ltaa` command line, one module per command group: serve, allocate, runs, store
 (backup, restore, archive, keygen), revise, reviews, estimates, bench, schedule, import
-(exchange). Importing a module registers its commands on the one `cli` group
+(exchange), fleet (the simulator). Importing a module registers its commands on the one `cli` group
 (app.cli.root)."""
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from app.cli import (
     bench,
     estimates,
     exchange,
+    fleet,
     reviews,
     revise,
     runs,
@@ -26,6 +27,7 @@ _COMMAND_MODULES = (
     bench,
     estimates,
     exchange,
+    fleet,
     reviews,
     revise,
     runs,

@@ -11,6 +11,7 @@ retried with backoff; the outbox keeps what was not acknowledged.
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import logging
 import socket
 from concurrent.futures import ThreadPoolExecutor
@@ -23,6 +24,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.fleet import outbox
 from app.fleet.dispatch import FleetNames, dispatch
+from app.fleet.echo import EchoSession
 from app.fleet.intake import Intake
 from app.fleet.metrics import FleetMetrics
 from app.fleet.vda5050 import Topic, subscription
@@ -37,6 +39,14 @@ def names_of(settings: Settings) -> FleetNames:
         manufacturer=settings.mqtt_manufacturer,
         sites=FleetNames.parse_sites(settings.mqtt_sites),
     )
+
+
+def default_client_id(settings: Settings) -> str:
+    """ltaa-{host}-{store}: stable across restarts of one server (its echo session is found
+    again), distinct for two servers on one machine (a broker drops the older of two clients
+    with one id)."""
+    store = hashlib.sha256(settings.db_url.encode()).hexdigest()[:8]
+    return f"ltaa-{socket.gethostname()[:40]}-{store}"
 
 
 class Bridge:
@@ -55,7 +65,7 @@ class Bridge:
         self.host = url.hostname or "127.0.0.1"
         self.port = url.port or (8883 if url.scheme == "mqtts" else 1883)
         self.tls = url.scheme == "mqtts"
-        self.identifier = settings.mqtt_client_id or f"ltaa-{socket.gethostname()}"[:64]
+        self.identifier = settings.mqtt_client_id or default_client_id(settings)
         self.sessions = sessions
         self.names = names_of(settings)
         self.metrics = metrics
@@ -71,8 +81,17 @@ class Bridge:
         )
         self._task: asyncio.Task[None] | None = None
         self.connected = asyncio.Event()
+        self.echo = EchoSession(
+            host=self.host,
+            port=self.port,
+            tls=self.tls,
+            identifier=f"{self.identifier}-echo"[:64],
+            interface=self.names.interface,
+            sessions=sessions,
+        )
 
     def start(self) -> None:
+        self.echo.start()
         self._task = asyncio.get_running_loop().create_task(self._run(), name="ltaa-fleet")
 
     async def close(self) -> None:
@@ -80,23 +99,28 @@ class Bridge:
             self._task.cancel()
             with suppress(asyncio.CancelledError):
                 await self._task
+        self.echo.close()
         self._pool.shutdown(wait=True)
 
     async def _in_thread(self, fn, *args, **kwargs):  # type: ignore[no-untyped-def]
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(self._pool, lambda: fn(*args, **kwargs))
 
+    def _client(self, identifier: str, *, clean: bool) -> aiomqtt.Client:
+        return aiomqtt.Client(
+            self.host,
+            self.port,
+            identifier=identifier,
+            tls_params=aiomqtt.TLSParameters() if self.tls else None,
+            keepalive=30,
+            clean_session=clean,
+        )
+
     async def _run(self) -> None:
         delay = 0.5
         while True:
             try:
-                async with aiomqtt.Client(
-                    self.host,
-                    self.port,
-                    identifier=self.identifier,
-                    tls_params=aiomqtt.TLSParameters() if self.tls else None,
-                    keepalive=30,
-                ) as client:
+                async with self._client(self.identifier, clean=True) as client:
                     delay = 0.5
                     log.info("fleet bridge connected to %s:%s", self.host, self.port)
                     for kind in (Topic.CONNECTION, Topic.STATE):
@@ -128,7 +152,11 @@ class Bridge:
             self._wake.set()
 
     async def _publish(self, client: aiomqtt.Client) -> None:
-        """Dispatch, then send the outbox in order, each message marked once acknowledged."""
+        """Dispatch, then send the outbox in order, each message marked once acknowledged.
+        First, what the echo session holds from before a kill is marked (app.fleet.echo)."""
+        loop = asyncio.get_running_loop()
+        if not await loop.run_in_executor(None, self.echo.caught_up.wait, 30.0):
+            log.warning("fleet bridge: the echo session did not catch up; publishing anyway")
         while True:
             await self._wake.wait()
             self._wake.clear()

@@ -159,13 +159,17 @@ def _dispatch_head(
     tasks = {str(t["id"]): t for t in head.request["instance_data"]["tasks"]}
     origin = _origin(head)
     wanted = {p.key: p for p in planned}
+    decided = {p.task_id for p in planned}
+    settled = head.status == RunStatus.COMPLETED
     written = 0
     for key, order in orders.items():
         if order.state != OrderState.SENT:
             continue
         p = wanted.get(key)
         if p is None or reports.get(order.task_id) in FINAL_REPORTS:
-            if p is None:
+            # Taken from the robot: the head decided it for others, or finished without it. A
+            # head still deciding may yet give it back to the same robot: the order waits.
+            if p is None and (order.task_id in decided or settled):
                 _cancel(session, names, order)
                 busy.discard(order.serial_number)
                 written += 1
@@ -179,7 +183,22 @@ def _dispatch_head(
     for p in planned:
         if p.robot not in online or p.robot in busy:
             continue
-        if reports.get(p.task_id) in FINAL_REPORTS or p.key in orders:
+        if reports.get(p.task_id) in FINAL_REPORTS:
+            continue
+        earlier = orders.get(p.key)
+        if earlier is not None:
+            if earlier.state not in (OrderState.CANCELLED, OrderState.FAILED):
+                continue  # sent, or the robot finished its part
+            # Cancelled, or failed and planned again by a revision (a failed task is never
+            # pinned): the same order again, as an update.
+            earlier.state = OrderState.SENT
+            earlier.action_status = None
+            earlier.update_id += 1
+            earlier.run_id = head.id
+            earlier.planned_start, earlier.planned_end = p.start, p.end
+            busy.add(p.robot)
+            _send(session, names, earlier, tasks[p.task_id], origin)
+            written += 1
             continue
         order = FleetOrder(
             order_id=order_id(root, p.task_id, p.robot),

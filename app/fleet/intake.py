@@ -148,7 +148,14 @@ class Intake:
         seen = self._last(manufacturer, serial, kind)
         if seen is None and kind == Topic.STATE:
             return self._refuse(Refusal.UNKNOWN_ROBOT, topic, "it never said ONLINE")
-        if seen is not None and seen.header_id is not None:
+        # A last will is written when the robot connects, before the ONLINE it follows: its
+        # timestamp (and, for some vehicles, its headerId) is older. An outage is never
+        # refused for that; a repeat of one is a no-op below.
+        will = (
+            isinstance(message, Connection)
+            and message.connection_state == ConnectionState.CONNECTIONBROKEN
+        )
+        if seen is not None and seen.header_id is not None and not will:
             if message.header_id <= seen.header_id:
                 if retained and message.header_id == seen.header_id:
                     return None  # the broker's retained copy of what we already have
@@ -193,6 +200,9 @@ class Intake:
 
     def _accept(self, row: FleetRobot, kind: Topic, message: Message) -> None:
         """The newest header on the row (written with the change) and in memory."""
+        seen = self._seen.get((message.manufacturer, message.serial_number, kind))
+        if seen is not None and seen.header_id is not None and seen.header_id > message.header_id:
+            return  # a will older than what it follows: the newest header stays
         if kind == Topic.STATE:
             row.state_header_id, row.state_at = message.header_id, message.timestamp
         else:
@@ -339,13 +349,14 @@ class Intake:
                     updates=[Update(order.task_id, target, at)],
                 )
             except DomainError as exc:
-                self._refuse(
+                # The order stays as it was: the robot repeats its state every interval, and
+                # the report lands once the head can take it (a revision still deciding the
+                # task), or dispatch cancels the order (a revision took the task away).
+                return self._refuse(
                     Refusal.REPORT_REFUSED,
                     f"{order.serial_number}/{order.task_id}",
                     f"{exc.field}: {exc}",
                 )
-                if status not in ORDER_STATE_OF:
-                    return Refusal.REPORT_REFUSED
         with transaction(self.sessions) as session:
             row = session.get(FleetOrder, order.id)
             if row is not None:

@@ -1,5 +1,7 @@
 """The fleet's outbox (docs/fleet.md#delivery): messages written with the order rows they
-carry, published in order by the bridge and marked once the broker acknowledged them."""
+carry, published in order by the bridge and marked once the broker acknowledged them, or once
+the bridge's echo session received them back (what closes the window of a kill between the
+broker's acknowledgement and the mark)."""
 
 from __future__ import annotations
 
@@ -34,7 +36,9 @@ def next_header_id(session: Session, topic: str) -> int:
 
 
 def enqueue(session: Session, topic: str, message: Message) -> None:
-    session.add(FleetOutbox(topic=topic, payload=message.wire().decode()))
+    session.add(
+        FleetOutbox(topic=topic, header_id=message.header_id, payload=message.wire().decode())
+    )
 
 
 def pending(*, sessions: sessionmaker[Session], limit: int = 200) -> list[Outgoing]:
@@ -46,6 +50,20 @@ def pending(*, sessions: sessionmaker[Session], limit: int = 200) -> list[Outgoi
             .limit(limit)
         )
         return [Outgoing(r.id, r.topic, r.payload.encode()) for r in rows]
+
+
+def mark_seen(*, sessions: sessionmaker[Session], topic: str, header_id: int) -> None:
+    """The broker delivered the message back to the bridge's echo session: it was published."""
+    with transaction(sessions) as session:
+        session.execute(
+            update(FleetOutbox)
+            .where(
+                FleetOutbox.topic == topic,
+                FleetOutbox.header_id == header_id,
+                FleetOutbox.published_at.is_(None),
+            )
+            .values(published_at=utcnow())
+        )
 
 
 def mark_published(*, sessions: sessionmaker[Session], ids: Sequence[int]) -> None:

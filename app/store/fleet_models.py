@@ -70,12 +70,15 @@ class FleetOrder(Base):
 
 
 class FleetOutbox(Base):
-    """A message for the broker, kept until the broker acknowledged it (QoS 1)."""
+    """A message for the broker, kept until the broker acknowledged it (QoS 1) or the bridge
+    saw it come back from the broker (docs/fleet.md#delivery)."""
 
     __tablename__ = "fleet_outbox"
+    __table_args__ = (UniqueConstraint("topic", "header_id", name="uq_fleet_outbox_topic_header"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     topic: Mapped[str] = mapped_column(String(1000))
+    header_id: Mapped[int] = mapped_column(Integer)  # the message's, unique per topic
     payload: Mapped[str] = mapped_column(Text)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     published_at: Mapped[datetime | None] = mapped_column(

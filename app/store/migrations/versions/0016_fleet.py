@@ -67,10 +67,12 @@ def upgrade() -> None:
         "fleet_outbox",
         sa.Column("id", sa.Integer(), autoincrement=True, nullable=False),
         sa.Column("topic", sa.String(length=1000), nullable=False),
+        sa.Column("header_id", sa.Integer(), nullable=False),
         sa.Column("payload", sa.Text(), nullable=False),
         sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
         sa.Column("published_at", sa.DateTime(timezone=True), nullable=True),
         sa.PrimaryKeyConstraint("id"),
+        sa.UniqueConstraint("topic", "header_id", name="uq_fleet_outbox_topic_header"),
     )
     op.create_index("ix_fleet_outbox_published_at", "fleet_outbox", ["published_at"], unique=False)
     op.create_table(
