@@ -77,7 +77,8 @@ class Settings(BaseSettings):
     mqtt_client_id: str | None = Field(
         None,
         max_length=64,
-        description="The bridge's MQTT client id; default ltaa-{hostname}-{a digest of the database URL}",
+        description="The bridge's MQTT client id; default ltaa-{hostname}-{a digest of the "
+        "database URL}",
     )
 
     # The Anthropic SDK's own variable is honoured so an existing key just works.

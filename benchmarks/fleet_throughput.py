@@ -8,7 +8,7 @@ from the first message published to the last one applied, beside the rate the ro
 published at. Every message must arrive (the broker keeps unlimited queues): a round that
 lost one reports nothing.
 
-    python -m benchmarks.fleet_throughput [--robots 100] [--per-robot 100]
+    python -m benchmarks.fleet_throughput [--robots 100] [--per-robot 1000]
 """
 
 from __future__ import annotations
@@ -172,7 +172,7 @@ def report(result: dict[str, float]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", type=int, default=100)
-    parser.add_argument("--per-robot", type=int, default=100)
+    parser.add_argument("--per-robot", type=int, default=1000)
     parser.add_argument("--no-write", action="store_true", help="print, do not write the docs")
     args = parser.parse_args()
     result = measure(args.robots, args.per_robot)

@@ -159,6 +159,19 @@ learned_id=$(python3 -c "import json; print(json.load(open('$TMP/out'))['id'])")
 [ "$(call GET "/runs/$learned_id/trace" '' "${SUPERVISOR[@]}")" = 200 ] || fail "trace of the learned run"
 check 'd["events"][0]["detail"]["learned"]["source"] == "learned" and d["events"][0]["detail"]["learned"]["reports"] >= 1' "the learned run's first event records its numbers"
 echo "smoke: sites ok (estimates, 404, 422s, a learned run $learned_id)"
+# The fleet (docs/fleet.md#the-robots): the robots the VDA 5050 bridge has heard from. .ci/run
+# serves with a broker (SMOKE_FLEET=1): the bridge must be on and connected.
+[ "$(call GET /fleet/robots '' "${CLIENT[@]}")" = 200 ] || fail "GET /fleet/robots"
+check 'isinstance(d["robots"], list) and "interface" in d' "the fleet answers"
+if [ "${SMOKE_FLEET:-0}" = 1 ]; then
+  for _ in $(seq 1 50); do
+    call GET /fleet/robots '' "${CLIENT[@]}" > /dev/null
+    python3 -c "import json,sys; d=json.load(open('$TMP/out')); sys.exit(0 if d['enabled'] and d['connected'] else 1)" && break
+    sleep 0.2
+  done
+  check 'd["enabled"] is True and d["connected"] is True' "the fleet bridge is connected to the broker"
+fi
+echo "smoke: fleet ok"
 # A run in time (docs/schedules.md#runs-in-time): the timed scenario decided by LTAA, its schedule
 # as JSON, CSV and iCalendar; an untimed run has no schedule (409). GET /scenarios says which one is
 # timed.

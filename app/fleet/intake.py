@@ -30,8 +30,9 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.config import Settings
 from app.domain.errors import DomainError
-from app.fleet.dispatch import FINAL_REPORTS, FleetNames
+from app.fleet.dispatch import FleetNames
 from app.fleet.metrics import FleetMetrics
+from app.fleet.outage import revise_without
 from app.fleet.states import OrderState, Refusal
 from app.fleet.vda5050 import (
     ActionStatus,
@@ -43,13 +44,11 @@ from app.fleet.vda5050 import (
     parse_topic,
 )
 from app.plans.reports import ExecutionState, Update, head_of, report
-from app.plans.revisions import RevisionRequest, create_revision
 from app.runs.worker import RunWorker
-from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
 from app.store.fleet_models import FleetOrder, FleetRobot
-from app.store.models import Run, as_utc
+from app.store.models import as_utc
 
 log = logging.getLogger("ltaa.fleet")
 
@@ -378,62 +377,20 @@ class Intake:
         states = {r.robot: r.action_status for r in rows if r.state != OrderState.CANCELLED}
         return states if len(states) > 1 else {}
 
-    # -- a robot gone ----------------------------------------------------------------
-
     def _unavailable(self, robot: str, why: str) -> None:
-        """Revise every head that still has unfinished work for the robot."""
-        for head in self._heads_needing(robot):
-            request = RevisionRequest(
-                changes=[{"type": "robot_unavailable", "robot": robot}],
-                pin="reported",
-                reason=f"fleet: robot '{robot}' is unavailable ({why}), reported by the robot",
-            )
-            try:
-                revision, _ = create_revision(
-                    sessions=self.sessions,
-                    worker=self.worker,
-                    parent_id=head,
-                    request=request,
-                    settings=self.settings,
-                )
-            except DomainError as exc:
-                log.warning("fleet: could not revise run %s without %s: %s", head, robot, exc)
-                continue
-            log.info(
-                "fleet: run %s revised as %s without robot %s (%s)", head, revision.id, robot, why
-            )
-
-    def _heads_needing(self, robot: str) -> list[str]:
-        with self.sessions() as session:
-            query = select(Run).where(Run.superseded_by.is_(None))
-            if self.names.sites is not None:
-                query = query.where(Run.site.in_(sorted(self.names.sites)))
-            heads = []
-            for run in session.scalars(query):
-                fleet = {str(r["name"]) for r in run.request["instance_data"]["robots"]}
-                if robot not in fleet or run.status in ("failed", "cancelled", "blocked"):
-                    continue
-                if _has_work(session, run, robot):
-                    heads.append(run.id)
-            return heads
+        revise_without(
+            sessions=self.sessions,
+            worker=self.worker,
+            settings=self.settings,
+            sites=self.names.sites,
+            robot=robot,
+            why=why,
+        )
 
     def _changed(self) -> None:
         self._dirty = True
         if self.on_change is not None:
             self.on_change()
-
-
-def _has_work(session: Session, run: Run, robot: str) -> bool:
-    """Whether the run plans a task for the robot that is not reported done or failed, or it is
-    still deciding (then its next decisions may name the robot)."""
-    reports = {r.task_id: r.state for r in repo.execution_reports(session=session, run_id=run.id)}
-    if run.status not in ("completed",):
-        return True
-    for d in decision_repo.decisions(session=session, run_id=run.id):
-        members = [str(m["robot"]) for m in d.team] if d.team else [d.robot_name]
-        if robot in members and reports.get(d.task_id) not in FINAL_REPORTS:
-            return True
-    return False
 
 
 def _team_report(
