@@ -8,7 +8,7 @@ from fastapi import APIRouter, Body, Query, Response, status
 from fastapi.responses import StreamingResponse
 
 from app.allocation.schemas import MetricsOut, UsageOut
-from app.allocation.teams import TeamMemberOut
+from app.allocation.team_schemas import TeamMemberOut
 from app.audit import verify
 from app.domain.estimates import DurationSource, RateSource
 from app.domain.models import Instance

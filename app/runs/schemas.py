@@ -19,7 +19,7 @@ from app.allocation.schemas import (
     absent,
     present,
 )
-from app.allocation.teams import MEMBERS_FIELD, TeamMemberOut
+from app.allocation.team_schemas import MEMBERS_FIELD, TeamMemberOut
 from app.audit.signoffs import SignOff
 from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
