@@ -116,7 +116,7 @@ def profiled(walks: Walks) -> Iterator[None]:
         yield
     finally:
         sys.setprofile(None)
-        threading.setprofile(None)  # type: ignore[arg-type]  # None removes it
+        threading.setprofile(None)
 
 
 Measured = tuple[list[str], list[list[str]]]  # the walk, the stack climbs

@@ -15,7 +15,7 @@ from pydantic import (
     model_validator,
 )
 
-from app.allocation.links import AfterEntry, TaskId
+from app.allocation.link_schemas import AfterEntry, TaskId
 from app.allocation.schedule_schemas import ScheduleOut, ViolationOut
 from app.allocation.team_schemas import (
     MEMBERS_FIELD,
