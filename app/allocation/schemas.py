@@ -15,9 +15,9 @@ from pydantic import (
     model_validator,
 )
 
-from app.allocation.links import AfterEntry, TaskId
+from app.allocation.link_schemas import AfterEntry, TaskId
 from app.allocation.schedule_schemas import ScheduleOut, ViolationOut
-from app.allocation.teams import (
+from app.allocation.team_schemas import (
     MEMBERS_FIELD,
     SKILLS_FIELD,
     TEAM_FIELD,
@@ -27,7 +27,7 @@ from app.allocation.teams import (
     TeamMemberOut,
     task_features,
 )
-from app.allocation.timing import Duration, Minutes, PositiveMinutes, Shift, WallClock
+from app.allocation.timing_schemas import Duration, Minutes, PositiveMinutes, Shift, WallClock
 from app.domain.metrics import Metrics
 from app.domain.models import MAX_NAME_CHARS, MAX_ROBOTS, MAX_TASKS, Robot, Task
 from app.domain.modes import Mode

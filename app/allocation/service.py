@@ -18,7 +18,7 @@ from app.allocation.schemas import (
     MetricsOut,
     UsageOut,
 )
-from app.allocation.teams import TeamMemberOut
+from app.allocation.team_schemas import TeamMemberOut
 from app.domain import catalog
 from app.domain.errors import DomainError
 from app.domain.metrics import compute_metrics, task_successes, workload

@@ -10,6 +10,8 @@ from fastapi import APIRouter, Depends, FastAPI
 
 from app.allocation import catalog_endpoints
 from app.allocation import endpoints as allocation
+from app.audit import endpoints as audit
+from app.audit.signing import SigningKeys
 from app.config import Settings
 from app.exchange import endpoints as exchange
 from app.fleet import endpoints as fleet
@@ -21,8 +23,8 @@ from app.plans import endpoints as plans
 from app.plans import schedule_endpoints
 from app.reviews import endpoints as reviews
 from app.reviews import signoff_endpoints
-from app.runs import audit_endpoints, event_endpoints
 from app.runs import endpoints as runs
+from app.runs import event_endpoints
 from app.sites import endpoints as sites
 from app.sites import service as site_service
 from app.webhooks import endpoints as webhooks
@@ -42,7 +44,7 @@ ROUTERS: tuple[APIRouter, ...] = (
     sites.router,
     fleet.router,
     operations.router,
-    audit_endpoints.router,
+    audit.router,
 )
 
 
@@ -60,6 +62,14 @@ def mount_routers(app: FastAPI) -> None:
     # ?site= of POST /schedules/import: the site's learned rates, which app.exchange may not
     # read itself (app.exchange.endpoints.SiteRates).
     app.state.site_rates = partial(_site_rates, app)
+    # GET /audit/public-key: the run worker's signing keys, which app.audit may not read
+    # itself (app.audit.endpoints.SigningKeysSource).
+    app.state.signing_keys = partial(_signing_keys, app)
+
+
+def _signing_keys(app: FastAPI) -> SigningKeys:
+    keys: SigningKeys = app.state.runs.worker.signing_keys
+    return keys
 
 
 def _site_rates(app: FastAPI, site: str) -> dict[str, dict[str, float]]:

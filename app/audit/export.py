@@ -10,7 +10,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.audit.heads import geneses as chain_geneses
-from app.audit.pages import (
+from app.audit.record_pages import (
     annotation_pages,
     chain_passes,
     columns,

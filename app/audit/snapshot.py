@@ -1,6 +1,6 @@
 """The moment trace/verify judges a run at: which rows of each chain it checks.
 
-Verify reads its pages in short sessions (app.audit.pages), so a live run (a timed run
+Verify reads its pages in short sessions (app.audit.record_pages), so a live run (a timed run
 still deciding, or a paused one whose in-flight decision lands) keeps appending while it
 reads. A timed run is chained in decision order (`seq`), whose task indexes are not
 consecutive, so verify needs that order up front; rows read after it that the order does
@@ -18,14 +18,14 @@ from dataclasses import dataclass
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from app.audit.pages import chain_passes
+from app.audit.record_pages import chain_passes
 from app.store import decision_repository as decision_repo
 from app.store.models import Decision, RunAnnotation, RunEvent
 
 
 @dataclass(frozen=True)
 class DecisionPass:
-    """One pass over a run's decisions in chain order (app.audit.pages.chain_passes), with
+    """One pass over a run's decisions in chain order (app.audit.record_pages.chain_passes), with
     the last key the snapshot holds: a seq when `by_seq`, else a task index (-1: none)."""
 
     pinned: bool | None

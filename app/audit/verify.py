@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.audit.heads import chain_heads
 from app.audit.heads import geneses as chain_geneses
-from app.audit.pages import (
+from app.audit.record_pages import (
     annotation_pages,
     columns,
     decision_pages,

@@ -50,14 +50,31 @@ class StateConflictError(DomainError):
 
 
 class IdempotencyKeyReusedError(DomainError):
-    """An Idempotency-Key sent again with another request (409): `message` names what the
-    key did the first time and how to go on."""
+    """An Idempotency-Key sent again with another request (409). One class for runs, reports,
+    reviews, sign-offs and webhooks alike: `what` names what the key did the first time
+    ("it created webhook 'w-1'"), and the message says how to go on."""
 
     status_code = 409
     location = "header"
 
-    def __init__(self, message: str) -> None:
-        super().__init__(IDEMPOTENCY_HEADER, message, code="idempotency_key_reused")
+    def __init__(
+        self, what: str, *, sent: str = "request", resend: str = "the original request"
+    ) -> None:
+        super().__init__(
+            IDEMPOTENCY_HEADER,
+            f"this {IDEMPOTENCY_HEADER} was already used with a different {sent} ({what}); "
+            f"send a new key for a new request, or resend {resend}",
+            code="idempotency_key_reused",
+        )
+
+    @classmethod
+    def for_run(cls, run_id: str) -> IdempotencyKeyReusedError:
+        """The key created (or wrote for) run `run_id`; resending the first body gets it."""
+        return cls(
+            f"it created run '{run_id}'",
+            sent="request body",
+            resend="the original body to get that run",
+        )
 
 
 class InfeasibleCapError(DomainError):

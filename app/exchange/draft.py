@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from datetime import UTC, datetime
 from typing import Any
 
-from app.exchange.links import bridge_milestones, refuse_cycles
+from app.exchange.activity_links import bridge_milestones, refuse_cycles
 from app.exchange.model import Activity, Draft, Link, ReadProject
 
 CAVEAT = (

@@ -21,7 +21,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.annotations import AnnotationKind
-from app.domain.errors import DomainError, RunNotFoundError
+from app.domain.errors import DomainError, IdempotencyKeyReusedError, RunNotFoundError
 from app.domain.lifecycle import FINISHED
 from app.runs import lifecycle
 from app.runs.lifecycle import EventKind
@@ -29,7 +29,7 @@ from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store import site_repository as site_repo
 from app.store.db import transaction
-from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
+from app.store.idempotency import Idempotency
 from app.store.models import ExecutionReport, RequestKey, Run, as_utc, utcnow
 
 
@@ -116,7 +116,7 @@ def _report(
             earlier = repo.request_key(session=session, key=idempotency.key)
             if earlier is not None:
                 if earlier.request_digest != idempotency.digest or earlier.run_id != run_id:
-                    raise IdempotencyKeyReusedError(earlier.run_id)
+                    raise IdempotencyKeyReusedError.for_run(earlier.run_id)
                 return current_states(session, run_id, [u.task_id for u in updates])
         if run.superseded_by is not None:
             head = head_of(session, run)

@@ -4,8 +4,9 @@ changes.
 Creating a revision and stopping its parent is one transaction. It begins by writing the
 parent's row (a lock: SQLite's write lock, a PostgreSQL row lock), so the decisions it pins
 are exactly those the parent had committed; every recorder write of the parent checks, in
-its own transaction, that the parent is still `running` (app.runs.recorder.StatusFence),
-so a decision it was computing when it was superseded is rolled back, never stored.
+the statement that writes it, that the parent is still `running` (app.runs.recorder.Fence,
+app.store.fenced), so a decision it was computing when it was superseded is rolled back,
+never stored.
 """
 
 from __future__ import annotations

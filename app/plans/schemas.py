@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
 from app.allocation.schemas import Probability, RobotIn, TaskId, TaskIn
-from app.allocation.teams import TeamMemberOut
+from app.allocation.team_schemas import TeamMemberOut
 from app.domain.estimates import DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
 from app.domain.models import MAX_ROBOTS, MAX_TASKS

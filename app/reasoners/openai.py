@@ -6,7 +6,7 @@ as for every SDK-backed reasoner (app.reasoners.transport), so the graph sees th
 errors as from `anthropic`.
 
 Where site data goes is decided by the server's LTAA_* settings alone. The SDK would fill
-in whatever it is not given from its own environment (SDK 3.51, lib/_client_auth.py):
+in whatever it is not given from its own environment (SDK 3.51, openai/lib/_client_auth.py):
 OPENAI_API_KEY, OPENAI_ADMIN_KEY, OPENAI_ORG_ID, OPENAI_PROJECT_ID, OPENAI_WEBHOOK_SECRET,
 OPENAI_BASE_URL (else https://api.openai.com/v1) and OPENAI_CUSTOM_HEADERS; its HTTP
 client would read HTTP(S)_PROXY / ALL_PROXY / NO_PROXY, SSL_CERT_FILE and ~/.netrc, and

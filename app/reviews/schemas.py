@@ -6,7 +6,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, Field
 
-from app.allocation.teams import TeamMemberIn, TeamMemberOut
+from app.allocation.team_schemas import TeamMemberIn, TeamMemberOut
 from app.domain.lifecycle import RunStatus
 from app.domain.review import ReviewAction
 from app.http.fields import Name, NoNul

@@ -16,7 +16,13 @@ from typing import Any
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.errors import DomainError, RunNotFoundError, RunStateConflictError, refuse_nul
+from app.domain.errors import (
+    DomainError,
+    IdempotencyKeyReusedError,
+    RunNotFoundError,
+    RunStateConflictError,
+    refuse_nul,
+)
 from app.domain.problem import Problem
 from app.domain.review import (
     Resolution,
@@ -31,7 +37,7 @@ from app.runs.spec import RunSpec
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
+from app.store.idempotency import Idempotency
 from app.store.models import Review, Run, as_utc, utcnow
 
 
@@ -271,7 +277,7 @@ def _retried(review: Review, idempotency: Idempotency | None) -> Resolved | None
     if idempotency is None or review.idempotency_key != idempotency.key:
         return None
     if review.request_digest != idempotency.digest:
-        raise IdempotencyKeyReusedError(review.run_id)
+        raise IdempotencyKeyReusedError.for_run(review.run_id)
     return Resolved(
         run_id=review.run_id,
         task_index=review.task_index,

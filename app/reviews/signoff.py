@@ -18,12 +18,17 @@ from app.audit.signing import SigningKeys, sign_run
 from app.audit.signoffs import SignOff
 from app.audit.verify import verify_trace
 from app.domain.annotations import AnnotationKind
-from app.domain.errors import DomainError, RunStateConflictError, refuse_nul
+from app.domain.errors import (
+    DomainError,
+    IdempotencyKeyReusedError,
+    RunStateConflictError,
+    refuse_nul,
+)
 from app.runs import lifecycle
 from app.runs.lifecycle import RunStatus
 from app.store import repository as repo
 from app.store.db import transaction
-from app.store.idempotency import Idempotency, IdempotencyKeyReusedError
+from app.store.idempotency import Idempotency
 from app.store.models import utcnow
 from app.store.tombstones import missing_run
 
@@ -110,5 +115,5 @@ def _for_key(
     if row is None:
         return None
     if row.request_digest != idempotency.digest or row.run_id != run_id:
-        raise IdempotencyKeyReusedError(row.run_id)
+        raise IdempotencyKeyReusedError.for_run(row.run_id)
     return SignOff.of(row)

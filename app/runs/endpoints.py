@@ -8,7 +8,7 @@ from fastapi import APIRouter, Body, Query, Response, status
 from fastapi.responses import StreamingResponse
 
 from app.allocation.schemas import MetricsOut, UsageOut
-from app.allocation.teams import TeamMemberOut
+from app.allocation.team_schemas import TeamMemberOut
 from app.audit import verify
 from app.domain.estimates import DurationSource, RateSource
 from app.domain.models import Instance
@@ -40,7 +40,7 @@ from app.runs.spec import RunSpec
 from app.runs.time_schemas import decision_times
 from app.runs.trace import JSONL_RESPONSE, jsonl_trace, verify_out
 from app.runs.trace_schemas import AttemptOut, DecisionOut, EventOut, TraceOut, TraceVerifyOut
-from app.store.models import Attempt, ExecutionReport, Run
+from app.store.models import Attempt, ExecutionReport
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -95,27 +95,13 @@ def list_runs(
     rows = views.list_run_rows(
         sessions=runs.sessions, status=status_, limit=limit, offset=offset, **where
     )
-    return [_summary(r) for r in rows]
+    return [RunSummary.model_validate(r) for r in rows]
 
 
 PageOffset = Annotated[
     int, Query(ge=0, le=1_000_000_000, description="Skip this many items (queue order)")
 ]
 PageLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="Return at most this many")]
-
-
-def _summary(r: Run) -> RunSummary:
-    return RunSummary(
-        id=r.id,
-        status=RunStatus(r.status),
-        reasoner=r.reasoner,
-        mode=r.mode,
-        n_tasks=r.n_tasks,
-        n_robots=r.n_robots,
-        resumes=r.resumes,
-        created_at=r.created_at,
-        site=r.site,
-    )
 
 
 def _team_out(d: DecisionRecord) -> list[TeamMemberOut] | None:
@@ -178,13 +164,7 @@ def _run_head(view: views.RunView, limit: int) -> RunOut:
 
 
 def _execution_out(report: ExecutionReport | None) -> ExecutionStateOut | None:
-    if report is None:
-        return None
-    return ExecutionStateOut(
-        state=report.state,  # type: ignore[arg-type]  # stored from the same Literal
-        started_at=report.started_at,
-        ended_at=report.ended_at,
-    )
+    return None if report is None else ExecutionStateOut.model_validate(report)
 
 
 @router.get("/{run_id}", response_model=RunOut, responses=errors(*CLIENT, 404, 410))
@@ -367,7 +347,7 @@ def resume_run(
     the Location for its progress."""
     run = service.resume_run(sessions=runs.sessions, worker=runs.worker, run_id=run_id)
     response.headers["Location"] = f"/runs/{run.id}"
-    return _summary(run)
+    return RunSummary.model_validate(run)
 
 
 @router.post(

@@ -2,6 +2,15 @@
 
 The store takes and returns plain column values so that it never depends on the graph or
 the reasoners; this module is the one place that knows how a record maps to its columns.
+
+Why a decision keeps four shapes: `DecisionRecord` is what the graph produces (it may not
+import the store), the `Decision` row is what the store keeps (with the chain hash and
+the columns the record's time lines are flattened into), and the answers differ on
+purpose: `DecisionOut` (the supervisors' trace, with attempts and the ledger) and
+`RunAssignment` (a client's page of a run, names resolved against the instance). The
+answers are built from the record in app.runs.endpoints, since they resolve indices to
+the instance's names; an answer that is its row alone is read with `from_attributes`
+(`RunSummary`, `ExecutionStateOut`).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ from app.allocation.schemas import (
     absent,
     present,
 )
-from app.allocation.teams import MEMBERS_FIELD, TeamMemberOut
+from app.allocation.team_schemas import MEMBERS_FIELD, TeamMemberOut
 from app.audit.signoffs import SignOff
 from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
@@ -270,7 +270,11 @@ class DecisionReviewOut(BaseModel):
     )
 
 
+# A task's latest execution report, read from its row (app.store.models.ExecutionReport).
+# (A comment, not a docstring: a docstring would become the schema's OpenAPI description.)
 class ExecutionStateOut(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
     state: Literal["started", "done", "failed"]
     started_at: Timestamp | None
     ended_at: Timestamp | None
@@ -356,7 +360,13 @@ class RunOut(BaseModel):
     durations: DurationSource = DurationSource.CONFIGURED
 
 
+# A run in a list, read from its row (app.store.models.Run). A run has more shapes on
+# purpose: RunRequest (what a client posts), RunOrder and RunSpec (the order as the worker
+# replays it: app/runs/spec.py), the row, this summary and RunOut (the whole answer, with
+# its views: app/runs/views.py).
 class RunSummary(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
     id: str
     status: RunStatus
     reasoner: str

@@ -21,7 +21,7 @@ from app.reasoners.base import close_reasoner
 from app.reasoners.factory import make_reasoner
 from app.runs import lifecycle, review_gate
 from app.runs.lifecycle import EventKind, RunStatus
-from app.runs.replay import REPLAY, replay_spec, validate_replay
+from app.runs.replay_source import REPLAY, replay_spec, validate_replay
 from app.runs.spec import RunOrder, RunSpec, copied_parameters, repeated_parameters
 from app.runs.views import require_run
 from app.runs.worker import RunWorker

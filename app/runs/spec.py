@@ -38,7 +38,7 @@ class RunParameter:
     # The spec stores the order's value as sent (an enum by its value); otherwise the run
     # service resolves it (a server default, the mode's cap, the review policy...).
     copied: bool = True
-    # A replay may name it, and must then send its source's value (app.runs.replay).
+    # A replay may name it, and must then send its source's value (app.runs.replay_source).
     repeatable: bool = True
     # Shown in the run's first event (`created`, or `revised`) and kept in its row.
     shown: bool = False

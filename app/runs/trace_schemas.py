@@ -6,7 +6,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
-from app.allocation.teams import MEMBERS_FIELD, TeamMemberOut
+from app.allocation.team_schemas import MEMBERS_FIELD, TeamMemberOut
 from app.domain.lifecycle import RunStatus
 from app.http.times import Timestamp
 from app.runs.schemas import DecisionReviewOut, Page, StandIn

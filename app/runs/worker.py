@@ -38,7 +38,7 @@ from app.runs.integrity import checked_for_resume
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.ownership import Ownership
 from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence, with_token_budget
-from app.runs.replay import recorded_replies
+from app.runs.replay_source import recorded_replies
 from app.runs.spec import RunSpec
 from app.solvers.ltaa import execute_ltaa
 from app.store import repository as repo

@@ -15,8 +15,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.errors import IDEMPOTENCY_HEADER
-from app.domain.errors import IdempotencyKeyReusedError as _KeyReusedError
+from app.domain.errors import IDEMPOTENCY_HEADER, IdempotencyKeyReusedError
 from app.store.models import Run
 
 HEADER = IDEMPOTENCY_HEADER
@@ -38,20 +37,11 @@ def request_digest(body: Mapping[str, Any]) -> str:
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
-class IdempotencyKeyReusedError(_KeyReusedError):
-    def __init__(self, run_id: str) -> None:
-        super().__init__(
-            f"this {HEADER} was already used with a different request body (it "
-            f"created run '{run_id}'); send a new key for a new request, or resend the "
-            "original body to get that run"
-        )
-
-
 def run_for_key(*, sessions: sessionmaker[Session], idempotency: Idempotency) -> Run | None:
     """The run created under this key, if any; IdempotencyKeyReusedError (409) if it was
     created by a request with another body."""
     with sessions() as session:
         run = session.scalar(select(Run).where(Run.idempotency_key == idempotency.key))
     if run is not None and run.request_digest != idempotency.digest:
-        raise IdempotencyKeyReusedError(run.id)
+        raise IdempotencyKeyReusedError.for_run(run.id)
     return run

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from app.domain.errors import IDEMPOTENCY_HEADER, DomainError, NotFoundError, StateConflictError
-from app.domain.errors import IdempotencyKeyReusedError as _KeyReusedError
+from app.domain.errors import DomainError, NotFoundError, StateConflictError
 
 
 class WebhookNotFoundError(NotFoundError):
@@ -41,14 +40,6 @@ class DeliveryStateConflictError(StateConflictError):
             "delivery_id",
             f"delivery '{delivery_id}' is {status}; only a delivered, failed or waiting "
             "delivery can be retried",
-        )
-
-
-class IdempotencyKeyReusedError(_KeyReusedError):
-    def __init__(self, what: str) -> None:
-        super().__init__(
-            f"this {IDEMPOTENCY_HEADER} was already used with a different request ({what}); "
-            "send a new key for a new request, or resend the original request"
         )
 
 

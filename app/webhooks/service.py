@@ -12,6 +12,7 @@ from typing import Protocol
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.domain.errors import IdempotencyKeyReusedError
 from app.store.db import transaction
 from app.store.models import utcnow
 from app.store.webhook_models import (
@@ -25,7 +26,6 @@ from app.webhooks.errors import (
     DeliveryNotFoundError,
     DeliveryStateConflictError,
     DuplicateSubscriptionError,
-    IdempotencyKeyReusedError,
 )
 from app.webhooks.events import ALL
 from app.webhooks.queue import db_now

@@ -17,7 +17,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import create_engine
 from sqlalchemy.orm import sessionmaker
 
-from app.audit import pages as record_pages
+from app.audit import record_pages
 from app.audit.export import trace_record
 from app.audit.verify import verify_trace
 from app.config import Settings

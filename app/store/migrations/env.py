@@ -3,9 +3,10 @@
 The revision files in versions/ are numbered in chain order: a file's number is its place
 in the chain (0001 first, each file's down_revision the file before it). The revision ids
 inside them are what every existing database records in alembic_version, so they are never
-renamed, even where an id carries an older number than its file (0006_reviews_annotations.py
-holds revision "0007_reviews_annotations"). A new revision takes the next number as its id:
-`alembic revision --rev-id 0014 -m "what it adds"` writes versions/0014_what_it_adds.py.
+renamed, even where an id carries an older number than its file
+(versions/0006_reviews_annotations.py holds revision "0007_reviews_annotations"). A new
+revision takes the next number as its id: `alembic revision --rev-id <number> -m "what it
+adds"` writes the file versions/<number>_<what it adds>.py.
 """
 
 from __future__ import annotations

@@ -2,16 +2,30 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from collections.abc import Callable
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Request
 from pydantic import BaseModel, Field
 
-from app.audit.signing import ALGORITHM, public_pem
+from app.audit.signing import ALGORITHM, SigningKeys, public_pem
 from app.http.deps import ClientDep
 from app.http.errors import ApiError
 from app.http.responses import CLIENT, errors
-from app.runs.deps import RunsDep
 
 router = APIRouter(prefix="/audit", tags=["audit"])
+
+# The keys the run worker signs with. Handed in by app.api.routers as
+# `app.state.signing_keys` (the worker lives in app.runs, a layer above this package).
+SigningKeysSource = Callable[[], SigningKeys]
+
+
+def get_signing_keys(request: Request) -> SigningKeys:
+    source: SigningKeysSource = request.app.state.signing_keys
+    return source()
+
+
+SigningKeysDep = Annotated[SigningKeys, Depends(get_signing_keys)]
 
 
 class PublicKeyOut(BaseModel):
@@ -28,9 +42,8 @@ class PublicKeysOut(BaseModel):
 
 
 @router.get("/public-key", response_model=PublicKeysOut, responses=errors(*CLIENT, 404))
-def public_key(caller: ClientDep, runs: RunsDep) -> PublicKeysOut:
+def public_key(caller: ClientDep, keys: SigningKeysDep) -> PublicKeysOut:
     """The public keys that verify signed chain heads (the current one and retired ones)."""
-    keys = runs.worker.signing_keys
     current = keys.current_id
     if current is None:
         raise ApiError(
