@@ -43,7 +43,7 @@ lint-quick: install
 # server, port, data directory and database (docs/development.md, "Tests and CI time").
 # Four workers on two cores: most tests spend their time waiting on a server subprocess,
 # a SIGKILLed process's restart or a webhook receiver's outage. WORKERS=0: one process.
-# PYTEST_ARGS: a selection, e.g. make test PYTEST_ARGS=tests/unit (the checks run whole).
+# PYTEST_ARGS: a selection, e.g. make test PYTEST_ARGS=tests/fleet (the checks run whole).
 WORKERS ?= 4
 PYTEST_ARGS ?=
 

@@ -217,7 +217,7 @@ def _alone(shot: Callable[[Page, str], Path]) -> Path:
 def import_screenshot(page: Page, url: str) -> Path:
     """The "Import a schedule" page (docs/exchange.md#the-console-page) after an MS Project
     file of three linked tasks was uploaded with the rates of a site that has reports."""
-    from tests.exchange_files import small_mspdi
+    from tests.support.exchange_files import small_mspdi
 
     run_id = _start(url, {"scenario": "baseline", "mode": "balanced", "site": "level-3"})
     _wait(url, run_id)

@@ -50,7 +50,7 @@ def best_of(run: Callable[[], Any]) -> tuple[float, float, Any]:
 
 def mpxj_files(n: int) -> dict[str, bytes]:
     """An n-activity project written by MPXJ as MSPDI and as XER."""
-    from tests.mpxj_oracle import Spec, build_project, write
+    from tests.support.mpxj_oracle import Spec, build_project, write
 
     kinds = ("FS", "SS", "FF", "SF")
     specs: list[Spec] = []
@@ -70,7 +70,7 @@ def mpxj_files(n: int) -> dict[str, bytes]:
 def mpxj_costs(files: dict[str, bytes]) -> dict[str, float]:
     """What reading with MPXJ instead would cost: MPXJ's own read of each file (the
     alternative docs/exchange.md weighs; the JVM's start is timed by `_mpxj_main`)."""
-    from tests.mpxj_oracle import read
+    from tests.support.mpxj_oracle import read
 
     costs: dict[str, float] = {}
     for fmt, data in files.items():
@@ -97,7 +97,7 @@ def mpxj_side(cache: Path) -> dict[str, float]:
 
 
 def _mpxj_main(cache: Path) -> None:
-    from tests.mpxj_oracle import start_jvm
+    from tests.support.mpxj_oracle import start_jvm
 
     # The JVM first (once per process): MPXJ's classes exist only once it runs, and the
     # files are written before anything is read.

@@ -4,7 +4,7 @@ throughput under that load and the runs' completion times, and refuses to report
 from a round in which anything failed: every /allocate must answer 200, every run must
 complete, and neither a response nor the server log may mention "database is locked".
 
-`drive()` is the load itself, against any base URL; tests/e2e/test_load.py runs it against
+`drive()` is the load itself, against any base URL; tests/runs/test_load.py runs it against
 the test suite's server and asserts on correctness only.
 """
 

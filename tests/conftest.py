@@ -1,4 +1,9 @@
-"""Fixtures shared by every test directory."""
+"""Fixtures shared by every test directory, and the order the suite runs in.
+
+The tests mirror app/ (tests/<feature>/ beside app/<feature>/, checked by
+tests/project/test_tests_mirror_app.py); what several features' tests share is defined once,
+in tests/support/ (clients and stores: tests/support/clients.py, registered below; the
+browser's: tests/support/browser.py, taken in by tests/console/conftest.py)."""
 
 from __future__ import annotations
 
@@ -14,9 +19,8 @@ from xdist.scheduler import LoadScopeScheduling
 from app.config import Settings
 from tests.fakes.llm_providers import PROVIDERS, Provider
 
-# The directories whose tests take minutes (servers killed and restarted, a browser), in
-# the order they are handed out: see pytest_collection_modifyitems.
-LONG_FIRST = ("tests/e2e/", "tests/browser/")
+pytest_plugins = ("tests.support.clients", "tests.support.mqtt_broker")
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -49,10 +53,10 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     def rank(item: pytest.Item) -> int:
         if item.get_closest_marker("slow"):  # training runs of a minute, wherever they live
             return 0
-        return next(
-            (i for i, prefix in enumerate(LONG_FIRST) if item.nodeid.startswith(prefix)),
-            len(LONG_FIRST),
-        )
+        # Minutes-long: servers killed and restarted (e2e), then a browser's (browser).
+        if item.get_closest_marker("e2e"):
+            return 1 if _is_browser(item.nodeid.split("::", 1)[0]) else 0
+        return 2
 
     items.sort(key=rank)  # stable: within a rank, collection order
 
@@ -74,14 +78,20 @@ class ModulesSharingAServer(LoadScopeScheduling):
 
 @cache
 def _shares_a_server(module: str) -> bool:
-    """Every browser module (tests/browser/conftest.py's `server` is module-scoped), and the
-    end-to-end modules that define a module-scoped fixture."""
-    if module.startswith("tests/browser/"):
+    """Every browser module (the `server` of tests/support/browser.py is module-scoped), and
+    the end-to-end modules that define a module-scoped fixture."""
+    if _is_browser(module):
         return True
     path = ROOT / module
-    return (
-        module.startswith("tests/e2e/") and path.is_file() and 'scope="module"' in path.read_text()
-    )
+    if not path.is_file():
+        return False
+    text = path.read_text()
+    return "pytest.mark.e2e" in text and 'scope="module"' in text
+
+
+def _is_browser(module: str) -> bool:
+    """Browser modules are named test_*_browser.py (tests/console/)."""
+    return module.endswith("_browser.py")
 
 
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Producer) -> ModulesSharingAServer:
@@ -114,9 +124,9 @@ def provider(request: pytest.FixtureRequest) -> Provider:
 
 @pytest.fixture(scope="session")
 def mpxj() -> Iterator[None]:
-    """MPXJ in a JVM (tests/mpxj_oracle.py), started once per test process: JPype cannot
+    """MPXJ in a JVM (tests/support/mpxj_oracle.py), started once per test process: JPype cannot
     start a second JVM in a process."""
-    from tests.mpxj_oracle import start_jvm
+    from tests.support.mpxj_oracle import start_jvm
 
     start_jvm()
     yield

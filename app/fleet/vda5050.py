@@ -5,7 +5,7 @@ One shape per message, in the protocol's own camelCase on the wire: the bridge b
 reverse with the same classes, so the two can never disagree on a field. Only the fields
 the service uses are typed; the rest of a robot's message is kept as sent (extra="allow")
 and ignored. Every message published is checked against the official JSON schemas in the
-tests (tests/vda5050_schemas.py).
+tests (tests/support/vda5050_schemas.py).
 """
 
 from __future__ import annotations

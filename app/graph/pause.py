@@ -5,7 +5,7 @@ in the graph (docs/operations.md#the-pause-hook-ltaa_test_pause).
 It is inert unless `LTAA_TEST_PAUSE` is set: app.runs.factory.pause_hook_from_settings then
 returns no hook and build_graph adds every node unwrapped; nothing here runs in a run. Set,
 the server warns at start-up, and each held run logs `PausePoint.message()`, which the
-tests wait for (tests/e2e/server.py). It stays in the product because the server process
+tests wait for (tests/support/server.py). It stays in the product because the server process
 that is killed must install it; in-process tests pass `pause_hook(...)` to the worker.
 
 `<node>:before` holds the node before its body runs: this node has done nothing.

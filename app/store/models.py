@@ -308,7 +308,7 @@ class Attempt(Base):
 # A run's status is moved only by app.runs.lifecycle, which checks the move against the
 # transition table and writes the matching event. These guards make the rule hold at run
 # time: an assignment to Run.status, or a bulk UPDATE of runs that sets status, outside
-# `status_writes()` raises. (tests/unit/test_lifecycle_guard.py also scans the source.)
+# `status_writes()` raises. (tests/runs/test_lifecycle.py also scans the source.)
 _status_writer: ContextVar[bool] = ContextVar("ltaa_status_writer", default=False)
 
 

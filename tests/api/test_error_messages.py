@@ -16,8 +16,8 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
+from tests.allocation import test_api_timed_bad_requests as timed
 from tests.api import test_api_bad_requests as plain
-from tests.api import test_api_timed_bad_requests as timed
 from tests.api import test_hostile_input as hostile
 
 # `{name}`, `{name!r}`, `{name:,}` or a `{{` escape: what str.format or pydantic would have

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.polling import wait_until
+from tests.support.polling import wait_until
 
 RUN_PATHS = [
     ("GET", "/runs/{}"),

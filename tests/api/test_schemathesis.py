@@ -28,7 +28,7 @@ from starlette.types import Receive, Scope, Send
 
 from app.config import Settings
 from app.main import create_app
-from tests.polling import wait_until
+from tests.support.polling import wait_until
 
 CONFIG = schemathesis.Config.from_path(Path(__file__).with_name("schemathesis.toml"))
 
@@ -79,7 +79,7 @@ RUN_PATHS = r"\{run_id\}"
 # second time under this test, 29 of its 54 CPU-s). Exclusions apply first, whatever else.
 NOT_RUN_PATHS = r"^(?!.*\{run_id\})"
 # POST /admin/backup writes a copy of the store (inside LTAA_BACKUP_DIR): generated paths
-# would be refused or litter the test's directory. tests/api/test_backup.py covers it.
+# would be refused or litter the test's directory. tests/operations/test_backup.py covers it.
 WRITES_FILES = r"^/admin/backup$"
 HYPOTHESIS = settings(
     max_examples=40,
@@ -120,7 +120,7 @@ def app_under_test(app_settings: Settings, migrated_store: Path) -> Iterator[Fas
     # Not the completed store of `stored_run` (which the run tests request before this).
     if app_settings.db_url == f"sqlite:///{store.as_posix()}" and not store.exists():
         # The app's lifespan finds the store at head and migrates nothing
-        # (tests/api/conftest.py: migrated_store).
+        # (tests/support/clients.py: migrated_store).
         store.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(migrated_store, store)
     APP.app = create_app(app_settings)

@@ -12,7 +12,7 @@ from typing import Any
 
 from standardwebhooks import Webhook
 
-from tests.polling import eventually
+from tests.support.polling import eventually
 
 
 @dataclass

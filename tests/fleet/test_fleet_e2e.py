@@ -21,11 +21,9 @@ import httpx
 import pytest
 
 from app.graph.pause import PausePoint
-from tests.e2e.server import ROOT, Server
-from tests.mqtt_broker import Recorder, interface, mqtt_url, recorder
-from tests.polling import eventually
-
-__all__ = ["interface", "mqtt_url", "recorder"]  # the fixtures, taken in here
+from tests.support.mqtt_broker import Recorder
+from tests.support.polling import eventually
+from tests.support.server import ROOT, Server
 
 pytestmark = pytest.mark.e2e
 

@@ -36,8 +36,8 @@ from app.fleet.vda5050 import (
 )
 from app.store.fleet_models import FleetOrder, FleetRobot
 from app.store.models import ExecutionReport
-from tests.api.test_revisions import BASELINE, completed_run, wait_status
-from tests.vda5050_schemas import validate
+from tests.plans.test_revisions import BASELINE, completed_run, wait_status
+from tests.support.vda5050_schemas import validate
 
 MAKER = "acme"
 

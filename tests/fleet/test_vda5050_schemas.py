@@ -21,7 +21,7 @@ from app.fleet.vda5050 import (
     Node,
     Order,
 )
-from tests.vda5050_schemas import schema_bytes, validate
+from tests.support.vda5050_schemas import schema_bytes, validate
 
 # sha256 of json_schemas/*.json in VDA5050/VDA5050 at tag 2.1.0.
 OFFICIAL = {
