@@ -7,7 +7,7 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Body, Query, Response, status
 from fastapi.responses import StreamingResponse
 
-from app.allocation.schemas import MetricsOut, UsageOut
+from app.allocation.schemas import MetricsOut, UsageOut, ViolationOut
 from app.allocation.team_schemas import TeamMemberOut
 from app.audit import verify
 from app.domain.estimates import DurationSource, RateSource
@@ -160,6 +160,9 @@ def _run_head(view: views.RunView, limit: int) -> RunOut:
         site=run.site,
         rates=RateSource(spec.rates),
         durations=DurationSource(spec.durations),
+        schedule_violations=None
+        if view.violations is None
+        else [ViolationOut.model_validate(v) for v in view.violations],
     )
 
 

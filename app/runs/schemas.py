@@ -16,6 +16,7 @@ from app.allocation.schemas import (
     Name,
     TaskId,
     UsageOut,
+    ViolationOut,
     absent,
     present,
 )
@@ -358,6 +359,13 @@ class RunOut(BaseModel):
         description="Which success rates it plans with (docs/estimates.md#using-the-estimates)",
     )
     durations: DurationSource = DurationSource.CONFIGURED
+    schedule_violations: list[ViolationOut] | None = Field(
+        None,
+        description="A completed timed run: the rules its plan breaks (e.g. a deadline no "
+        "robot could meet, a task added by a revision included), as POST /allocate reports "
+        "them; empty when it breaks none",
+        exclude_if=lambda v: v is None,
+    )
 
 
 # A run in a list, read from its row (app.store.models.Run). A run has more shapes on

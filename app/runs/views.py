@@ -17,6 +17,7 @@ from app.domain.errors import StateConflictError
 from app.domain.metrics import Metrics, compute_metrics
 from app.domain.phases import detect_phase
 from app.domain.problem import Problem
+from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.progress import TimedProgress
 from app.domain.scheduling.schedule import Schedule, build_schedule
 from app.domain.usage import Usage
@@ -25,6 +26,7 @@ from app.graph.timing import decision_teams
 from app.runs import records
 from app.runs.lifecycle import RunStatus
 from app.runs.spec import LruCache, RunSpec
+from app.schedules import violations_json
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store import run_totals
@@ -34,6 +36,8 @@ from app.store.tombstones import missing_run
 # Parsed once per process: a poll of a 10,000-task run re-parsed its 1 MB request each time.
 _SPECS: LruCache[RunSpec] = LruCache(64)
 _METRICS: LruCache[Metrics] = LruCache(256)
+# A completed timed run's plan in time, rebuilt from its decisions (which never change).
+_PLANS: LruCache[tuple[Problem, Schedule]] = LruCache(64)
 
 
 def require_run(session: Session, run_id: str, *, lock: bool = False) -> Run:
@@ -64,6 +68,8 @@ class RunView:
     pins: dict[int, str | None] = field(default_factory=dict)
     # The task indexes of the page, in order (those in `decisions` and those skipped).
     page: list[int] = field(default_factory=list)
+    # A completed timed run's: the rules its plan breaks (app.schedules.violations_json).
+    violations: list[dict[str, Any]] | None = None
 
     @property
     def progress(self) -> dict[str, Any]:
@@ -112,11 +118,19 @@ def run_view(
         execution = {
             r.task_index: r for r in repo.execution_reports(session=session, run_id=run_id)
         }
+        complete = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
+        # A completed timed revision's pins without times are shown where it placed them: read
+        # afresh, not as kept from a poll made before the revision had placed them.
+        unplaced = (
+            decision_repo.unplaced_pins(session=session, run_id=run_id)
+            if complete and spec.problem.instance.timed
+            else set()
+        )
         if have:
             page = run_totals.page_indexes(
                 session=session, run_id=run_id, offset=offset, limit=limit
             )
-            wanted = [t for t in page if t not in have or t in execution]
+            wanted = [t for t in page if t not in have or t in execution or t in unplaced]
             rows = run_totals.decision_rows(session=session, run_id=run_id, tasks=wanted)
         else:
             rows = run_totals.decision_page(
@@ -127,7 +141,7 @@ def run_view(
         pins = pins_of(rows)
         usage = records.usage_of_totals(replies)
         signed = signoffs(session=session, run_id=run_id)
-        completed = run.status == RunStatus.COMPLETED and totals.allocated == run.n_tasks
+        completed = complete
         teams = _teams(session, run_id, spec)
         # Every decision's robot only once the run is complete, for its metrics.
         outcomes = (
@@ -157,6 +171,14 @@ def run_view(
                 expected_success=statistics.fmean(o.expected_success for o in outcomes),
             )
         _METRICS.put(run_id, metrics)  # a completed run's decisions never change
+    violations = None
+    if complete and spec.problem.instance.timed:
+        problem, schedule = _completed_plan(sessions, run_id)
+        # docs/schedules.md#what-a-run-reports: what its plan breaks (a deadline nobody could
+        # meet, say), as POST /allocate says it.
+        violations = violations_json(problem, check_schedule(problem, schedule))
+        if unplaced & {d.task_index for d in decisions}:
+            decisions = _placed_pins(schedule, decisions, unplaced)
     return RunView(
         run=run,
         spec=spec,
@@ -171,6 +193,7 @@ def run_view(
         pins=pins,
         signoffs=signed,
         page=page,
+        violations=violations,
     )
 
 
@@ -290,6 +313,36 @@ def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
     """Which of these decision rows a revision kept from its parent, with the parent
     decision's chain hash."""
     return {d.task_index: d.pinned_from for d in rows if d.pinned}
+
+
+def _completed_plan(sessions: sessionmaker[Session], run_id: str) -> tuple[Problem, Schedule]:
+    def load() -> tuple[Problem, Schedule]:
+        planned = run_schedule(sessions=sessions, run_id=run_id)
+        assert planned is not None  # a timed run
+        return planned
+
+    return _PLANS.get_or_load(run_id, load)
+
+
+def _placed_pins(
+    schedule: Schedule, decisions: list[DecisionRecord], unplaced: set[int]
+) -> list[DecisionRecord]:
+    """docs/living-plans.md#a-revision-in-time: a pin the site had not reported keeps the
+    parent's row (its chain link), which has no times in the revision's plan; they are where
+    the revision placed it, as its schedule says (run_schedule)."""
+    slots = schedule.slots
+    return [
+        replace(
+            d,
+            start=slots[d.task_index].start,
+            end=slots[d.task_index].end,
+            zone=slots[d.task_index].zone,
+            travel=slots[d.task_index].travel,
+        )
+        if d.task_index in unplaced
+        else d
+        for d in decisions
+    ]
 
 
 def run_schedule(

@@ -305,7 +305,7 @@ def _explain_start(
     # Nothing binds: the solver left slack. The latest of the other causes explains the rest.
     ends: list[tuple[float, int, int | None, float]] = [(at, p, None, 0.0) for at, p in allowed]
     ends += [(slots[q].end + m, q, r, m) for r, q, m in previous[t] if q is not None]
-    if not ends or max(ends)[0] < limit:
+    if not ends or max(e[0] for e in ends) < limit:
         steps.append(Step(StepKind.WAIT, 0.0, s.start, t, s.robot, "slack"))
         return None
     when, via, member, travel = max(ends, key=lambda e: (e[0], e[1]))
