@@ -241,6 +241,20 @@ def _origin(run: Run) -> datetime | None:
     return at if at.tzinfo is not None else at.replace(tzinfo=UTC)
 
 
+def _addressed(
+    session: Session, names: FleetNames, order: FleetOrder, kind: Topic
+) -> tuple[str, dict[str, Any]]:
+    """The topic of a message to the order's robot, and the header fields it starts with."""
+    name = topic(names.interface, names.manufacturer, order.serial_number, kind)
+    return name, {
+        "header_id": outbox.next_header_id(session, name),
+        "timestamp": utcnow(),
+        "version": PROTOCOL_VERSION,
+        "manufacturer": names.manufacturer,
+        "serial_number": order.serial_number,
+    }
+
+
 def _send(
     session: Session,
     names: FleetNames,
@@ -248,13 +262,9 @@ def _send(
     task: Mapping[str, Any],
     origin: datetime | None,
 ) -> None:
-    name = topic(names.interface, names.manufacturer, order.serial_number, Topic.ORDER)
+    name, header = _addressed(session, names, order, Topic.ORDER)
     message = Order(
-        header_id=outbox.next_header_id(session, name),
-        timestamp=utcnow(),
-        version=PROTOCOL_VERSION,
-        manufacturer=names.manufacturer,
-        serial_number=order.serial_number,
+        **header,
         order_id=order.order_id,
         order_update_id=order.update_id,
         nodes=[
@@ -297,13 +307,9 @@ def _action(order: FleetOrder, task: Mapping[str, Any], origin: datetime | None)
 
 def _cancel(session: Session, names: FleetNames, order: FleetOrder) -> None:
     order.state = OrderState.CANCELLED
-    name = topic(names.interface, names.manufacturer, order.serial_number, Topic.INSTANT_ACTIONS)
+    name, header = _addressed(session, names, order, Topic.INSTANT_ACTIONS)
     message = InstantActions(
-        header_id=outbox.next_header_id(session, name),
-        timestamp=utcnow(),
-        version=PROTOCOL_VERSION,
-        manufacturer=names.manufacturer,
-        serial_number=order.serial_number,
+        **header,
         actions=[
             Action(
                 action_type=CANCEL_ORDER,
