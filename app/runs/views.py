@@ -5,7 +5,7 @@ trace, and the listings. Read-only: the commands that change a run are app.runs.
 from __future__ import annotations
 
 import statistics
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -122,7 +122,7 @@ def run_view(
         # A completed timed revision's pins without times are shown where it placed them: read
         # afresh, not as kept from a poll made before the revision had placed them.
         unplaced = (
-            decision_repo.unplaced_pins(session=session, run_id=run_id)
+            run_totals.unplaced_pins(session=session, run_id=run_id)
             if complete and spec.problem.instance.timed
             else set()
         )
@@ -151,34 +151,10 @@ def run_view(
         )
     names = [r["name"] for r in spec.instance_data["robots"]]
     workload = _workload(names, totals.by_robot, teams)
-    metrics = _METRICS.get(run_id) if completed else None
-    if completed and metrics is None:
-        problem = spec.problem
-        index = {name: i for i, name in enumerate(names)}
-        metrics = compute_metrics(
-            problem.instance,
-            [o.robot for o in outcomes],
-            seed=spec.seed,
-            scope=problem.balance_scope,
-            teams={
-                o.task_index: tuple(index[m["robot"]] for m in o.team) for o in outcomes if o.team
-            },
-        )
-        if problem.pinned:
-            # A pin keeps the success it was decided with, whatever set_rates changed.
-            metrics = replace(
-                metrics,
-                expected_success=statistics.fmean(o.expected_success for o in outcomes),
-            )
-        _METRICS.put(run_id, metrics)  # a completed run's decisions never change
+    metrics = _completed_metrics(run_id, spec, names, outcomes) if completed else None
     violations = None
     if complete and spec.problem.instance.timed:
-        problem, schedule = _completed_plan(sessions, run_id)
-        # docs/schedules.md#what-a-run-reports: what its plan breaks (a deadline nobody could
-        # meet, say), as POST /allocate says it.
-        violations = violations_json(problem, check_schedule(problem, schedule))
-        if unplaced & {d.task_index for d in decisions}:
-            decisions = _placed_pins(schedule, decisions, unplaced)
+        violations, decisions = _timed_reading(sessions, run_id, decisions, unplaced)
     return RunView(
         run=run,
         spec=spec,
@@ -195,6 +171,32 @@ def run_view(
         page=page,
         violations=violations,
     )
+
+
+def _completed_metrics(
+    run_id: str, spec: RunSpec, names: list[str], outcomes: Sequence[Any]
+) -> Metrics:
+    """A completed run's metrics, computed once from every decision's robot (its decisions
+    never change, so they are kept)."""
+    metrics = _METRICS.get(run_id)
+    if metrics is not None:
+        return metrics
+    problem = spec.problem
+    index = {name: i for i, name in enumerate(names)}
+    metrics = compute_metrics(
+        problem.instance,
+        [o.robot for o in outcomes],
+        seed=spec.seed,
+        scope=problem.balance_scope,
+        teams={o.task_index: tuple(index[m["robot"]] for m in o.team) for o in outcomes if o.team},
+    )
+    if problem.pinned:
+        # A pin keeps the success it was decided with, whatever set_rates changed.
+        metrics = replace(
+            metrics, expected_success=statistics.fmean(o.expected_success for o in outcomes)
+        )
+    _METRICS.put(run_id, metrics)
+    return metrics
 
 
 def _teams(session: Session, run_id: str, spec: RunSpec) -> list[Any]:
@@ -313,6 +315,22 @@ def pins_of(rows: Iterable[Any]) -> dict[int, str | None]:
     """Which of these decision rows a revision kept from its parent, with the parent
     decision's chain hash."""
     return {d.task_index: d.pinned_from for d in rows if d.pinned}
+
+
+def _timed_reading(
+    sessions: sessionmaker[Session],
+    run_id: str,
+    decisions: list[DecisionRecord],
+    unplaced: set[int],
+) -> tuple[list[dict[str, Any]], list[DecisionRecord]]:
+    """A completed timed run's: what its plan breaks (docs/schedules.md#what-a-run-reports: a
+    deadline nobody could meet, say), as POST /allocate says it, and its page's decisions with
+    the unreported pins at the times the run placed them."""
+    problem, schedule = _completed_plan(sessions, run_id)
+    violations = violations_json(problem, check_schedule(problem, schedule))
+    if unplaced & {d.task_index for d in decisions}:
+        decisions = _placed_pins(schedule, decisions, unplaced)
+    return violations, decisions
 
 
 def _completed_plan(sessions: sessionmaker[Session], run_id: str) -> tuple[Problem, Schedule]:

@@ -397,18 +397,6 @@ def decided_task_ids(session: Session, run_id: str) -> list[Any]:
     )
 
 
-def unplaced_pins(*, session: Session, run_id: str) -> set[int]:
-    """Task indexes of a revision's pins stored without times (not reported when it was made:
-    docs/living-plans.md#a-revision-in-time)."""
-    return set(
-        session.scalars(
-            select(Decision.task_index).where(
-                Decision.run_id == run_id, Decision.pinned.is_(True), Decision.start.is_(None)
-            )
-        )
-    )
-
-
 def decision_count(*, session: Session, run_id: str) -> int:
     return int(
         session.scalar(select(func.count()).select_from(Decision).where(Decision.run_id == run_id))

@@ -176,3 +176,15 @@ def tally(*, session: Session, run_id: str, settled: Tally) -> tuple[Tally, Tall
             for i, value in enumerate(values):
                 sums[i] += value
     return now, keep
+
+
+def unplaced_pins(*, session: Session, run_id: str) -> set[int]:
+    """Task indexes of a revision's pins stored without times (not reported when it was made:
+    docs/living-plans.md#a-revision-in-time)."""
+    return set(
+        session.scalars(
+            select(Decision.task_index).where(
+                Decision.run_id == run_id, Decision.pinned.is_(True), Decision.start.is_(None)
+            )
+        )
+    )

@@ -4,6 +4,7 @@ refused and counted with nothing stored. The broker is exercised in test_fleet_e
 
 from __future__ import annotations
 
+import copy
 import json
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
@@ -37,6 +38,8 @@ from app.fleet.vda5050 import (
 from app.store.fleet_models import FleetOrder, FleetRobot
 from app.store.models import ExecutionReport
 from tests.plans.test_revisions import BASELINE, completed_run, wait_status
+from tests.plans.test_timed_team_revisions import BODY as TEAM_BODY
+from tests.plans.test_timed_team_revisions import completed
 from tests.support.vda5050_schemas import validate
 
 MAKER = "acme"
@@ -293,3 +296,31 @@ def test_the_console_shows_each_robots_battery(
     f.state(robots[0], None, battery=57.0)
     page = client.get("/console/fleet")
     assert robots[0] in page.text and "57%" in page.text
+
+
+def test_a_team_task_is_one_order_per_member_done_when_every_member_finished(
+    client: TestClient,
+) -> None:
+    """docs/fleet.md#teams, on the timed team scenario: the first task is a two-robot lift."""
+    body = copy.deepcopy(TEAM_BODY)
+    body["tasks"] = body["tasks"][:1]  # the beam: {"heavy": 2}, 30 minutes
+    run = completed(client, body)
+    (beam,) = run["assignments"]
+    members = [m["robot"] for m in beam["team"]]
+    f = Fleet(client)
+    for robot in members:
+        f.connection(robot, ConnectionState.ONLINE)
+    orders = _orders(f.dispatch())
+    assert sorted(orders) == sorted(members)
+    for order in orders.values():
+        action = order.task_actions()[0]
+        assert action.parameter("plannedDurationS") == 30 * 60.0
+        start = datetime.fromisoformat(str(action.parameter("plannedStart")))
+        assert start == datetime(2026, 12, 7, 6, 0, tzinfo=UTC) + timedelta(minutes=beam["start"])
+    first, second = members
+    f.state(first, orders[first], ActionStatus.RUNNING)
+    assert f.reports(run["id"]) == {"beam": "started"}
+    f.state(first, orders[first], ActionStatus.FINISHED)
+    assert f.reports(run["id"]) == {"beam": "started"}  # one member is not the team
+    f.state(second, orders[second], ActionStatus.FINISHED)
+    assert f.reports(run["id"]) == {"beam": "done"}
