@@ -19,7 +19,9 @@ from app.graph.state import LTAAState, TaskView
 # Bump when prompts, parsing or validation change what a resumed task would decide (the
 # node set and the state schema are read from the code itself). 2: team decisions
 # (docs/allocation.md#teams) and unit-aware candidate lists on instances with team tasks.
-BEHAVIOUR_VERSION = 2
+# 3: a task with a lead may take idle time before its predecessor on the same robot
+# (docs/schedules.md#links), so a timed run with leads places some tasks earlier.
+BEHAVIOUR_VERSION = 3
 
 
 def _annotations(schema: type) -> dict[str, str]:

@@ -5,7 +5,8 @@ LTAA) gets its *when* here, so all methods have a makespan on the same terms. Se
 schedule generation: among the tasks whose predecessors are placed, the one that can
 start earliest (ties: queue order) goes next, appended to its robot's timeline at the
 earliest time its links allow (docs/schedules.md#links), its robot is free and has travelled, its
-release and `not_before` allow. Tasks with a pinned start are facts (reported started or
+release and `not_before` allow (a task with a lead may take idle time its robot left
+behind: `Timeline`). Tasks with a pinned start are facts (reported started or
 done): they sit at their times from the outset and the others are placed around them.
 
 Nothing is hidden: with a given assignment the scheduler may end a task after its
@@ -29,16 +30,30 @@ from app.domain.time_model import TimeModel
 
 @dataclass
 class Timeline:
-    """One robot: when it is next free, where it is, and its fixed tasks still ahead."""
+    """One robot: when it is next free, where it is, and its fixed tasks still ahead.
+
+    It also keeps the idle time it has left behind (`gaps`) and when each task it holds
+    starts: a task whose links let it start before one of those tasks (a lead,
+    docs/schedules.md#links) may go into that idle time, where it fits with its travel
+    there and on; every other task is appended, as it always was."""
 
     free: float
     zone: int | None
     fixed: list[tuple[float, float, int]] = field(default_factory=list)  # (start, end, task)
+    # Idle time behind `free`: (opens, the zone the robot is in, closes, the zone it goes to).
+    gaps: list[tuple[float, int | None, float, int | None]] = field(default_factory=list)
+    starts: dict[int, float] = field(default_factory=dict)  # the tasks placed on it
 
     def earliest(self, tm: TimeModel, task: int, robot: int, ready: float) -> float:
-        """Earliest start >= ready, appended after the fixed tasks it cannot fit before."""
-        free, zone = self.free, self.zone
+        """Earliest start >= ready: in idle time behind it when a lead allows, else
+        appended after the fixed tasks it cannot fit before."""
         d = tm.duration(task, robot)
+        if self._leads(tm, task, ready):
+            for opens, zone, closes, after in self.gaps:
+                s = max(ready, opens + tm.travel_to_task(zone, task))
+                if s + d + tm.travel(tm.task_zone[task], after) <= closes + EPS:
+                    return s
+        free, zone = self.free, self.zone
         for start, end, other in self.fixed:
             s = max(ready, free + tm.travel_to_task(zone, task))
             if s + d + tm.travel(tm.task_zone[task], tm.task_zone[other]) <= start + EPS:
@@ -46,11 +61,45 @@ class Timeline:
             free, zone = max(free, end), tm.task_zone[other]
         return max(ready, free + tm.travel_to_task(zone, task))
 
+    def _leads(self, tm: TimeModel, task: int, ready: float) -> bool:
+        """May the task start before a predecessor this robot already holds?"""
+        if not self.gaps or ready >= self.free - EPS:
+            return False
+        held = [self.starts[p] for p in tm.predecessors[task] if p in self.starts]
+        return bool(held) and ready < max(held) - EPS
+
+    def before(self, start: float) -> tuple[float, int | None]:
+        """When the robot is free and where it is before a task starting at `start`."""
+        if start >= self.free - EPS:
+            return self.free, self.zone
+        for opens, zone, closes, _ in self.gaps:
+            if opens - EPS <= start <= closes + EPS:
+                return opens, zone
+        return self.free, self.zone
+
     def place(self, tm: TimeModel, task: int, robot: int, start: float) -> None:
-        while self.fixed and self.fixed[0][0] < start + tm.duration(task, robot) - EPS:
-            _, end, other = self.fixed.pop(0)
-            self.free, self.zone = max(self.free, end), tm.task_zone[other]
-        self.free, self.zone = start + tm.duration(task, robot), tm.task_zone[task]
+        end, zone = start + tm.duration(task, robot), tm.task_zone[task]
+        self.starts[task] = start
+        if start < self.free - EPS:  # into idle time behind: that gap splits in two
+            for i, (opens, before, closes, after) in enumerate(self.gaps):
+                if opens - EPS <= start and end <= closes + EPS:
+                    self.gaps[i : i + 1] = [
+                        (opens, before, start, zone),
+                        (end, zone, closes, after),
+                    ]
+                    return
+            raise ValueError(f"task {task} at {start:g} fits no idle time of its robot")
+        while self.fixed and self.fixed[0][0] < end - EPS:
+            begins, ends, other = self.fixed.pop(0)
+            self._idle_until(begins, tm.task_zone[other])
+            self.starts[other] = begins
+            self.free, self.zone = max(self.free, ends), tm.task_zone[other]
+        self._idle_until(start, zone)
+        self.free, self.zone = end, zone
+
+    def _idle_until(self, start: float, zone: int | None) -> None:
+        if start > self.free + EPS:
+            self.gaps.append((self.free, self.zone, start, zone))
 
 
 def _check_assignment(

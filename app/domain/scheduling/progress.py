@@ -4,7 +4,8 @@ choice would mean in time (docs/schedules.md#runs-in-time).
 The graph decides one task at a time. On a timed instance the next task is, among the
 tasks whose predecessors are all placed, the one that could start earliest on any robot
 that may take it (ties: queue order), given the robots' timelines as decided so far;
-the chosen robot appends it to its timeline at the earliest time its links allow
+the chosen robot appends it to its timeline (or, a task with a lead, puts it in idle time
+its robot left behind: list_schedule.Timeline) at the earliest time its links allow
 (docs/schedules.md#links), the robot is free and has travelled there, and its release and
 `not_before` allow. It is the list scheduler's rule (app.domain.scheduling.list_schedule) with the
 robot chosen at each step instead of given up front, so the graph's times are the list
@@ -176,15 +177,17 @@ class TimedProgress:
         allowed_robots = set(self._candidates(task))
         out = []
         for r, line in enumerate(self._lines):
-            travel = tm.travel_to_task(line.zone, task)
             duration = tm.durations[task][r]
             if duration is None or r not in allowed_robots:
                 why = "cannot take the task" if duration is None else "is unavailable"
+                travel = tm.travel_to_task(line.zone, task)
                 out.append(
                     TimeOption(r, line.free, travel, math.inf, math.inf, -math.inf, False, why)
                 )
                 continue
             start = line.earliest(tm, task, r, self.ready_time(task, r))
+            free, zone = line.before(start)  # idle time behind, for a lead
+            travel = tm.travel_to_task(zone, task)
             end = start + duration
             slack = deadline - end
             why = ""
@@ -192,7 +195,7 @@ class TimedProgress:
                 why = f"misses the deadline (minute {deadline:g}) by {end - deadline:g} min"
             elif end > tm.shifts[r][1] + EPS:
                 why = f"ends after its shift (minute {tm.shifts[r][1]:g})"
-            out.append(TimeOption(r, line.free, travel, start, end, slack, not why, why))
+            out.append(TimeOption(r, free, travel, start, end, slack, not why, why))
         return tuple(out)
 
     def team_start(self, task: int, members: Members) -> float:
@@ -222,8 +225,9 @@ class TimedProgress:
             if late:
                 name = self.problem.instance.robots[late[0]].name
                 why = f"ends after {name}'s shift (minute {tm.shifts[late[0]][1]:g})"
-        travel = tm.travel_to_task(line.zone, task)
-        return TimeOption(last, line.free, travel, start, end, deadline - end, not why, why)
+        free, zone = line.before(start)
+        travel = tm.travel_to_task(zone, task)
+        return TimeOption(last, free, travel, start, end, deadline - end, not why, why)
 
     def place(self, task: int, robot: int, team: Members = ()) -> Placement:
         """Give the current task to `robot` (a team task: to the members `team`, `robot` the
@@ -238,11 +242,11 @@ class TimedProgress:
     def _place(self, task: int, robot: int, team: Members = ()) -> Placement:
         tm = self.tm
         line = self._lines[robot]
-        travel = tm.travel_to_task(line.zone, task)
         if team:
             start = self.team_start(task, team)
         else:
             start = line.earliest(tm, task, robot, self.ready_time(task, robot))
+        travel = tm.travel_to_task(line.before(start)[1], task)
         for m in team or (robot,):
             self._lines[m].place(tm, task, m, start)
         end = start + tm.duration(task, robot)
