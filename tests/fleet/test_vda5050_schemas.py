@@ -23,7 +23,7 @@ from app.fleet.vda5050 import (
 )
 from tests.support.vda5050_schemas import schema_bytes, validate
 
-# sha256 of json_schemas/*.json in VDA5050/VDA5050 at tag 2.1.0.
+# sha256 of json_schemas/*.schema in VDA5050/VDA5050 at tag 2.1.0 (the shipped copies).
 OFFICIAL = {
     "order": "18fedf85ecf7bc22baf7da71b74d08d699d65b8c6a5f0ccde8bc8d84e1406796",
     "state": "26e41279414d7acfeac6ea9b6438b484b0930ee0e9059cf953168d141da8473b",

@@ -1,24 +1,25 @@
 """The official VDA 5050 2.1.0 JSON schemas, for checking every message the tests see.
 
-They come from the vda5050-sdk package (a pinned dev dependency, MIT), whose files are
-byte-identical to json_schemas/ of the VDA5050/VDA5050 repository at tag 2.1.0: their
-sha256 are pinned in tests/fleet/test_vda5050_schemas.py, so a different copy fails there.
+They are shipped in tests/fleet/data/vda5050/: copies of json_schemas/ of the public
+VDA5050/VDA5050 repository at tag 2.1.0 (MIT), whose sha256 are pinned in
+tests/fleet/test_vda5050_schemas.py, so an edited copy fails there.
 """
 
 from __future__ import annotations
 
 import json
 from functools import cache
-from importlib import resources
+from pathlib import Path
 from typing import Any
 
 import jsonschema
 
 KINDS = ("order", "state", "instantActions", "connection", "factsheet")
+SCHEMAS = Path(__file__).resolve().parents[1] / "fleet" / "data" / "vda5050"
 
 
 def schema_bytes(kind: str) -> bytes:
-    return (resources.files("vda5050") / "validation" / "schemas" / f"{kind}.json").read_bytes()
+    return (SCHEMAS / f"{kind}.schema.json").read_bytes()
 
 
 @cache
