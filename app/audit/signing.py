@@ -22,12 +22,11 @@ from typing import Any
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
-from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.orm import Session
 
 from app.audit.heads import chain_heads, geneses
 from app.config import Settings
 from app.store import chain
-from app.store.db import transaction
 from app.store.models import Run, RunSignature
 
 ALGORITHM = "Ed25519"
@@ -125,26 +124,21 @@ def heads_payload(session: Session, run: Run, reason: str) -> dict[str, Any]:
     }
 
 
-def sign_run(
-    *, sessions: sessionmaker[Session], keys: SigningKeys, run_id: str, reason: str
-) -> RunSignature | None:
-    """Sign the run's current heads with the server key (None when there is no key)."""
+def sign_in(session: Session, keys: SigningKeys, run: Run, reason: str) -> RunSignature | None:
+    """Sign the run's heads as this transaction leaves them, in it: whatever it commits
+    (a run's completed event, a sign-off) is never seen unsigned, even across a crash."""
     if keys.private is None:
         return None
-    with transaction(sessions) as session:
-        run = session.get(Run, run_id)
-        if run is None:
-            return None
-        payload = heads_payload(session, run, reason)
-        signature = keys.private.sign(payload_bytes(payload)).hex()
-        row = RunSignature(
-            run_id=run_id,
-            reason=reason,
-            key_id=str(keys.current_id),
-            payload=payload,
-            signature=signature,
-        )
-        session.add(row)
+    session.flush()  # the heads read below include what this transaction has added
+    payload = heads_payload(session, run, reason)
+    row = RunSignature(
+        run_id=run.id,
+        reason=reason,
+        key_id=str(keys.current_id),
+        payload=payload,
+        signature=keys.private.sign(payload_bytes(payload)).hex(),
+    )
+    session.add(row)
     return row
 
 

@@ -14,7 +14,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.audit.heads import chain_heads
-from app.audit.signing import SigningKeys, sign_run
+from app.audit.signing import SigningKeys, sign_in
 from app.audit.signoffs import SignOff
 from app.audit.verify import verify_trace
 from app.domain.annotations import AnnotationKind
@@ -76,7 +76,7 @@ def sign_off(
     try:
         with transaction(sessions) as session:
             # Locked: two sign-offs at once take their turns on the annotation chain.
-            repo.get_run(session=session, run_id=run_id, for_update=True)
+            locked = repo.get_run(session=session, run_id=run_id, for_update=True)
             at = utcnow()
             detail: dict[str, Any] = {
                 "signer": signer,
@@ -92,6 +92,10 @@ def sign_off(
                 idempotency_key=idempotency.key if idempotency else None,
                 request_digest=idempotency.digest if idempotency else None,
             )
+            if keys is not None and locked is not None:
+                # With a server key the heads are signed at each sign-off too, in its
+                # transaction (app.audit.signing.sign_in).
+                sign_in(session, keys, locked, "signoff")
             signed = SignOff.of(row)
     except IntegrityError:
         # The unique key decides between two requests with one Idempotency-Key at once.
@@ -101,9 +105,6 @@ def sign_off(
         if earlier is None:
             raise
         return earlier, True
-    if keys is not None:
-        # With a server key the heads are signed at each sign-off too (app.audit.signing).
-        sign_run(sessions=sessions, keys=keys, run_id=run_id, reason="signoff")
     return signed, False
 
 

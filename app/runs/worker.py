@@ -22,7 +22,7 @@ from typing import Any
 from langgraph.checkpoint.base import BaseCheckpointSaver, CheckpointTuple
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.audit.signing import SigningKeys, sign_run
+from app.audit.signing import SigningKeys, sign_in
 from app.config import Settings
 from app.domain.errors import DomainError
 from app.graph.builder import build_graph
@@ -423,11 +423,10 @@ class RunWorker:
             lifecycle.move(
                 session, run, status, event=EventKind(status.value), detail=detail, error=error
             )
-        if status == RunStatus.COMPLETED:
-            # After the completed event commits: the heads signed are the final ones.
-            sign_run(
-                sessions=self._sessions, keys=self.signing_keys, run_id=run_id, reason="completed"
-            )
+            if status == RunStatus.COMPLETED:
+                # In the transaction that writes the completed event: the heads signed are
+                # the final ones, and no reader sees a completed run without its signature.
+                sign_in(session, self.signing_keys, run, "completed")
         if status in (RunStatus.COMPLETED, RunStatus.CANCELLED):
             self._prune_checkpoints(run_id)
 
