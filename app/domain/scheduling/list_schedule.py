@@ -70,25 +70,29 @@ class Timeline:
 
     def before(self, start: float) -> tuple[float, int | None]:
         """When the robot is free and where it is before a task starting at `start`."""
-        if start >= self.free - EPS:
+        i = None if start >= self.free - EPS else self._gap_at(start, start)
+        if i is None:
             return self.free, self.zone
-        for opens, zone, closes, _ in self.gaps:
-            if opens - EPS <= start <= closes + EPS:
-                return opens, zone
-        return self.free, self.zone
+        opens, zone, _, _ = self.gaps[i]
+        return opens, zone
+
+    def _gap_at(self, start: float, end: float) -> int | None:
+        """The first idle time behind `free` that holds [start, end]."""
+        for i, (opens, _, closes, _) in enumerate(self.gaps):
+            if opens - EPS <= start and end <= closes + EPS:
+                return i
+        return None
 
     def place(self, tm: TimeModel, task: int, robot: int, start: float) -> None:
         end, zone = start + tm.duration(task, robot), tm.task_zone[task]
         self.starts[task] = start
         if start < self.free - EPS:  # into idle time behind: that gap splits in two
-            for i, (opens, before, closes, after) in enumerate(self.gaps):
-                if opens - EPS <= start and end <= closes + EPS:
-                    self.gaps[i : i + 1] = [
-                        (opens, before, start, zone),
-                        (end, zone, closes, after),
-                    ]
-                    return
-            raise ValueError(f"task {task} at {start:g} fits no idle time of its robot")
+            i = self._gap_at(start, end)
+            if i is None:
+                raise ValueError(f"task {task} at {start:g} fits no idle time of its robot")
+            opens, before, closes, after = self.gaps[i]
+            self.gaps[i : i + 1] = [(opens, before, start, zone), (end, zone, closes, after)]
+            return
         while self.fixed and self.fixed[0][0] < end - EPS:
             begins, ends, other = self.fixed.pop(0)
             self._idle_until(begins, tm.task_zone[other])
