@@ -227,7 +227,7 @@ def test_robot_3_broken_is_revised_away(
     )
     revision = httpx.get(f"{server.url}/runs/{head}").json()
     assert revision["revision_of"] == run_id
-    states = all_final(server, run_id, 60, timeout=30)
+    states = all_final(server, run_id, 60)
     assert len(states) == 60
     final = httpx.get(f"{server.url}/runs/{head}", params={"limit": 1000}).json()
     later = [a for a in final["assignments"] if a["robot"] == "robot-3" and not a.get("pinned")]
