@@ -140,9 +140,12 @@ class Bridge:
             async for message in client.messages:
                 payload = message.payload
                 data = payload if isinstance(payload, bytes) else str(payload).encode()
-                await self._in_thread(
-                    self.intake.receive, str(message.topic), data, retained=bool(message.retain)
-                )
+                try:
+                    await self._in_thread(
+                        self.intake.receive, str(message.topic), data, retained=bool(message.retain)
+                    )
+                except Exception:  # one message must not stop the others (docs/fleet.md)
+                    log.exception("fleet bridge could not apply a message on %s", message.topic)
                 if self.intake.take_changed():
                     self._wake.set()
 
@@ -162,7 +165,8 @@ class Bridge:
             self._wake.clear()
             try:
                 if await self._in_thread(dispatch, sessions=self.sessions, names=self.names):
-                    self.intake.orders_changed()
+                    # On the intake's own thread, never in the middle of a message.
+                    await self._in_thread(self.intake.orders_changed)
             except Exception:  # a bad plan must not stop the robots' messages
                 log.exception("fleet dispatch failed; trying again at the next message")
             while True:

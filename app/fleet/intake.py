@@ -250,7 +250,8 @@ class Intake:
 
     def _robot_orders(self, manufacturer: str, serial: str) -> dict[str, FleetOrder]:
         key = (manufacturer, serial)
-        if key not in self._orders:
+        orders = self._orders.get(key)
+        if orders is None:
             with self.sessions() as session:
                 rows = session.scalars(
                     select(FleetOrder).where(
@@ -258,9 +259,10 @@ class Intake:
                         FleetOrder.serial_number == serial,
                     )
                 )
-                self._orders[key] = {o.order_id: o for o in rows}
+                orders = self._orders[key] = {o.order_id: o for o in rows}
                 session.expunge_all()
-        return self._orders[key]
+        # The orders read here, not the memo again: `orders_changed` may clear it meanwhile.
+        return orders
 
     def _state(self, topic: str, message: State) -> Refusal | None:
         by_id = self._robot_orders(message.manufacturer, message.serial_number)

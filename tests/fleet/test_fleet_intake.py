@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 from prometheus_client import CollectorRegistry
-from sqlalchemy import func, select
+from sqlalchemy import event, func, select
 
 from app.fleet import outbox
 from app.fleet.dispatch import FleetNames, dispatch
@@ -324,3 +324,30 @@ def test_a_team_task_is_one_order_per_member_done_when_every_member_finished(
     assert f.reports(run["id"]) == {"beam": "started"}  # one member is not the team
     f.state(second, orders[second], ActionStatus.FINISHED)
     assert f.reports(run["id"]) == {"beam": "done"}
+
+
+def test_orders_changed_in_the_middle_of_a_state_does_not_lose_it(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    # The bridge's loop cleared the intake's memo of orders while a state read them (a
+    # KeyError that stopped every later message): the clear lands here at the same point,
+    # as the orders just read leave their session.
+    _, f, run_id, robots = fleet
+    robot = robots[0]
+    f.connection(robot, ConnectionState.ONLINE)
+    order = _orders(f.dispatch())[robot]
+    cleared: list[object] = []
+
+    def clear(session: object, instance: object) -> None:
+        if isinstance(instance, FleetOrder) and not cleared:
+            cleared.append(instance)
+            f.intake.orders_changed()
+
+    event.listen(f.sessions, "persistent_to_detached", clear)
+    try:
+        assert f.state(robot, order, ActionStatus.FINISHED) is None
+    finally:
+        event.remove(f.sessions, "persistent_to_detached", clear)
+    assert cleared, "the memo was never cleared mid-read: the test no longer reaches the race"
+    action = order.task_actions()[0].action_id
+    assert f.reports(run_id)[action] == "done"
