@@ -34,11 +34,16 @@ def dispatch_schedule(
     classes: Sequence[int],
     quotas: Mapping[tuple[int, int], int],
     penalty: Sequence[float] | None = None,
+    slowness: float = 0.0,
 ) -> Schedule:
     """Schedule every task, choosing its robot among those with quota left for its class
     (`classes[t]`); pinned tasks keep their robot (and count against its quota).
     `penalty[r]` lengthens robot r's durations by that share when choosing (not when
-    timing): a busy robot then takes the tasks it is quick at."""
+    timing): a busy robot then takes the tasks it is quick at. `slowness` charges a choice
+    that many minutes per minute its robot is slower at the task than the quickest robot
+    open to it: where robots' speeds are unrelated (docs/schedules.md#the-generator), the
+    earliest finish alone hands a task to a slow robot free now over a quick one free a
+    little later, and the plan runs long on slow work."""
     tm = problem.instance.timing
     n = tm.n_tasks
     left = dict(quotas)
@@ -65,11 +70,14 @@ def dispatch_schedule(
     def best(t: int) -> tuple[float, float, int]:
         floor = max(tm.release[t], problem.not_before)
         options = []
-        for r in choices(t):
+        open_to = choices(t)
+        quickest = min((tm.duration(t, r) for r in open_to), default=0.0)
+        for r in open_to:
             ready = max(tm.ready(t, tm.duration(t, r), starts, ends), floor)
             s = lines[r].earliest(tm, t, r, ready)
             slower = 1.0 if penalty is None else 1.0 + penalty[r]
-            options.append((s + tm.duration(t, r) * slower, s, r))
+            excess = slowness * (tm.duration(t, r) - quickest)
+            options.append((s + tm.duration(t, r) * slower + excess, s, r))
         if not options:
             raise ValueError(f"no robot has quota left for task {t} (class {classes[t]})")
         finish, s, r = min(options)

@@ -276,9 +276,12 @@ def assignment_schedules(problem: Problem, robots: list[int]) -> list[Schedule]:
     ]
 
 
-def free_dispatch(problem: Problem, pairs: set[tuple[int, int]] | None) -> Schedule:
+def free_dispatch(
+    problem: Problem, pairs: set[tuple[int, int]] | None, slowness: float = 0.0
+) -> Schedule:
     """Earliest-finish dispatch with every allowed robot open to every task (one class per
-    set of robots able, no quotas): ValueError/DomainError when it cannot place a task."""
+    set of robots able, no quotas), each minute of slowness charged `slowness` minutes
+    (`dispatch_schedule`): ValueError/DomainError when it cannot place a task."""
     tm = problem.instance.timing
     sets: dict[frozenset[int], int] = {}
     classes = []
@@ -295,7 +298,33 @@ def free_dispatch(problem: Problem, pairs: set[tuple[int, int]] | None) -> Sched
         )
         classes.append(sets.setdefault(able, len(sets)))
     quotas = {(c, r): tm.n_tasks for able, c in sets.items() for r in able}
-    return dispatch_schedule(problem, classes, quotas)
+    return dispatch_schedule(problem, classes, quotas, slowness=slowness)
+
+
+# A task's quickest robot at least this much quicker than its slowest: speeds that matter.
+SPEED_SPREAD = 1.5
+
+
+def speeds_decide(
+    problem: Problem, weights: SuccessWeights, candidates: Sequence[Sequence[int]]
+) -> bool:
+    """Is the choice of robot the speeds' to make? True where, for every task, all robots
+    it may take give the same expected success (the objective leaves the choice free, as
+    on Brandimarte's shops and the second benchmark family), some task's quickest robot is
+    `SPEED_SPREAD` times quicker than its slowest, and tasks lie in zones with travel
+    between them. The large path then also runs the steps meant for unrelated robots
+    (`large._dispatch_quick`, the LNS's `speed` and `zone` neighbourhoods); elsewhere it
+    runs as it did before them."""
+    tm = problem.instance.timing
+    if not tm.has_travel:
+        return False
+    spread = False
+    for t, robots in enumerate(candidates):
+        if len({weights[t, r] for r in robots}) > 1:
+            return False
+        minutes = [tm.duration(t, r) for r in robots]
+        spread = spread or (len(minutes) > 1 and max(minutes) >= SPEED_SPREAD * min(minutes))
+    return spread
 
 
 def makespan_floor(problem: Problem, pairs: set[tuple[int, int]] | None = None) -> float:

@@ -42,7 +42,14 @@ from app.domain.errors import DomainError
 from app.domain.scheduling.dispatch import dispatch_schedule, quotas_of
 from app.solvers.cpsat.assignment_model import AssignmentModel
 from app.solvers.cpsat.bounds import best_bound, bound_floors, chains
-from app.solvers.cpsat.common import assignment_schedules, model_cost, none_found, task_classes
+from app.solvers.cpsat.common import (
+    assignment_schedules,
+    free_dispatch,
+    model_cost,
+    none_found,
+    speeds_decide,
+    task_classes,
+)
 from app.solvers.cpsat.lns import improve
 from app.solvers.cpsat.load_bound import load_lower_bound
 from app.solvers.cpsat.model import ScheduleModel, Travel
@@ -74,6 +81,11 @@ BUSY_DISPATCH = ", earliest-finish dispatch with the busiest robots' durations w
 BUSY_SHARE = 0.8
 BUSY_PENALTIES = (0.05, 0.15, 0.25, 0.3, 0.35, 0.45, 0.6, 1.0)
 DISPATCH_COST_PER_TASK = 1.5e-5  # deterministic units per task (47 ms at 1,000 tasks)
+QUICK_DISPATCH = ", earliest-finish dispatch with slowness charged"
+# Minutes charged per minute of slowness, one dispatch each. Measured on the second
+# family (docs/benchmarks.md), 600 x 12 x 4 zones: 657 at 0, 559 at 1, 507 at 2, 503 at 3,
+# 485 at 4; the best weight varies by site (1,000 x 20: 4, 200 x 5: 3): the best is kept.
+SLOWNESS = (1.0, 2.0, 3.0, 4.0, 6.0)
 
 
 def solve_large(setup: Setup) -> ScheduleOutcome:
@@ -97,6 +109,8 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
     ran = _assign(setup, candidates, floors)
     ran += _dispatch_busy(setup)
+    if speeds_decide(setup.problem, setup.weights, candidates):
+        ran += _dispatch_quick(setup)
     best = feasible.best()
     if best is not None:
         search.mark(best.makespan, min(best.makespan, max(floors.values())))
@@ -204,6 +218,18 @@ def _dispatch_busy(setup: Setup) -> str:
             penalty = [weight if b else 0.0 for b in busy]
             feasible.offer(dispatch_schedule(problem, groups, quotas, penalty))
     return BUSY_DISPATCH
+
+
+def _dispatch_quick(setup: Setup) -> str:
+    """Step 2c, where the speeds decide (`speeds_decide`): earliest-finish dispatch with
+    every allowed robot open, each minute a robot is slower at a task than the quickest
+    open to it charged each of `SLOWNESS` minutes while choosing (what ran)."""
+    problem, search, feasible = setup.problem, setup.search, setup.feasible
+    for slowness in SLOWNESS:
+        search.charge(DISPATCH_COST_PER_TASK * problem.instance.n_tasks)
+        with contextlib.suppress(ValueError, DomainError):
+            feasible.offer(free_dispatch(problem, setup.pairs, slowness))
+    return QUICK_DISPATCH
 
 
 def _candidates(setup: Setup, t: int) -> list[int]:

@@ -29,7 +29,8 @@ from app.domain.links import ancestors_through
 from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.list_schedule import sequence_schedule
 from app.domain.scheduling.schedule import EPS, Schedule, StepKind
-from app.solvers.cpsat.common import model_cost
+from app.domain.time_model import TimeModel
+from app.solvers.cpsat.common import model_cost, speeds_decide
 from app.solvers.cpsat.lns_model import Neighbourhood
 from app.solvers.cpsat.outcome import Setup
 
@@ -38,11 +39,15 @@ SLICE = 0.5  # deterministic units of CP-SAT per neighbourhood (~1.5 s of CPU he
 # took 1-2 s to solve, 40 tasks on 3-5 robots (the rest fixed) 0.03-0.1 s. Each kind of
 # neighbourhood keeps its own size, grown while CP-SAT solves it fast and to optimality,
 # shrunk when it does not.
-START_SIZE = {"window": 30, "robots": 40}
+START_SIZE = {"window": 30, "robots": 40, "speed": 40, "zone": 40}
 MIN_SIZE, MAX_SIZE = 6, 250
 FAST, SLOW = 0.3, 0.8  # deterministic units
 GROW, SHRINK = 1.2, 0.8
-ROBOTS_SHARE = 0.5
+# How often each kind is drawn; `speed` and `zone` only where the speeds decide the
+# robots and travel matters (`common.speeds_decide`; docs/schedules.md#anytime).
+SHARES = {"robots": 0.5, "window": 0.5}
+SHARES_UNRELATED = {"robots": 0.3, "window": 0.3, "speed": 0.2, "zone": 0.2}
+QUICK_PARTNERS = 3  # the robots quickest at the chosen task, besides its own
 
 
 @dataclass
@@ -101,15 +106,18 @@ def improve(
     ]
     report = LnsReport(start_makespan=current.makespan, end_makespan=current.makespan)
     size = {kind: float(n) for kind, n in START_SIZE.items()}
+    shares = SHARES_UNRELATED if speeds_decide(setup.problem, setup.weights, candidates) else SHARES
     build = 0.0  # the last neighbourhood's modelled build cost: the next one's estimate
     while (
         movable and search.spent + build + slice_units <= stop_at + 1e-9 and search.remaining() > 0
     ):
         search.need(search.spent + build + slice_units)
-        kind = "robots" if rng.random() < ROBOTS_SHARE else "window"
-        free, robots = _choose(
-            rng, current, movable, (int(size[kind]), kind), candidates, loaded_first
-        )
+        kind = _draw(rng, shares)
+        how = (int(size[kind]), kind)
+        if kind in ("speed", "zone"):
+            free, robots = _choose_by_site(rng, setup, current, movable, how, candidates)
+        else:
+            free, robots = _choose(rng, current, movable, how, candidates, loaded_first)
         allowed = candidates
         if robots is not None:  # an exchange among these robots only
             allowed = [[r for r in c if r in robots] for c in candidates]
@@ -184,6 +192,73 @@ def _choose(
         chosen = {last, *rng.sample(partners[:6], min(len(partners[:6]), rng.randint(2, 4)))}
         pool = [t for t in movable if slots[t].robot in chosen]
     return sorted(pool, key=lambda t: (abs(slots[t].start - centre), t))[:size], chosen
+
+
+def _draw(rng: random.Random, shares: dict[str, float]) -> str:
+    """A kind of neighbourhood, by one draw over `shares` in its order."""
+    x = rng.random()
+    for kind, share in shares.items():
+        x -= share
+        if x < 0:
+            return kind
+    return kind
+
+
+def _choose_by_site(
+    rng: random.Random,
+    setup: Setup,
+    current: Schedule,
+    movable: list[int],
+    how: tuple[int, str],
+    candidates: Sequence[Sequence[int]],
+) -> tuple[list[int], set[int] | None]:
+    """Around a task of a loaded robot on the critical path, among a few robots only:
+    `speed`, the robots quickest at the task that is slowest there for its robot (the
+    earliest finish hands work to whoever is free, and a minute of slow work is a minute
+    of makespan on a loaded robot); `zone`, the robots with work in the zone of a task
+    there (the neighbourhood may then give one robot a run of tasks in that zone instead of
+    each crossing the site). The tasks of those robots closest in time are freed."""
+    size, kind = how
+    tm, slots = setup.problem.instance.timing, current.slots
+    loaded = _loaded(current)
+    late = loaded or sorted({s.robot for s in slots})
+    robot = rng.choice(late)
+    mine = [t for t in movable if slots[t].robot == robot]
+    if not mine:
+        return _choose(rng, current, movable, (size, "window"), candidates)
+    if kind == "speed":
+        pivot = slots[rng.choice(mine)].start
+        near = sorted(mine, key=lambda t: (abs(slots[t].start - pivot), t))[: max(4, size // 4)]
+        centre = max(near, key=lambda t: (_excess(tm, t, robot, candidates[t]), -t))
+        quick = sorted(
+            (r for r in candidates[centre] if r != robot),
+            key=lambda r: (tm.duration(centre, r), r),
+        )
+        chosen = {robot, *quick[:QUICK_PARTNERS]}
+    else:
+        centre = rng.choice(mine)
+        zone = tm.task_zone[centre]
+        at = slots[centre].start
+        others = sorted(
+            {
+                slots[t].robot
+                for t in movable
+                if tm.task_zone[t] == zone and slots[t].robot != robot and robot in candidates[t]
+            },
+            key=lambda r: (
+                min(abs(slots[t].start - at) for t in movable if slots[t].robot == r),
+                r,
+            ),
+        )
+        chosen = {robot, *others[: rng.randint(2, 3)]}
+    pool = [t for t in movable if slots[t].robot in chosen]
+    at = slots[centre].start
+    return sorted(pool, key=lambda t: (abs(slots[t].start - at), t))[:size], chosen
+
+
+def _excess(tm: TimeModel, t: int, robot: int, robots: Sequence[int]) -> float:
+    """Minutes robot `robot` takes at task t beyond the quickest robot allowed."""
+    return tm.duration(t, robot) - min(tm.duration(t, r) for r in robots)
 
 
 def _loaded(current: Schedule) -> list[int]:

@@ -1,0 +1,104 @@
+"""Sites where every robot has its own speed (issue 38; docs/schedules.md#the-generator,
+#schedulers): the second family's generator, the slowness charged by the dispatch, the
+gate that turns on the steps for unrelated robots (and leaves every other site as it
+was), and the large path on the family: checked, deterministic, never longer with more
+budget. Small sites and short deterministic budgets; the large path forced by lowering
+its threshold."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from app.domain.models import Instance, Robot, Task
+from app.domain.modes import Mode
+from app.domain.problem import Problem
+from app.domain.scheduling.dispatch import dispatch_schedule
+from app.domain.scheduling.feasibility import check_schedule
+from app.solvers.cpsat import search
+from app.solvers.cpsat.common import DET_PER_S, SuccessWeights, speeds_decide
+from benchmarks.fjs import DATA, read_fjs, shop_instance
+from benchmarks.timed_instances import construction_site
+from benchmarks.unrelated_sites import MINUTES, TRAVEL, unrelated_site
+
+
+def unrelated(n_tasks: int, n_robots: int, seed: int = 0) -> Problem:
+    return Problem.build(unrelated_site(n_tasks, n_robots, seed=seed), Mode.BALANCED, uncapped=True)
+
+
+@pytest.fixture
+def large_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(search, "EXACT_LIMIT", 0)
+
+
+def test_the_generator_draws_the_family_it_documents() -> None:
+    instance = unrelated_site(600, 12, seed=3)
+    tm = Problem.build(instance, uncapped=True).instance.timing
+    zones = range(len(tm.zones))
+    assert len(tm.zones) == 4
+    for a, b, c in itertools.product(zones, repeat=3):  # a metric: no way round is shorter
+        assert tm.travel(a, c) <= tm.travel(a, b) + tm.travel(b, c)
+    assert all(TRAVEL[0] <= tm.travel(a, b) <= TRAVEL[1] for a in zones for b in zones if a != b)
+    durations = [tm.duration(t, r) for t in range(600) for r in range(12)]
+    assert len(durations) == 600 * 12 and min(durations) >= MINUTES[0]
+    assert max(durations) <= MINUTES[1]
+    index = {t.id: i for i, t in enumerate(instance.tasks)}
+    waiting = [t for t in instance.tasks if t.after]
+    assert 0.55 < len(waiting) / 600 < 0.65
+    for t in waiting:  # one or two of the 30 before it
+        assert 1 <= len(t.after) <= 2
+        assert all(0 < index[t.id] - index[str(a)] <= 30 for a in t.after)
+    released = [t for t in instance.tasks if t.release is not None]
+    assert 0.05 < len(released) / 600 < 0.15
+    assert unrelated_site(600, 12, seed=3) == instance  # seeded
+
+
+def test_slowness_gives_a_task_to_the_robot_quick_at_it() -> None:
+    # Robot a is free now and takes 8 minutes; b takes 4 but is busy until 5 (9 in all).
+    tasks = (
+        Task(id="first", name="first", features=("w",), duration={"b": 5.0}),
+        Task(id="next", name="next", features=("w",), duration={"a": 8.0, "b": 4.0}),
+    )
+    robots = (Robot(name="a", success={"w": 0.9}), Robot(name="b", success={"w": 0.9}))
+    problem = Problem.build(Instance(tasks=tasks, robots=robots), uncapped=True)
+    quotas = {(0, 1): 1, (1, 0): 1, (1, 1): 1}  # class 0: b alone; class 1: either
+    plain = dispatch_schedule(problem, [0, 1], quotas)
+    charged = dispatch_schedule(problem, [0, 1], quotas, slowness=1.0)
+    assert list(plain.assignment) == [1, 0] and plain.makespan == 8
+    assert list(charged.assignment) == [1, 1] and charged.makespan == 9
+    assert check_schedule(problem, charged) == []
+
+
+def _decides(problem: Problem) -> bool:
+    tm = problem.instance.timing
+    candidates = [tm.eligible_robots(t) for t in range(tm.n_tasks)]
+    return speeds_decide(problem, SuccessWeights(problem), candidates)
+
+
+def test_only_sites_where_the_speeds_decide_run_the_steps_for_unrelated_robots() -> None:
+    assert _decides(unrelated(60, 4))
+    # Kinds of robots whose success rates differ: the expected success chooses the robots.
+    assert not _decides(Problem.build(construction_site(60, 4, zones=(2, 2)), Mode.BALANCED))
+    # A flexible job shop: the speeds decide, but nothing travels.
+    shop = shop_instance(read_fjs(DATA / "mk01.fjs"))
+    assert not _decides(Problem.build(shop, Mode.BALANCED, uncapped=True))
+
+
+def test_the_large_path_on_unrelated_robots_is_checked_deterministic_and_anytime(
+    large_path: None,
+) -> None:
+    problem = unrelated(120, 4, seed=1)
+    small = search.solve_schedule(problem, time_limit_s=2.0)
+    again = search.solve_schedule(problem, time_limit_s=2.0)
+    large = search.solve_schedule(problem, time_limit_s=4.0)
+    assert "slowness charged" in small.model and "LNS" in large.model
+    for answer in (small, large):
+        assert check_schedule(problem, answer.schedule) == []
+        assert answer.bound <= answer.makespan
+    assert [(s.robot, s.start) for s in small.schedule.slots] == [
+        (s.robot, s.start) for s in again.schedule.slots
+    ]
+    assert large.makespan <= small.makespan
+    reached = [p for p in large.trajectory if p[0] <= 2.0 * DET_PER_S + 1e-6]
+    assert reached and reached[-1][3] == small.makespan
