@@ -13,10 +13,13 @@ $(BIN)/python:
 	$(BIN)/pip install --quiet --upgrade pip
 
 # torch goes first and on its own: pinned, pip takes the CPU build from local disk,
-# while letting the resolver pick a torch pulls a multi-GB CUDA build.
+# while letting the resolver pick a torch pulls a multi-GB CUDA build. The rest goes in
+# with uv (pinned): on a clean clone pip took 55 s of CI's 15 minutes for it, uv 6 s
+# (torch already there satisfies the extra's pin, so uv leaves it alone).
+UV_VERSION := 0.13.9
 $(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e '.[rl,dev]'
+	$(BIN)/pip install --quiet torch==2.13.0 uv==$(UV_VERSION)
+	$(BIN)/uv pip install --quiet --python $(BIN)/python -e '.[rl,dev]'
 	touch $@
 
 install: $(VENV)/.installed
