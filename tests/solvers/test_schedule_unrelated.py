@@ -16,8 +16,14 @@ from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.domain.scheduling.dispatch import dispatch_schedule
 from app.domain.scheduling.feasibility import check_schedule
+from app.domain.scheduling.list_schedule import sequence_schedule
+from app.domain.scheduling.zone_batches import batched_orders
 from app.solvers.cpsat import search
+from app.solvers.cpsat.bounds import chains
 from app.solvers.cpsat.common import DET_PER_S, SuccessWeights, speeds_decide
+from app.solvers.cpsat.large import _candidates
+from app.solvers.cpsat.load_bound import load_lower_bound, load_relaxation
+from app.solvers.cpsat.search import _setup
 from benchmarks.fjs import DATA, read_fjs, shop_instance
 from benchmarks.timed_instances import construction_site
 from benchmarks.unrelated_sites import MINUTES, TRAVEL, unrelated_site
@@ -93,6 +99,7 @@ def test_the_large_path_on_unrelated_robots_is_checked_deterministic_and_anytime
     again = search.solve_schedule(problem, time_limit_s=2.0)
     large = search.solve_schedule(problem, time_limit_s=4.0)
     assert "slowness charged" in small.model and "LNS" in large.model
+    assert "zone-batched orders" in small.model
     for answer in (small, large):
         assert check_schedule(problem, answer.schedule) == []
         assert answer.bound <= answer.makespan
@@ -102,3 +109,65 @@ def test_the_large_path_on_unrelated_robots_is_checked_deterministic_and_anytime
     assert large.makespan <= small.makespan
     reached = [p for p in large.trajectory if p[0] <= 2.0 * DET_PER_S + 1e-6]
     assert reached and reached[-1][3] == small.makespan
+
+
+def test_zone_batching_keeps_a_robot_in_its_zone_for_a_run_of_tasks() -> None:
+    # One robot, four tasks alternating between two zones 5 minutes apart in queue order:
+    # in that order it crosses three times; zone-batched, once.
+    zones = ("A", "B", "A", "B")
+    tasks = tuple(
+        Task(id=f"t{i}", name=f"t{i}", features=("w",), duration={"a": 10.0}, zone=z)
+        for i, z in enumerate(zones)
+    )
+    robots = (Robot(name="a", success={"w": 0.9}, zone="A"),)
+    travel = {"A": {"B": 5.0}, "B": {"A": 5.0}}
+    problem = Problem.build(Instance(tasks=tasks, robots=robots, travel=travel), uncapped=True)
+    queue = sequence_schedule(problem, [[0, 1, 2, 3]])
+    orders = batched_orders(problem, [0, 0, 0, 0], [0.0] * 4, 1.0, 0.5)
+    batched = sequence_schedule(problem, orders)
+    assert sorted(orders[0]) == [0, 1, 2, 3]
+    assert check_schedule(problem, batched) == []
+    assert [problem.instance.tasks[t].zone for t in orders[0]] == ["A", "A", "B", "B"]
+    assert batched.robot_time[0].travel == 5.0 < queue.robot_time[0].travel == 15.0
+    assert batched.makespan == 45.0 < queue.makespan == 55.0
+
+
+def test_zone_batched_orders_keep_every_rule_on_the_family() -> None:
+    problem = unrelated(150, 5, seed=2)
+    tm = problem.instance.timing
+    assignment = [min(range(5), key=lambda r: (tm.duration(t, r), r)) for t in range(150)]
+    _, _, _, tails, _ = chains(problem)
+    for travel in (0.0, 1.0, 4.0):
+        orders = batched_orders(problem, assignment, list(tails), travel, 0.5)
+        assert sorted(t for order in orders for t in order) == list(range(150))
+        assert all(assignment[t] == r for r, order in enumerate(orders) for t in order)
+        assert check_schedule(problem, sequence_schedule(problem, orders)) == []
+
+
+def test_pricing_the_entries_more_never_lowers_the_load_lp_and_its_shares_are_whole_tasks() -> None:
+    problem = unrelated(80, 4, seed=1)
+    setup = _setup(problem, search.Search(10.0, 1, 0), None)
+    candidates = [_candidates(setup, t) for t in range(problem.instance.n_tasks)]
+    _, _, heads, tails, _ = chains(problem, setup.pairs)
+    common = {
+        "es_target": setup.es_target,
+        "es_floor": setup.es_floor,
+        "time_limit_s": 30.0,
+        "heads": heads,
+        "tails": tails,
+    }
+    once = load_relaxation(problem, candidates, setup.weights, **common)  # type: ignore[arg-type]
+    thrice = load_relaxation(
+        problem,
+        candidates,
+        setup.weights,
+        entry_weight=3.0,
+        **common,  # type: ignore[arg-type]
+    )
+    assert once.minutes == load_lower_bound(problem, candidates, setup.weights, **common)  # type: ignore[arg-type]
+    assert thrice.minutes >= once.minutes > 0
+    for relaxation in (once, thrice):
+        assert relaxation.shares is not None
+        assert relaxation.shares.sum(axis=1) == pytest.approx(1.0, abs=1e-6)
+        allowed = {(t, r) for t, robots in enumerate(candidates) for r in robots}
+        assert all((t, r) in allowed for t, r in zip(*relaxation.shares.nonzero(), strict=True))

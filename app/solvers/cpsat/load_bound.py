@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import linprog
@@ -118,8 +119,9 @@ class _Lp:
             starts[r] = max(starts[r], first + min(tails[t] for t in tasks))
         return starts
 
-    def time_rows(self, starts: np.ndarray) -> tuple[csr_matrix, np.ndarray]:
-        """work + entries + group entries + start * y - T <= 0, per robot."""
+    def time_rows(self, starts: np.ndarray, entry_weight: float) -> tuple[csr_matrix, np.ndarray]:
+        """work + entries + group entries + start * y - T <= 0, per robot (the entries
+        `entry_weight` times over)."""
         tm, k, m = self.tm, self.k, self.m
         robot_of = np.array([r for _, r in self.pairs], dtype=int)
         work = [
@@ -127,10 +129,10 @@ class _Lp:
         ]
         rows = [robot_of, np.array([r for r, *_ in self.visits], dtype=int)]
         cols = [np.arange(k), k + np.arange(self.nv)]
-        vals = [np.array(work), np.array([w for _, _, w, _ in self.visits])]
+        vals = [np.array(work), entry_weight * np.array([w for _, _, w, _ in self.visits])]
         rows.append(np.array([r for r, *_ in self.groups], dtype=int))
         cols.append(self.g0 + np.arange(len(self.groups)))
-        vals.append(np.array([w for _, _, w, _ in self.groups]))
+        vals.append(entry_weight * np.array([w for _, _, w, _ in self.groups]))
         rows += [np.arange(m), np.arange(m)]
         cols += [self.y0 + np.arange(m), np.full(m, self.n_cols - 1)]
         vals += [starts, -np.ones(m)]
@@ -180,6 +182,14 @@ class _Lp:
         return self.col(vals, rows, cols, len(keep))
 
 
+class Relaxation(NamedTuple):
+    """The LP's optimum in minutes (0.0 when HiGHS did not finish) and each task's shares
+    over the robots (tasks x robots; None when it did not finish)."""
+
+    minutes: float
+    shares: np.ndarray | None
+
+
 def load_lower_bound(
     problem: Problem,
     candidates: Sequence[Sequence[int]],
@@ -197,12 +207,42 @@ def load_lower_bound(
     (without them: the plain load LP, a fifth of the time); with an exact `scale`
     the bound is rounded up to its unit (every time of an earliest-start schedule is a
     whole number of units)."""
+    return load_relaxation(
+        problem,
+        candidates,
+        weights,
+        es_target=es_target,
+        es_floor=es_floor,
+        time_limit_s=time_limit_s,
+        heads=heads,
+        tails=tails,
+        scale=scale,
+    ).minutes
+
+
+def load_relaxation(
+    problem: Problem,
+    candidates: Sequence[Sequence[int]],
+    weights: SuccessWeights,
+    *,
+    es_target: int | None,
+    es_floor: int | None,
+    time_limit_s: float,
+    heads: np.ndarray | None = None,
+    tails: np.ndarray | None = None,
+    scale: TimeScale | None = None,
+    entry_weight: float = 1.0,
+) -> Relaxation:
+    """The LP of `load_lower_bound` and its shares. `entry_weight` prices every zone and
+    group entry that many times over: above 1 the optimum is no bound, but its shares are
+    an assignment that keeps each robot in fewer zones (`large._lp_rounded`, the planner's
+    use: a robot enters a zone more than once when its work there is spread in time)."""
     lp = _Lp(problem, candidates, heads is not None and tails is not None)
     n, k, m = problem.instance.n_tasks, lp.k, lp.m
     task_of = np.array([t for t, _ in lp.pairs], dtype=int)
     full = heads is not None and tails is not None
     starts = lp.line_starts(heads, tails)
-    time_rows, time_rhs = lp.time_rows(starts)
+    time_rows, time_rhs = lp.time_rows(starts, entry_weight)
     loads = lp.loads()
     available = list(problem.available)
     cap = problem.cap
@@ -245,12 +285,14 @@ def load_lower_bound(
         options={"time_limit": max(0.1, time_limit_s), "presolve": not full},
     )
     if result.status != 0:
-        return 0.0
+        return Relaxation(0.0, None)
     bound = max(0.0, float(result.fun) * (1 - STEP_BACK) - 1e-6)
     if scale is not None and scale.exact:
         units = scale.units_per_minute
         bound = math.ceil(bound * units - 1e-6) / units
-    return bound
+    shares = np.zeros((n, m))
+    np.add.at(shares, (task_of, np.array([r for _, r in lp.pairs], dtype=int)), result.x[:k])
+    return Relaxation(bound, shares)
 
 
 def _group_entries(
