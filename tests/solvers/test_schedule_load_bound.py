@@ -26,6 +26,7 @@ from app.solvers.cpsat.load_bound import load_lower_bound
 from app.solvers.cpsat.outcome import Setup
 from app.solvers.cpsat.search import _setup, solve_schedule
 from benchmarks.timed_instances import construction_site
+from benchmarks.unrelated_sites import unrelated_site
 from tests.solvers.test_schedule_exhaustive import Case, cases, exhaustive
 
 
@@ -225,3 +226,21 @@ def test_group_entries_count_the_way_into_the_other_group() -> None:
     )
     setup = _setup(problem, Search(1.0, 1, 0), None)
     assert bounds_of(setup)[1] == grouped_optimum(problem, setup.es_target, setup.weights) == 9
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(3, 6), st.integers(2, 3), st.integers(0, 10_000))
+def test_never_above_the_exhaustive_optimum_on_the_second_family(
+    n_tasks: int, n_robots: int, seed: int
+) -> None:
+    """Small sites of the unrelated family (docs/schedules.md#the-generator): four zones with
+    random metric travel, every (task, robot) duration its own, precedence and releases."""
+    assume(n_tasks <= 4 or n_robots == 2)  # the search is robots^tasks x orders
+    problem = Problem.build(
+        unrelated_site(n_tasks, n_robots, seed=seed), Mode.BALANCED, uncapped=True
+    )
+    setup = _setup(problem, Search(1.0, 1, 0), None)
+    plain, full = bounds_of(setup)
+    expected = grouped_optimum(problem, setup.es_target, setup.weights)
+    note(f"{problem.instance}: {plain} {full} vs {expected}")
+    assert plain <= full <= expected + 1e-6
