@@ -20,11 +20,11 @@ from app.http.responses import CLIENT, ErrorOut, errors
 from app.operations import endpoints as operations
 from app.operations import health_endpoints, metrics_endpoints
 from app.plans import endpoints as plans
-from app.plans import schedule_endpoints
 from app.reviews import endpoints as reviews
 from app.reviews import signoff_endpoints
 from app.runs import endpoints as runs
 from app.runs import event_endpoints
+from app.schedules import endpoints as schedules
 from app.sites import endpoints as sites
 from app.sites import service as site_service
 from app.webhooks import endpoints as webhooks
@@ -34,7 +34,7 @@ ROUTERS: tuple[APIRouter, ...] = (
     catalog_endpoints.router,
     allocation.router,
     runs.router,
-    schedule_endpoints.router,
+    schedules.router,
     plans.router,
     signoff_endpoints.router,
     reviews.router,

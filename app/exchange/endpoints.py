@@ -2,7 +2,7 @@
 to a draft instance, and the MSPDI answer of GET /runs/{id}/schedule?format=mspdi.
 
 The HTTP side of app.exchange. It imports nothing of the HTTP kit (app.exchange sits below
-it, beside app.schedules, and imports only the domain): app.api.routers mounts the router
+it, beside app.schedule_views, and imports only the domain): app.api.routers mounts the router
 with the client-role dependency and the error responses. Nothing is stored: the caller
 edits the draft (rates, say) and posts it. The body's size limit is LTAA_IMPORT_MAX_BYTES
 (413 above it, enforced while reading by the body-size middleware, to which app.main hands
