@@ -1,14 +1,14 @@
 """POST /schedules/import (client): a site's MS Project (MSPDI) or Primavera P6 (XER) file
-to a draft instance (docs/exchange.md), read by app.exchange.
+to a draft instance (docs/exchange.md), read by app.exchange through app.schedules.service.
 
 The HTTP side of the schedule files, here and not in app.exchange: the readers sit low,
 beside app.schedule_views, and import only the domain (a contract), so they can take
 neither the client-role dependency and the error responses (app.http) nor a site's
 learned rates (app.sites). This package sits above both, so the router carries its
-access check and responses and `?site=` calls app.sites.service itself, as the console's
-import page does. Nothing is stored: the caller edits the draft (rates, say) and posts
-it. The body's size limit is LTAA_IMPORT_MAX_BYTES (413 above it, enforced while reading
-by the body-size middleware, to which app.main hands app.api.routers.body_limits).
+access check and responses, and `?site=` is read by app.schedules.service, which the
+console's import page calls too. Nothing is stored: the caller edits the draft (rates, say)
+and posts it. The body's size limit is LTAA_IMPORT_MAX_BYTES (413 above it, enforced while
+reading by the body-size middleware, to which app.main hands app.api.routers.body_limits).
 """
 
 from __future__ import annotations
@@ -18,12 +18,11 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Depends, Header, Query, Request
 from fastapi.concurrency import run_in_threadpool
 
-from app.exchange import fill_rates, read_schedule
 from app.http.deps import SettingsDep, require_client
 from app.http.responses import CLIENT, ErrorOut, errors
 from app.runs.deps import RunsDep
+from app.schedules import service
 from app.schedules.schemas import ImportedDraft
-from app.sites import service as site_service
 
 IMPORT_PATH = "/schedules/import"
 
@@ -87,19 +86,15 @@ async def import_schedule(
     """A schedule file as a draft instance: nothing is stored (docs/exchange.md)."""
     data = await request.body()
     draft = await run_in_threadpool(
-        lambda: read_schedule(
+        lambda: service.import_draft(
             data,
+            sessions=runs.sessions,
+            prior_strength=settings.prior_strength,
             format=format_,
             content_type=content_type,
             features_field=features_field,
             default_features=default_features,
+            site=site,
         )
     )
-    if site is not None:
-        rates = await run_in_threadpool(
-            lambda: site_service.site_rates(
-                sessions=runs.sessions, site=site, strength=settings.prior_strength
-            )
-        )
-        draft = fill_rates(draft, rates, site=site)
     return ImportedDraft.model_validate(draft.to_dict())
