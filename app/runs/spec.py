@@ -88,6 +88,8 @@ def repeated_parameters(order: RunOrder) -> dict[str, Any]:
     }
 
 
+# The order resolved: what the worker replays on every resume, stored as the run's request
+# (why a run has five shapes: app.runs.schemas.RunRequest).
 @dataclass(frozen=True)
 class RunSpec:
     instance_data: dict[str, Any]
@@ -251,6 +253,7 @@ class RunSpec:
         return cls(**data)
 
 
+# Why a run has five shapes: app.runs.schemas.RunRequest.
 @dataclass(frozen=True)
 class RunOrder:
     """What a POST /runs body asks for, nothing resolved yet: the instance as sent (a

@@ -51,6 +51,7 @@ class Base(DeclarativeBase):
     type_annotation_map: ClassVar[dict[Any, Any]] = {dict[str, Any]: JSON, list[Any]: JSON}
 
 
+# The store's shape of a run (why a run has five: app.runs.schemas.RunRequest).
 class Run(Base):
     __tablename__ = "runs"
 
@@ -170,6 +171,7 @@ class RunAnnotation(_SeqChained, Base):
     request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True, sort_order=1)
 
 
+# The store's shape of a decision (why a decision has four: app.graph.recorder.DecisionRecord).
 class Decision(Base):
     __tablename__ = "decisions"
     __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_decisions_run_task"),)
