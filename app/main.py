@@ -23,10 +23,11 @@ from app.console.imports import CONSOLE_IMPORT_PATH
 from app.fleet.bridge import Bridge
 from app.fleet.metrics import FleetMetrics
 from app.http.auth import InsecureBindError, KeyRing, check_bind
-from app.http.errors import BodySizeLimit, install_error_handlers
+from app.http.errors import install_error_handlers
+from app.http.middleware import BodySizeLimit, RequestMetrics
 from app.http.rounding import RoundedJSONResponse
 from app.observability.logs import configure_logging
-from app.observability.metrics import Metrics, RequestMetrics, RunTablesCollector
+from app.observability.metrics import Metrics, RunTablesCollector
 from app.runs.deps import RunsContext
 from app.runs.factory import make_worker
 from app.runs.worker import RunWorker
@@ -188,7 +189,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         },
     )
     # Outermost, so rejected bodies (413) are timed too.
-    app.add_middleware(RequestMetrics, metrics=app.state.metrics)
+    app.add_middleware(RequestMetrics, histogram=app.state.metrics.request_seconds)
     mount_routers(app)
     install_openapi(app, open_access=keyring.open)
     install_console(app, keyring=keyring, settings=settings)

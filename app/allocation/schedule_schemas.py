@@ -1,6 +1,6 @@
 """The schedule block of an answer on a timed instance (docs/schedules.md#a-schedule-and-its-check).
 
-Its content is built by `app.schedules.schedule_json` (the one JSON view of a schedule,
+Its content is built by `app.schedule_views.schedule_json` (the one JSON view of a schedule,
 also what `ltaa schedule --format json` prints); these models only describe it for the
 OpenAPI document and check that the answer keeps to it.
 """

@@ -30,7 +30,7 @@ from app.domain.scheduling.feasibility import check_schedule
 from app.domain.scheduling.schedule import Schedule
 from app.domain.teams import team_problem
 from app.reasoners.factory import ReasonerSettings
-from app.schedules import schedule_json, violations_json
+from app.schedule_views import schedule_json, violations_json
 from app.solvers.base import Solution, Solver
 from app.solvers.registry import get_solver
 

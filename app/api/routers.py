@@ -6,27 +6,24 @@ from __future__ import annotations
 
 from functools import partial
 
-from fastapi import APIRouter, Depends, FastAPI
+from fastapi import APIRouter, FastAPI
 
 from app.allocation import catalog_endpoints
 from app.allocation import endpoints as allocation
 from app.audit import endpoints as audit
 from app.audit.signing import SigningKeys
 from app.config import Settings
-from app.exchange import endpoints as exchange
 from app.fleet import endpoints as fleet
-from app.http.deps import require_client
-from app.http.responses import CLIENT, ErrorOut, errors
 from app.operations import endpoints as operations
 from app.operations import health_endpoints, metrics_endpoints
 from app.plans import endpoints as plans
-from app.plans import schedule_endpoints
 from app.reviews import endpoints as reviews
 from app.reviews import signoff_endpoints
 from app.runs import endpoints as runs
 from app.runs import event_endpoints
+from app.schedules import endpoints as schedules
+from app.schedules import import_endpoints
 from app.sites import endpoints as sites
-from app.sites import service as site_service
 from app.webhooks import endpoints as webhooks
 
 ROUTERS: tuple[APIRouter, ...] = (
@@ -34,7 +31,7 @@ ROUTERS: tuple[APIRouter, ...] = (
     catalog_endpoints.router,
     allocation.router,
     runs.router,
-    schedule_endpoints.router,
+    schedules.router,
     plans.router,
     signoff_endpoints.router,
     reviews.router,
@@ -45,23 +42,13 @@ ROUTERS: tuple[APIRouter, ...] = (
     fleet.router,
     operations.router,
     audit.router,
+    import_endpoints.router,
 )
 
 
 def mount_routers(app: FastAPI) -> None:
     for router in ROUTERS:
         app.include_router(router)
-    # The schedule-file reader is a pure layer (app.exchange imports only the domain): its
-    # access check and documented errors are added here.
-    unknown_site = {"model": ErrorOut, "description": "No run names the site of ?site="}
-    app.include_router(
-        exchange.router,
-        dependencies=[Depends(require_client)],
-        responses={**errors(*CLIENT, 413), 404: unknown_site},
-    )
-    # ?site= of POST /schedules/import: the site's learned rates, which app.exchange may not
-    # read itself (app.exchange.endpoints.SiteRates).
-    app.state.site_rates = partial(_site_rates, app)
     # GET /audit/public-key: the run worker's signing keys, which app.audit may not read
     # itself (app.audit.endpoints.SigningKeysSource).
     app.state.signing_keys = partial(_signing_keys, app)
@@ -72,13 +59,7 @@ def _signing_keys(app: FastAPI) -> SigningKeys:
     return keys
 
 
-def _site_rates(app: FastAPI, site: str) -> dict[str, dict[str, float]]:
-    return site_service.site_rates(
-        sessions=app.state.runs.sessions, site=site, strength=app.state.settings.prior_strength
-    )
-
-
 def body_limits(settings: Settings) -> dict[str, tuple[int, str]]:
     """Path -> (its body limit in bytes, the setting that raises it), for the paths whose
     bodies may be larger than LTAA_MAX_BODY_BYTES (an imported schedule file)."""
-    return {exchange.IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES")}
+    return {import_endpoints.IMPORT_PATH: (settings.import_max_bytes, "LTAA_IMPORT_MAX_BYTES")}

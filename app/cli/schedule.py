@@ -39,7 +39,7 @@ from app.domain.scheduling.schedule import Schedule
 from app.exchange import write_mspdi
 from app.http.errors import domain_error_body, validation_error_body
 from app.http.rounding import rounded
-from app.schedules import render_timeline, schedule_csv, schedule_ics, schedule_json
+from app.schedule_views import render_timeline, schedule_csv, schedule_ics, schedule_json
 
 
 class Format(StrEnum):

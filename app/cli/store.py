@@ -90,7 +90,7 @@ def run_archive(
     after_file: Callable[[str], None] | None = None,
 ) -> tuple[dict[str, Any], str]:
     """Archive through the server holding the store, or directly under the store lock."""
-    from app.operations import archive
+    from app.operations import service
     from app.store.db import make_engine, make_session_factory
     from app.store.migrate import upgrade_head
 
@@ -116,19 +116,18 @@ def run_archive(
         upgrade_head(settings.db_url)
         engine = make_engine(settings.db_url)
         try:
-            sessions = make_session_factory(engine)
-            dest = settings.archive_root
-            done = archive.archive(
-                sessions=sessions, before=before, dest=dest, after_file=after_file
+            done = service.archive_finished(
+                sessions=make_session_factory(engine),
+                settings=settings,
+                before=before,
+                after_file=after_file,
             )
         finally:
             engine.dispose()
-        if done:
-            archive.vacuum(backup.database_file(settings))
     finally:
         lock.release()
     return {
-        "archive_dir": str(dest),
+        "archive_dir": str(settings.archive_root),
         "lineages": [{"head": x.head, "runs": x.runs, "files": x.files} for x in done],
     }, "direct"
 

@@ -2,9 +2,10 @@
 a site's MS Project or P6 file uploaded, its draft shown (tasks, links, robots and their
 rates, what was skipped and why, the source), and the draft started as a run.
 
-Over app.exchange (the readers), app.sites (a site's learned rates) and app.runs (the run
-service POST /runs calls), like the other pages. The draft is started as the file has it,
-typed links and lags included (docs/schedules.md#links).
+Over app.schedules.service (the file read by app.exchange, a site's learned rates from
+app.sites: what POST /schedules/import calls), app.sites (the sites to choose from) and
+app.runs (the run service POST /runs calls), like the other pages. The draft is started
+as the file has it, typed links and lags included (docs/schedules.md#links).
 """
 
 from __future__ import annotations
@@ -21,14 +22,10 @@ from app.domain.errors import DomainError
 from app.domain.estimates import DEFAULT_SITE
 from app.domain.models import MAX_NAME_CHARS
 from app.domain.serialize import instance_from_dict
-from app.exchange import (
-    Draft,
-    ExchangeError,
-    fill_rates,
-    read_schedule,
-)
+from app.exchange import Draft, ExchangeError
 from app.runs import service as run_service
 from app.runs.spec import RunOrder
+from app.schedules import service as import_service
 from app.sites import service as site_service
 
 CONSOLE_IMPORT_PATH = "/console/import"
@@ -53,19 +50,6 @@ def _unrated(draft: Draft) -> list[str]:
     them."""
     rated = {f for r in draft.robots for f in r["success"]}
     return sorted({f for t in draft.tasks for f in t["features"]} - rated)
-
-
-def _read(data: bytes, form: dict[str, str], rates_of: Any) -> Draft:
-    kind = form["format"]
-    draft = read_schedule(
-        data,
-        format="mspdi" if kind == "mspdi" else "xer" if kind == "xer" else None,
-        features_field=form["features_field"] or None,
-        default_features=form["default_features"] or None,
-    )
-    if form["site"]:
-        draft = fill_rates(draft, rates_of(form["site"]), site=form["site"])
-    return draft
 
 
 @router.post("/import")
@@ -106,13 +90,19 @@ async def import_file(
             413,
         )
 
-    def rates_of(name: str) -> dict[str, dict[str, float]]:
-        return site_service.site_rates(
-            sessions=sessions_of(request), site=name, strength=console.settings.prior_strength
-        )
-
+    kind = form["format"]
     try:
-        draft = await run_in_threadpool(_read, data, form, rates_of)
+        draft = await run_in_threadpool(
+            lambda: import_service.import_draft(
+                data,
+                sessions=sessions_of(request),
+                prior_strength=console.settings.prior_strength,
+                format="mspdi" if kind == "mspdi" else "xer" if kind == "xer" else None,
+                features_field=form["features_field"] or None,
+                default_features=form["default_features"] or None,
+                site=form["site"] or None,
+            )
+        )
         sites = await run_in_threadpool(_sites, request)
     except ExchangeError as exc:
         where = f"{exc.field}: " if exc.field and exc.field != "links" else ""

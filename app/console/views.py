@@ -17,7 +17,7 @@ from app.graph.validation import CRITERION_TITLES, WEIGHTS
 from app.plans import current, revisions
 from app.plans import diff as diffs
 from app.runs import views as run_views
-from app.schedules import gantt_svg
+from app.schedule_views import gantt_svg
 from app.store.models import Attempt
 
 DECISIONS_PER_PAGE = 25
@@ -234,7 +234,7 @@ def run_page(
 
 
 def gantt(*, sessions: sessionmaker[Session], run_id: str, timed: bool) -> dict[str, Any]:
-    """A timed run's Gantt chart (server-rendered by app.schedules, the critical path
+    """A timed run's Gantt chart (server-rendered by app.schedule_views, the critical path
     marked), once its schedule is whole; nothing for an untimed run. Its current
     schedule: the decisions re-timed by the site's execution reports (app.plans.current)."""
     if not timed:

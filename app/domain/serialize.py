@@ -12,6 +12,9 @@ from typing import Any
 
 from app.domain.links import Link
 from app.domain.models import Instance, Robot, Task
+from app.domain.modes import Mode
+from app.domain.objective import Objective, ObjectiveKind
+from app.domain.problem import Problem
 
 _TASK_TIME = ("duration", "after", "zone", "release", "deadline", "team")
 
@@ -102,4 +105,26 @@ def instance_from_dict(data: dict[str, Any]) -> Instance:
         ),
         travel=data.get("travel"),
         start=None if start is None else datetime.fromisoformat(start),
+    )
+
+
+def problem_from_dict(
+    data: dict[str, Any],
+    mode: str,
+    max_deviation: float | None,
+    *,
+    objective: str,
+    min_expected_success: float,
+    **build: Any,
+) -> Problem:
+    """The problem a stored run poses (app.runs.spec.RunSpec.problem, on every start and
+    resume), in one call: its instance's plain-JSON form read back, its mode and objective
+    (docs/schedules.md#the-model; Problem.build refuses any but the default untimed) named
+    by value, the rest of Problem.build's arguments as given."""
+    return Problem.build(
+        instance_from_dict(data),
+        Mode(mode),
+        max_deviation,
+        objective=Objective(ObjectiveKind(objective), min_expected_success),
+        **build,
     )

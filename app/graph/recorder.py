@@ -57,6 +57,12 @@ def _copy_json(value: Any) -> Any:
     return copy.deepcopy(value)
 
 
+# A decision has four shapes, each for its reader: this record (what the graph produces;
+# the graph may not import the store), the Decision row (app.store.models: what the store
+# keeps, with its chain hash and flattened time columns), DecisionOut (the supervisors'
+# trace, with attempts and attribution) and RunAssignment (a client's page of a run, with
+# execution reports); both answers resolve indices to names, read with from_attributes
+# (app.runs.endpoints; the mapping to columns: app.runs.records).
 @dataclass
 class DecisionRecord:
     """The finalised decision for one task. Key: task_index (one per run and task)."""

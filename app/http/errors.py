@@ -16,7 +16,6 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.routing import iter_route_contexts
 from starlette.exceptions import HTTPException as StarletteHTTPException
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.domain.errors import DomainError, RunArchivedError, RunNotFoundError
 from app.store.tombstones import archive_file_of
@@ -174,62 +173,3 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(DomainError, _on_domain)  # type: ignore[arg-type]
     app.add_exception_handler(StarletteHTTPException, _on_http)  # type: ignore[arg-type]
     app.add_exception_handler(Exception, _on_unexpected)
-
-
-class BodySizeLimit:
-    """Answer 413 for bodies above `max_bytes`, whether declared (Content-Length) or streamed.
-
-    Pure ASGI so the limit is enforced while reading, before anything is buffered or parsed.
-    `paths` gives a path a limit of its own: {path: (bytes, the setting that sets it)}
-    (an imported schedule file may be larger than any JSON request).
-    """
-
-    def __init__(
-        self, app: ASGIApp, max_bytes: int, paths: dict[str, tuple[int, str]] | None = None
-    ) -> None:
-        self.app = app
-        self.max_bytes = max_bytes
-        self.paths = paths or {}
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        limit, setting = self.paths.get(
-            scope.get("path", ""), (self.max_bytes, "LTAA_MAX_BODY_BYTES")
-        )
-        declared = dict(scope.get("headers") or []).get(b"content-length")
-        if declared is not None and declared.isdigit() and int(declared) > limit:
-            await self._reject(scope, receive, send, int(declared), limit, setting)
-            return
-
-        seen = 0
-
-        async def counting_receive() -> Message:
-            # Streamed (chunked) bodies carry no Content-Length: count while reading.
-            nonlocal seen
-            message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > limit:
-                    raise self._too_large(None, limit, setting)
-            return message
-
-        await self.app(scope, counting_receive, send)
-
-    def _too_large(self, size: int | None, limit: int, setting: str) -> ApiError:
-        amount = f"{size:,} bytes" if size is not None else "too large"
-        return ApiError(
-            413,
-            ["body"],
-            f"request body is {amount}: the limit is {limit:,} bytes "
-            f"({setting}); send less or raise the limit",
-            "body_too_large",
-        )
-
-    async def _reject(
-        self, scope: Scope, receive: Receive, send: Send, size: int, limit: int, setting: str
-    ) -> None:
-        exc = self._too_large(size, limit, setting)
-        body = error_body(exc.loc, str(exc.detail), exc.type)
-        await JSONResponse(body, status_code=413)(scope, receive, send)

@@ -11,7 +11,6 @@ reports the same totals: aggregate them with max(), not sum().
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -21,7 +20,6 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 from sqlalchemy import case, func, select
 from sqlalchemy.orm import Session, sessionmaker
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.domain.lifecycle import RunStatus
 from app.domain.review import ReviewState
@@ -174,33 +172,3 @@ class RunTablesCollector(Collector):
         with self._sessions() as session:
             counts = read_counts(session)
         yield from families(counts)
-
-
-class RequestMetrics:
-    """Pure ASGI (streams pass straight through): observe each request's latency, labelled
-    by route template so /runs/{run_id} is one series, not one per run."""
-
-    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
-        self.app = app
-        self.histogram = metrics.request_seconds
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        started = time.perf_counter()
-        status = 500  # an exception escaping the app becomes a 500
-
-        async def send_status(message: Message) -> None:
-            nonlocal status
-            if message["type"] == "http.response.start":
-                status = message["status"]
-            await send(message)
-
-        try:
-            await self.app(scope, receive, send_status)
-        finally:
-            route = getattr(scope.get("route"), "path", None) or "unrouted"
-            self.histogram.labels(scope["method"], route, str(status)).observe(
-                time.perf_counter() - started
-            )

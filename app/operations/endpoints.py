@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from fastapi import APIRouter
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -12,9 +10,8 @@ from app.http.deps import SettingsDep, SupervisorDep
 from app.http.errors import ApiError
 from app.http.responses import BODY, SUPERVISOR, errors
 from app.http.times import RequestTime
-from app.operations import archive, backup
+from app.operations import backup, service
 from app.runs.deps import RunsDep
-from app.runs.factory import uses_leases
 
 router = APIRouter(prefix="/admin", tags=["admin"])
 
@@ -48,17 +45,10 @@ class BackupOut(BaseModel):
 def backup_store(caller: SupervisorDep, body: BackupRequest, settings: SettingsDep) -> BackupOut:
     """For supervisors (`ltaa backup DEST` calls this while a server holds the store): copy
     both SQLite files consistently, runs held at a node boundary meanwhile."""
-    root = settings.backup_root.resolve()
-    dest = Path(body.dest).resolve()
-    if dest == root or root not in dest.parents:
-        raise ApiError(
-            422,
-            ["body", "dest"],
-            f"dest must be a directory inside {root} (LTAA_BACKUP_DIR)",
-            "outside_backup_dir",
-        )
     try:
-        report = backup.backup(settings=settings, dest=dest)
+        report = service.backup_into_backup_dir(settings=settings, dest=body.dest)
+    except service.OutsideBackupDirError as exc:
+        raise ApiError(422, ["body", "dest"], str(exc), "outside_backup_dir") from None
     except backup.BackupError as exc:
         raise ApiError(409, ["body", "dest"], str(exc), "backup_refused") from None
     except OSError as exc:
@@ -102,11 +92,8 @@ def archive_runs(
     """For supervisors (`ltaa archive` calls this while a server holds the store): write
     each selected run's verified export to the archive directory, delete its rows, leave a
     tombstone (lookups then answer 410 naming the file), then vacuum."""
-    dest = settings.archive_root
-    done = archive.archive(sessions=runs.sessions, before=body.before, dest=dest)
-    if done and not uses_leases(settings.db_url):
-        archive.vacuum(backup.database_file(settings))
+    done = service.archive_finished(sessions=runs.sessions, settings=settings, before=body.before)
     return ArchiveOut(
-        archive_dir=str(dest),
+        archive_dir=str(settings.archive_root),
         lineages=[ArchivedLineageOut(head=x.head, runs=x.runs, files=x.files) for x in done],
     )

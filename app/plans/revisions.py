@@ -32,8 +32,7 @@ from app.plans.revision_pins import ParentDecision
 from app.plans.revision_plan import RevisionPlan, plan_revision
 from app.plans.revision_rates import revision_spec
 from app.plans.revision_times import ReportedTimes
-from app.reasoners.base import close_reasoner
-from app.reasoners.factory import make_reasoner
+from app.reasoners.factory import check_reasoner
 from app.runs import lifecycle, records, review_gate
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.service import insert_run
@@ -375,7 +374,7 @@ def _check_reasoner(settings: Settings, request: RevisionRequest) -> None:
     if request.reasoner is None:
         return
     try:
-        close_reasoner(make_reasoner(request.reasoner, settings=settings, model=request.model))
+        check_reasoner(request.reasoner, settings=settings, model=request.model)
     except DomainError as exc:
         raise DomainError("reasoner", exc.message, code=exc.code) from None
 

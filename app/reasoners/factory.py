@@ -9,7 +9,7 @@ from typing import Any, Protocol
 from pydantic import SecretStr
 
 from app.domain.errors import DomainError
-from app.reasoners.base import Reasoner
+from app.reasoners.base import Reasoner, close_reasoner
 from app.reasoners.replay import RecordedReply, ReplayReasoner, ReplyKey
 from app.reasoners.rules import RulesReasoner
 from app.reasoners.scope import DEFAULT_LLM_MARGIN, scoped
@@ -46,6 +46,18 @@ def resolve_api_key(explicit: SecretStr | str | None, settings: Any = None) -> s
     if key:
         return key
     return next((os.environ[v] for v in API_KEY_VARS if os.environ.get(v)), None)
+
+
+def check_reasoner(
+    name: str,
+    *,
+    settings: ReasonerSettings | None = None,
+    model: str | None = None,
+    temperature: float | None = None,
+) -> None:
+    """Refuse (DomainError) a reasoner this server cannot build: unknown, or its key
+    missing. It is built and closed at once; a run builds its own when it starts."""
+    close_reasoner(make_reasoner(name, settings=settings, model=model, temperature=temperature))
 
 
 def make_reasoner(

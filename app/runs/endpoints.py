@@ -13,6 +13,7 @@ from app.audit import verify
 from app.domain.estimates import DurationSource, RateSource
 from app.domain.models import Instance
 from app.graph.recorder import DecisionRecord
+from app.http.answers import from_row
 from app.http.deps import ClientDep, SettingsDep, SupervisorDep
 from app.http.fields import SiteName
 from app.http.idempotency import CREATED_HEADERS, IdempotencyKey, idempotency_of, mark_replayed
@@ -37,7 +38,7 @@ from app.runs.schemas import (
     signoff_out,
 )
 from app.runs.spec import RunSpec
-from app.runs.time_schemas import decision_times
+from app.runs.time_schemas import DecisionTimes, decision_times
 from app.runs.trace import JSONL_RESPONSE, jsonl_trace, verify_out
 from app.runs.trace_schemas import AttemptOut, DecisionOut, EventOut, TraceOut, TraceVerifyOut
 from app.store.models import Attempt, ExecutionReport
@@ -113,33 +114,43 @@ def _review_out(review: dict[str, Any] | None) -> DecisionReviewOut | None:
     return None if review is None else DecisionReviewOut.model_validate(review)
 
 
+def _times(instance: Instance, d: DecisionRecord) -> dict[str, Any]:
+    """The DecisionTimes fields, all given: an untimed decision's are absent (None), even
+    where the record holds a zone, as decision_times has them."""
+    return {**dict.fromkeys(DecisionTimes.model_fields), **decision_times(instance, d)}
+
+
 def _assignment(view: views.RunView, d: DecisionRecord) -> RunAssignment:
+    # From the record: task_index, task_name, fallback. The rest differs in shape: the task's
+    # id and the robot's name resolved against the instance (the record's robot is an
+    # index; a task id keeps its int or str type there), `success` is the record's
+    # expected_success, the pins, the execution report and the times come from the view.
     instance = view.spec.problem.instance
-    return RunAssignment(
-        task_index=d.task_index,
+    return from_row(
+        RunAssignment,
+        d,
         task_id=instance.tasks[d.task_index].id,
-        task_name=d.task_name,
         robot=instance.robots[d.robot].name,
         success=d.expected_success,
-        fallback=d.fallback,
         review=_review_out(d.review),
         pinned=d.task_index in view.pins,
         pinned_from=view.pins.get(d.task_index),
         execution=_execution_out(view.execution.get(d.task_index)),
         team=_team_out(d),
-        **decision_times(instance, d),
+        **_times(instance, d),
     )
 
 
 def _run_head(view: views.RunView, limit: int) -> RunOut:
     """The run's answer without its assignments, which app.runs.pages fills in."""
-    run, spec = view.run, view.spec
-    return RunOut(
-        id=run.id,
-        status=RunStatus(run.status),
-        reasoner=run.reasoner,
-        mode=run.mode,
-        max_deviation=run.max_deviation,
+    # From the run's row: id, status, reasoner, mode, max_deviation, resumes, graph_version,
+    # error, the lineage (revision_of, revision, superseded_by), the times and the site.
+    # What the row does not hold comes from the view: progress, workload, the page, the
+    # metrics, regret and usage, the sign-offs, the violations, and the rates and durations
+    # its spec planned with.
+    return from_row(
+        RunOut,
+        view.run,
         progress=Progress(**view.progress),
         workload=view.workload,
         assignments=[],
@@ -147,19 +158,9 @@ def _run_head(view: views.RunView, limit: int) -> RunOut:
         metrics=MetricsOut.from_domain(view.metrics) if view.metrics else None,
         regret=view.regret,
         usage=UsageOut.from_domain(view.usage),
-        resumes=run.resumes,
-        graph_version=run.graph_version,
-        error=run.error,
-        revision_of=run.revision_of,
-        revision=run.revision,
-        superseded_by=run.superseded_by,
-        created_at=run.created_at,
-        updated_at=run.updated_at,
-        finished_at=run.finished_at,
         signoffs=[signoff_out(s) for s in view.signoffs],
-        site=run.site,
-        rates=RateSource(spec.rates),
-        durations=DurationSource(spec.durations),
+        rates=RateSource(view.spec.rates),
+        durations=DurationSource(view.spec.durations),
         schedule_violations=None
         if view.violations is None
         else [ViolationOut.model_validate(v) for v in view.violations],
@@ -203,25 +204,21 @@ def _page_out(runs: RunsContext, run_id: str, offset: int, limit: int) -> Respon
 
 
 def _attempt_out(a: Attempt, prompts: bool, run_reasoner: str) -> AttemptOut:
+    # From the attempt's row: attempt, tier, parsed, quality, accepted, hard_invalid,
+    # feedback, the tokens, latency_ms, transport_retries. Differing: the row's reply_*
+    # columns answer as model and reply, who wrote it is read from reply_extra, scores may
+    # be null in the row, and the prompts are answered only with ?include=prompts.
     who = attempt_attribution(a.reply_extra, a.reply_model, run_reasoner)
-    return AttemptOut(
-        attempt=a.attempt,
-        tier=a.tier,
-        parsed=a.parsed,
+    extra = a.reply_extra or {}
+    return from_row(
+        AttemptOut,
+        a,
         scores=a.scores or {},
-        quality=a.quality,
-        accepted=a.accepted,
-        hard_invalid=a.hard_invalid,
-        feedback=a.feedback,
-        input_tokens=a.input_tokens,
-        output_tokens=a.output_tokens,
-        latency_ms=a.latency_ms,
-        transport_retries=a.transport_retries,
         model=a.reply_model,
         reasoner=who.reasoner,
-        why=who.why,  # type: ignore[arg-type]  # one of the StandIn values, as stored
-        replayed_from=(a.reply_extra or {}).get("replayed_from"),
-        original_model=(a.reply_extra or {}).get("original_model"),
+        why=who.why,
+        replayed_from=extra.get("replayed_from"),
+        original_model=extra.get("original_model"),
         system_prompt=a.system_prompt if prompts else None,
         user_prompt=a.user_prompt if prompts else None,
         reply=a.reply_text if prompts else None,
@@ -256,16 +253,13 @@ def get_trace(
     instance = spec.problem.instance
     names = [r.name for r in instance.robots]
     prompts = include == "prompts"
-    return TraceOut(
-        id=trace.run.id,
-        status=RunStatus(trace.run.status),
-        reasoner=trace.run.reasoner,
-        mode=trace.run.mode,
-        max_deviation=trace.run.max_deviation,
+    # id, status, reasoner, mode and max_deviation from the run's row; an event's row answers
+    # its created_at as `at`.
+    return from_row(
+        TraceOut,
+        trace.run,
         robots=names,
-        events=[
-            EventOut(seq=e.seq, kind=e.kind, detail=e.detail, at=e.created_at) for e in trace.events
-        ],
+        events=[from_row(EventOut, e, at=e.created_at) for e in trace.events],
         decisions=[
             _decision_out(
                 d,
@@ -297,33 +291,24 @@ def _decision_out(
     who = decision_attribution(
         d.fallback, Attribution(accepted.reasoner, accepted.why) if accepted else None
     )
-    return DecisionOut(
-        task_index=d.task_index,
+    # From the record: the task's index and name, expected_success, phase, the loads and
+    # balances, severity, reasoning, confidence, trade-off, quality, fallback, failure_log,
+    # regret. Differing: the task id and robot name resolved against the instance, who
+    # decided (the accepted attempt's attribution, or the fallback), the pins, the attempts
+    # (the record counts them; the answer lists them) and the times.
+    return from_row(
+        DecisionOut,
+        d,
         task_id=instance.tasks[d.task_index].id,
-        task_name=d.task_name,
         robot=names[d.robot],
-        expected_success=d.expected_success,
-        phase=d.phase,
-        loads_before=d.loads_before,
-        loads_after=d.loads_after,
-        balance_before=d.balance_before,
-        balance_after=d.balance_after,
-        severity_after=d.severity_after,
-        reasoning=d.reasoning,
-        confidence=d.confidence,
-        tradeoff=d.tradeoff,
-        quality=d.quality,
-        fallback=d.fallback,
-        failure_log=d.failure_log,
-        regret=d.regret,
         reasoner=who.reasoner,
-        why=who.why,  # type: ignore[arg-type]  # one of the StandIn values
+        why=who.why,
         review=_review_out(d.review),
         pinned=d.task_index in pins,
         pinned_from=pins.get(d.task_index),
         attempts=outs,
         team=_team_out(d),
-        **decision_times(instance, d),
+        **_times(instance, d),
     )
 
 

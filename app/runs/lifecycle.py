@@ -8,7 +8,8 @@ true across processes sharing PostgreSQL; a process-local counter here would not
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 from sqlalchemy import ColumnElement, update
@@ -22,7 +23,7 @@ from app.domain.lifecycle import (
     check_transition,
 )
 from app.store import repository as repo
-from app.store.models import Run, RunAnnotation, RunEvent, status_writes, utcnow
+from app.store.models import STATUS_WRITER, Run, RunAnnotation, RunEvent, utcnow
 from app.webhooks.events import SIGNED_OFF
 from app.webhooks.outbox import enqueue_for_event
 
@@ -35,7 +36,19 @@ __all__ = [
     "new_run",
     "record_annotation",
     "record_event",
+    "status_writes",
 ]
+
+
+@contextmanager
+def status_writes() -> Iterator[None]:
+    """Writing a run's status is allowed inside this (app.store.models' guards refuse it
+    elsewhere). Only this module enters it, and test factories building rows."""
+    token = STATUS_WRITER.set(True)
+    try:
+        yield
+    finally:
+        STATUS_WRITER.reset(token)
 
 
 def record_event(

@@ -7,10 +7,10 @@ Why a decision keeps four shapes: `DecisionRecord` is what the graph produces (i
 import the store), the `Decision` row is what the store keeps (with the chain hash and
 the columns the record's time lines are flattened into), and the answers differ on
 purpose: `DecisionOut` (the supervisors' trace, with attempts and the ledger) and
-`RunAssignment` (a client's page of a run, names resolved against the instance). The
-answers are built from the record in app.runs.endpoints, since they resolve indices to
-the instance's names; an answer that is its row alone is read with `from_attributes`
-(`RunSummary`, `ExecutionStateOut`).
+`RunAssignment` (a client's page of a run, names resolved against the instance). Every
+answer is read from its record or row with `from_attributes` (app.http.answers.from_row,
+in app.runs.endpoints), given beside it only the fields whose shape differs: the names
+the record's indices resolve to against the instance, who decided, the pins, the times.
 """
 
 from __future__ import annotations

@@ -26,6 +26,7 @@ from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.lifecycle import RunStatus
 from app.domain.objective import ObjectiveKind
 from app.domain.review import ReviewAction, ReviewOn
+from app.http.answers import from_row
 from app.http.times import Timestamp
 from app.runs.spec import ORDER_INSTANCE_FIELDS, RUN_PARAMETERS, RunOrder
 from app.runs.time_schemas import DecisionTimes
@@ -92,6 +93,12 @@ class ReviewPolicyIn(BaseModel):
     )
 
 
+# A run has five shapes, each for its reader: RunRequest (what a client posts, with its
+# OpenAPI forms), RunOrder (that body as the run service takes it, nothing resolved:
+# app.runs.spec), RunSpec (the order resolved and frozen, stored as the run's request and
+# replayed by the worker on every resume), the Run row (app.store.models: status, lease,
+# lineage, chain) and RunOut (the answer: the row with its views, read with
+# from_attributes); RunSummary is the row alone, in a list.
 class RunRequest(InstanceRequest):
     """An LTAA run on an instance, executed durably in the background."""
 
@@ -281,6 +288,8 @@ class ExecutionStateOut(BaseModel):
     ended_at: Timestamp | None
 
 
+# A client's shape of a decision: names, success, pins and the execution report, without
+# the ledger and attempts DecisionOut has (why four shapes: app.graph.recorder.DecisionRecord).
 class RunAssignment(DecisionTimes):
     task_index: int
     task_id: int | str
@@ -318,6 +327,7 @@ class SignOffOut(BaseModel):
     statement: str
 
 
+# The answer of GET /runs/{id}: the Run row and its views (why five shapes: RunRequest).
 class RunOut(BaseModel):
     id: str
     status: RunStatus
@@ -368,10 +378,8 @@ class RunOut(BaseModel):
     )
 
 
-# A run in a list, read from its row (app.store.models.Run). A run has more shapes on
-# purpose: RunRequest (what a client posts), RunOrder and RunSpec (the order as the worker
-# replays it: app/runs/spec.py), the row, this summary and RunOut (the whole answer, with
-# its views: app/runs/views.py).
+# A run in a list, read from its row (app.store.models.Run) alone; why a run has five other
+# shapes: RunRequest.
 class RunSummary(BaseModel):
     model_config = ConfigDict(from_attributes=True)
 
@@ -387,11 +395,8 @@ class RunSummary(BaseModel):
 
 
 def signoff_out(signed: SignOff) -> SignOffOut:
-    return SignOffOut(
-        signer=signed.signer,
-        at=signed.at,
-        heads=SignedHeadsOut(
-            decisions=signed.heads.get("decisions"), events=signed.heads.get("events")
-        ),
-        statement=signed.statement,
+    # signer, at and statement as recorded; the heads a dict that may lack a chain's.
+    heads = SignedHeadsOut(
+        decisions=signed.heads.get("decisions"), events=signed.heads.get("events")
     )
+    return from_row(SignOffOut, signed, heads=heads)

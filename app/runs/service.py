@@ -17,8 +17,7 @@ from app.domain.lifecycle import FINISHED
 from app.domain.objective import Objective
 from app.domain.problem import Problem
 from app.domain.serialize import instance_to_dict
-from app.reasoners.base import close_reasoner
-from app.reasoners.factory import make_reasoner
+from app.reasoners.factory import check_reasoner
 from app.runs import lifecycle, review_gate
 from app.runs.lifecycle import EventKind, RunStatus
 from app.runs.replay_source import REPLAY, replay_spec, validate_replay
@@ -45,11 +44,8 @@ def create_run(
     # A replay names a completed run and copies its parameters; nothing else names a run.
     validate_replay(sessions=sessions, spec=spec)
     if spec.replay_of is None:  # a replay's reasoner is built from the record, at run time
-        # Raises for an unknown reasoner or a missing key; the run builds its own later.
-        close_reasoner(
-            make_reasoner(
-                spec.reasoner, settings=settings, model=spec.model, temperature=spec.temperature
-            )
+        check_reasoner(
+            spec.reasoner, settings=settings, model=spec.model, temperature=spec.temperature
         )
     run_id = uuid.uuid4().hex
     with transaction(sessions) as session:
@@ -79,6 +75,7 @@ def insert_run(
     """A queued run's row for `spec` and its first event, whose detail is `created` and
     what the spec shows of itself (RunSpec.created_detail): for a new run (create_run) and
     for a revision (app.plans.revisions, `revised`, with its row's revision columns)."""
+    shown = spec.created_detail(problem)  # the instance's size counted once, for both
     return lifecycle.new_run(
         session,
         run_id=run_id,
@@ -86,8 +83,8 @@ def insert_run(
         reasoner=spec.reasoner,
         mode=spec.mode,
         max_deviation=problem.cap.max_deviation,
-        n_tasks=problem.instance.n_tasks,
-        n_robots=problem.instance.n_robots,
+        n_tasks=shown["tasks"],
+        n_robots=shown["robots"],
         resumes=0,
         cancel_requested=False,
         idempotency_key=idempotency.key if idempotency else None,
@@ -95,7 +92,7 @@ def insert_run(
         chain_scheme=chain.SCHEME_V2,
         site=spec.site,
         first_event=first_event,
-        created={**created, **spec.created_detail(problem)},
+        created={**created, **shown},
         **row,
     )
 

@@ -17,10 +17,10 @@ from app.domain import estimates
 from app.domain.estimates import DEFAULT_SITE, DurationSource, RateSource
 from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
-from app.domain.objective import Objective, ObjectiveKind
+from app.domain.objective import ObjectiveKind
 from app.domain.problem import Problem
 from app.domain.review import ReviewPolicy
-from app.domain.serialize import instance_from_dict, instance_to_dict
+from app.domain.serialize import instance_to_dict, problem_from_dict
 from app.reasoners.scope import DEFAULT_LLM_MARGIN, LLMScope
 
 DEFAULT_QUALITY_THRESHOLD = 0.6
@@ -88,6 +88,8 @@ def repeated_parameters(order: RunOrder) -> dict[str, Any]:
     }
 
 
+# The order resolved: what the worker replays on every resume, stored as the run's request
+# (why a run has five shapes: app.runs.schemas.RunRequest).
 @dataclass(frozen=True)
 class RunSpec:
     instance_data: dict[str, Any]
@@ -156,23 +158,21 @@ class RunSpec:
 
     @cached_property
     def problem(self) -> Problem:
-        return Problem.build(
-            instance_from_dict(self.instance_data),
-            Mode(self.mode),
+        # One call into the domain (app.domain.serialize.problem_from_dict): the instance,
+        # the objective and the problem are built there.
+        return problem_from_dict(
+            self.instance_data,
+            self.mode,
             self.max_deviation,
+            objective=self.objective,
+            min_expected_success=self.min_expected_success,
             uncapped=self.max_deviation is None,
             pinned={int(t): r for t, r in (self.pinned or {}).items()},
             unavailable=self.unavailable or (),
-            objective=self.objective_of(),
             pinned_starts={int(t): m for t, m in (self.pinned_starts or {}).items()},
             not_before=self.not_before or 0.0,
             pinned_teams={int(t): m for t, m in (self.pinned_teams or {}).items()},
         )
-
-    def objective_of(self) -> Objective:
-        """The objective (docs/schedules.md#the-model); Problem.build refuses any but the default
-        untimed."""
-        return Objective(ObjectiveKind(self.objective), self.min_expected_success)
 
     def with_site_estimates(
         self,
@@ -251,6 +251,7 @@ class RunSpec:
         return cls(**data)
 
 
+# Why a run has five shapes: app.runs.schemas.RunRequest.
 @dataclass(frozen=True)
 class RunOrder:
     """What a POST /runs body asks for, nothing resolved yet: the instance as sent (a

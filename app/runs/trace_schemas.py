@@ -58,6 +58,8 @@ class AttemptOut(BaseModel):
     reply: str | None = Field(None, description="Raw reply, with ?include=prompts")
 
 
+# The supervisors' shape of a decision: the record with its attempts, who decided and the
+# pins (why a decision has four shapes: app.graph.recorder.DecisionRecord).
 class DecisionOut(DecisionTimes):
     task_index: int
     task_id: int | str

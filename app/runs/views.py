@@ -26,7 +26,7 @@ from app.graph.timing import decision_teams
 from app.runs import records
 from app.runs.lifecycle import RunStatus
 from app.runs.spec import LruCache, RunSpec
-from app.schedules import violations_json
+from app.schedule_views import violations_json
 from app.store import decision_repository as decision_repo
 from app.store import repository as repo
 from app.store import run_totals
@@ -68,7 +68,7 @@ class RunView:
     pins: dict[int, str | None] = field(default_factory=dict)
     # The task indexes of the page, in order (those in `decisions` and those skipped).
     page: list[int] = field(default_factory=list)
-    # A completed timed run's: the rules its plan breaks (app.schedules.violations_json).
+    # A completed timed run's: the rules its plan breaks (app.schedule_views.violations_json).
     violations: list[dict[str, Any]] | None = None
 
     @property

@@ -1,25 +1,8 @@
-"""Reading a schedule (docs/schedules.md#reading-a-runs-schedule): the same plan as JSON, CSV,
-iCalendar, a Gantt chart (SVG) and a terminal timeline.
+"""A run's schedule over HTTP (docs/schedules.md#reading-a-runs-schedule): GET
+/runs/{id}/schedule (`endpoints.py`), the current plan in time (app.plans.current) read by
+app.schedule_views as JSON, CSV, iCalendar or MS Project XML.
 
-Pure functions over domain objects (a `Problem` and the `Schedule` a solver made of it):
-they compute nothing a schedule does not already say, so every view shows the same times.
-The API, the console and the command line call them; they import only the domain.
+A feature above the living plans, whose re-timed schedule it serves; the pure readers it
+calls sit low, in app.schedule_views, because allocation, runs, the console and the
+command line call them too (a package is one layer: the readers cannot share this one).
 """
-
-from __future__ import annotations
-
-from app.schedules.calendar import schedule_ics
-from app.schedules.gantt import gantt_svg
-from app.schedules.json_view import lanes, schedule_json, violations_json
-from app.schedules.table import schedule_csv
-from app.schedules.timeline import render_timeline
-
-__all__ = [
-    "gantt_svg",
-    "lanes",
-    "render_timeline",
-    "schedule_csv",
-    "schedule_ics",
-    "schedule_json",
-    "violations_json",
-]

@@ -6,8 +6,6 @@ a run lives here, keyed so that a node re-executed after a crash upserts, never 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from contextvars import ContextVar
 from datetime import UTC, datetime
 from typing import Any, ClassVar
@@ -51,6 +49,7 @@ class Base(DeclarativeBase):
     type_annotation_map: ClassVar[dict[Any, Any]] = {dict[str, Any]: JSON, list[Any]: JSON}
 
 
+# The store's shape of a run (why a run has five: app.runs.schemas.RunRequest).
 class Run(Base):
     __tablename__ = "runs"
 
@@ -170,6 +169,7 @@ class RunAnnotation(_SeqChained, Base):
     request_digest: Mapped[str | None] = mapped_column(String(64), nullable=True, sort_order=1)
 
 
+# The store's shape of a decision (why a decision has four: app.graph.recorder.DecisionRecord).
 class Decision(Base):
     __tablename__ = "decisions"
     __table_args__ = (UniqueConstraint("run_id", "task_index", name="uq_decisions_run_task"),)
@@ -307,23 +307,15 @@ class Attempt(Base):
 # -- one writer of runs.status -------------------------------------------------------------
 # A run's status is moved only by app.runs.lifecycle, which checks the move against the
 # transition table and writes the matching event. These guards make the rule hold at run
-# time: an assignment to Run.status, or a bulk UPDATE of runs that sets status, outside
-# `status_writes()` raises. (tests/runs/test_lifecycle.py also scans the source.)
-_status_writer: ContextVar[bool] = ContextVar("ltaa_status_writer", default=False)
+# time: an assignment to Run.status, or a bulk UPDATE of runs that sets status, while
+# STATUS_WRITER is unset raises. Only app.runs.lifecycle.status_writes sets it: the context
+# lives with its one user, the guards with the rows. (tests/runs/test_lifecycle.py also
+# scans the source.)
+STATUS_WRITER: ContextVar[bool] = ContextVar("ltaa_status_writer", default=False)
 
 
 class StatusWriteError(RuntimeError):
     """Code outside app.runs.lifecycle tried to write a run's status."""
-
-
-@contextmanager
-def status_writes() -> Iterator[None]:
-    """Only app.runs.lifecycle enters this."""
-    token = _status_writer.set(True)
-    try:
-        yield
-    finally:
-        _status_writer.reset(token)
 
 
 def _refuse(how: str) -> StatusWriteError:
@@ -335,14 +327,14 @@ def _refuse(how: str) -> StatusWriteError:
 
 @orm_event.listens_for(Run.status, "set", propagate=True)
 def _guard_status_set(target: Run, value: Any, old: Any, initiator: Any) -> None:
-    if not _status_writer.get():
+    if not STATUS_WRITER.get():
         raise _refuse(f"by assignment ({old!r} -> {value!r})")
     RunStatus(value)  # only statuses the lifecycle knows
 
 
 @orm_event.listens_for(Session, "do_orm_execute")
 def _guard_bulk_status(state: ORMExecuteState) -> None:
-    if not state.is_update or _status_writer.get():
+    if not state.is_update or STATUS_WRITER.get():
         return
     statement: Any = state.statement
     # The statement holds an annotated copy of the table, so compare by name.

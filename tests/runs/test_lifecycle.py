@@ -22,10 +22,11 @@ from app.domain.lifecycle import (
     check_transition,
 )
 from app.runs import lifecycle
+from app.runs.lifecycle import status_writes
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import upgrade_head
-from app.store.models import Run, StatusWriteError, status_writes
+from app.store.models import Run, StatusWriteError
 
 APP = Path(__file__).resolve().parents[2] / "app"
 THE_WRITER = APP / "runs" / "lifecycle.py"

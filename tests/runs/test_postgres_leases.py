@@ -22,6 +22,7 @@ from app.domain.catalog import scenario
 from app.graph.checkpoint.postgres import open_postgres_saver
 from app.runs import service
 from app.runs.factory import make_worker
+from app.runs.lifecycle import status_writes
 from app.runs.ownership import LeaseOwnership
 from app.runs.recorder import LeaseLost, RunStop, SqlRecorder
 from app.runs.spec import RunSpec
@@ -31,7 +32,7 @@ from app.store import leases
 from app.store import repository as repo
 from app.store.db import make_engine, make_session_factory, transaction
 from app.store.migrate import alembic_config, upgrade_head
-from app.store.models import Run, status_writes
+from app.store.models import Run
 from tests.support.factories import decision_record, run_row
 from tests.support.polling import eventually
 from tests.support.postgres import fresh_database, query

@@ -1,4 +1,4 @@
-"""The schedule readers (app.schedules): every view read back with an independent parser
+"""The schedule readers (app.schedule_views): every view read back with an independent parser
 (stdlib csv, the `icalendar` package, xml.etree) and checked against the schedule itself."""
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from app.domain.modes import Mode
 from app.domain.problem import Problem
 from app.domain.scheduling.list_schedule import list_schedule
 from app.domain.scheduling.schedule import Schedule, StepKind
-from app.schedules import (
+from app.schedule_views import (
     gantt_svg,
     lanes,
     render_timeline,

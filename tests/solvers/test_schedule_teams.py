@@ -38,7 +38,7 @@ from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
 from app.domain.scheduling.schedule import Schedule
 from app.domain.teams import covers
 from app.exchange.mspdi_write import write_mspdi
-from app.schedules import gantt_svg, schedule_csv, schedule_ics
+from app.schedule_views import gantt_svg, schedule_csv, schedule_ics
 from app.solvers.cpsat.team_dispatch import team_dispatch
 from app.solvers.registry import get_solver
 from benchmarks.team_schedules import measure

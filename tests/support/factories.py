@@ -6,7 +6,8 @@ from typing import Any
 
 from app.graph.recorder import DecisionRecord
 from app.runs import records
-from app.store.models import Decision, Run, status_writes
+from app.runs.lifecycle import status_writes
+from app.store.models import Decision, Run
 
 
 def run_row(run_id: str, status: str = "queued", **overrides: Any) -> Run:

@@ -14,7 +14,7 @@ from datetime import UTC, datetime, timedelta
 
 from app.domain.problem import Problem
 from app.domain.scheduling.schedule import Schedule
-from app.schedules.json_view import critical_tasks
+from app.schedule_views.json_view import critical_tasks
 
 PRODID = "-//LTAA//Robot task schedule//EN"
 _LINE_OCTETS = 75  # RFC 5545 3.1: lines longer than this are folded

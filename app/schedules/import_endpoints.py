@@ -1,48 +1,37 @@
 """POST /schedules/import (client): a site's MS Project (MSPDI) or Primavera P6 (XER) file
-to a draft instance, and the MSPDI answer of GET /runs/{id}/schedule?format=mspdi.
+to a draft instance (docs/exchange.md), read by app.exchange through app.schedules.service.
 
-The HTTP side of app.exchange. It imports nothing of the HTTP kit (app.exchange sits below
-it, beside app.schedules, and imports only the domain): app.api.routers mounts the router
-with the client-role dependency and the error responses. Nothing is stored: the caller
-edits the draft (rates, say) and posts it. The body's size limit is LTAA_IMPORT_MAX_BYTES
-(413 above it, enforced while reading by the body-size middleware, to which app.main hands
-app.api.routers.body_limits).
+The HTTP side of the schedule files, here and not in app.exchange: the readers sit low,
+beside app.schedule_views, and import only the domain (a contract), so they can take
+neither the client-role dependency and the error responses (app.http) nor a site's
+learned rates (app.sites). This package sits above both, so the router carries its
+access check and responses, and `?site=` is read by app.schedules.service, which the
+console's import page calls too. Nothing is stored: the caller edits the draft (rates, say)
+and posts it. The body's size limit is LTAA_IMPORT_MAX_BYTES (413 above it, enforced while
+reading by the body-size middleware, to which app.main hands app.api.routers.body_limits).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
-from fastapi import APIRouter, Header, Query, Request
+from fastapi import APIRouter, Depends, Header, Query, Request
 from fastapi.concurrency import run_in_threadpool
-from pydantic import BaseModel, Field
 
-from app.exchange.rates import fill_rates
-from app.exchange.read import read_schedule
+from app.http.deps import SettingsDep, require_client
+from app.http.responses import CLIENT, ErrorOut, errors
+from app.runs.deps import RunsDep
+from app.schedules import service
+from app.schedules.schemas import ImportedDraft
 
 IMPORT_PATH = "/schedules/import"
 
-# site -> {robot: {feature: learned rate}}, raising a 404 error for an unknown site. Handed
-# in by app.api.routers as `app.state.site_rates` (the site's estimates live in app.sites, a layer
-# this package must not import).
-SiteRates = Callable[[str], Mapping[str, Mapping[str, float]]]
-
-router = APIRouter(tags=["schedules"])
-
-
-class ImportedDraft(BaseModel):
-    """A draft instance: `tasks`, `robots`, `start` as a request sends them, plus what was
-    read and what was not (docs/exchange.md)."""
-
-    tasks: list[dict[str, Any]] = Field(description="Tasks in the shape a request sends")
-    robots: list[dict[str, Any]] = Field(description="The assigned resources, rates empty")
-    start: str | None = Field(description="The project's start (RFC 3339)")
-    source: dict[str, Any] = Field(
-        description="format, project, calendar, features_field, counts read and imported, "
-        "and the calendar caveat"
-    )
-    skipped: list[dict[str, Any]] = Field(description="Each item not imported, with why")
+_UNKNOWN_SITE = {"model": ErrorOut, "description": "No run names the site of ?site="}
+router = APIRouter(
+    tags=["schedules"],
+    dependencies=[Depends(require_client)],
+    responses={**errors(*CLIENT, 413), 404: _UNKNOWN_SITE},
+)
 
 
 _BODY = {
@@ -60,6 +49,8 @@ _BODY = {
 @router.post(IMPORT_PATH, response_model=ImportedDraft, openapi_extra=_BODY)
 async def import_schedule(
     request: Request,
+    runs: RunsDep,
+    settings: SettingsDep,
     format_: Annotated[
         Literal["mspdi", "xer"] | None,
         Query(alias="format", description="mspdi or xer; default: told by the first bytes"),
@@ -95,16 +86,15 @@ async def import_schedule(
     """A schedule file as a draft instance: nothing is stored (docs/exchange.md)."""
     data = await request.body()
     draft = await run_in_threadpool(
-        lambda: read_schedule(
+        lambda: service.import_draft(
             data,
+            sessions=runs.sessions,
+            prior_strength=settings.prior_strength,
             format=format_,
             content_type=content_type,
             features_field=features_field,
             default_features=default_features,
+            site=site,
         )
     )
-    if site is not None:
-        site_rates: SiteRates = request.app.state.site_rates
-        rates = await run_in_threadpool(site_rates, site)
-        draft = fill_rates(draft, rates, site=site)
     return ImportedDraft.model_validate(draft.to_dict())

@@ -1,6 +1,6 @@
 """GET /runs/{id}/schedule (docs/schedules.md#reading-a-runs-schedule): a timed run's plan in time,
 as the schedule JSON block, CSV (one row per task) or iCalendar (one VEVENT per task), read
-by app.schedules from the schedule rebuilt from the run's stored decisions and re-timed
+by app.schedule_views from the schedule rebuilt from the run's stored decisions and re-timed
 by its execution reports (app.plans.current).
 
 An untimed run has no times: 409, saying so (the run exists, it is the request that
@@ -21,7 +21,7 @@ from app.http.deps import ClientDep
 from app.http.responses import CLIENT, errors
 from app.plans import current
 from app.runs.deps import RunIdPath, RunsDep
-from app.schedules import schedule_csv, schedule_ics, schedule_json
+from app.schedule_views import schedule_csv, schedule_ics, schedule_json
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 

@@ -15,8 +15,8 @@ from app.domain.links import Link
 from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
 from app.domain.problem import Problem
-from app.schedules import gantt_svg
-from app.schedules.gantt import BAR, GUTTER, LANE, TOP, WIDTH
+from app.schedule_views import gantt_svg
+from app.schedule_views.gantt import BAR, GUTTER, LANE, TOP, WIDTH
 from app.solvers.registry import get_solver
 
 SVG = "{http://www.w3.org/2000/svg}"

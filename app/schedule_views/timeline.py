@@ -9,7 +9,7 @@ from rich.text import Text
 
 from app.domain.problem import Problem
 from app.domain.scheduling.schedule import Schedule
-from app.schedules.json_view import LaneKind, critical_tasks, lanes
+from app.schedule_views.json_view import LaneKind, critical_tasks, lanes
 
 _STYLE = {LaneKind.TASK: "", LaneKind.TRAVEL: "yellow", LaneKind.IDLE: "dim"}
 

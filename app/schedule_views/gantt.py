@@ -26,7 +26,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 from app.domain.problem import Problem
 from app.domain.scheduling.schedule import Schedule
-from app.schedules.json_view import LaneItem, LaneKind, critical_tasks, lanes
+from app.schedule_views.json_view import LaneItem, LaneKind, critical_tasks, lanes
 
 WIDTH = 1200
 GUTTER = 150  # robot names

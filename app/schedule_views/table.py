@@ -9,7 +9,7 @@ import io
 
 from app.domain.problem import Problem
 from app.domain.scheduling.schedule import Schedule
-from app.schedules.json_view import critical_tasks
+from app.schedule_views.json_view import critical_tasks
 
 COLUMNS = (
     "task_id",
