@@ -76,6 +76,9 @@ class RunWorker:
         self.checkpointer, self._close_checkpointer = checkpointer
         self.signing_keys = SigningKeys.from_settings(settings)
         self.graph = build_graph(self.checkpointer, node_hook=node_hook)
+        # The graph this process runs, read once: every run it admits starts or resumes
+        # under it (docs/operations.md#upgrades: a resume compares it with the run's).
+        self.graph_version = current_version(settings.test_graph_version)
         self._pool = ThreadPoolExecutor(
             max_workers=settings.max_concurrent_runs, thread_name_prefix="ltaa-run"
         )
@@ -313,7 +316,7 @@ class RunWorker:
             spec = RunSpec.from_json(run.request)
             instance = spec.problem.instance
             resume = checkpoint is not None or run.status == RunStatus.INTERRUPTED
-            version = current_version(self._settings.test_graph_version)
+            version = self.graph_version
             resolution = review_gate.resolution_to_apply(session, run_id) if resume else None
             if resolution is not None and run.status == RunStatus.QUEUED:
                 # Queued by a review's resolution: the paused graph goes on with it. Not a
