@@ -22,7 +22,7 @@ from app.solvers.cpsat.assignment_model import AssignmentModel
 from app.solvers.cpsat.bounds import chains
 from app.solvers.cpsat.common import Search, SuccessWeights
 from app.solvers.cpsat.large import _candidates
-from app.solvers.cpsat.load_bound import load_lower_bound
+from app.solvers.cpsat.load_bound import load_relaxation
 from app.solvers.cpsat.outcome import Setup
 from app.solvers.cpsat.search import _setup, solve_schedule
 from benchmarks.timed_instances import construction_site
@@ -36,8 +36,8 @@ def bounds_of(setup: Setup) -> tuple[float, float]:
     candidates = [_candidates(setup, t) for t in range(problem.instance.n_tasks)]
     _, _, heads, tails, _ = chains(problem, setup.pairs)
     common = {"es_target": setup.es_target, "es_floor": setup.es_floor, "time_limit_s": 30.0}
-    plain = load_lower_bound(problem, candidates, setup.weights, **common)  # type: ignore[arg-type]
-    full = load_lower_bound(
+    plain = load_relaxation(problem, candidates, setup.weights, **common).minutes  # type: ignore[arg-type]
+    full = load_relaxation(
         problem,
         candidates,
         setup.weights,
@@ -45,7 +45,7 @@ def bounds_of(setup: Setup) -> tuple[float, float]:
         tails=tails,
         scale=setup.scale,
         **common,  # type: ignore[arg-type]
-    )
+    ).minutes
     return plain, full
 
 

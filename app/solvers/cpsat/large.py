@@ -54,7 +54,7 @@ from app.solvers.cpsat.common import (
     task_classes,
 )
 from app.solvers.cpsat.lns import SLICE, improve
-from app.solvers.cpsat.load_bound import Relaxation, load_lower_bound, load_relaxation
+from app.solvers.cpsat.load_bound import Relaxation, load_relaxation
 from app.solvers.cpsat.model import ScheduleModel, Travel
 from app.solvers.cpsat.outcome import ScheduleOutcome, Setup, outcome
 
@@ -173,7 +173,7 @@ def _load_lp(setup: Setup, candidates: list[list[int]]) -> Relaxation:
         full = _full_lp(setup, candidates, 1.0)
         if full.minutes > 0:
             return full
-    plain = load_lower_bound(
+    plain = load_relaxation(
         problem,
         candidates,
         setup.weights,
@@ -181,7 +181,7 @@ def _load_lp(setup: Setup, candidates: list[list[int]]) -> Relaxation:
         es_floor=setup.es_floor,
         time_limit_s=max(0.1, search.wall_left() / 4),
     )
-    return Relaxation(plain, None)
+    return Relaxation(plain.minutes, None)  # the plain LP's shares see no travel
 
 
 def _full_lp(setup: Setup, candidates: list[list[int]], entry_weight: float) -> Relaxation:

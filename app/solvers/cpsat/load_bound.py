@@ -190,36 +190,6 @@ class Relaxation(NamedTuple):
     shares: np.ndarray | None
 
 
-def load_lower_bound(
-    problem: Problem,
-    candidates: Sequence[Sequence[int]],
-    weights: SuccessWeights,
-    *,
-    es_target: int | None,
-    es_floor: int | None,
-    time_limit_s: float,
-    heads: np.ndarray | None = None,
-    tails: np.ndarray | None = None,
-    scale: TimeScale | None = None,
-) -> float:
-    """Minutes; 0.0 when HiGHS does not finish within `time_limit_s`. `heads` and `tails`
-    (`bounds.chains`) add the zone entries and each robot's first start and last tail
-    (without them: the plain load LP, a fifth of the time); with an exact `scale`
-    the bound is rounded up to its unit (every time of an earliest-start schedule is a
-    whole number of units)."""
-    return load_relaxation(
-        problem,
-        candidates,
-        weights,
-        es_target=es_target,
-        es_floor=es_floor,
-        time_limit_s=time_limit_s,
-        heads=heads,
-        tails=tails,
-        scale=scale,
-    ).minutes
-
-
 def load_relaxation(
     problem: Problem,
     candidates: Sequence[Sequence[int]],
@@ -233,10 +203,15 @@ def load_relaxation(
     scale: TimeScale | None = None,
     entry_weight: float = 1.0,
 ) -> Relaxation:
-    """The LP of `load_lower_bound` and its shares. `entry_weight` prices every zone and
-    group entry that many times over: above 1 the optimum is no bound, but its shares are
-    an assignment that keeps each robot in fewer zones (`large._lp_rounded`, the planner's
-    use: a robot enters a zone more than once when its work there is spread in time)."""
+    """The LP's optimum, a lower bound in minutes (0.0 when HiGHS does not finish within
+    `time_limit_s`), and its shares. `heads` and `tails` (`bounds.chains`) add the zone
+    entries and each robot's first start and last tail (without them: the plain load LP, a
+    fifth of the time); with an exact `scale` the bound is rounded up to its unit (every
+    time of an earliest-start schedule is a whole number of units). `entry_weight` prices
+    every zone and group entry that many times over: above 1 the optimum is no bound, but
+    its shares are an assignment that keeps each robot in fewer zones
+    (`large._lp_rounded`, the planner's use: a robot enters a zone more than once when its
+    work there is spread in time)."""
     lp = _Lp(problem, candidates, heads is not None and tails is not None)
     n, k, m = problem.instance.n_tasks, lp.k, lp.m
     task_of = np.array([t for t, _ in lp.pairs], dtype=int)
