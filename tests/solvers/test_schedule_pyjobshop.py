@@ -17,8 +17,9 @@ from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
 from app.solvers.cpsat.search import solve_schedule
-from benchmarks.pyjobshop_reference import solve_with_pyjobshop
+from benchmarks.pyjobshop_reference import MAX_SETUP_ARCS, setup_arcs, solve_with_pyjobshop
 from benchmarks.timed_instances import construction_site
+from benchmarks.unrelated_sites import unrelated_site
 
 LIMIT_S = 20
 
@@ -39,3 +40,13 @@ def test_makespan_optimum_agrees_with_pyjobshop(n_tasks: int, n_robots: int, see
         assert ours.makespan == pytest.approx(theirs.makespan)
     assert ours.makespan >= theirs.bound - 1e-6
     assert theirs.makespan >= ours.bound - 1e-6
+
+
+def test_a_site_too_large_to_state_is_said_so_not_solved() -> None:
+    # 1,000 x 20 of the second family: every robot may take every task, 20 million arcs
+    # (stating them took all 24 GB of a machine here).
+    instance = unrelated_site(1000, 20, seed=0)
+    assert setup_arcs(instance) == 20 * 1001 * 1000 > MAX_SETUP_ARCS
+    out = solve_with_pyjobshop(instance, time_limit_s=1.0)
+    assert out.status == "not stated (20,020,000 setup arcs)" and out.makespan is None
+    assert setup_arcs(unrelated_site(50, 3, seed=0)) == 3 * 51 * 50 < MAX_SETUP_ARCS
