@@ -149,6 +149,7 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
             candidates,
             slice_units=UNRELATED_SLICE if unrelated else SLICE,
             loaded_first=True,
+            effort_first=unrelated,
         )
         if report is not None:
             ran += (
