@@ -133,14 +133,17 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     unrelated = speeds_decide(setup.problem, setup.weights, candidates)
     if unrelated:
         ran += _dispatch_quick(setup)
-        ran += _lp_rounded(setup, candidates, relaxation.shares)
     best = feasible.best()
     if best is not None:
         search.mark(best.makespan, min(best.makespan, max(floors.values())))
-    # Sequencing, then the LNS, only when the sequencing fits whole: every budget that
-    # runs them runs the same stages before them.
-    if search.fits(SEQUENCE_UNITS + SEQUENCE_BUILD):
-        search.need(search.spent + SEQUENCE_UNITS + SEQUENCE_BUILD)
+    # Step 2d, sequencing, then the LNS, only when step 2d and the sequencing fit whole:
+    # every budget that runs them runs the same stages before them.
+    batching = _lp_rounded_cost(setup, candidates) if unrelated else 0.0
+    if search.fits(batching + SEQUENCE_UNITS + SEQUENCE_BUILD):
+        search.need(search.spent + batching + SEQUENCE_UNITS + SEQUENCE_BUILD)
+        if unrelated:
+            ran += _lp_rounded(setup, candidates, relaxation.shares)
+            search.mark(feasible.best().makespan)  # type: ignore[union-attr]
         if _sequence(setup, SEQUENCE_UNITS):
             ran += SEQUENCING_MODEL
             search.mark(feasible.best().makespan)  # type: ignore[union-attr]
@@ -201,13 +204,26 @@ def _full_lp(setup: Setup, candidates: list[list[int]], entry_weight: float) -> 
     )
 
 
+def _lp_rounded_cost(setup: Setup, candidates: list[list[int]]) -> float:
+    """Step 2d's modelled cost: its two more LPs and its zone-batched orders."""
+    lps = len(ENTRY_WEIGHTS) - 1
+    orders = len(ENTRY_WEIGHTS) * len(TRAVEL_WEIGHTS)
+    pairs = sum(len(c) for c in candidates)
+    return lps * LP_COST_PER_PAIR * pairs + orders * BATCH_COST_PER_TASK * len(candidates)
+
+
 def _lp_rounded(setup: Setup, candidates: list[list[int]], bound_shares: np.ndarray | None) -> str:
     """Step 2d, where the speeds decide (`speeds_decide`): the load LP's shares at each of
     `ENTRY_WEIGHTS` rounded to an assignment, in zone-batched orders (`batched_orders`)
     for each of `TRAVEL_WEIGHTS` (what ran). Only with the full LP's shares (budget
     `FULL_LP_FROM` on) and without fixed starts (a living plan's facts)."""
     problem, search, feasible = setup.problem, setup.search, setup.feasible
-    if bound_shares is None or problem.pinned_starts:
+    if problem.pinned_starts:
+        return ""
+    if bound_shares is None:
+        # The full LP ran (the step fits only past `FULL_LP_FROM`) and HiGHS did not
+        # finish before its share of the wall-clock net: the plan is not the budget's.
+        search.wall_cut = True
         return ""
     _, _, _, tails, _ = chains(problem, setup.pairs)
     n = problem.instance.n_tasks
@@ -217,6 +233,7 @@ def _lp_rounded(setup: Setup, candidates: list[list[int]], bound_shares: np.ndar
             search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
             shares = _full_lp(setup, candidates, weight).shares
         if shares is None:
+            search.wall_cut = True  # as above
             continue
         assignment = [int(np.argmax(row)) for row in shares]
         for travel in TRAVEL_WEIGHTS:
