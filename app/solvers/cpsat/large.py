@@ -44,7 +44,7 @@ from app.domain.errors import DomainError
 from app.domain.scheduling.dispatch import dispatch_schedule, quotas_of
 from app.domain.scheduling.zone_batches import batched_orders
 from app.solvers.cpsat.assignment_model import AssignmentModel
-from app.solvers.cpsat.bounds import best_bound, bound_floors, chains
+from app.solvers.cpsat.bounds import Chains, best_bound, bound_floors, chains
 from app.solvers.cpsat.common import (
     assignment_schedules,
     free_dispatch,
@@ -125,7 +125,8 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     tm = problem.instance.timing
     candidates = [_candidates(setup, t) for t in range(tm.n_tasks)]
     floors = bound_floors(problem, setup.pairs)
-    relaxation = _load_lp(setup, candidates)
+    chain = chains(problem, setup.pairs)
+    relaxation = _load_lp(setup, candidates, chain)
     floors[LOAD_LP] = relaxation.minutes
     search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
     ran = _assign(setup, candidates, floors)
@@ -138,11 +139,13 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
         search.mark(best.makespan, min(best.makespan, max(floors.values())))
     # Step 2d, sequencing, then the LNS, only when step 2d and the sequencing fit whole:
     # every budget that runs them runs the same stages before them.
-    batching = _lp_rounded_cost(setup, candidates) if unrelated else 0.0
+    # (a living plan's facts put robots where they worked: not for step 2d)
+    batches = unrelated and not problem.pinned_starts
+    batching = _lp_rounded_cost(candidates) if batches else 0.0
     if search.fits(batching + SEQUENCE_UNITS + SEQUENCE_BUILD):
         search.need(search.spent + batching + SEQUENCE_UNITS + SEQUENCE_BUILD)
-        if unrelated:
-            ran += _lp_rounded(setup, candidates, relaxation.shares)
+        if batches:
+            ran += _lp_rounded(setup, candidates, chain, relaxation.shares)
             search.mark(feasible.best().makespan)  # type: ignore[union-attr]
         if _sequence(setup, SEQUENCE_UNITS):
             ran += SEQUENCING_MODEL
@@ -167,14 +170,14 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     return result
 
 
-def _load_lp(setup: Setup, candidates: list[list[int]]) -> Relaxation:
+def _load_lp(setup: Setup, candidates: list[list[int]], chain: Chains) -> Relaxation:
     """The load LP with zone entries, first heads and last tails from a budget of
     `FULL_LP_FROM` units; the plain load LP (its rows without those) below it, or if
     HiGHS does not finish the full one before a third of the wall-clock net (on a machine
     loaded far past its cores: it takes 1.5-2.6 s of CPU at 1,000 x 20)."""
     problem, search = setup.problem, setup.search
     if search.budget >= FULL_LP_FROM:
-        full = _full_lp(setup, candidates, 1.0)
+        full = _full_lp(setup, candidates, chain, 1.0)
         if full.minutes > 0:
             return full
     plain = load_relaxation(
@@ -188,8 +191,9 @@ def _load_lp(setup: Setup, candidates: list[list[int]]) -> Relaxation:
     return Relaxation(plain.minutes, None)  # the plain LP's shares see no travel
 
 
-def _full_lp(setup: Setup, candidates: list[list[int]], entry_weight: float) -> Relaxation:
-    _, _, heads, tails, _ = chains(setup.problem, setup.pairs)
+def _full_lp(
+    setup: Setup, candidates: list[list[int]], chain: Chains, entry_weight: float
+) -> Relaxation:
     return load_relaxation(
         setup.problem,
         candidates,
@@ -197,14 +201,14 @@ def _full_lp(setup: Setup, candidates: list[list[int]], entry_weight: float) -> 
         es_target=setup.es_target,
         es_floor=setup.es_floor,
         time_limit_s=max(0.1, setup.search.wall_left() / 3),
-        heads=heads,
-        tails=tails,
+        heads=chain.heads,
+        tails=chain.tails,
         scale=setup.scale,
         entry_weight=entry_weight,
     )
 
 
-def _lp_rounded_cost(setup: Setup, candidates: list[list[int]]) -> float:
+def _lp_rounded_cost(candidates: list[list[int]]) -> float:
     """Step 2d's modelled cost: its two more LPs and its zone-batched orders."""
     lps = len(ENTRY_WEIGHTS) - 1
     orders = len(ENTRY_WEIGHTS) * len(TRAVEL_WEIGHTS)
@@ -212,26 +216,25 @@ def _lp_rounded_cost(setup: Setup, candidates: list[list[int]]) -> float:
     return lps * LP_COST_PER_PAIR * pairs + orders * BATCH_COST_PER_TASK * len(candidates)
 
 
-def _lp_rounded(setup: Setup, candidates: list[list[int]], bound_shares: np.ndarray | None) -> str:
+def _lp_rounded(
+    setup: Setup, candidates: list[list[int]], chain: Chains, bound_shares: np.ndarray | None
+) -> str:
     """Step 2d, where the speeds decide (`speeds_decide`): the load LP's shares at each of
     `ENTRY_WEIGHTS` rounded to an assignment, in zone-batched orders (`batched_orders`)
-    for each of `TRAVEL_WEIGHTS` (what ran). Only with the full LP's shares (budget
-    `FULL_LP_FROM` on) and without fixed starts (a living plan's facts)."""
+    for each of `TRAVEL_WEIGHTS` (what ran), for a plan without fixed starts."""
     problem, search, feasible = setup.problem, setup.search, setup.feasible
-    if problem.pinned_starts:
-        return ""
     if bound_shares is None:
         # The full LP ran (the step fits only past `FULL_LP_FROM`) and HiGHS did not
         # finish before its share of the wall-clock net: the plan is not the budget's.
         search.wall_cut = True
         return ""
-    _, _, _, tails, _ = chains(problem, setup.pairs)
-    n = problem.instance.n_tasks
+    tails = list(chain.tails)
+    n, pairs = problem.instance.n_tasks, sum(len(c) for c in candidates)
     for weight in ENTRY_WEIGHTS:
         shares: np.ndarray | None = bound_shares
         if weight != 1.0:
-            search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
-            shares = _full_lp(setup, candidates, weight).shares
+            search.charge(LP_COST_PER_PAIR * pairs)
+            shares = _full_lp(setup, candidates, chain, weight).shares
         if shares is None:
             search.wall_cut = True  # as above
             continue
@@ -239,7 +242,7 @@ def _lp_rounded(setup: Setup, candidates: list[list[int]], bound_shares: np.ndar
         for travel in TRAVEL_WEIGHTS:
             search.charge(BATCH_COST_PER_TASK * n)
             with contextlib.suppress(ValueError, DomainError):
-                orders = batched_orders(problem, assignment, list(tails), travel, TAIL_WEIGHT)
+                orders = batched_orders(problem, assignment, tails, travel, TAIL_WEIGHT)
                 feasible.offer_orders(orders)
     return LP_ROUNDED
 
