@@ -1,7 +1,8 @@
 """The large-instance path's LNS (`app/solvers/cpsat/lns.py`, `lns_model.py`): a
 neighbourhood of every task is the exact model; from any start it never gets worse;
 under `success_then_makespan` ES stays at the allocation optimum; the makespan objective
-keeps its floor; the path answers within its limit."""
+keeps its floor; the path answers within its limit; where the speeds decide, plans of one
+makespan are ranked by their robots' ends, the latest first, before their effort."""
 
 from __future__ import annotations
 
@@ -11,15 +12,16 @@ import pytest
 from ortools.sat.python import cp_model
 
 from app.domain.metrics import expected_success
+from app.domain.models import Instance, Robot, Task
 from app.domain.modes import Mode
 from app.domain.objective import Objective, ObjectiveKind
 from app.domain.problem import Problem
 from app.domain.scheduling.feasibility import check_schedule
-from app.domain.scheduling.list_schedule import list_schedule
+from app.domain.scheduling.list_schedule import list_schedule, sequence_schedule
 from app.domain.scheduling.schedule import Schedule
 from app.solvers.cpsat.common import Search, time_free_optimum
 from app.solvers.cpsat.large import _candidates
-from app.solvers.cpsat.lns import _ancestor_masks, _retimed, improve
+from app.solvers.cpsat.lns import _ancestor_masks, _better, _retimed, improve
 from app.solvers.cpsat.lns_model import Neighbourhood
 from app.solvers.cpsat.outcome import Setup
 from app.solvers.cpsat.search import _setup, solve_schedule
@@ -124,3 +126,24 @@ def test_the_makespan_objective_keeps_its_floor_in_the_lns() -> None:
     assert "LNS" in outcome.model
     assert check_schedule(problem, outcome.schedule) == []
     assert expected_success(problem.instance, outcome.schedule.assignment) >= floor - 1e-12
+
+
+def test_of_one_makespan_the_plan_whose_robots_end_earlier_wins_before_effort() -> None:
+    # Both plans end at 20 on robot a. "spread" ends its other robots at 12 and 12 with 44
+    # minutes of work; "stacked" puts both on b (20) with 40. Where the speeds decide, the
+    # spread one wins though it works more: a later neighbourhood may shorten a robot
+    # that ends at 12, never the makespan while two robots hold it.
+    work = {"t0": {"a": 10.0}, "t1": {"a": 10.0}, "t2": {"b": 12.0}, "t3": {"b": 8.0, "c": 12.0}}
+    tasks = tuple(Task(id=t, name=t, features=("w",), duration=d) for t, d in work.items())
+    robots = tuple(Robot(name=r, success={"w": 0.9}) for r in "abc")
+    problem = Problem.build(Instance(tasks=tasks, robots=robots), uncapped=True)
+    spread = sequence_schedule(problem, [[0, 1], [2], [3]])
+    stacked = sequence_schedule(problem, [[0, 1], [3, 2], []])
+    assert spread.makespan == stacked.makespan == 20
+    assert _better(spread, stacked, effort_first=True)
+    assert not _better(stacked, spread, effort_first=True)
+    assert not _better(spread, spread, effort_first=True)  # a strict order: no cycle
+    # The same ends and the same work: the smaller sum of ends wins (t3's 8 minutes first).
+    late_short = sequence_schedule(problem, [[0, 1], [2, 3], []])
+    assert _better(stacked, late_short, effort_first=True)
+    assert not _better(late_short, stacked, effort_first=True)
