@@ -7,11 +7,13 @@ neighbourhood (the tasks running around a task of the critical path, around a ra
 time, or on the robot that ends last and a few others in a window), re-solve it with
 CP-SAT (`lns_model.Neighbourhood`: the rest keeps its robots and orders, its times
 float), re-time the answer at earliest times, and keep it if it passes `check_schedule`
-and is better: a shorter makespan, or the same makespan with a smaller sum of ends (a
-strict order, so it cannot cycle). Under `success_then_makespan` the free tasks keep
-their ES share exactly and may only use ES-optimal pairs (`success_pairs`), so ES stays
-at its proven optimum. The neighbourhood grows when CP-SAT solves it to optimality and
-shrinks when it does not within its slice of time. Every CP-SAT run stops at the call's
+and is better: a shorter makespan, or the same makespan with a smaller sum of ends (where
+the speeds decide the robots, first the robots' ends from the latest down, then their
+work and travel: `_better`; a strict order, so it cannot cycle). Under
+`success_then_makespan` the free tasks keep their ES share exactly and may only use
+ES-optimal pairs (`success_pairs`), so ES stays at its proven optimum. The neighbourhood
+grows when CP-SAT solves it to optimality and shrinks when it does not within its slice
+of time. Every CP-SAT run stops at the call's
 time limit; nothing it finds is called optimal.
 """
 
