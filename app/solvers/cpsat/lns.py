@@ -183,9 +183,7 @@ def _choose(
         # Where the makespan is: one of the three robots that end last, its tasks around a
         # random one of them, with two to four robots that could take some of those tasks
         # (the earliest to finish first: they have room), all in the same time window.
-        ends: dict[int, float] = {}
-        for s in slots:
-            ends[s.robot] = max(ends.get(s.robot, 0.0), s.end)
+        ends = _last_ends(current)
         late = (_loaded(current) if loaded_first else []) or sorted(ends, key=lambda r: -ends[r])[
             :3
         ]
@@ -330,13 +328,19 @@ def _better(new: Schedule, old: Schedule, effort_first: bool = False) -> bool:
     return _sum_ends(new) < _sum_ends(old) - EPS
 
 
-def _robot_ends(schedule: Schedule) -> list[float]:
-    """Each robot's last end (0 for a robot without work), the latest first."""
-    ends = [0.0] * len(schedule.robot_time)
+def _last_ends(schedule: Schedule) -> dict[int, float]:
+    """Each robot with work: the end of its last task."""
+    ends: dict[int, float] = {}
     for s in schedule.slots:
         for r in s.members:
-            ends[r] = max(ends[r], s.end)
-    return sorted(ends, reverse=True)
+            ends[r] = max(ends.get(r, 0.0), s.end)
+    return ends
+
+
+def _robot_ends(schedule: Schedule) -> list[float]:
+    """Each robot's last end (0 for a robot without work), the latest first."""
+    ends = _last_ends(schedule)
+    return sorted((ends.get(r, 0.0) for r in range(len(schedule.robot_time))), reverse=True)
 
 
 def _effort(schedule: Schedule) -> float:
