@@ -2,7 +2,8 @@
 neighbourhood of every task is the exact model; from any start it never gets worse;
 under `success_then_makespan` ES stays at the allocation optimum; the makespan objective
 keeps its floor; the path answers within its limit; where the speeds decide, plans of one
-makespan are ranked by their robots' ends, the latest first, before their effort."""
+makespan are ranked by their robots' ends, the latest first, before their effort; past a
+neighbourhood's floating tail the tasks keep their times and the plan still fits."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from app.solvers.cpsat.outcome import Setup
 from app.solvers.cpsat.search import _setup, solve_schedule
 from app.solvers.registry import get_solver
 from benchmarks.timed_instances import construction_site
+from benchmarks.unrelated_sites import unrelated_site
 
 
 def setup_of(problem: Problem, seconds: float) -> Setup:
@@ -147,3 +149,43 @@ def test_of_one_makespan_the_plan_whose_robots_end_earlier_wins_before_effort() 
     late_short = sequence_schedule(problem, [[0, 1], [2, 3], []])
     assert _better(stacked, late_short, effort_first=True)
     assert not _better(late_short, stacked, effort_first=True)
+
+
+@pytest.mark.parametrize("tail_minutes", [0.0, 30.0, 120.0])
+def test_past_the_floating_tail_tasks_keep_their_times_and_the_plan_still_fits(
+    tail_minutes: float,
+) -> None:
+    # A window early in a plan of the second family: the tasks that start more than
+    # `tail_minutes` after it are constants at their planned starts, the ones between
+    # float, and the plan itself is still an answer (all variables at their hints), so
+    # the neighbourhood can only keep or shorten it.
+    problem = Problem.build(unrelated_site(80, 4, seed=2), Mode.BALANCED, uncapped=True)
+    setup = setup_of(problem, 4)
+    current = setup.feasible.best()
+    assert current is not None
+    candidates = [_candidates(setup, t) for t in range(problem.instance.n_tasks)]
+    free = sorted(range(80), key=lambda t: (current.slots[t].start, t))[10:22]
+    hi = max(current.slots[f].end for f in free)
+    hood = Neighbourhood(
+        setup, current, free, candidates, _ancestor_masks(setup), True, tail_minutes
+    )
+    later = {t for t in range(80) if t not in free and current.slots[t].start >= hi + tail_minutes}
+    assert hood.later == later and later  # something past the tail on this site
+    floating = [t for t in range(80) if t not in free and t not in hood.frozen]
+    assert floating or tail_minutes == 0.0
+    proto = hood.model.proto
+    for t in range(80):
+        domain = proto.variables[hood.start[t].index].domain
+        if t in later:
+            assert list(domain) == [round(current.slots[t].start)] * 2
+    pinned = cp_model.CpSolver()
+    pinned.parameters.fix_variables_to_their_hinted_value = True
+    pinned.parameters.num_workers = 1
+    assert pinned.status_name(pinned.solve(hood.model)) in ("OPTIMAL", "FEASIBLE")
+    solver = cp_model.CpSolver()
+    solver.parameters.max_deterministic_time = 0.5
+    solver.parameters.num_workers = 1
+    assert solver.status_name(solver.solve(hood.model)) in ("OPTIMAL", "FEASIBLE")
+    schedule = _retimed(setup, *hood.read(solver))
+    assert schedule is not None and check_schedule(problem, schedule) == []
+    assert schedule.makespan <= current.makespan

@@ -101,11 +101,19 @@ ENTRY_WEIGHTS = (1.0, 2.0, 3.0)
 TRAVEL_WEIGHTS = (0.0, 1.0, 2.0, 4.0)
 TAIL_WEIGHT = 0.5
 BATCH_COST_PER_TASK = 5e-5  # deterministic units per task and order (60 ms at 600 x 12)
-# The LNS's slice where the speeds decide: smaller neighbourhoods, solved more often.
-# Measured at 600 x 12 x 4 zones of the second family, 30 s: 474 at 0.5 (21
-# neighbourhoods), 462 at 0.2 (56), 467 at 0.1 (104); 1,000 x 20 x 4 zones, 60 s: 426 at
-# 0.5, 422 at 0.2.
-UNRELATED_SLICE = 0.2
+# The LNS's slice where the speeds decide, and how far past a neighbourhood the tasks
+# float there. Measured (a callback on every answer): CP-SAT reports its answers to these
+# neighbourhoods within the first 0.001 units of its clock and spends the rest of a slice
+# proving or searching in vain, so a short slice runs many more of them; with the slice
+# short, building the model costs more than solving it, and the tasks more than two hours
+# past the window keep their times (`lns_model.Neighbourhood`'s `tail_minutes`).
+# Second family, 600 x 12 x 4 zones, 30 s, search seeds 0-3 (mean):
+# slice 0.2 453.75, 0.1 453.0, 0.05 449.0, 0.03 446.5, 0.02 446.25, 0.01 445.5; at 0.02
+# with the tail cut at 60, 120 or 200 minutes 445.75, 443.5, 444.75 (0.01 and 120:
+# 443.25). 1,000 x 20 x 4 zones at 60 s: 403 -> 395; 200 x 5 x 4 zones: 488 -> 483
+# (docs/schedules.md#anytime).
+UNRELATED_SLICE = 0.02
+UNRELATED_TAIL_MINUTES = 120.0
 
 
 def solve_large(setup: Setup) -> ScheduleOutcome:
@@ -156,6 +164,7 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
             slice_units=UNRELATED_SLICE if unrelated else SLICE,
             loaded_first=True,
             effort_first=unrelated,
+            tail_minutes=UNRELATED_TAIL_MINUTES if unrelated else None,
         )
         if report is not None:
             ran += (

@@ -13,6 +13,12 @@ only lengthens their gap. Precedence, releases, deadlines, shifts, pins, `not_be
 the cap (fixed loads plus the free tasks' presences) and the ES condition (the free tasks'
 share, given the fixed tasks') hold as in the exact model (`model.py`).
 
+With `tail_minutes` (where the speeds decide the robots), only the tasks that start
+within that many minutes after the window float; later ones keep their times, as
+constants the floating ones must still meet (each robot's order, precedence). A smaller
+model is built faster, and the answer is re-timed at earliest times in any case
+(docs/schedules.md#anytime).
+
 Objective: the makespan, then the sum of the free tasks' ends (weighted below one minute
 of makespan): a window off the critical path still gets compacted, which later windows
 build on.
@@ -40,6 +46,7 @@ class Neighbourhood:
         candidates: Sequence[Sequence[int]],
         ancestors: Sequence[int],
         float_tail: bool = False,
+        tail_minutes: float | None = None,
     ) -> None:
         problem, scale = setup.problem, setup.scale
         self.problem, self.scale, self.setup = problem, scale, setup
@@ -67,6 +74,15 @@ class Neighbourhood:
             for s in current.slots
             if s.task not in is_free and (s.end <= lo or not float_tail)
         }
+        # Kept in time past the window: the tasks after it that no longer float.
+        self.later: set[int] = set()
+        if float_tail and tail_minutes is not None:
+            self.later = {
+                s.task
+                for s in current.slots
+                if s.task not in is_free and s.start >= hi + tail_minutes
+            }
+            self.frozen |= self.later
         self._add_times()
         sequences = current.sequences(tm.n_robots)
         for r in range(tm.n_robots):
@@ -79,7 +95,10 @@ class Neighbourhood:
         self._add_precedence()
         self._add_cap()
         self._add_success()
-        self.makespan = m.new_int_var(0, self.horizon, "makespan")
+        kept_end = max(
+            (self._at[t] + scale.up(tm.duration(t, self.robots[t])) for t in self.later), default=0
+        )
+        self.makespan = m.new_int_var(kept_end, self.horizon, "makespan")
         for t, e in enumerate(self.end):
             if t not in self.frozen:
                 m.add(self.makespan >= e)
@@ -145,7 +164,8 @@ class Neighbourhood:
             way = up(tm.travel_to_task(tm.robot_zone[r], chain[0]))
             m.add(self.start[chain[0]] >= up(a) + way)
         for t, u in pairwise(chain):
-            if u not in self.frozen:
+            # Between two tasks kept in time the current plan already holds the order.
+            if u not in self.frozen or (u in self.later and t not in self.frozen):
                 self._add_after(r, t, u, [])
 
     def _add_free_on(self, r: int, before: list[int], inside: list[int], after: list[int]) -> None:
