@@ -250,6 +250,7 @@ def measure_part(name: str) -> Any:
     if os.environ.get("SCHEDULE_QUALITY_REUSE") == "1" and path.exists():
         return json.loads(path.read_text())
     result = PARTS[name]()
+    path.parent.mkdir(parents=True, exist_ok=True)  # a results folder given, not yet made
     path.write_text(json.dumps(result))
     return result
 
