@@ -164,8 +164,9 @@ class Neighbourhood:
             way = up(tm.travel_to_task(tm.robot_zone[r], chain[0]))
             m.add(self.start[chain[0]] >= up(a) + way)
         for t, u in pairwise(chain):
-            # Between two tasks kept in time the current plan already holds the order.
-            if u not in self.frozen or (u in self.later and t not in self.frozen):
+            # Between two tasks kept in time (before the window or past the floating tail)
+            # the current plan already holds the order.
+            if t not in self.frozen or u not in self.frozen:
                 self._add_after(r, t, u, [])
 
     def _add_free_on(self, r: int, before: list[int], inside: list[int], after: list[int]) -> None:
