@@ -22,7 +22,7 @@ from app.solvers.cpsat.assignment_model import AssignmentModel
 from app.solvers.cpsat.bounds import chains
 from app.solvers.cpsat.common import Search, SuccessWeights
 from app.solvers.cpsat.large import _candidates
-from app.solvers.cpsat.load_bound import load_relaxation
+from app.solvers.cpsat.load_bound import _route_minutes, _shortest_ways, load_relaxation
 from app.solvers.cpsat.outcome import Setup
 from app.solvers.cpsat.search import _setup, solve_schedule
 from benchmarks.timed_instances import construction_site
@@ -30,23 +30,28 @@ from benchmarks.unrelated_sites import unrelated_site
 from tests.solvers.test_schedule_exhaustive import Case, cases, exhaustive
 
 
-def bounds_of(setup: Setup) -> tuple[float, float]:
-    """(the plain load LP, the LP with zone entries, first heads and last tails)."""
+def bounds_of(setup: Setup) -> tuple[float, float, float]:
+    """(the plain load LP, the LP with zone entries, first heads and last tails, that LP
+    with each robot's routes through the zones)."""
     problem = setup.problem
     candidates = [_candidates(setup, t) for t in range(problem.instance.n_tasks)]
     _, _, heads, tails, _ = chains(problem, setup.pairs)
     common = {"es_target": setup.es_target, "es_floor": setup.es_floor, "time_limit_s": 30.0}
     plain = load_relaxation(problem, candidates, setup.weights, **common).minutes  # type: ignore[arg-type]
-    full = load_relaxation(
-        problem,
-        candidates,
-        setup.weights,
-        heads=heads,
-        tails=tails,
-        scale=setup.scale,
-        **common,  # type: ignore[arg-type]
-    ).minutes
-    return plain, full
+    full, routed = (
+        load_relaxation(
+            problem,
+            candidates,
+            setup.weights,
+            heads=heads,
+            tails=tails,
+            scale=setup.scale,
+            routes=routes,
+            **common,  # type: ignore[arg-type]
+        ).minutes
+        for routes in (False, True)
+    )
+    return plain, full, routed
 
 
 @settings(
@@ -69,9 +74,9 @@ def test_never_above_the_exhaustive_optimum(case: Case) -> None:
     expected = exhaustive(case)
     assume(expected is not None)
     assert expected is not None
-    plain, full = bounds_of(setup)
+    plain, full, routed = bounds_of(setup)
     note(f"{problem.instance}\n{problem.cap} {dict(problem.pinned_starts)}: {plain} {full}")
-    assert full <= expected[1] + 1e-6
+    assert full <= routed <= expected[1] + 1e-6
     assert plain <= full + 1e-6
 
 
@@ -81,9 +86,9 @@ def test_never_above_a_plan_found_and_above_the_plain_lp(
 ) -> None:
     problem = Problem.build(construction_site(n, robots, seed=0, zones=zones), Mode.BALANCED)
     setup = _setup(problem, Search(1.0, 1, 0), None)
-    plain, full = bounds_of(setup)
+    plain, full, routed = bounds_of(setup)
     found = solve_schedule(problem, time_limit_s=1)
-    assert plain < full <= found.makespan
+    assert plain < full <= routed <= found.makespan
 
 
 # Zones in two groups (docs/schedules.md#bounds): A-B and C-D near each other, the groups
@@ -205,10 +210,11 @@ def grouped_optimum(problem: Problem, es_target: int | None, weights: SuccessWei
 def test_group_entries_never_above_the_exhaustive_optimum(problem: Problem) -> None:
     setup = _setup(problem, Search(1.0, 1, 0), None)
     assume(setup.es_target is not None or setup.es_floor is not None)
-    _, full = bounds_of(setup)
+    _, full, routed = bounds_of(setup)
     expected = grouped_optimum(problem, setup.es_target, setup.weights)
-    note(f"{problem.instance}: {full} vs {expected}")
-    assert full <= expected + 1e-6
+    note(f"{problem.instance}: {full} {routed} vs {expected}")
+    assert full <= routed + 1e-6
+    assert routed <= expected + 1e-6
 
 
 def test_group_entries_count_the_way_into_the_other_group() -> None:
@@ -228,6 +234,54 @@ def test_group_entries_count_the_way_into_the_other_group() -> None:
     assert bounds_of(setup)[1] == grouped_optimum(problem, setup.es_target, setup.weights) == 9
 
 
+def test_a_route_through_the_zones_counts_every_way_between_them() -> None:
+    """One robot at A, one task in each of B, C and D. The entries charge 2 into B, 1
+    into C and 1 into D, and the group {C, D} 4 more on its first entry: 8, with the
+    work 11. But no route does it in 8: A-B-C-D is 2 + 6 + 1 = 9, and every other is
+    longer, so the routes give the optimum, 12."""
+    robot = Robot(name="r", success={"x": 0.5}, zone="A", available=(0, 100))
+    tasks = tuple(
+        Task(id=t, name=z.lower(), features=("x",), duration=1, zone=z) for t, z in enumerate("BCD")
+    )
+    problem = Problem.build(
+        Instance(tasks=tasks, robots=(robot,), travel=GROUPED), Mode.SUCCESS_FOCUSED
+    )
+    setup = _setup(problem, Search(1.0, 1, 0), None)
+    _, full, routed = bounds_of(setup)
+    assert (full, routed) == (11, 12) == (11, grouped_optimum(problem, None, setup.weights))
+
+
+@given(
+    st.integers(1, 5).flatmap(
+        lambda n: st.tuples(
+            st.lists(st.lists(st.integers(0, 9), min_size=6, max_size=6), min_size=6, max_size=6),
+            st.sampled_from([None, *range(6)]),
+            st.lists(st.integers(0, 5), min_size=n, max_size=n, unique=True),
+        )
+    )
+)
+def test_route_minutes_are_the_shortest_walk_through_each_set(
+    drawn: tuple[list[list[int]], int | None, list[int]],
+) -> None:
+    """Every set's route is the least over its orders of the way from the start zone (none:
+    from the first) through the set, over the shortest ways between zones (a walk may
+    pass through any zone)."""
+    travel, home, zones = drawn
+    for z in range(6):
+        travel[z][z] = 0
+    way = _shortest_ways(travel)
+    for mask, minutes in _route_minutes(way, home, zones).items():
+        members = [z for i, z in enumerate(zones) if mask >> i & 1]
+        walks = [
+            (0 if home is None else way[home][order[0]])
+            + sum(way[a][b] for a, b in itertools.pairwise(order))
+            for order in itertools.permutations(members)
+        ]
+        assert minutes == min(walks)
+    for a, b, c in itertools.product(range(6), repeat=3):  # a metric, each way at most direct
+        assert way[a][c] <= way[a][b] + way[b][c] and way[a][c] <= travel[a][c]
+
+
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(3, 6), st.integers(2, 3), st.integers(0, 10_000))
 def test_never_above_the_exhaustive_optimum_on_the_second_family(
@@ -240,7 +294,8 @@ def test_never_above_the_exhaustive_optimum_on_the_second_family(
         unrelated_site(n_tasks, n_robots, seed=seed), Mode.BALANCED, uncapped=True
     )
     setup = _setup(problem, Search(1.0, 1, 0), None)
-    plain, full = bounds_of(setup)
+    plain, full, routed = bounds_of(setup)
     expected = grouped_optimum(problem, setup.es_target, setup.weights)
-    note(f"{problem.instance}: {plain} {full} vs {expected}")
-    assert plain <= full <= expected + 1e-6
+    note(f"{problem.instance}: {plain} {full} {routed} vs {expected}")
+    assert plain <= full <= routed + 1e-6
+    assert routed <= expected + 1e-6

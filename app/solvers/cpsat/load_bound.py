@@ -14,6 +14,15 @@ target (or above its floor) and the cap kept; T above each robot's time line
   of the generated sites); the first way into a group other than the start zone's comes
   from outside it, so it costs at least the shortest way in from outside, more than
   the zone's entry by `into_g - max way_z` (u_rg >= v_rz for its zones);
+- routes (with `routes`, where there is no fact): a second row per robot, T >= work +
+  route + S'_r * y_r, where the route is a share over the sets of zones it may enter,
+  each at the shortest way from its start zone through all of the set (w_rS; v_rz <= the
+  shares of the sets through z, at most one set in all): the entries price each zone's
+  first way in on its own, a route the ways between them too (a robot at A that works
+  in B, C and D, of which only C and D are near each other, pays A-B and B-C, not two
+  ways in from the nearest zone). S'_r is S_r but for the first task's way there: the
+  route holds all of it, so G'_r takes the whole way from the start zone off that task's
+  earliest start, where G_r takes off its zone's and group's entries;
 - S_r, what the line holds before and after the work: the shift start (less the first
   zone's entry for a robot without a start zone: it starts there); with heads and tails
   and no fixed start, G_r + Q_r: the robot's first task cannot start before its head
@@ -50,13 +59,20 @@ from app.solvers.cpsat.time_scale import TimeScale
 # HiGHS works in floating point: the bound steps back this share of itself (and a hair
 # more) so that it stays a bound.
 STEP_BACK = 1e-7
+# Routes through every set of the zones a robot may enter, up to this many zones (2^n - 1
+# route columns per robot); a robot that may enter more keeps the entries alone.
+ROUTE_ZONES = 6
 
 
 class _Lp:
     """The LP's columns (pair shares, zone visits, robots' y, then T) and rows."""
 
     def __init__(
-        self, problem: Problem, candidates: Sequence[Sequence[int]], entries: bool
+        self,
+        problem: Problem,
+        candidates: Sequence[Sequence[int]],
+        entries: bool,
+        routes: bool = False,
     ) -> None:
         tm = self.tm = problem.instance.timing
         self.problem = problem
@@ -78,9 +94,14 @@ class _Lp:
         self.group_of: list[int] = []
         if self.visits and not problem.pinned_starts:
             self.group_of, self.groups = _group_entries(problem, self.visits)
+        # (robot, the visit columns of a set of zones it may enter, its shortest route)
+        self.routes: list[tuple[int, list[int], float]] = []
+        if routes and self.visits and not problem.pinned_starts:
+            self.routes = _routes(problem, self.visits)
         self.k, self.nv, self.m = len(self.pairs), len(self.visits), tm.n_robots
         self.g0 = self.k + self.nv  # first group column
-        self.y0 = self.g0 + len(self.groups)  # first y column
+        self.w0 = self.g0 + len(self.groups)  # first route column
+        self.y0 = self.w0 + len(self.routes)  # first y column
         self.n_cols = self.y0 + self.m + 1
 
     def _group_added(self, added: dict[tuple[int, int], float], r: int, z: int | None) -> float:
@@ -119,6 +140,24 @@ class _Lp:
             starts[r] = max(starts[r], first + min(tails[t] for t in tasks))
         return starts
 
+    def route_starts(self, heads: np.ndarray | None, tails: np.ndarray | None) -> np.ndarray:
+        """Per robot, what its time line adds to its work and route if it works at all:
+        its shift start, or with `heads` and `tails`, G'_r + Q_r: its first task cannot
+        start before its head nor before the robot gets there, and that first way is
+        part of the route, so G'_r is the least of those starts less the way there."""
+        tm = self.tm
+        starts = np.array([a for a, _ in tm.shifts], dtype=float)
+        if heads is None or tails is None:
+            return starts
+        for r, tasks in enumerate(self.mine):
+            if not tasks or not any(q == r for q, _, _ in self.routes):
+                continue
+            a = tm.shifts[r][0]
+            ways = [tm.travel_to_task(tm.robot_zone[r], t) for t in tasks]
+            first = min(max(heads[t], a + w) - w for t, w in zip(tasks, ways, strict=True))
+            starts[r] = max(a, first) + min(tails[t] for t in tasks)
+        return starts
+
     def time_rows(self, starts: np.ndarray, entry_weight: float) -> tuple[csr_matrix, np.ndarray]:
         """work + entries + group entries + start * y - T <= 0, per robot (the entries
         `entry_weight` times over)."""
@@ -138,6 +177,57 @@ class _Lp:
         vals += [starts, -np.ones(m)]
         matrix = self.col(np.concatenate(vals), np.concatenate(rows), np.concatenate(cols), m)
         return matrix, np.zeros(m)
+
+    def route_time_rows(
+        self, starts: np.ndarray, entry_weight: float
+    ) -> tuple[csr_matrix, np.ndarray]:
+        """work + route + start' * y - T <= 0, per robot with routes (the routes
+        `entry_weight` times over)."""
+        robots = sorted({r for r, _, _ in self.routes})
+        row_of = {r: i for i, r in enumerate(robots)}
+        rows, cols, vals = [], [], []
+        for i, (t, r) in enumerate(self.pairs):
+            if r in row_of:
+                rows.append(row_of[r])
+                cols.append(i)
+                vals.append(self.tm.duration(t, r))
+        for j, (r, _, minutes) in enumerate(self.routes):
+            rows.append(row_of[r])
+            cols.append(self.w0 + j)
+            vals.append(entry_weight * minutes)
+        for r, i in row_of.items():
+            rows += [i, i]
+            cols += [self.y0 + r, self.n_cols - 1]
+            vals += [starts[r], -1.0]
+        matrix = self.col(
+            np.array(vals), np.array(rows, dtype=int), np.array(cols, dtype=int), len(robots)
+        )
+        return matrix, np.zeros(len(robots))
+
+    def route_rows(self) -> tuple[csr_matrix, np.ndarray]:
+        """v_rz - (the routes through z) <= 0 for each zone z robot r may enter, and at
+        most one route per robot (its routes' shares sum to at most 1)."""
+        rows, cols, vals = [], [], []
+        through: dict[int, list[int]] = {}
+        for j, (_, visits, _) in enumerate(self.routes):
+            for v in visits:
+                through.setdefault(v, []).append(j)
+        i = 0
+        for v, routes in through.items():
+            rows += [i] * (1 + len(routes))
+            cols += [self.k + v, *(self.w0 + j for j in routes)]
+            vals += [1.0, *([-1.0] * len(routes))]
+            i += 1
+        robots = sorted({r for r, _, _ in self.routes})
+        for r in robots:
+            mine = [j for j, (q, _, _) in enumerate(self.routes) if q == r]
+            rows += [i] * len(mine)
+            cols += [self.w0 + j for j in mine]
+            vals += [1.0] * len(mine)
+            i += 1
+        rhs = np.r_[np.zeros(len(through)), np.ones(len(robots))]
+        matrix = self.col(np.array(vals), np.array(rows, dtype=int), np.array(cols, dtype=int), i)
+        return matrix, rhs
 
     def visit_rows(self) -> csr_matrix:
         """x_tr - v_rz <= 0 for every task t robot r may take in a zone z it must enter."""
@@ -202,6 +292,7 @@ def load_relaxation(
     tails: np.ndarray | None = None,
     scale: TimeScale | None = None,
     entry_weight: float = 1.0,
+    routes: bool = False,
 ) -> Relaxation:
     """The LP's optimum, a lower bound in minutes (0.0 when HiGHS does not finish within
     `time_limit_s`), and its shares. `heads` and `tails` (`bounds.chains`) add the zone
@@ -212,26 +303,33 @@ def load_relaxation(
     its shares are an assignment that keeps each robot in fewer zones
     (`large._lp_rounded`, the planner's use: a robot enters a zone more than once when its
     work there is spread in time)."""
-    lp = _Lp(problem, candidates, heads is not None and tails is not None)
+    lp = _Lp(problem, candidates, heads is not None and tails is not None, routes)
     n, k, m = problem.instance.n_tasks, lp.k, lp.m
     task_of = np.array([t for t, _ in lp.pairs], dtype=int)
     full = heads is not None and tails is not None
     starts = lp.line_starts(heads, tails)
     time_rows, time_rhs = lp.time_rows(starts, entry_weight)
+    route_starts = lp.route_starts(heads, tails)
+    route_time, route_time_rhs = lp.route_time_rows(route_starts, entry_weight)
+    route_rows, route_rhs = lp.route_rows()
     loads = lp.loads()
     available = list(problem.available)
     cap = problem.cap
     # The cap's lower load makes every available robot work (y = 1); not so with a fact,
     # which counts in the load but holds no shift.
     fixed = set(available) if cap.lower >= 1 and not problem.pinned_starts else set()
-    visit_rows, y_rows, group_rows = lp.visit_rows(), lp.y_rows(starts, fixed), lp.group_rows()
+    visit_rows, group_rows = lp.visit_rows(), lp.group_rows()
+    y_rows = lp.y_rows(np.maximum(starts, route_starts), fixed)
     upper_rows = [loads[available], time_rows, visit_rows, y_rows, group_rows]
+    upper_rows += [route_time, route_rows]
     upper_rhs = [
         np.full(len(available), cap.upper),
         time_rhs,
         np.zeros(visit_rows.shape[0]),
         np.zeros(y_rows.shape[0]),
         np.zeros(group_rows.shape[0]),
+        route_time_rhs,
+        route_rhs,
     ]
     lower_rows, lower_rhs = [loads[available]], [np.full(len(available), cap.lower)]
     es_row = lp.col(
@@ -307,6 +405,64 @@ def _group_entries(
         if added > 0:
             out.append((r, g, added, columns))
     return group, out
+
+
+def _routes(
+    problem: Problem, visits: Sequence[tuple[int, int, float, list[int]]]
+) -> list[tuple[int, list[int], float]]:
+    """Per robot and set of the zones it may enter (at most `ROUTE_ZONES` of them), the
+    visit columns of the set and the shortest way from its start zone through every zone
+    of the set (from the first, for a robot without one), over the shortest ways between
+    zones (a robot passing through a zone on the way only makes its route longer)."""
+    tm = problem.instance.timing
+    way = _shortest_ways(tm.travel_minutes)
+    by_robot: dict[int, list[int]] = {}
+    for j, (r, *_) in enumerate(visits):
+        by_robot.setdefault(r, []).append(j)
+    out: list[tuple[int, list[int], float]] = []
+    for r, columns in by_robot.items():
+        if len(columns) > ROUTE_ZONES:
+            continue
+        zones = [visits[j][1] for j in columns]
+        home = tm.robot_zone[r]
+        for mask, minutes in _route_minutes(way, home, zones).items():
+            members = [columns[i] for i in range(len(zones)) if mask >> i & 1]
+            out.append((r, members, minutes))
+    return out
+
+
+def _route_minutes(
+    way: Sequence[Sequence[float]], home: int | None, zones: Sequence[int]
+) -> dict[int, float]:
+    """For every non-empty set of `zones` (a bit mask over them), the shortest way from
+    `home` (from whichever zone of the set comes first when None) visiting all of it."""
+    n = len(zones)
+    inf = math.inf
+    # best[mask][i]: the shortest way from home through the zones of mask, ending at i
+    best = [[inf] * n for _ in range(1 << n)]
+    for i, z in enumerate(zones):
+        best[1 << i][i] = 0.0 if home is None else way[home][z]
+    for mask in range(1, 1 << n):
+        for i in range(n):
+            here = best[mask][i]
+            if here == inf:
+                continue
+            for j in range(n):
+                if not mask >> j & 1:
+                    nxt = mask | 1 << j
+                    best[nxt][j] = min(best[nxt][j], here + way[zones[i]][zones[j]])
+    return {mask: min(best[mask]) for mask in range(1, 1 << n)}
+
+
+def _shortest_ways(travel: Sequence[Sequence[float]]) -> list[list[float]]:
+    """The shortest way between every two zones (Floyd-Warshall over the travel)."""
+    n = len(travel)
+    way = [list(map(float, row)) for row in travel]
+    for k in range(n):
+        for a in range(n):
+            for b in range(n):
+                way[a][b] = min(way[a][b], way[a][k] + way[k][b])
+    return way
 
 
 def _components(travel: Sequence[Sequence[float]], within: float) -> list[int]:
