@@ -3,7 +3,8 @@ neighbourhood of every task is the exact model; from any start it never gets wor
 under `success_then_makespan` ES stays at the allocation optimum; the makespan objective
 keeps its floor; the path answers within its limit; where the speeds decide, plans of one
 makespan are ranked by their robots' ends, the latest first, before their effort; past a
-neighbourhood's floating tail the tasks keep their times and the plan still fits."""
+neighbourhood's floating tail the tasks keep their times and the plan still fits, as do
+the other robots' tasks in an exchange among a few that nothing floating comes before."""
 
 from __future__ import annotations
 
@@ -56,15 +57,18 @@ def optimal_es(problem: Problem) -> float:
     ],
     ids=["plain", "pins-and-now", "makespan"],
 )
-def test_a_neighbourhood_of_every_task_finds_the_exact_optimum(build) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize("compact", [False, True], ids=["per-robot-orders", "compact"])
+def test_a_neighbourhood_of_every_task_finds_the_exact_optimum(build, compact: bool) -> None:  # type: ignore[no-untyped-def]
     problem = build(construction_site(9, 3, seed=3))
+    assert problem.instance.timing.has_travel  # the free pairs in other zones need orders
     exact = solve_schedule(problem, time_limit_s=20)
     assert exact.status == "optimal"
     setup = setup_of(problem, 20)
     start = list_schedule(problem, setup.feasible.best().assignment)  # type: ignore[union-attr]
     candidates = [_candidates(setup, t) for t in range(problem.instance.n_tasks)]
     everything = range(problem.instance.n_tasks)
-    hood = Neighbourhood(setup, start, everything, candidates, _ancestor_masks(setup))
+    ancestors = _ancestor_masks(setup)
+    hood = Neighbourhood(setup, start, everything, candidates, ancestors, compact=compact)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = 20
     solver.parameters.num_workers = 2
@@ -177,6 +181,51 @@ def test_past_the_floating_tail_tasks_keep_their_times_and_the_plan_still_fits(
     for t in later:  # whole minutes on this family: one unit of the model per minute
         domain = proto.variables[hood.start[t].index].domain
         assert list(domain) == [round(current.slots[t].start)] * 2
+    pinned = cp_model.CpSolver()
+    pinned.parameters.fix_variables_to_their_hinted_value = True
+    pinned.parameters.num_workers = 1
+    assert pinned.status_name(pinned.solve(hood.model)) in ("OPTIMAL", "FEASIBLE")
+    solver = cp_model.CpSolver()
+    solver.parameters.max_deterministic_time = 0.5
+    solver.parameters.num_workers = 1
+    assert solver.status_name(solver.solve(hood.model)) in ("OPTIMAL", "FEASIBLE")
+    schedule = _retimed(setup, *hood.read(solver))
+    assert schedule is not None and check_schedule(problem, schedule) == []
+    assert schedule.makespan <= current.makespan
+
+
+def test_in_an_exchange_among_a_few_robots_what_nothing_floating_precedes_keeps_its_time() -> None:
+    # A window on two of four robots: of the other robots' tasks after it, those that a
+    # floating task of the two precedes (through a link or a robot's order, directly or
+    # not) float, the rest are constants at their planned starts, and the plan itself is
+    # still an answer, so the neighbourhood can only keep or shorten it.
+    problem = Problem.build(unrelated_site(80, 4, seed=2), Mode.BALANCED, uncapped=True)
+    setup = setup_of(problem, 4)
+    current = setup.feasible.best()
+    assert current is not None
+    slots, chosen = current.slots, {0, 1}
+    mine = [t for t in range(80) if slots[t].robot in chosen]
+    free = sorted(mine, key=lambda t: (slots[t].start, t))[8:16]
+    lo = min(slots[f].start for f in free)
+    allowed = [[r for r in _candidates(setup, t) if r in chosen] for t in range(80)]
+    ancestors = _ancestor_masks(setup)
+    hood = Neighbourhood(setup, current, free, allowed, ancestors, True, None, chosen, True)
+    # Written from the rule: everything not ended before the window floats on the two
+    # robots; a task follows one that floats in its robot's order or by a link.
+    tm, sequences = problem.instance.timing, current.sequences(4)
+    moving = {t for t in range(80) if slots[t].robot in chosen and slots[t].end > lo}
+    grown = True
+    while grown:
+        after = {u for t in moving for u in tm.successors[t]}
+        after |= {seq[i + 1] for seq in sequences for i, t in enumerate(seq[:-1]) if t in moving}
+        grown = not after <= moving
+        moving |= after
+    kept = {t for t in range(80) if t not in moving and slots[t].end > lo}
+    assert hood.later == kept and kept and moving - set(mine)  # both kinds on this site
+    assert {t for t in range(80) if t not in hood.frozen} == moving
+    proto = hood.model.proto
+    for t in kept:  # whole minutes on this family: one unit of the model per minute
+        assert list(proto.variables[hood.start[t].index].domain) == [round(slots[t].start)] * 2
     pinned = cp_model.CpSolver()
     pinned.parameters.fix_variables_to_their_hinted_value = True
     pinned.parameters.num_workers = 1

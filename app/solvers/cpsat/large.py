@@ -11,7 +11,8 @@ stages first and then more LNS (docs/schedules.md#anytime):
 1. Bound: the floors of `bounds` (critical path, heads and tails over the robots able)
    and the LP relaxation of the assignment (`load_bound`, HiGHS: deterministic; with
    each robot's zone and group entries, first head and last tail from a budget of
-   `FULL_LP_FROM`).
+   `FULL_LP_FROM`; where the speeds decide and no fact is in the plan, that LP again
+   with each robot's routes through the zones it may enter, a floor of its own).
 2. Assign: the `AssignmentModel` (ES held at its target, or above the floor; the cap; per
    robot: shift start + work + one entry into each zone it visits <= T; minimise T) for
    `ASSIGN_UNITS`; its bound on T is one more floor. Then time it: the assignment (and
@@ -101,6 +102,12 @@ ENTRY_WEIGHTS = (1.0, 2.0, 3.0)
 TRAVEL_WEIGHTS = (0.0, 1.0, 2.0, 4.0)
 TAIL_WEIGHT = 0.5
 BATCH_COST_PER_TASK = 5e-5  # deterministic units per task and order (60 ms at 600 x 12)
+# Where the speeds decide, the load LP again with each robot's routes through the zones
+# (`load_bound`'s `routes`), a floor only: step 2d rounds the entries LP's shares (on the
+# second family's 600 x 12 x 4 zones, from the routes' shares its plan was 461 at 10 s
+# where the entries' gave 453). Not on the first family: there it proved no more (600 x
+# 12 x 4 zones 401, 1,000 x 20 x 4 zones 417) and its cost would only cut the LNS short.
+LOAD_ROUTES = "load with routes through the zones (LP relaxation)"
 # The LNS's slice where the speeds decide, and how far past a neighbourhood the tasks
 # float there. Measured (a callback on every answer): CP-SAT reports its answers to these
 # neighbourhoods within the first 0.001 units of its clock and spends the rest of a slice
@@ -137,9 +144,12 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     relaxation = _load_lp(setup, candidates, chain)
     floors[LOAD_LP] = relaxation.minutes
     search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
+    unrelated = speeds_decide(setup.problem, setup.weights, candidates)
+    if unrelated and search.budget >= FULL_LP_FROM and not problem.pinned_starts:
+        floors[LOAD_ROUTES] = _full_lp(setup, candidates, chain, 1.0, routes=True).minutes
+        search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
     ran = _assign(setup, candidates, floors)
     ran += _dispatch_busy(setup)
-    unrelated = speeds_decide(setup.problem, setup.weights, candidates)
     if unrelated:
         ran += _dispatch_quick(setup)
     best = feasible.best()
@@ -165,6 +175,7 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
             loaded_first=True,
             effort_first=unrelated,
             tail_minutes=UNRELATED_TAIL_MINUTES if unrelated else None,
+            compact=unrelated,
         )
         if report is not None:
             ran += (
@@ -201,7 +212,11 @@ def _load_lp(setup: Setup, candidates: list[list[int]], chain: Chains) -> Relaxa
 
 
 def _full_lp(
-    setup: Setup, candidates: list[list[int]], chain: Chains, entry_weight: float
+    setup: Setup,
+    candidates: list[list[int]],
+    chain: Chains,
+    entry_weight: float,
+    routes: bool = False,
 ) -> Relaxation:
     return load_relaxation(
         setup.problem,
@@ -214,6 +229,7 @@ def _full_lp(
         tails=chain.tails,
         scale=setup.scale,
         entry_weight=entry_weight,
+        routes=routes,
     )
 
 

@@ -83,6 +83,7 @@ def improve(
     loaded_first: bool = False,
     effort_first: bool = False,
     tail_minutes: float | None = None,
+    compact: bool = False,
 ) -> LnsReport | None:
     """Run LNS from `start` (default: the best schedule so far) for `seconds` of budget
     (default: all that is left); None if there is nothing to start from or no time.
@@ -97,7 +98,8 @@ def improve(
     the one whose robots end earlier, from the latest down, is better, then the one whose
     robots work and travel less, before the sum of ends (`_better`; measured in
     docs/schedules.md#anytime). `tail_minutes`: of the tasks after a neighbourhood, only
-    those starting within that many minutes of its end float (`Neighbourhood`)."""
+    those starting within that many minutes of its end float; `compact`: the smaller
+    model of the same neighbourhood (`Neighbourhood`)."""
     search, feasible = setup.search, setup.feasible
     current = start or feasible.best()
     limit = search.remaining() if seconds is None else min(search.remaining(), seconds)
@@ -133,7 +135,9 @@ def improve(
         # On the large path the robots' tails float too: a task swapped onto a robot at the
         # cap's load moves its successors instead of meeting them frozen in time.
         floating = kind == "window" or loaded_first
-        hood = Neighbourhood(setup, current, free, allowed, ancestors, floating, tail_minutes)
+        hood = Neighbourhood(
+            setup, current, free, allowed, ancestors, floating, tail_minutes, robots, compact
+        )
         build = model_cost(hood.model)
         search.charge(build)
         status, solver = _solve(hood.model, setup, rng, slice_units)

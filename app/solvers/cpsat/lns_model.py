@@ -17,7 +17,12 @@ With `tail_minutes` (where the speeds decide the robots), only the tasks that st
 within that many minutes after the window float; later ones keep their times, as
 constants the floating ones must still meet (each robot's order, precedence). A smaller
 model is built faster, and the answer is re-timed at earliest times in any case
-(docs/schedules.md#anytime).
+(docs/schedules.md#anytime). `compact` (there too) builds the same neighbourhood
+smaller: two free tasks get one order literal and one that they share a robot, whichever
+robot it is (the way between them is the same for every robot), where each robot had
+its own; and with `robots` (an exchange among a few robots) the other robots' tasks that
+no floating task of those robots comes before, through a link or a robot's order, keep
+their times: nothing in the neighbourhood can delay them.
 
 Objective: the makespan, then the sum of the free tasks' ends (weighted below one minute
 of makespan): a window off the critical path still gets compacted, which later windows
@@ -47,6 +52,8 @@ class Neighbourhood:
         ancestors: Sequence[int],
         float_tail: bool = False,
         tail_minutes: float | None = None,
+        robots: Collection[int] | None = None,
+        compact: bool = False,
     ) -> None:
         problem, scale = setup.problem, setup.scale
         self.problem, self.scale, self.setup = problem, scale, setup
@@ -63,6 +70,7 @@ class Neighbourhood:
         self.end: list[cp_model.IntVar] = []
         self.present: dict[tuple[int, int], cp_model.IntVar] = {}
         self._orders: list[tuple[int, int, cp_model.IntVar]] = []
+        self._same: dict[tuple[int, int], cp_model.IntVar] = {}
         is_free = set(self.free)
         self._candidates = {f: list(candidates[f]) for f in self.free}
         lo = min(current.slots[f].start for f in self.free)
@@ -74,7 +82,9 @@ class Neighbourhood:
             for s in current.slots
             if s.task not in is_free and (s.end <= lo or not float_tail)
         }
-        # Kept in time past the window: the tasks after it that no longer float.
+        # Kept in time besides the tasks before the window: those past the floating tail,
+        # and, in an exchange among a few robots, the others' tasks nothing that floats
+        # can push.
         self.later: set[int] = set()
         if float_tail and tail_minutes is not None:
             self.later = {
@@ -83,6 +93,11 @@ class Neighbourhood:
                 if s.task not in is_free and s.start >= hi + tail_minutes
             }
             self.frozen |= self.later
+        self._compact = compact
+        if compact and float_tail and robots is not None:
+            unpushed = self._unpushed(current, robots)
+            self.later |= unpushed
+            self.frozen |= unpushed
         self._add_times()
         sequences = current.sequences(tm.n_robots)
         for r in range(tm.n_robots):
@@ -105,6 +120,25 @@ class Neighbourhood:
         weight = len(self.free) * (self.horizon + 1) + 1
         m.minimize(self.makespan * weight + sum(self.end[f] for f in self.free))
         self._hint()
+
+    def _unpushed(self, current: Schedule, robots: Collection[int]) -> set[int]:
+        """The floating tasks of robots outside `robots` that no floating task of `robots`
+        comes before, through a link or a robot's order, directly or not: nothing that
+        moves can delay them, so they keep their times."""
+        tm, slots = self.tm, current.slots
+        nexts: list[list[int]] = [[u for u, _ in links] for links in tm.successor_links]
+        for chain in current.sequences(tm.n_robots):
+            for t, u in pairwise(chain):
+                nexts[t].append(u)
+        floating = [t for t in range(tm.n_tasks) if t not in self.frozen]
+        reached = {t for t in floating if slots[t].robot in robots}
+        stack = list(reached)
+        while stack:
+            for u in nexts[stack.pop()]:
+                if u not in reached and u not in self.frozen:
+                    reached.add(u)
+                    stack.append(u)
+        return {t for t in floating if t not in reached}
 
     def _add_times(self) -> None:
         tm, m, up, down = self.tm, self.model, self.scale.up, self.scale.down
@@ -195,8 +229,24 @@ class Neighbourhood:
             for u in inside:
                 self._add_pair(r, f, u, [x])
             for g in mine[i + 1 :]:
-                self._add_pair(r, f, g, [x, self.present[g, r]])
+                if self._compact:
+                    self._add_shared(r, f, g)
+                else:
+                    self._add_pair(r, f, g, [x, self.present[g, r]])
         m.add_no_overlap(intervals)
+
+    def _add_shared(self, r: int, f: int, g: int) -> None:
+        """Travel between two free tasks robot r may both do. Whichever robot takes both,
+        the travel between them is the same (neither is a fact), so one literal says
+        they share a robot and one their order, for every robot they may share."""
+        tm, m = self.tm, self.model
+        if tm.task_zone[f] == tm.task_zone[g]:
+            return
+        same = self._same.get((f, g))
+        if same is None:
+            same = self._same[f, g] = m.new_bool_var(f"same{f}_{g}")
+            self._add_pair(r, f, g, [same])
+        m.add_bool_or([self.present[f, r].Not(), self.present[g, r].Not(), same])
 
     def _add_pair(self, r: int, t: int, u: int, both: list[cp_model.IntVar]) -> None:
         """Travel between two tasks robot r may both do, in whichever order they run."""
@@ -265,6 +315,8 @@ class Neighbourhood:
             m.add_hint(self.end[t], ends[t])
         for (t, r), lit in self.present.items():
             m.add_hint(lit, self.robots[t] == r)
+        for (t, u), same in self._same.items():
+            m.add_hint(same, self.robots[t] == self.robots[u])
         for t, u, before in self._orders:
             m.add_hint(before, (self._at[t], t) < (self._at[u], u))
         m.add_hint(self.makespan, max(ends, default=0))
