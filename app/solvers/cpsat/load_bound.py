@@ -65,7 +65,8 @@ ROUTE_ZONES = 6
 
 
 class _Lp:
-    """The LP's columns (pair shares, zone visits, robots' y, then T) and rows."""
+    """The LP's columns (pair shares, zone visits, group entries, routes, robots' y, then
+    T) and rows."""
 
     def __init__(
         self,
@@ -141,18 +142,18 @@ class _Lp:
         return starts
 
     def route_starts(self, heads: np.ndarray | None, tails: np.ndarray | None) -> np.ndarray:
-        """Per robot, what its time line adds to its work and route if it works at all:
-        its shift start, or with `heads` and `tails`, G'_r + Q_r: its first task cannot
-        start before its head nor before the robot gets there, and that first way is
-        part of the route, so G'_r is the least of those starts less the way there."""
+        """Per robot with routes, what its time line adds to its work and route if it
+        works at all (0 for the others: they have no such row): its shift start, or with
+        `heads` and `tails`, G'_r + Q_r: its first task cannot start before its head nor
+        before the robot gets there, and that first way is part of the route, so G'_r is
+        the least of those starts less the way there."""
         tm = self.tm
-        starts = np.array([a for a, _ in tm.shifts], dtype=float)
-        if heads is None or tails is None:
-            return starts
-        for r, tasks in enumerate(self.mine):
-            if not tasks or not any(q == r for q, _, _ in self.routes):
+        starts = np.zeros(self.m)
+        for r in {r for r, _, _ in self.routes}:
+            tasks, a = self.mine[r], tm.shifts[r][0]
+            starts[r] = a
+            if heads is None or tails is None:
                 continue
-            a = tm.shifts[r][0]
             ways = [tm.travel_to_task(tm.robot_zone[r], t) for t in tasks]
             first = min(max(heads[t], a + w) - w for t, w in zip(tasks, ways, strict=True))
             starts[r] = max(a, first) + min(tails[t] for t in tasks)
