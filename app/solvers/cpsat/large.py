@@ -11,8 +11,7 @@ stages first and then more LNS (docs/schedules.md#anytime):
 1. Bound: the floors of `bounds` (critical path, heads and tails over the robots able)
    and the LP relaxation of the assignment (`load_bound`, HiGHS: deterministic; with
    each robot's zone and group entries, first head and last tail from a budget of
-   `FULL_LP_FROM`; where the speeds decide and no fact is in the plan, that LP again
-   with each robot's routes through the zones it may enter, a floor of its own).
+   `FULL_LP_FROM`).
 2. Assign: the `AssignmentModel` (ES held at its target, or above the floor; the cap; per
    robot: shift start + work + one entry into each zone it visits <= T; minimise T) for
    `ASSIGN_UNITS`; its bound on T is one more floor. Then time it: the assignment (and
@@ -23,7 +22,9 @@ stages first and then more LNS (docs/schedules.md#anytime):
    task fixed to its robot: CP-SAT improves the per-robot orders and start times, hinted
    with the best schedule (at 200 x 20 it proves that assignment's optimum in under a
    second).
-4. Improve, until the budget: the large-neighbourhood search (`lns`) over the exact model
+4. Improve, until the budget (where the speeds decide, first the load LP again with each
+   robot's routes through the zones, a floor of its own: `_route_floor`): the
+   large-neighbourhood search (`lns`) over the exact model
    from the best schedule so far, in whole slices (`loaded_first`: its robots neighbourhood
    starts from the most loaded robots on the critical path, the tasks after it floating).
 
@@ -103,10 +104,11 @@ TRAVEL_WEIGHTS = (0.0, 1.0, 2.0, 4.0)
 TAIL_WEIGHT = 0.5
 BATCH_COST_PER_TASK = 5e-5  # deterministic units per task and order (60 ms at 600 x 12)
 # Where the speeds decide, the load LP again with each robot's routes through the zones
-# (`load_bound`'s `routes`), a floor only: step 2d rounds the entries LP's shares (on the
-# second family's 600 x 12 x 4 zones, from the routes' shares its plan was 461 at 10 s
-# where the entries' gave 453). Not on the first family: there it proved no more (600 x
-# 12 x 4 zones 401, 1,000 x 20 x 4 zones 417) and its cost would only cut the LNS short.
+# (`load_bound`'s `routes`), a floor only, so it runs after the plan's first stages (a
+# small budget keeps them): step 2d rounds the entries LP's shares (on the second
+# family's 600 x 12 x 4 zones, from the routes' shares its plan was 461 at 10 s where the
+# entries' gave 453). Not on the first family: there it proved no more (600 x 12 x 4
+# zones 401, 1,000 x 20 x 4 zones 417) and its cost would only cut the LNS short.
 LOAD_ROUTES = "load with routes through the zones (LP relaxation)"
 # The LNS's slice where the speeds decide, and how far past a neighbourhood the tasks
 # float there. Measured (a callback on every answer): CP-SAT reports its answers to these
@@ -144,12 +146,9 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
     relaxation = _load_lp(setup, candidates, chain)
     floors[LOAD_LP] = relaxation.minutes
     search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
-    unrelated = speeds_decide(setup.problem, setup.weights, candidates)
-    if unrelated and search.budget >= FULL_LP_FROM and not problem.pinned_starts:
-        floors[LOAD_ROUTES] = _full_lp(setup, candidates, chain, 1.0, routes=True).minutes
-        search.charge(LP_COST_PER_PAIR * sum(len(c) for c in candidates))
     ran = _assign(setup, candidates, floors)
     ran += _dispatch_busy(setup)
+    unrelated = speeds_decide(setup.problem, setup.weights, candidates)
     if unrelated:
         ran += _dispatch_quick(setup)
     best = feasible.best()
@@ -168,6 +167,8 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
         if _sequence(setup, SEQUENCE_UNITS):
             ran += SEQUENCING_MODEL
             search.mark(feasible.best().makespan)  # type: ignore[union-attr]
+        if unrelated and not _route_floor(setup, candidates, chain, floors):
+            return _answer(setup, floors, ran)
         report = improve(
             setup,
             candidates,
@@ -181,13 +182,38 @@ def solve_large(setup: Setup) -> ScheduleOutcome:
             ran += (
                 f"{LNS_MODEL} ({report.neighbourhoods} neighbourhoods, {report.improved} improved)"
             )
-    best = feasible.best()
+    return _answer(setup, floors, ran)
+
+
+def _answer(setup: Setup, floors: dict[str, float], ran: str) -> ScheduleOutcome:
+    best = setup.feasible.best()
     if best is None:
-        raise none_found(search.time_limit_s, ran)
+        raise none_found(setup.search.time_limit_s, ran)
     bound, source = best_bound(floors, best.makespan, False)
     result = outcome(setup, best, "feasible", ran, bound, source)
     result.bounds = floors
     return result
+
+
+def _route_floor(
+    setup: Setup, candidates: list[list[int]], chain: Chains, floors: dict[str, float]
+) -> bool:
+    """Where the speeds decide, before the LNS: the routes' LP (`LOAD_ROUTES`) for a plan
+    without facts. False when it does not fit with a slice of the LNS after it: then
+    nothing more runs, so every budget that runs the LNS ran this first (anytime)."""
+    problem, search = setup.problem, setup.search
+    if problem.pinned_starts:
+        return True  # a fact puts a robot where it worked: no route from its start zone
+    cost = LP_COST_PER_PAIR * sum(len(c) for c in candidates)
+    if not search.fits(cost + UNRELATED_SLICE):
+        return False
+    search.need(search.spent + cost + UNRELATED_SLICE)
+    floors[LOAD_ROUTES] = _full_lp(setup, candidates, chain, 1.0, routes=True).minutes
+    search.charge(cost)
+    best = setup.feasible.best()
+    if best is not None:
+        search.mark(best.makespan, min(best.makespan, max(floors.values())))
+    return True
 
 
 def _load_lp(setup: Setup, candidates: list[list[int]], chain: Chains) -> Relaxation:
