@@ -22,9 +22,10 @@ from app.solvers.cpsat.assignment_model import AssignmentModel
 from app.solvers.cpsat.bounds import chains
 from app.solvers.cpsat.common import Search, SuccessWeights
 from app.solvers.cpsat.large import _candidates
-from app.solvers.cpsat.load_bound import _route_minutes, _shortest_ways, load_relaxation
+from app.solvers.cpsat.load_bound import load_relaxation
 from app.solvers.cpsat.outcome import Setup
 from app.solvers.cpsat.search import _setup, solve_schedule
+from app.solvers.cpsat.zone_routes import route_minutes, shortest_ways
 from benchmarks.timed_instances import construction_site
 from benchmarks.unrelated_sites import unrelated_site
 from tests.solvers.test_schedule_exhaustive import Case, cases, exhaustive
@@ -269,8 +270,8 @@ def test_route_minutes_are_the_shortest_walk_through_each_set(
     travel, home, zones = drawn
     for z in range(6):
         travel[z][z] = 0
-    way = _shortest_ways(travel)
-    for mask, minutes in _route_minutes(way, home, zones).items():
+    way = shortest_ways(travel)
+    for mask, minutes in route_minutes(way, home, zones).items():
         members = [z for i, z in enumerate(zones) if mask >> i & 1]
         walks = [
             (0 if home is None else way[home][order[0]])

@@ -55,13 +55,11 @@ from app.domain.problem import Problem
 from app.solvers.cpsat.common import SuccessWeights
 from app.solvers.cpsat.model import zones_to_enter
 from app.solvers.cpsat.time_scale import TimeScale
+from app.solvers.cpsat.zone_routes import zone_routes
 
 # HiGHS works in floating point: the bound steps back this share of itself (and a hair
 # more) so that it stays a bound.
 STEP_BACK = 1e-7
-# Routes through every set of the zones a robot may enter, up to this many zones (2^n - 1
-# route columns per robot); a robot that may enter more keeps the entries alone.
-ROUTE_ZONES = 6
 
 
 class _Lp:
@@ -98,7 +96,7 @@ class _Lp:
         # (robot, the visit columns of a set of zones it may enter, its shortest route)
         self.routes: list[tuple[int, list[int], float]] = []
         if routes and self.visits and not problem.pinned_starts:
-            self.routes = _routes(problem, self.visits)
+            self.routes = zone_routes(problem, self.visits)
         self.k, self.nv, self.m = len(self.pairs), len(self.visits), tm.n_robots
         self.g0 = self.k + self.nv  # first group column
         self.w0 = self.g0 + len(self.groups)  # first route column
@@ -406,64 +404,6 @@ def _group_entries(
         if added > 0:
             out.append((r, g, added, columns))
     return group, out
-
-
-def _routes(
-    problem: Problem, visits: Sequence[tuple[int, int, float, list[int]]]
-) -> list[tuple[int, list[int], float]]:
-    """Per robot and set of the zones it may enter (at most `ROUTE_ZONES` of them), the
-    visit columns of the set and the shortest way from its start zone through every zone
-    of the set (from the first, for a robot without one), over the shortest ways between
-    zones (a robot passing through a zone on the way only makes its route longer)."""
-    tm = problem.instance.timing
-    way = _shortest_ways(tm.travel_minutes)
-    by_robot: dict[int, list[int]] = {}
-    for j, (r, *_) in enumerate(visits):
-        by_robot.setdefault(r, []).append(j)
-    out: list[tuple[int, list[int], float]] = []
-    for r, columns in by_robot.items():
-        if len(columns) > ROUTE_ZONES:
-            continue
-        zones = [visits[j][1] for j in columns]
-        home = tm.robot_zone[r]
-        for mask, minutes in _route_minutes(way, home, zones).items():
-            members = [columns[i] for i in range(len(zones)) if mask >> i & 1]
-            out.append((r, members, minutes))
-    return out
-
-
-def _route_minutes(
-    way: Sequence[Sequence[float]], home: int | None, zones: Sequence[int]
-) -> dict[int, float]:
-    """For every non-empty set of `zones` (a bit mask over them), the shortest way from
-    `home` (from whichever zone of the set comes first when None) visiting all of it."""
-    n = len(zones)
-    inf = math.inf
-    # best[mask][i]: the shortest way from home through the zones of mask, ending at i
-    best = [[inf] * n for _ in range(1 << n)]
-    for i, z in enumerate(zones):
-        best[1 << i][i] = 0.0 if home is None else way[home][z]
-    for mask in range(1, 1 << n):
-        for i in range(n):
-            here = best[mask][i]
-            if here == inf:
-                continue
-            for j in range(n):
-                if not mask >> j & 1:
-                    nxt = mask | 1 << j
-                    best[nxt][j] = min(best[nxt][j], here + way[zones[i]][zones[j]])
-    return {mask: min(best[mask]) for mask in range(1, 1 << n)}
-
-
-def _shortest_ways(travel: Sequence[Sequence[float]]) -> list[list[float]]:
-    """The shortest way between every two zones (Floyd-Warshall over the travel)."""
-    n = len(travel)
-    way = [list(map(float, row)) for row in travel]
-    for k in range(n):
-        for a in range(n):
-            for b in range(n):
-                way[a][b] = min(way[a][b], way[a][k] + way[k][b])
-    return way
 
 
 def _components(travel: Sequence[Sequence[float]], within: float) -> list[int]:
