@@ -177,21 +177,7 @@ def test_past_the_floating_tail_tasks_keep_their_times_and_the_plan_still_fits(
     assert hood.later == later and later  # something past the tail on this site
     floating = [t for t in range(80) if t not in free and t not in hood.frozen]
     assert floating or tail_minutes == 0.0
-    proto = hood.model.proto
-    for t in later:  # whole minutes on this family: one unit of the model per minute
-        domain = proto.variables[hood.start[t].index].domain
-        assert list(domain) == [round(current.slots[t].start)] * 2
-    pinned = cp_model.CpSolver()
-    pinned.parameters.fix_variables_to_their_hinted_value = True
-    pinned.parameters.num_workers = 1
-    assert pinned.status_name(pinned.solve(hood.model)) in ("OPTIMAL", "FEASIBLE")
-    solver = cp_model.CpSolver()
-    solver.parameters.max_deterministic_time = 0.5
-    solver.parameters.num_workers = 1
-    assert solver.status_name(solver.solve(hood.model)) in ("OPTIMAL", "FEASIBLE")
-    schedule = _retimed(setup, *hood.read(solver))
-    assert schedule is not None and check_schedule(problem, schedule) == []
-    assert schedule.makespan <= current.makespan
+    assert_kept_and_fitting(setup, current, hood, later)
 
 
 def test_in_an_exchange_among_a_few_robots_what_nothing_floating_precedes_keeps_its_time() -> None:
@@ -223,9 +209,20 @@ def test_in_an_exchange_among_a_few_robots_what_nothing_floating_precedes_keeps_
     kept = {t for t in range(80) if t not in moving and slots[t].end > lo}
     assert hood.later == kept and kept and moving - set(mine)  # both kinds on this site
     assert {t for t in range(80) if t not in hood.frozen} == moving
+    assert_kept_and_fitting(setup, current, hood, kept)
+
+
+def assert_kept_and_fitting(
+    setup: Setup, current: Schedule, hood: Neighbourhood, kept: set[int]
+) -> None:
+    """The `kept` tasks are constants at their planned starts (whole minutes on the second
+    family: one unit of the model per minute), the plan itself is an answer (every
+    variable at its hint), and CP-SAT's answer, re-timed, passes the check and is never
+    longer than the plan."""
     proto = hood.model.proto
-    for t in kept:  # whole minutes on this family: one unit of the model per minute
-        assert list(proto.variables[hood.start[t].index].domain) == [round(slots[t].start)] * 2
+    for t in kept:
+        domain = proto.variables[hood.start[t].index].domain
+        assert list(domain) == [round(current.slots[t].start)] * 2
     pinned = cp_model.CpSolver()
     pinned.parameters.fix_variables_to_their_hinted_value = True
     pinned.parameters.num_workers = 1
@@ -235,5 +232,5 @@ def test_in_an_exchange_among_a_few_robots_what_nothing_floating_precedes_keeps_
     solver.parameters.num_workers = 1
     assert solver.status_name(solver.solve(hood.model)) in ("OPTIMAL", "FEASIBLE")
     schedule = _retimed(setup, *hood.read(solver))
-    assert schedule is not None and check_schedule(problem, schedule) == []
+    assert schedule is not None and check_schedule(setup.problem, schedule) == []
     assert schedule.makespan <= current.makespan
