@@ -94,12 +94,12 @@ class Neighbourhood:
             }
             self.frozen |= self.later
         self._compact = compact
+        sequences = current.sequences(tm.n_robots)
         if compact and float_tail and robots is not None:
-            unpushed = self._unpushed(current, robots)
+            unpushed = self._unpushed(current, sequences, robots)
             self.later |= unpushed
             self.frozen |= unpushed
         self._add_times()
-        sequences = current.sequences(tm.n_robots)
         for r in range(tm.n_robots):
             chain = [t for t in sequences[r] if t not in is_free]
             before = [t for t in chain if current.slots[t].end <= lo]
@@ -121,13 +121,15 @@ class Neighbourhood:
         m.minimize(self.makespan * weight + sum(self.end[f] for f in self.free))
         self._hint()
 
-    def _unpushed(self, current: Schedule, robots: Collection[int]) -> set[int]:
+    def _unpushed(
+        self, current: Schedule, sequences: list[list[int]], robots: Collection[int]
+    ) -> set[int]:
         """The floating tasks of robots outside `robots` that no floating task of `robots`
         comes before, through a link or a robot's order, directly or not: nothing that
         moves can delay them, so they keep their times."""
         tm, slots = self.tm, current.slots
         nexts: list[list[int]] = [[u for u, _ in links] for links in tm.successor_links]
-        for chain in current.sequences(tm.n_robots):
+        for chain in sequences:
             for t, u in pairwise(chain):
                 nexts[t].append(u)
         floating = [t for t in range(tm.n_tasks) if t not in self.frozen]
@@ -198,8 +200,8 @@ class Neighbourhood:
             way = up(tm.travel_to_task(tm.robot_zone[r], chain[0]))
             m.add(self.start[chain[0]] >= up(a) + way)
         for t, u in pairwise(chain):
-            # Between two tasks kept in time (before the window or past the floating tail)
-            # the current plan already holds the order.
+            # Between two tasks kept in time (before the window, past the floating tail or
+            # out of reach of what floats) the current plan already holds the order.
             if t not in self.frozen or u not in self.frozen:
                 self._add_after(r, t, u, [])
 
