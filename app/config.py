@@ -5,7 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import AliasChoices, Field, SecretStr, field_validator, model_validator
+from pydantic import (
+    AliasChoices,
+    Field,
+    SecretStr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 # MPXJ writes 10,000 activities as 23 MB of MSPDI (3 MB of XER): docs/exchange.md.
@@ -102,6 +109,20 @@ class Settings(BaseSettings):
     openai_model: str | None = Field(None, min_length=1, description="e.g. Qwen/Qwen3-8B")
     openai_timeout_s: float = Field(60.0, gt=0)
     openai_max_transport_retries: int = Field(3, ge=0)
+    # How a run asks its model for a decision (docs/reasoners.md#structured-replies):
+    # json_schema (OpenAI, vLLM, Ollama; a server that refuses it is asked in json_object),
+    # json_object (llama-cpp-python's server), markdown (the paper's sections). Stored with
+    # each run when it is created.
+    llm_reply_format: Literal["json_schema", "json_object", "markdown"] = "json_schema"
+    # Output tokens per attempt, by prompt tier 0-3 (docs/reasoners.md#bounded-cost): one
+    # number for every tier, or up to four comma-separated.
+    llm_max_tokens: Annotated[list[int], NoDecode] = Field(
+        default_factory=lambda: [400, 400, 500, 500],
+        description="Comma-separated output-token caps of tiers 0-3 (each 32-8192)",
+    )
+    # After this many tasks in a row ended in the rules fallback, a run asks its model no
+    # more and the rule decides the rest (docs/reasoners.md#bounded-cost); 0: never.
+    llm_give_up_after: int = Field(3, ge=0, le=10_000)
     # LLM tokens (input + output) a run may spend when its request names no token_budget;
     # then its remaining tasks go to the offline rules reasoner. None: no limit.
     run_token_budget: int | None = Field(None, ge=1)
@@ -192,6 +213,28 @@ class Settings(BaseSettings):
             raise ValueError("retry delays must be >= 0 seconds")
         return value
 
+    @field_validator("llm_max_tokens", mode="before")
+    @classmethod
+    def _caps(cls, value: object) -> object:
+        if isinstance(value, str):
+            return [part.strip() for part in value.split(",") if part.strip()]
+        return [value] if isinstance(value, int) else value
+
+    @field_validator("llm_max_tokens")
+    @classmethod
+    def _caps_in_range(cls, value: list[int]) -> list[int]:
+        if not 1 <= len(value) <= 4:
+            raise ValueError(
+                f"give one output-token cap for every tier or one per tier 0-3, not {len(value)}"
+            )
+        wrong = [cap for cap in value if not 32 <= cap <= 8192]
+        if wrong:
+            raise ValueError(
+                f"each output-token cap must be 32-8192 (a decision needs a few hundred), "
+                f"not {wrong[0]}"
+            )
+        return value
+
     @field_validator("log_level", mode="before")
     @classmethod
     def _upper(cls, value: object) -> object:
@@ -228,6 +271,25 @@ class Settings(BaseSettings):
         return self.checkpoint_path or self.data_dir / "checkpoints.sqlite"
 
 
+class SettingsError(ValueError):
+    """A setting the service refuses to start with, named as it is set (LTAA_...)."""
+
+
 def get_settings() -> Settings:
-    """Read settings from the environment now (deliberately uncached: tests change the env)."""
-    return Settings()
+    """Read settings from the environment now (deliberately uncached: tests change the env).
+    A value out of range stops the start with one sentence per setting at fault."""
+    try:
+        return Settings()
+    except ValidationError as exc:
+        raise SettingsError(refusal(exc)) from None
+
+
+def refusal(exc: ValidationError) -> str:
+    """Each setting at fault as its variable, what it was set to and why it is refused."""
+    lines = []
+    for error in exc.errors():
+        name = str(error["loc"][0]) if error["loc"] else "settings"
+        shown = "" if "secret" in name or "key" in name else f"={error.get('input')!s:.60}"
+        message = str(error["msg"]).removeprefix("Value error, ")
+        lines.append(f"LTAA_{name.upper()}{shown} is refused: {message}.")
+    return "the service cannot start: " + " ".join(lines)

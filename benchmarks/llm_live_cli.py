@@ -6,6 +6,7 @@ contract in pyproject.toml): `ltaa bench-llm` starts this module in a child proc
 
 from __future__ import annotations
 
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -14,9 +15,16 @@ import typer
 from app.config import get_settings
 from app.domain.errors import DomainError
 from app.domain.modes import Mode
+from app.solvers.ltaa import model_use_for
 from benchmarks import llm_live
 
 command = typer.Typer(add_completion=False)
+
+
+class Format(StrEnum):
+    JSON_SCHEMA = "json_schema"
+    JSON_OBJECT = "json_object"
+    MARKDOWN = "markdown"
 
 
 @command.command()
@@ -34,6 +42,27 @@ def bench_llm(
     tasks: Annotated[
         int | None, typer.Option(min=1, help="Only the first N tasks of each scenario")
     ] = None,
+    reply_format: Annotated[
+        Format | None,
+        typer.Option("--format", help="How the model is asked (default: LTAA_LLM_REPLY_FORMAT)"),
+    ] = None,
+    give_up: Annotated[
+        int | None,
+        typer.Option(
+            min=0, help="Give up after N failed tasks in a row; 0 never (default: the setting)"
+        ),
+    ] = None,
+    paper_only: Annotated[
+        bool,
+        typer.Option(
+            "--paper-only",
+            help="Only the paper's variant (scope all, unguided) instead of all four",
+        ),
+    ] = False,
+    title: Annotated[
+        str | None,
+        typer.Option(help="The report section this run writes (default: model and settings)"),
+    ] = None,
     out: Annotated[Path, typer.Option(help="Where the report goes")] = Path(
         "docs/llm-benchmark.md"
     ),
@@ -42,12 +71,15 @@ def bench_llm(
         typer.Option(help="Who produced the figures, for the report (default: the endpoint)"),
     ] = None,
 ) -> None:
-    """Run the 4 scenarios x 3 modes (scope all and contested, guided and unguided) with
-    the configured LLM reasoner and write docs/llm-benchmark.md. Every call goes to the
-    server the LTAA_* settings name, and costs what that server charges."""
+    """Run the 4 scenarios x 3 modes (scope all and contested, guided and unguided; or only
+    the paper's variant) with the configured LLM reasoner and write its section of
+    docs/llm-benchmark.md. Every call goes to the server the LTAA_* settings name, and costs
+    what that server charges."""
     settings = get_settings()
+    fmt = (reply_format or Format(settings.llm_reply_format)).value
+    after = settings.llm_give_up_after if give_up is None else give_up
     try:
-        make = llm_live.reasoner_factory(reasoner, settings=settings, model=model)
+        make = llm_live.reasoner_factory(reasoner, settings=settings, model=model, reply_format=fmt)
     except DomainError as exc:  # a missing setting (DomainError is a ValueError too)
         typer.echo(f"{exc.field}: {exc.message}", err=True)
         raise typer.Exit(1) from None
@@ -55,13 +87,16 @@ def bench_llm(
         typer.echo(str(exc), err=True)
         raise typer.Exit(2) from None
     endpoint, used_model = llm_live.server_of(reasoner, settings, model)
-    typer.echo(f"bench-llm: {reasoner} model {used_model} at {endpoint}", err=True)
+    given_up = f"give up after {after} failed tasks in a row" if after else "never given up"
+    used = f"format `{fmt}`, {given_up}, output caps {settings.llm_max_tokens} by tier"
+    typer.echo(f"bench-llm: {reasoner} model {used_model} at {endpoint}; {used}", err=True)
 
     def progress(cell: llm_live.LiveCell) -> None:
         typer.echo(
             f"  {cell.scenario}/{cell.mode} {cell.scope}"
             f"{' guided' if cell.guided else ''}: {cell.llm_tasks}/{cell.n_tasks} tasks "
-            f"asked the model, {cell.tokens:,} tokens, {cell.seconds:.1f} s",
+            f"asked the model, {cell.model_decided} decided by it, {cell.tokens:,} tokens, "
+            f"{cell.seconds:.1f} s",
             err=True,
         )
 
@@ -71,11 +106,19 @@ def bench_llm(
         modes=mode or llm_live.MODES,
         n_tasks=tasks,
         progress=progress,
+        variants=llm_live.VARIANTS[:1] if paper_only else llm_live.VARIANTS,
+        model_use=model_use_for(reasoner, fmt, after),
     )
-    text = llm_live.render(
-        cells, reasoner=reasoner, endpoint=endpoint, model=used_model, label=label
+    section = llm_live.render(
+        cells,
+        title=title or f"{used_model}: {fmt}, {given_up}",
+        reasoner=reasoner,
+        endpoint=endpoint,
+        model=used_model,
+        label=label,
+        settings=used,
     )
-    typer.echo(f"wrote {llm_live.write(text, out)}", err=True)
+    typer.echo(f"wrote {llm_live.write(section, out)}", err=True)
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ from app.graph.runner import run_graph
 from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.rules import choose, compose_answer
 from app.reasoners.scope import DEFAULT_LLM_MARGIN, LLMScope, scoped
+from app.reasoners.structured import ReplySchema
 from app.solvers.ltaa import graph_context
 from benchmarks.common import Section, table
 
@@ -54,7 +55,13 @@ class CountingReasoner:
     def answer(self, ctx: DecisionContext) -> str:
         return compose_answer(ctx)
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply:
         self.calls += 1
         if self.tasks is None:
             self.tasks = set()

@@ -56,6 +56,8 @@ def run_locally(
             guidance=guidance,
             token_budget=settings.run_token_budget,
             llm_scope=llm_scope,
+            reply_format=settings.llm_reply_format,
+            llm_give_up_after=settings.llm_give_up_after,
         )
         run = service.create_run(sessions=sessions, worker=worker, settings=settings, spec=spec)
         columns = (

@@ -42,6 +42,9 @@ class EventKind(StrEnum):
     CANCELLED = "cancelled"
     INTEGRITY_FAILED = "integrity_failed"
     BUDGET_EXHAUSTED = "budget_exhausted"
+    # docs/reasoners.md#bounded-cost: the model failed too many tasks in a row; the rule decides
+    # the rest of the run.
+    LLM_GAVE_UP = "llm_gave_up"
     UPGRADE_BLOCKED = "upgrade_blocked"
     REVIEW_REQUESTED = "review_requested"
     REVIEW_RESOLVED = "review_resolved"

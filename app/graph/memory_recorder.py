@@ -12,6 +12,7 @@ from collections.abc import Callable
 from app.domain.usage import Usage
 from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 from app.graph.usage import usage_from_attempts
+from app.reasoners.give_up import GaveUp
 
 BeforeReasonHook = Callable[[int, int], None]
 
@@ -32,6 +33,7 @@ class MemoryRecorder:
         self._hook = before_reason_hook
         self.attempt_saves = 0
         self.decision_saves = 0
+        self.gave_up: GaveUp | None = None  # when the run stopped asking its model
 
     def cancel(self) -> None:
         self._cancelled = True
@@ -66,6 +68,10 @@ class MemoryRecorder:
 
     def usage(self) -> Usage:
         return usage_from_attempts(self._attempts.values())
+
+    def model_gave_up(self, gave_up: GaveUp) -> None:
+        if self.gave_up is None:
+            self.gave_up = gave_up
 
     def assignment(self) -> list[int]:
         return [d.robot for d in self.decisions()]

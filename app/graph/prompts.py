@@ -14,8 +14,18 @@ from app.domain.decision import DecisionContext, percent
 from app.domain.modes import MODE_DESCRIPTIONS, tradeoff_threshold
 from app.domain.phases import Phase
 from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
-from app.graph.team_prompts import TEAM_FORMAT, team_facts_text, team_guidance, team_step_template
+from app.graph import structured_prompts as structured
+from app.graph.team_prompts import (
+    TEAM_FORMAT,
+    team_facts_text,
+    team_framework,
+    team_steering,
+    team_step_template,
+)
 from app.graph.validation import CRITERION_TITLES, WEIGHTS
+from app.reasoners.structured import ReplyFormat
+
+MARKDOWN = ReplyFormat.MARKDOWN
 
 TARGET_USER_PROMPT_CHARS = 2_500
 
@@ -27,6 +37,16 @@ SYSTEM_PROMPT = (
     "per unit, each with its reason. Use only the numbers given; do not invent data. Reply in "
     "the required markdown format and nothing else."
 )
+
+
+def system_prompt(fmt: ReplyFormat = MARKDOWN) -> str:
+    """The system prompt of a run asking in `fmt`: the same but for how to reply."""
+    if not fmt.structured:
+        return SYSTEM_PROMPT
+    return SYSTEM_PROMPT.replace(
+        "Reply in the required markdown format and nothing else.", structured.SYSTEM_SUFFIX
+    )
+
 
 _PHASE_GUIDANCE = {
     Phase.EARLY: "early: secure high success while loads are still even",
@@ -115,17 +135,27 @@ def _time_facts(ctx: DecisionContext) -> list[str]:
 
 
 def _guidance(ctx: DecisionContext) -> str:
-    threshold = tradeoff_threshold(ctx.mode, ctx.phase)
+    return "\n".join(_situation(ctx) + _framework(ctx) + _steering(ctx))
+
+
+def _situation(ctx: DecisionContext) -> list[str]:
+    """Where the run stands: the phase and its progress, the mode and its weights now."""
     done = ctx.task_index if ctx.allocated is None else ctx.allocated
     progress = done / ctx.total_tasks if ctx.total_tasks else 1.0
-    lines = [
+    return [
         f"Phase: {ctx.phase.value} (progress {progress:.0%}); {_PHASE_GUIDANCE[ctx.phase]}.",
         f"Mode: {ctx.mode.value}, {MODE_DESCRIPTIONS[ctx.mode]}; weights success:balance "
         f"{ctx.weights} now.",
     ]
+
+
+def _framework(ctx: DecisionContext) -> list[str]:
+    """The trade-off rule and the confidence it implies: the same for every decision of a
+    mode and phase."""
     if ctx.team is not None:
-        return "\n".join(lines + team_guidance(ctx))
-    lines += [
+        return team_framework(ctx)
+    threshold = tradeoff_threshold(ctx.mode, ctx.phase)
+    return [
         "Decision framework, among allowed robots: best = highest S, fewest = lowest load, "
         f"gap = S(best) - S(fewest) in points. Gap > {DECISIVE_GAP:g}: best. Gap < "
         f"{NEGLIGIBLE_GAP:g}: fewest. Otherwise best if gap > {threshold:g} (this mode and "
@@ -133,7 +163,10 @@ def _guidance(ctx: DecisionContext) -> str:
         f"Confidence: High if the gap is {CLEAR_MARGIN:g}+ points from the deciding cut-off, "
         "Medium if closer, Low if you depart from the rule.",
     ]
-    return "\n".join(lines + _optimizer_guidance(ctx))
+
+
+def _steering(ctx: DecisionContext) -> list[str]:
+    return team_steering(ctx) if ctx.team is not None else _optimizer_guidance(ctx)
 
 
 def _optimizer_guidance(ctx: DecisionContext) -> list[str]:
@@ -157,9 +190,35 @@ def _format(ctx: DecisionContext) -> str:
     return TEAM_FORMAT if ctx.team is not None else _FORMAT
 
 
-def user_prompt(ctx: DecisionContext) -> str:
+def user_prompt(ctx: DecisionContext, fmt: ReplyFormat = MARKDOWN) -> str:
     """Tier 0: the first try."""
+    if fmt.structured:
+        return _structured(ctx, 0)
     return "\n\n".join([_facts(ctx), _guidance(ctx), _format(ctx)])
+
+
+def _structured(ctx: DecisionContext, tier: int, feedback: str = "") -> str:
+    """A structured run's prompt (docs/reasoners.md#structured-replies): the same parts as the
+    markdown tiers, ordered for the servers' prompt caches (llama.cpp, vLLM and OpenAI reuse
+    the longest prefix already computed): what is the same for every decision of a run
+    first (the reply object, the rule of its mode and phase; at tier 2 the scoring guide and
+    the example), then the task's facts, then the feedback on the last answer."""
+    stable = [structured.json_format(ctx), "\n".join(_framework(ctx))]
+    allowed = ", ".join(structured.allowed_labels(ctx))
+    task = "\n".join([_facts(ctx), *_situation(ctx), f"Allowed now: {allowed}.", *_steering(ctx)])
+    if tier == 0:
+        return "\n\n".join([*stable, task])
+    if tier <= 1:
+        return "\n\n".join([*stable, task, feedback, "Answer again, fixing every problem listed."])
+    if tier == 2:
+        example = [] if ctx.team is not None else [structured.WORKED_EXAMPLE]
+        return "\n\n".join([*stable, _criteria_guide(), *example, task, feedback])
+    steps = (
+        structured.team_step_template(ctx)
+        if ctx.team is not None
+        else (structured.step_template(ctx))
+    )
+    return "\n\n".join([task, feedback, steps])
 
 
 def _feedback_block(feedback: str, quality: float | None, threshold: float) -> str:
@@ -192,19 +251,29 @@ so A takes the task."""
 
 
 def retry_prompt(
-    ctx: DecisionContext, tier: int, feedback: str, quality: float | None, threshold: float
+    ctx: DecisionContext,
+    tier: int,
+    feedback: str,
+    quality: float | None,
+    threshold: float,
+    fmt: ReplyFormat = MARKDOWN,
 ) -> str:
     """Tiers 1-3; a tier above 3 uses tier 3."""
     fb = _feedback_block(feedback, quality, threshold)
+    if fmt.structured:
+        return _structured(ctx, min(tier, 3), fb)
     if tier <= 1:
-        return "\n\n".join([user_prompt(ctx), fb, "Answer again, fixing every problem listed."])
+        return "\n\n".join(
+            [user_prompt(ctx, fmt), fb, "Answer again, fixing every problem listed."]
+        )
     if tier == 2:
         example = [] if ctx.team is not None else [_WORKED_EXAMPLE]
         return "\n\n".join(
             [_facts(ctx), _guidance(ctx), fb, _criteria_guide(), *example, _format(ctx)]
         )
     if ctx.team is not None:
-        return "\n\n".join([_facts(ctx), _guidance(ctx), fb, team_step_template(ctx)])
+        template = structured.team_step_template(ctx) if fmt.structured else team_step_template(ctx)
+        return "\n\n".join([_facts(ctx), _guidance(ctx), fb, template])
     # The step template replaces the framework text, but not the optimizer's choice.
     guidance = _optimizer_guidance(ctx)
     return "\n\n".join(
@@ -245,15 +314,19 @@ def prompt_for(
     feedback: str = "",
     quality: float | None = None,
     threshold: float = 0.6,
+    fmt: ReplyFormat = MARKDOWN,
 ) -> str:
-    return user_prompt(ctx) if tier == 0 else retry_prompt(ctx, tier, feedback, quality, threshold)
+    if tier == 0:
+        return user_prompt(ctx, fmt)
+    return retry_prompt(ctx, tier, feedback, quality, threshold, fmt)
 
 
-def prompt_size(ctx: DecisionContext, tier: int = 0) -> dict[str, int]:
+def prompt_size(ctx: DecisionContext, tier: int = 0, fmt: ReplyFormat = MARKDOWN) -> dict[str, int]:
     """Characters in the system and user prompt (feedback-free for retry tiers)."""
-    user = prompt_for(ctx, tier, feedback="-", quality=0.0)
+    user = prompt_for(ctx, tier, feedback="-", quality=0.0, fmt=fmt)
+    system = system_prompt(fmt)
     return {
-        "system_chars": len(SYSTEM_PROMPT),
+        "system_chars": len(system),
         "user_chars": len(user),
-        "total_chars": len(SYSTEM_PROMPT) + len(user),
+        "total_chars": len(system) + len(user),
     }

@@ -13,6 +13,7 @@ from typing import Any, Protocol
 
 from app.domain.usage import Usage
 from app.reasoners.base import ReasonerReply
+from app.reasoners.give_up import GaveUp
 
 
 class RunCancelled(Exception):
@@ -123,3 +124,7 @@ class Recorder(Protocol):
 
     def usage(self) -> Usage:
         """What the run's recorded LLM calls used (app.domain.usage's rule)."""
+
+    def model_gave_up(self, gave_up: GaveUp) -> None:
+        """The run stopped asking its model (docs/reasoners.md#bounded-cost): recorded once,
+        however often it is told (every later attempt tells it, and a resumed run again)."""

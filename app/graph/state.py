@@ -27,6 +27,7 @@ from app.graph.timing import TimedCursor, first_task
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.graph.verdicts import VerdictCache
 from app.reasoners.base import Reasoner
+from app.reasoners.structured import ReplyFormat
 
 DEFAULT_MAX_RETRIES = 3
 
@@ -64,6 +65,21 @@ class LTAAState(TypedDict, total=False):
     fallback: bool
     robot: int | None  # the robot chosen for the current task (accepted or fallback)
     decision: dict[str, Any] | None  # finalize -> store_and_route scratch, then cleared
+    # docs/reasoners.md#bounded-cost: decided tasks in a row that fell back (held once the
+    # model is given up: app.reasoners.give_up).
+    failing: int
+
+
+@dataclass(frozen=True)
+class ModelUse:
+    """How a run asks its model, and when it stops asking; stored with the run."""
+
+    # docs/reasoners.md#structured-replies: how the prompts ask for the answer, and whether the
+    # reasoner is handed the decision's JSON Schema (markdown: the paper's sections).
+    reply_format: ReplyFormat = ReplyFormat.MARKDOWN
+    # docs/reasoners.md#bounded-cost: after this many tasks in a row ended in the fallback the
+    # model is asked no more (0: never; the reasoners that call no model never give up).
+    give_up_after: int = 0
 
 
 @dataclass
@@ -87,6 +103,7 @@ class GraphContext:
     # docs/schedules.md#the-order-of-decisions: on a timed instance, the robots' timelines and the
     # decision order.
     timed: TimedCursor = field(default_factory=TimedCursor)
+    model_use: ModelUse = field(default_factory=lambda: ModelUse())
 
     @property
     def max_attempts(self) -> int:
@@ -109,6 +126,7 @@ def initial_state(problem: Problem) -> dict[str, Any]:
         "fallback": False,
         "robot": None,
         "decision": None,
+        "failing": 0,
     }
 
 

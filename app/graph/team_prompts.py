@@ -115,9 +115,13 @@ def team_time_facts(ctx: DecisionContext) -> list[str]:
 
 def team_guidance(ctx: DecisionContext) -> list[str]:
     """The decision framework for teams, and the optimizer's team when the run is guided."""
-    facts = _facts_of(ctx)
+    return team_framework(ctx) + team_steering(ctx)
+
+
+def team_framework(ctx: DecisionContext) -> list[str]:
+    """The decision framework for teams (the same for every task of a mode and phase)."""
     threshold = tradeoff_threshold(ctx.mode, ctx.phase)
-    lines = [
+    return [
         "Decision framework for teams: compare the best and the least-loaded team above; gap = "
         f"S(best) - S(least-loaded) in points. Gap > {DECISIVE_GAP:g}: best. Gap < "
         f"{NEGLIGIBLE_GAP:g}: least-loaded. Otherwise best if gap > {threshold:g}, else "
@@ -125,12 +129,17 @@ def team_guidance(ctx: DecisionContext) -> list[str]:
         f"Confidence: High if the gap is {CLEAR_MARGIN:g}+ points from the deciding cut-off, "
         "Medium if closer, Low if you depart from the rule.",
     ]
-    if facts.guided is not None:
-        lines.append(
-            f"Optimizer guidance: the team {describe_team(facts, ctx.labels, facts.guided)} lies "
-            "on the optimal completion of the queue; follow it, or explain why you depart."
-        )
-    return lines
+
+
+def team_steering(ctx: DecisionContext) -> list[str]:
+    """The optimizer's team, when the run is guided."""
+    facts = _facts_of(ctx)
+    if facts.guided is None:
+        return []
+    return [
+        f"Optimizer guidance: the team {describe_team(facts, ctx.labels, facts.guided)} lies "
+        "on the optimal completion of the queue; follow it, or explain why you depart."
+    ]
 
 
 def team_step_template(ctx: DecisionContext) -> str:

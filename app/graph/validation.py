@@ -12,12 +12,8 @@ from dataclasses import dataclass, field
 from app.domain.decision import DecisionContext
 from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
 from app.graph.criteria_text import NUMBER_CITED, score_tradeoff, score_workload
-from app.graph.parsing import (
-    ParsedResponse,
-    count_sentences,
-    mentioned_robots,
-    parse_response,
-)
+from app.graph.parsing import ParsedResponse, count_sentences, mentioned_robots
+from app.graph.reply_reading import read_reply
 from app.graph.team_validation import (
     ACCURACY_EXACT as ACCURACY_EXACT,  # re-exported: tests and tools read them here
 )
@@ -260,5 +256,11 @@ def reasoner_failed(error: str) -> Validation:
 def validate_text(
     text: str, ctx: DecisionContext, threshold: float = DEFAULT_QUALITY_THRESHOLD
 ) -> Validation:
-    features = ctx.team.features if ctx.team is not None else ()
-    return score(parse_response(text, ctx.robot_names, ctx.labels, features), ctx, threshold)
+    """A reply in either format (app.graph.reply_reading): a structured reply that breaks
+    its schema is hard-invalid, naming the field; otherwise both are scored alike."""
+    read = read_reply(text, ctx)
+    if read.schema_error is not None:
+        zeros = dict.fromkeys(WEIGHTS, 0.0)
+        why = f"the JSON reply breaks its schema: {read.schema_error}"
+        return Validation(read.parsed.robot, zeros, {}, 0.0, False, why, read.parsed)
+    return score(read.parsed, ctx, threshold)

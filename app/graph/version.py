@@ -21,7 +21,10 @@ from app.graph.state import LTAAState, TaskView
 # (docs/allocation.md#teams) and unit-aware candidate lists on instances with team tasks.
 # 3: a task with a lead may take idle time before its predecessor on the same robot
 # (docs/schedules.md#links), so a timed run with leads places some tasks earlier.
-BEHAVIOUR_VERSION = 3
+# 4: structured replies (docs/reasoners.md#structured-replies: the run's reply format shapes
+# its prompts, and a JSON reply is read against the decision's schema) and the give-up rule
+# (docs/reasoners.md#bounded-cost: the `failing` count in the state).
+BEHAVIOUR_VERSION = 4
 
 
 def _annotations(schema: type) -> dict[str, str]:

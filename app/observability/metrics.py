@@ -21,9 +21,9 @@ from prometheus_client.registry import Collector
 from sqlalchemy import case, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.domain.lifecycle import RunStatus
+from app.domain.lifecycle import EventKind, RunStatus
 from app.domain.review import ReviewState
-from app.store.models import Attempt, Decision, Review, Run
+from app.store.models import Attempt, Decision, Review, Run, RunEvent
 
 RUN_STATUSES = tuple(s.value for s in RunStatus)
 RETRY_TIERS = ("1", "2", "3")
@@ -66,6 +66,7 @@ class RunCounts:
     below_threshold: int = 0
     retries_by_tier: dict[str, int] = field(default_factory=dict)
     reviews_pending: int = 0
+    llm_gave_up: int = 0
 
 
 def _count_if(condition: Any) -> Any:
@@ -104,6 +105,14 @@ def read_counts(session: Session) -> RunCounts:
             select(Attempt.tier, func.count()).where(Attempt.tier > 0).group_by(Attempt.tier)
         )
     }
+    counts.llm_gave_up = (
+        session.scalar(
+            select(func.count())
+            .select_from(RunEvent)
+            .where(RunEvent.kind == EventKind.LLM_GAVE_UP.value)
+        )
+        or 0
+    )
     counts.reviews_pending = (
         session.scalar(
             select(func.count())
@@ -153,6 +162,12 @@ def families(c: RunCounts) -> Iterator[Metric]:
     for tier in sorted({*RETRY_TIERS, *c.retries_by_tier}, key=int):
         retries.add_metric([tier], c.retries_by_tier.get(tier, 0))
     yield retries
+    yield CounterMetricFamily(
+        "ltaa_llm_gave_up",
+        "Runs that stopped asking their model after it failed too many tasks in a row "
+        "(docs/reasoners.md#bounded-cost)",
+        c.llm_gave_up,
+    )
     yield GaugeMetricFamily(
         "ltaa_reviews_pending", "Decisions waiting for a supervisor's review", c.reviews_pending
     )

@@ -28,6 +28,7 @@ class Why(StrEnum):
     CLEAR_CUT = "clear-cut"  # llm_scope 'contested': the decision was not contested
     BUDGET_EXHAUSTED = "budget_exhausted"  # the run's token budget was spent
     FALLBACK = "fallback"  # every attempt failed: the conservative fallback decided
+    GAVE_UP = "gave_up"  # the model failed too many tasks in a row (app.reasoners.give_up)
 
 
 def attributed(reply: ReasonerReply, reasoner: str) -> ReasonerReply:

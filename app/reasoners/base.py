@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from app.domain.decision import DecisionContext
+from app.reasoners.structured import ReplySchema
 
 
 @dataclass(frozen=True)
@@ -32,9 +33,33 @@ class ReasonerError(RuntimeError):
 
 
 class Reasoner(Protocol):
+    """Answers one decision. With a `schema` (a structured run,
+    docs/reasoners.md#structured-replies) a model is asked for that JSON object; a reasoner
+    that calls no model (rules, replay) may answer in markdown all the same: the graph reads
+    whatever a reply holds."""
+
     name: str
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply: ...
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply: ...
+
+
+class ModelCaller(Protocol):
+    """One call of a language model, outside any allocation decision (the Decomposition
+    Agent's too): free text without a schema, else the JSON object the schema describes,
+    in at most `max_tokens` output tokens. The `anthropic` and `openai` reasoners are
+    both; transport failures raise ReasonerError, refusals ReasonerRejectedError."""
+
+    name: str
+
+    def complete(
+        self, system: str, user: str, *, schema: ReplySchema | None, max_tokens: int
+    ) -> ReasonerReply: ...
 
 
 def close_reasoner(reasoner: Reasoner) -> None:

@@ -19,6 +19,7 @@ from app.domain.lifecycle import EventKind
 from app.reasoners.attribution import Why, stood_in
 from app.reasoners.base import Reasoner, ReasonerReply, close_reasoner
 from app.reasoners.rules import RulesReasoner
+from app.reasoners.structured import ReplySchema
 
 BUDGET_EXHAUSTED = EventKind.BUDGET_EXHAUSTED.value  # the run event recording the switch
 
@@ -56,9 +57,15 @@ class TokenBudgetReasoner:
     def exhausted(self) -> bool:
         return self.spent >= self.budget
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply:
         if not self.exhausted:
-            reply = self._inner.reason(system, user, context)
+            reply = self._inner.reason(system, user, context, schema)
             if reply.model is not None:
                 self.spent += reply.input_tokens + reply.output_tokens
             return reply

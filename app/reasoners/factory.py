@@ -13,6 +13,8 @@ from app.reasoners.base import Reasoner, close_reasoner
 from app.reasoners.replay import RecordedReply, ReplayReasoner, ReplyKey
 from app.reasoners.rules import RulesReasoner
 from app.reasoners.scope import DEFAULT_LLM_MARGIN, scoped
+from app.reasoners.structured import ReplyFormat
+from app.reasoners.transport import DEFAULT_MAX_TOKENS
 
 REASONERS = ("rules", "anthropic", "openai", "replay")
 LLM_REASONERS = ("anthropic", "openai")  # the ones that call a model (and cost tokens)
@@ -32,6 +34,7 @@ class ReasonerSettings(Protocol):
     openai_model: str | None
     openai_timeout_s: float
     openai_max_transport_retries: int
+    llm_max_tokens: list[int]
 
 
 def _secret(value: SecretStr | str | None) -> str | None:
@@ -74,8 +77,11 @@ def make_reasoner(
     replies: Mapping[ReplyKey, RecordedReply] | None = None,
     llm_scope: str = "all",
     llm_margin: float | None = None,
+    reply_format: str = ReplyFormat.JSON_SCHEMA.value,
 ) -> Reasoner:
     """Explicit arguments win over settings, which win over the reasoner's defaults.
+    `reply_format` (docs/reasoners.md#structured-replies): the dialect an `openai` reasoner
+    asks a structured reply in (the graph decides whether to ask for one).
 
     'replay' reads no database: the caller loads the recorded replies of run `replay_of`
     and passes them in `replies`. `llm_scope` 'contested' asks an LLM reasoner only for
@@ -92,6 +98,7 @@ def make_reasoner(
         transport_retries=transport_retries,
         replay_of=replay_of,
         replies=replies,
+        reply_format=ReplyFormat(reply_format),
     )
     if name not in LLM_REASONERS:
         return reasoner
@@ -111,6 +118,7 @@ def _make_reasoner(
     transport_retries: int | None,
     replay_of: str | None,
     replies: Mapping[ReplyKey, RecordedReply] | None,
+    reply_format: ReplyFormat,
 ) -> Reasoner:
     if name == "rules":
         return RulesReasoner()
@@ -145,6 +153,7 @@ def _make_reasoner(
             base_url=base_url,
             timeout=timeout,
             transport_retries=transport_retries,
+            reply_format=reply_format,
         )
     key = resolve_api_key(api_key, settings)
     if key is None:
@@ -172,6 +181,7 @@ def _make_reasoner(
             anthropic_reasoner.DEFAULT_TRANSPORT_RETRIES,
         ),
         base_url=pick(base_url, "anthropic_base_url", None),
+        max_tokens=tuple(pick(None, "llm_max_tokens", DEFAULT_MAX_TOKENS)),
     )
 
 
@@ -194,6 +204,7 @@ def _openai_reasoner(
     base_url: str | None,
     timeout: float | None,
     transport_retries: int | None,
+    reply_format: ReplyFormat,
 ) -> Reasoner:
     """Base URL and model are required; nothing falls back to OPENAI_* or a default host."""
     url = pick(base_url, "openai_base_url", None)
@@ -216,4 +227,6 @@ def _openai_reasoner(
             "openai_max_transport_retries",
             openai_reasoner.DEFAULT_TRANSPORT_RETRIES,
         ),
+        max_tokens=tuple(pick(None, "llm_max_tokens", DEFAULT_MAX_TOKENS)),
+        reply_format=reply_format,
     )

@@ -30,14 +30,18 @@ from openai.types.chat import ChatCompletion
 
 from app.domain.decision import DecisionContext
 from app.reasoners.base import ReasonerError, ReasonerReply
+from app.reasoners.mechanism import StructuredMechanism, response_format
+from app.reasoners.structured import ReplyFormat, ReplySchema
 from app.reasoners.transport import (
     DEFAULT_MAX_TOKENS,
     DEFAULT_TEMPERATURE,
     DEFAULT_TIMEOUT_S,
     DEFAULT_TRANSPORT_RETRIES,
+    TierCaps,
     connection_failed,
     parse_reply,
     status_failed,
+    tier_caps,
 )
 
 # Named in the message of a refused call, with what the operator should check.
@@ -71,15 +75,17 @@ class OpenAIReasoner:
         model: str,
         api_key: str | None = None,
         temperature: float | None = DEFAULT_TEMPERATURE,
-        max_tokens: int = DEFAULT_MAX_TOKENS,
+        max_tokens: TierCaps | int | tuple[int, ...] = DEFAULT_MAX_TOKENS,
         timeout: float = DEFAULT_TIMEOUT_S,
         transport_retries: int = DEFAULT_TRANSPORT_RETRIES,
+        reply_format: ReplyFormat = ReplyFormat.JSON_SCHEMA,
     ) -> None:
         self.model = model
         self.temperature = temperature
-        self.max_tokens = max_tokens
+        self.caps = tier_caps(max_tokens)
         self.transport_retries = transport_retries
         self.base_url = base_url
+        self.mechanism = StructuredMechanism(reply_format)
         self._http = httpx2.Client(trust_env=False, follow_redirects=False, timeout=timeout)
         self._client = openai.OpenAI(
             api_key=api_key or NO_KEY,
@@ -91,25 +97,65 @@ class OpenAIReasoner:
         )
         _forget_environment(self._client)
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
-        sampling: dict[str, Any] = {}
-        if self.temperature is not None:
-            sampling["temperature"] = self.temperature
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply:
+        return self.complete(system, user, schema=schema, max_tokens=self.caps.at(context.tier))
+
+    def complete(
+        self, system: str, user: str, *, schema: ReplySchema | None, max_tokens: int
+    ) -> ReasonerReply:
+        """One Chat Completions call; with a schema, in the dialect the server takes
+        (json_schema, or json_object + schema once the server has refused json_schema)."""
         started = time.perf_counter()
+        messages: list[dict[str, str]] = [
+            {"role": "system", "content": system},
+            {"role": "user", "content": user},
+        ]
+        asked = self.mechanism.current if schema is not None else None
         try:
-            raw = self._client.chat.completions.with_raw_response.create(
-                model=self.model,
-                max_tokens=self.max_tokens,
-                messages=[
-                    {"role": "system", "content": system},
-                    {"role": "user", "content": user},
-                ],
-                **sampling,
-            )
+            try:
+                raw = self._create(messages, max_tokens, schema, asked)
+            except openai.APIStatusError as exc:
+                if schema is None or not self.mechanism.refused(exc.status_code, exc.message):
+                    raise
+                # The server does not take json_schema (llama-cpp-python answers 500 naming
+                # the field, after the SDK's retries): ask again in its own dialect, and so
+                # for the rest of the run.
+                asked = self.mechanism.current
+                raw = self._create(messages, max_tokens, schema, asked)
         except openai.APIConnectionError as exc:  # includes APITimeoutError
             raise connection_failed(exc) from exc
         except openai.APIStatusError as exc:
             raise status_failed(exc, api=API, model=self.model, check=CHECK) from exc
+        return self._reply(raw, started, asked)
+
+    def _create(
+        self,
+        messages: list[dict[str, str]],
+        max_tokens: int,
+        schema: ReplySchema | None,
+        asked: ReplyFormat | None,
+    ) -> LegacyAPIResponse[Any]:
+        sampling: dict[str, Any] = {}
+        if self.temperature is not None:
+            sampling["temperature"] = self.temperature
+        if schema is not None and asked is not None:
+            sampling["extra_body"] = {"response_format": response_format(schema, asked)}
+        return self._client.chat.completions.with_raw_response.create(
+            model=self.model,
+            max_tokens=max_tokens,
+            messages=messages,  # type: ignore[arg-type]
+            **sampling,
+        )
+
+    def _reply(
+        self, raw: LegacyAPIResponse[Any], started: float, asked: ReplyFormat | None
+    ) -> ReasonerReply:
         completion = _completion(raw)
         latency_ms = (time.perf_counter() - started) * 1000.0
         choice = completion.choices[0]
@@ -119,6 +165,8 @@ class OpenAIReasoner:
             "message_id": completion.id,
             "temperature": self.temperature,
         }
+        if asked is not None:
+            extra["response_format"] = asked.value
         return ReasonerReply(
             text=choice.message.content or "",
             input_tokens=usage.prompt_tokens if usage else 0,

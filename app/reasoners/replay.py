@@ -23,6 +23,7 @@ from typing import Any
 
 from app.domain.decision import DecisionContext
 from app.reasoners.base import ReasonerError, ReasonerReply
+from app.reasoners.structured import ReplySchema
 
 ReplyKey = tuple[int, int]  # (task_index, attempt)
 
@@ -74,7 +75,13 @@ class ReplayReasoner:
         self.run_id = run_id
         self._replies = replies
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply:
         key = (context.task_index, context.attempt)
         recorded = self._replies.get(key)
         if recorded is None:

@@ -10,6 +10,7 @@ from app.domain.decision import DecisionContext, Members, percent
 from app.domain.team_choice import TeamRule, describe_team, team_load, team_rule, team_summary
 from app.domain.tradeoff import TradeOff, expected_confidence, rule_for
 from app.reasoners.base import ReasonerReply
+from app.reasoners.structured import ReplySchema
 
 
 def choose(ctx: DecisionContext) -> tuple[int, TradeOff]:
@@ -148,5 +149,11 @@ def compose_answer(ctx: DecisionContext) -> str:
 class RulesReasoner:
     name = "rules"
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply:
         return ReasonerReply(text=compose_answer(context))

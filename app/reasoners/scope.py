@@ -23,6 +23,7 @@ from app.domain.tradeoff import rule_for
 from app.reasoners.attribution import Why, stood_in
 from app.reasoners.base import Reasoner, ReasonerReply, close_reasoner
 from app.reasoners.rules import RulesReasoner
+from app.reasoners.structured import ReplySchema
 
 DEFAULT_LLM_MARGIN = 5.0  # points either side of the threshold
 
@@ -59,9 +60,15 @@ class ContestedOnlyReasoner:
         self._inner = inner
         self._rules = RulesReasoner()
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply:
         if is_contested(context, self.margin):
-            return self._inner.reason(system, user, context)
+            return self._inner.reason(system, user, context, schema)
         return stood_in(self._rules.reason(system, user, context), Why.CLEAR_CUT)
 
     def close(self) -> None:

@@ -12,7 +12,8 @@ it becomes ReasonerRejectedError, which ends the run or request with that messag
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
 import pydantic
@@ -27,11 +28,36 @@ TRANSIENT_STATUSES = frozenset({408, 409, 429})
 # (docs/reasoners.md#the-anthropic-reasoner-claude), and one transport budget so that the providers
 # fail alike.
 DEFAULT_TEMPERATURE = 0.1
-DEFAULT_MAX_TOKENS = 700  # the required answer is ~150-300 tokens; room for a long one
+# Output tokens per attempt, by prompt tier (0 the first try, 3 the step template): the
+# answer is ~150-300 tokens in either format (a structured reply's strings are capped by
+# the schema's maxLength), so the cap bounds a model that rambles or echoes the prompt
+# (docs/reasoners.md#bounded-cost). A team decision's reply is longer: one line per unit.
+DEFAULT_MAX_TOKENS = (400, 400, 500, 500)
+MIN_TOKEN_CAP, MAX_TOKEN_CAP = 32, 8192
 DEFAULT_TIMEOUT_S = 60.0
 DEFAULT_TRANSPORT_RETRIES = 3
 
 _Reply = TypeVar("_Reply", bound=pydantic.BaseModel)
+
+
+@dataclass(frozen=True)
+class TierCaps:
+    """The output-token cap of each prompt tier; tiers past the last take the last."""
+
+    caps: tuple[int, ...]
+
+    def at(self, tier: int) -> int:
+        return self.caps[min(max(tier, 0), len(self.caps) - 1)]
+
+
+def tier_caps(value: TierCaps | int | Sequence[int]) -> TierCaps:
+    """One cap for every tier, or one per tier."""
+    if isinstance(value, TierCaps):
+        return value
+    caps = (value,) if isinstance(value, int) else tuple(value)
+    if not caps:
+        raise ValueError("at least one output-token cap is needed")
+    return TierCaps(caps)
 
 
 class _Request(Protocol):

@@ -16,7 +16,8 @@ from app.graph.recorder import AttemptRecord, DecisionRecord, RunCancelled
 from app.observability.logs import bind
 from app.reasoners.attribution import REASONER, RULES
 from app.reasoners.base import Reasoner
-from app.reasoners.budget import BUDGET_EXHAUSTED, BudgetExhausted, TokenBudgetReasoner
+from app.reasoners.budget import BudgetExhausted, TokenBudgetReasoner
+from app.reasoners.give_up import GaveUp
 from app.runs import lifecycle, records
 from app.store import chain, fenced, leases
 from app.store import decision_repository as decision_repo
@@ -173,6 +174,7 @@ class SqlRecorder:
         self._defer = defer_offline
         self._pending: dict[tuple[int, int], dict[str, Any]] = {}
         self._replied: set[tuple[int, int]] = set()  # attempts stored with their reply
+        self._gave_up = False  # the run's llm_gave_up event is known to be written
 
     def check_cancelled(self) -> None:
         if self._stop.lease_lost.is_set():
@@ -320,6 +322,40 @@ class SqlRecorder:
         with self._sessions() as session:
             return records.usage_of(decision_repo.reply_costs(session=session, run_id=self.run_id))
 
+    def model_gave_up(self, gave_up: GaveUp) -> None:
+        if self._gave_up:
+            return
+        if record_once(
+            self._sessions, self._fence, self.run_id, EventKind.LLM_GAVE_UP, gave_up.as_dict()
+        ):
+            log.warning(
+                "the model failed %d tasks in a row: the rules reasoner decides from task "
+                "index %d on",
+                gave_up.failing,
+                gave_up.task_index,
+                extra={"run_id": self.run_id},
+            )
+        self._gave_up = True
+
+
+def record_once(
+    sessions: sessionmaker[Session],
+    fence: Callable[[Session], None] | None,
+    run_id: str,
+    kind: EventKind,
+    detail: dict[str, Any],
+) -> bool:
+    """Write a run event that a run tells once but may be told again after a restart (the
+    token budget spent, the model given up); False when it was written before. `fence`:
+    the run's write check (a process that lost the run writes no event either)."""
+    with transaction(sessions) as session:
+        if fence is not None:
+            fence(session)
+        if repo.has_event(session=session, run_id=run_id, kind=kind.value):
+            return False
+        lifecycle.record_event(session, run_id=run_id, kind=kind, detail=detail)
+    return True
+
 
 # -- the token budget -------------------------------------------------------------------------
 # A run's token budget wired to its record (the rule itself: app.reasoners.budget).
@@ -346,18 +382,11 @@ def with_token_budget(
         spent = decision_repo.tokens_spent(session=session, run_id=run_id)
 
     def record(exhausted: BudgetExhausted) -> None:
-        with transaction(sessions) as session:
-            if fence is not None:
-                fence(session)
-            # A run restarted after the switch is told again: the event stays single.
-            if repo.has_event(session=session, run_id=run_id, kind=BUDGET_EXHAUSTED):
-                return
-            lifecycle.record_event(
-                session,
-                run_id=run_id,
-                kind=EventKind.BUDGET_EXHAUSTED,
-                detail=exhausted.as_dict(),
-            )
+        # A run restarted after the switch is told again: the event stays single.
+        if not record_once(
+            sessions, fence, run_id, EventKind.BUDGET_EXHAUSTED, exhausted.as_dict()
+        ):
+            return
         log.warning(
             "token budget spent (%d of %d tokens): the rules reasoner decides from "
             "task index %d on",

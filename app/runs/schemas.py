@@ -31,7 +31,7 @@ from app.http.times import Timestamp
 from app.runs.spec import ORDER_INSTANCE_FIELDS, RUN_PARAMETERS, RunOrder
 from app.runs.time_schemas import DecisionTimes
 
-StandIn = Literal["clear-cut", "budget_exhausted", "fallback"]
+StandIn = Literal["clear-cut", "budget_exhausted", "gave_up", "fallback"]
 # Run ids are uuid4 hex; the pattern is looser on purpose, and only keeps out what a
 # database may refuse in a query (PostgreSQL rejects a NUL character with an error, a 500).
 RUN_ID_PATTERN = r"^[A-Za-z0-9_-]+$"

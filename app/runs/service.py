@@ -180,6 +180,8 @@ def spec_for(order: RunOrder, *, sessions: sessionmaker[Session], settings: Sett
         review=review_gate.policy_for(order.review, instance),
         objective=problem.objective.kind.value,
         min_expected_success=problem.objective.min_expected_success,
+        reply_format=settings.llm_reply_format,
+        llm_give_up_after=settings.llm_give_up_after,
         **scope,
     )
     return learned_spec(spec, sessions=sessions, settings=settings)

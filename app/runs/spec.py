@@ -143,6 +143,13 @@ class RunSpec:
     # stored before it existed read as the default.
     objective: str = ObjectiveKind.SUCCESS_THEN_MAKESPAN.value
     min_expected_success: float = 0.0
+    # How the run asks its model (docs/reasoners.md#structured-replies) and after how many
+    # failed tasks in a row it stops asking (docs/reasoners.md#bounded-cost): the server's
+    # settings when the run was created, so a resume, a replay and a revision ask and read
+    # replies the same way. Specs stored before these existed asked in markdown and never
+    # gave up.
+    reply_format: str = "markdown"
+    llm_give_up_after: int = 0
 
     @property
     def review_policy(self) -> ReviewPolicy | None:

@@ -41,7 +41,8 @@ class AttemptOut(BaseModel):
         None,
         description="Set when the rules reasoner answered instead of the run's LLM: "
         "'clear-cut' (llm_scope 'contested' and the decision was not contested) or "
-        "'budget_exhausted' (the run's token budget was spent)",
+        "'budget_exhausted' (the run's token budget was spent) or 'gave_up' (the model "
+        "failed too many tasks in a row: docs/reasoners.md#bounded-cost)",
     )
     replayed_from: str | None = Field(
         None,

@@ -40,7 +40,7 @@ from app.runs.ownership import Ownership
 from app.runs.recorder import Fence, RunStop, SqlRecorder, fences, status_fence, with_token_budget
 from app.runs.replay_source import recorded_replies
 from app.runs.spec import RunSpec
-from app.solvers.ltaa import execute_ltaa
+from app.solvers.ltaa import execute_ltaa, model_use_for
 from app.store import repository as repo
 from app.store.db import transaction
 
@@ -254,6 +254,7 @@ class RunWorker:
                 resume_with=admission.resume_with,
                 rate_notes=spec.rate_notes,
                 plan=plan,
+                model_use=model_use_for(spec.reasoner, spec.reply_format, spec.llm_give_up_after),
             )
         except RunCancelled:
             self._end_stopped(run_id, stop)
@@ -386,6 +387,7 @@ class RunWorker:
             replies=replies,
             llm_scope=spec.llm_scope,
             llm_margin=spec.llm_margin,
+            reply_format=spec.reply_format,
         )
         return with_token_budget(
             reasoner, run_id=run_id, budget=spec.token_budget, sessions=self._sessions, fence=fence

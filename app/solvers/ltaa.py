@@ -26,12 +26,13 @@ from app.graph.execution import Execution, execute
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import DecisionRecord, Recorder
 from app.graph.review import ReviewGate
-from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext, Guidance, Regret
+from app.graph.state import DEFAULT_MAX_RETRIES, GraphContext, Guidance, ModelUse, Regret
 from app.graph.timing import decision_teams
 from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from app.reasoners.base import Reasoner
-from app.reasoners.factory import make_reasoner
+from app.reasoners.factory import LLM_REASONERS, make_reasoner
 from app.reasoners.scope import DEFAULT_LLM_MARGIN
+from app.reasoners.structured import ReplyFormat
 from app.solvers.base import Solution, Solver, SolverInfo, SolverOptions
 from app.solvers.oracle import CompletionOracle
 from app.solvers.timed_guidance import (
@@ -56,8 +57,20 @@ class LTAAOptions(SolverOptions):
     # disagrees with the rule.
     llm_scope: Literal["all", "contested"] = "all"
     llm_margin: float = Field(DEFAULT_LLM_MARGIN, ge=0.0, le=100.0)
+    # docs/reasoners.md#structured-replies: how the model is asked; None: the server's
+    # LTAA_LLM_REPLY_FORMAT.
+    reply_format: Literal["json_schema", "json_object", "markdown"] | None = None
     # No api_key / base_url here: a request must not choose where the server sends its
     # key (SSRF) nor carry secrets into logs; both come from the server's settings.
+
+
+def model_use_for(reasoner: str, reply_format: str, give_up_after: int) -> ModelUse:
+    """How a run asks its model: in `reply_format`, given up after `give_up_after` failed
+    tasks in a row; a reasoner that calls no model (rules, replay) is never given up."""
+    return ModelUse(
+        reply_format=ReplyFormat(reply_format),
+        give_up_after=give_up_after if reasoner in LLM_REASONERS else 0,
+    )
 
 
 def graph_context(
@@ -72,6 +85,7 @@ def graph_context(
     recorded_reviews: Mapping[int, Resolution] | None = None,
     rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] | None = None,
     plan: GuidancePlan | None = None,
+    model_use: ModelUse | None = None,
 ) -> GraphContext:
     """The LTAA graph's run context, with exact regret always, guidance on request, and the
     review gate when the run has a review policy (or replays recorded resolutions).
@@ -121,6 +135,7 @@ def graph_context(
         regret=None if problem.instance.timed else regret,
         review=gate,
         rate_notes=rate_notes or {},
+        model_use=model_use or ModelUse(),
     )
 
 
@@ -140,6 +155,7 @@ def execute_ltaa(
     resume_with: Any = None,
     rate_notes: Mapping[str, Mapping[str, tuple[str, int]]] | None = None,
     plan: GuidancePlan | None = None,
+    model_use: ModelUse | None = None,
 ) -> Execution:
     """The one execution path of an LTAA problem (durable runs, `ltaa run` and the
     synchronous solver): its context with exact regret (and guidance on request), then
@@ -156,6 +172,7 @@ def execute_ltaa(
         recorded_reviews=recorded_reviews,
         rate_notes=rate_notes,
         plan=plan,
+        model_use=model_use,
     )
     return execute(graph, context, thread_id, resume=resume, resume_with=resume_with)
 
@@ -206,6 +223,10 @@ class LTAASolver(Solver):
 
     def _solve(self, problem: Problem, *, seed: int, options: Any) -> Solution:
         opts: LTAAOptions = options
+        reply_format = str(
+            opts.reply_format
+            or getattr(self.settings, "llm_reply_format", ReplyFormat.JSON_SCHEMA.value)
+        )
         try:
             reasoner = make_reasoner(
                 opts.reasoner,
@@ -215,6 +236,7 @@ class LTAASolver(Solver):
                 timeout=opts.timeout,
                 llm_scope=opts.llm_scope,
                 llm_margin=opts.llm_margin,
+                reply_format=reply_format,
             )
         except DomainError as exc:
             raise DomainError("options.reasoner", exc.message, code=exc.code) from None
@@ -235,6 +257,9 @@ class LTAASolver(Solver):
                 max_retries=opts.max_retries,
                 guidance=opts.guidance,
                 plan=plan,
+                model_use=model_use_for(
+                    opts.reasoner, reply_format, getattr(self.settings, "llm_give_up_after", 0)
+                ),
             )
         except DomainError as exc:
             # e.g. the Messages API refusing the model: point at the request's option.

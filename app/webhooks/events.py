@@ -22,6 +22,7 @@ class WebhookEventType(StrEnum):
     REVIEW_RESOLVED = "review.resolved"
     RUN_SIGNED_OFF = "run.signed_off"
     BUDGET_EXHAUSTED = "budget.exhausted"
+    LLM_GAVE_UP = "llm.gave_up"
 
 
 # Run event kind -> webhook type. Kinds absent here (started, resumed, ...) send nothing.
@@ -37,6 +38,7 @@ TYPE_OF_KIND: dict[str, WebhookEventType] = {
     EventKind.CANCELLED: WebhookEventType.RUN_CANCELLED,
     EventKind.INTERRUPTED: WebhookEventType.RUN_INTERRUPTED,
     EventKind.BUDGET_EXHAUSTED: WebhookEventType.BUDGET_EXHAUSTED,
+    EventKind.LLM_GAVE_UP: WebhookEventType.LLM_GAVE_UP,
     EventKind.SUPERSEDED: WebhookEventType.RUN_SUPERSEDED,
     EventKind.REVISED: WebhookEventType.RUN_REVISED,
     EventKind.REVIEW_REQUESTED: WebhookEventType.REVIEW_REQUESTED,

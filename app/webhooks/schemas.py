@@ -26,6 +26,7 @@ EventName = Literal[
     "review.resolved",
     "run.signed_off",
     "budget.exhausted",
+    "llm.gave_up",
 ]
 # One list of names: the Literal (for the OpenAPI enum) is the enum plus "*".
 assert set(get_args(EventName)) == {ALL, *WebhookEventType}

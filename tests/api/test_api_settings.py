@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
 from pathlib import Path
 
 import pytest
 
-from app.config import Settings, get_settings
+from app.config import Settings, SettingsError, get_settings
+from tests.support.server import BIN
 
 
 def test_defaults_derive_paths_from_data_dir(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -47,5 +50,43 @@ def test_api_key_from_either_variable_and_never_printed(
 
 def test_invalid_environment_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("LTAA_MAX_CONCURRENT_RUNS", "0")
-    with pytest.raises(ValueError, match="max_concurrent_runs"):
+    with pytest.raises(ValueError, match="LTAA_MAX_CONCURRENT_RUNS=0 is refused"):
         get_settings()
+
+
+LLM_REFUSALS = {
+    "LTAA_LLM_MAX_TOKENS=10": "each output-token cap must be 32-8192",
+    "LTAA_LLM_MAX_TOKENS=400,400,500,500,600": "one per tier 0-3, not 5",
+    "LTAA_LLM_MAX_TOKENS=many": "=many is refused: Input should be a valid integer",
+    "LTAA_LLM_GIVE_UP_AFTER=-1": "greater than or equal to 0",
+    "LTAA_LLM_REPLY_FORMAT=xml": "'json_schema', 'json_object' or 'markdown'",
+}
+
+
+@pytest.mark.parametrize("setting,why", LLM_REFUSALS.items(), ids=LLM_REFUSALS.keys())
+def test_an_llm_setting_out_of_range_is_refused_naming_it(
+    setting: str, why: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    name, value = setting.split("=", 1)
+    monkeypatch.setenv(name, value)
+    with pytest.raises(SettingsError) as refused:
+        get_settings()
+    assert str(refused.value).startswith("the service cannot start: ")
+    assert name in str(refused.value) and why in str(refused.value)
+
+
+def test_the_server_itself_stops_at_start_with_the_sentence(tmp_path: Path) -> None:
+    """docs/reasoners.md#bounded-cost: the server, as `make run` starts it, refuses."""
+    env = {**os.environ, "LTAA_DATA_DIR": str(tmp_path), "LTAA_LLM_GIVE_UP_AFTER": "-1"}
+    started = subprocess.run(
+        [str(BIN / "uvicorn"), "app.asgi:create_app", "--factory", "--port", "1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert started.returncode != 0
+    assert started.stderr.strip().splitlines()[-1] == (
+        "app.config.SettingsError: the service cannot start: LTAA_LLM_GIVE_UP_AFTER=-1 is "
+        "refused: Input should be greater than or equal to 0."
+    )

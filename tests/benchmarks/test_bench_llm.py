@@ -23,8 +23,10 @@ def runner(tmp_path: Path) -> CliRunner:
     return CliRunner(env={"LTAA_DATA_DIR": str(tmp_path / "data"), "COLUMNS": "120"})
 
 
-def cells_of(report: str) -> list[list[str]]:
-    body = report.split("## Every cell", 1)[1]
+def cells_of(report: str, title: str = "") -> list[list[str]]:
+    """The `Every cell` rows of the section titled `title` (default: the first section)."""
+    section = report.split(f"## {title}", 1)[1] if title else report
+    body = section.split("### Every cell", 1)[1].split("\n## ", 1)[0]
     rows = [line for line in body.splitlines() if line.startswith("| ")][1:]
     return [[cell.strip() for cell in row.strip("|").split("|")] for row in rows]
 
@@ -69,14 +71,39 @@ def test_bench_llm_writes_the_report_from_real_calls(
         ("baseline", "contested", "no"),
         ("baseline", "contested", "yes"),
     ]
-    asked = [int(re.search(r"\((\d+)/6\)", c[6]).group(1)) for c in cells]  # type: ignore[union-attr]
+    assert {c[4] for c in cells} == {"json_schema"}  # the default: structured replies
+    asked = [int(re.search(r"\((\d+)/6\)", c[7]).group(1)) for c in cells]  # type: ignore[union-attr]
     assert [asked[i] for i in (0, 1, 4, 5)] == [N_TASKS] * 4  # scope all asks every task
     assert all(asked[i] <= N_TASKS for i in (2, 3, 6, 7))
     assert served == sum(asked) + 1  # every asked task once, plus the one retry
-    assert cells[0][8] == "1 / 0 / 0" and cells[0][7] == "83%"  # 5 of 6 at the first try
-    reported = sum(float(c[4].replace(",", "")) * N_TASKS for c in cells)
+    assert cells[0][10] == "1 / 0 / 0" and cells[0][8] == "83%"  # 5 of 6 at the first try
+    assert cells[0][9] == str(N_TASKS)  # the model's own answers decided every task
+    assert {c[12] for c in cells} == {"0"} and {c[13] for c in cells} == {"-"}
+    reported = sum(float(c[5].replace(",", "")) * N_TASKS for c in cells)
     assert reported == pytest.approx(tokens, abs=len(cells))  # tokens/task rounded per cell
     assert "Traceback" not in result.output
+
+
+def test_a_run_writes_its_own_section_and_keeps_the_others(
+    runner: CliRunner, tmp_path: Path, provider: Provider
+) -> None:
+    out = tmp_path / "llm-benchmark.md"
+    with provider.fake() as api:
+        base = ["bench-llm", "--reasoner", provider.reasoner, "--model", provider.model]
+        base += ["--scenario", "baseline", "--mode", "balanced", "--tasks", "3", "--paper-only"]
+        for fmt in ("markdown", "json_object", "markdown"):
+            args = [*base, "--format", fmt, "--give-up", "0", "--out", str(out)]
+            result = runner.invoke(cli, args, env=provider.env(api))
+            assert result.exit_code == 0, result.output
+    report = out.read_text()
+    titles = [line for line in report.splitlines() if line.startswith("## ")]
+    assert titles == [
+        f"## {provider.model}: json_object, never given up",
+        f"## {provider.model}: markdown, never given up",
+    ]
+    assert report.count("# LLM benchmark") == 1
+    [row] = cells_of(report, titles[1][3:])
+    assert row[2:5] == ["all", "no", "markdown"]
 
 
 def test_bench_llm_without_a_configured_server_says_what_to_set(

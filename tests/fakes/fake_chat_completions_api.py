@@ -31,6 +31,13 @@ from tests.fakes.fake_messages_api import (
 
 __all__ = ["FakeChatCompletionsAPI", "Reply", "Served", "good_responder"]
 
+# What llama-cpp-python 0.3.36's server answers `response_format: {"type": "json_schema"}`
+# with (HTTP 500), measured against the real server.
+LLAMA_CPP_REFUSAL = (
+    "1 validation error:\n  {'type': 'literal_error', 'loc': ('body', 'response_format', "
+    "'type'), 'msg': \"Input should be 'text' or 'json_object'\", 'input': 'json_schema'}"
+)
+
 _ERROR_TYPES = {
     400: "invalid_request_error",
     401: "invalid_request_error",
@@ -42,6 +49,19 @@ _ERROR_TYPES = {
 class FakeChatCompletionsAPI(FakeMessagesAPI):
     PATH = "/v1/chat/completions"
     NAME = "fake Chat Completions API"
+
+    def __init__(self, *, refuse_json_schema: bool = False, **kw: Any) -> None:
+        """`refuse_json_schema`: answer `response_format: json_schema` as llama-cpp-python's
+        server does (HTTP 500 naming the field), so only json_object + schema is taken."""
+        super().__init__(**kw)
+        self.refuse_json_schema = refuse_json_schema
+
+    def _respond(self, request: dict[str, Any]) -> tuple[Reply, int, dict[str, Any]]:
+        fmt = request.get("response_format") or {}
+        if self.refuse_json_schema and fmt.get("type") == "json_schema":
+            reply = Reply.error(500, retry_after=None)
+            return reply, 500, self._error_body(500, LLAMA_CPP_REFUSAL)
+        return super()._respond(request)
 
     @property
     def base_url(self) -> str:

@@ -35,6 +35,7 @@ from app.domain.decision import DecisionContext, Members, TeamFacts
 from app.domain.modes import Mode, strategic_weights
 from app.domain.phases import Phase
 from app.reasoners.rules import compose_answer
+from tests.fakes.structured_replies import as_structured, asked_schema
 
 Responder = Callable[[dict[str, Any]], "Reply"]
 
@@ -135,7 +136,9 @@ class Served:
 
 _TASK = re.compile(r"^Task (\d+)/(\d+): (.*?)(?: \(([^()]*)\))?; features: (.+)$", re.M)
 _ROBOT = re.compile(
-    r"^- (.+?) \[([^\]]+)\]: S ([\d.]+)%, load (\d+) \(dev [^)]*\)(, NOT allowed)?$", re.M
+    r"^- (.+?) \[([^\]]+)\]: S ([\d.]+)%(?: \([^)]*\))?, load (\d+) \(dev [^)]*\)(, NOT allowed)?"
+    r"(?:, cannot take this task)?$",
+    re.M,
 )
 _TARGET = re.compile(
     r"^Target load W = ([\d.]+)(?: \([^)]*\))?;.*?(?:final loads in \[(\d+), (\d+)\])?", re.M
@@ -340,6 +343,9 @@ class FakeMessagesAPI:
         if reply.body is not None:
             return reply, reply.status, {}  # sent verbatim: no message to compose
         text = reply.text if reply.text is not None else answer_from_prompt(prompt_of(request))
+        schema = asked_schema(request)
+        if schema is not None:  # docs/reasoners.md#structured-replies: as a constrained server
+            text = as_structured(text, schema)
         prompt = self._system_of(request) + prompt_of(request)
         in_tokens = (
             reply.input_tokens if reply.input_tokens is not None else estimate_tokens(prompt)
@@ -366,13 +372,24 @@ class FakeMessagesAPI:
     def _message_body(
         self, request: dict[str, Any], text: str, in_tokens: int, out_tokens: int
     ) -> dict[str, Any]:
+        content: dict[str, Any] = {"type": "text", "text": text}
+        tool = (request.get("tool_choice") or {}).get("name")
+        if tool is not None:
+            # Forced tool use: the structured reply is the tool's input (a JSON object; a
+            # scripted reply that is no object comes back as text, as a model's words).
+            try:
+                value = json.loads(text)
+            except json.JSONDecodeError:
+                value = None
+            if isinstance(value, dict):
+                content = {"type": "tool_use", "id": "toolu_fake", "name": tool, "input": value}
         return {
             "id": f"msg_fake_{next(self._ids):05d}",
             "type": "message",
             "role": "assistant",
             "model": request.get("model", "fake-model"),
-            "content": [{"type": "text", "text": text}],
-            "stop_reason": "end_turn",
+            "content": [content],
+            "stop_reason": "tool_use" if content["type"] == "tool_use" else "end_turn",
             "stop_sequence": None,
             "usage": {"input_tokens": in_tokens, "output_tokens": out_tokens},
         }

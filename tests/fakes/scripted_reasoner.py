@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from app.domain.decision import DecisionContext
 from app.reasoners.base import ReasonerError, ReasonerReply
 from app.reasoners.rules import compose_answer
+from app.reasoners.structured import ReplySchema
 
 Answer = str | Callable[[DecisionContext], str] | ReasonerError
 
@@ -33,7 +34,13 @@ class ScriptedReasoner:
     name: str = "scripted"
     calls: list[Call] = field(default_factory=list)
 
-    def reason(self, system: str, user: str, context: DecisionContext) -> ReasonerReply:
+    def reason(
+        self,
+        system: str,
+        user: str,
+        context: DecisionContext,
+        schema: ReplySchema | None = None,
+    ) -> ReasonerReply:
         self.calls.append(Call(context.task_index, context.tier, system, user))
         item = self.script.pop(0) if self.script else self.then
         if isinstance(item, ReasonerError):

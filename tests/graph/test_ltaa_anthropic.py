@@ -187,6 +187,7 @@ class FakeSettings:
     openai_model: str | None = None
     openai_timeout_s = 60.0
     openai_max_transport_retries = 3
+    llm_max_tokens: list[int] = [300, 310, 320, 330]  # noqa: RUF012
 
 
 def test_factory(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -203,5 +204,6 @@ def test_factory(monkeypatch: pytest.MonkeyPatch) -> None:
     r = make_reasoner("anthropic", settings=FakeSettings(), model="claude-override")
     assert isinstance(r, AnthropicReasoner)
     assert (r.model, r.transport_retries, r.temperature) == ("claude-override", 5, 0.1)
+    assert [r.caps.at(tier) for tier in range(5)] == [300, 310, 320, 330, 330]
     monkeypatch.setenv("LTAA_ANTHROPIC_API_KEY", "from-env")
     assert isinstance(make_reasoner("anthropic"), AnthropicReasoner)

@@ -203,7 +203,7 @@ def test_update_workload_and_store_and_route() -> None:
     state = step(state, nodes.update_workload, rt)
     assert state["loads"] == [1, 0, 0] and state["view"]["severity"] == "high"
     out = nodes.store_and_route(state, rt)
-    assert out == {"task_index": 1, "done": False, "decision": None}
+    assert out == {"task_index": 1, "done": False, "decision": None, "failing": 0}
     [d] = rec.decisions()
     assert (d.task_index, d.task_id, d.robot_name, d.attempts, d.fallback) == (
         0,

@@ -71,7 +71,7 @@ def test_answers_are_accepted_with_usage_latency_and_temperature(
         {"role": "system", "content": first.system_prompt},
         {"role": "user", "content": first.user_prompt},
     ]
-    assert body["temperature"] == 0.1 and body["max_tokens"] == 700
+    assert body["temperature"] == 0.1 and body["max_tokens"] == 400  # the tier-0 cap
     assert body["_headers"]["authorization"] == "Bearer test-key"
 
 

@@ -151,7 +151,8 @@ VALIDATION_FAULTS: dict[str, tuple[Reply | Callable[[dict[str, Any]], Reply], st
     "truncated JSON": (Reply.truncated(keep=60), "unreadable reply (HTTP 200, 60 bytes"),
     "non-JSON garbage": (Reply.garbage(), "text/html): body: Invalid JSON"),
     "JSON of another shape": (Reply(body=b'{"ok": true}'), "id: Field required"),
-    "unknown robot": (unknown_robot, "unknown robot 'Flying Robot'"),
+    # Structured replies (the default): the robot is read against the decision's schema.
+    "unknown robot": (unknown_robot, "field `decision`: 'Flying Robot' is not one of"),
 }
 
 
@@ -218,8 +219,9 @@ def test_a_run_whose_every_call_fails_completes_on_fallbacks(
         ]
     )
     with provider.fake(default=lambda request: next(faults)()) as api:
-        app = create_app(settings.model_copy(update=provider.settings(api, retries=1)))
-        with TestClient(app) as client:
+        # Never given up (docs/reasoners.md#bounded-cost), so every task meets every fault.
+        update = {**provider.settings(api, retries=1), "llm_give_up_after": 0}
+        with TestClient(create_app(settings.model_copy(update=update))) as client:
             client.provider = provider  # type: ignore[attr-defined]
             state, trace = llm_run(client, n_tasks=4)
         statuses = {s.status for s in api.served}

@@ -13,6 +13,7 @@ from tests.fakes.fake_chat_completions_api import FakeChatCompletionsAPI
 from tests.fakes.fake_messages_api import Reply
 from tests.fakes.llm_providers import Provider
 from tests.fakes.scripted_reasoner import GARBAGE
+from tests.fakes.structured_replies import as_structured
 from tests.support.server import Server
 
 pytestmark = pytest.mark.e2e
@@ -54,7 +55,10 @@ def test_a_run_through_transport_faults_and_a_poor_answer(
         assert [a["tier"] for a in first["attempts"]] == [0, 1]
         rejected, fixed = first["attempts"]
         assert rejected["accepted"] is False and rejected["transport_retries"] == 2
-        assert rejected["feedback"] and rejected["reply"] == GARBAGE
+        # GARBAGE as a constrained server writes it in the run's structured format
+        # (docs/reasoners.md#structured-replies): an object with none of its required fields.
+        assert rejected["feedback"] and rejected["reply"] == as_structured(GARBAGE, {}) == "{}"
+        assert "field `the reply`: 'decision' is a required property" in rejected["hard_invalid"]
         assert fixed["accepted"] is True and fixed["model"] == provider.model
         assert all(not d["fallback"] for d in trace["decisions"])
         assert {r["model"] for r in api.requests} == {provider.model}

@@ -18,7 +18,7 @@ from app.graph.builder import build_graph
 from app.graph.memory_recorder import MemoryRecorder
 from app.graph.recorder import AttemptRecord, Recorder
 from app.graph.runner import run_graph
-from app.graph.state import GraphContext, LTAAState
+from app.graph.state import GraphContext, LTAAState, ModelUse
 from app.reasoners.base import Reasoner, ReasonerReply
 from app.reasoners.rules import RulesReasoner
 
@@ -61,6 +61,7 @@ def run(
     max_retries: int = 3,
     threshold: float = 0.6,
     recorder: MemoryRecorder | None = None,
+    model_use: ModelUse | None = None,
 ) -> tuple[MemoryRecorder, dict]:
     rec = recorder or MemoryRecorder()
     ctx = GraphContext(
@@ -69,6 +70,7 @@ def run(
         recorder=rec,
         quality_threshold=threshold,
         max_retries=max_retries,
+        model_use=model_use or ModelUse(),
     )
     final = run_graph(build_graph(InMemorySaver()), ctx, "test-thread", resume=False)
     return rec, final

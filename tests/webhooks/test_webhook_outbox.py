@@ -62,7 +62,9 @@ def test_every_spec_type_exists_and_kinds_map_as_documented() -> None:
         "review.resolved",
         "run.signed_off",
         "budget.exhausted",
+        "llm.gave_up",
     }
+    assert TYPE_OF_KIND["llm_gave_up"] is WebhookEventType.LLM_GAVE_UP
     assert TYPE_OF_KIND["integrity_failed"] is WebhookEventType.RUN_FAILED
     assert TYPE_OF_KIND["budget_exhausted"] is WebhookEventType.BUDGET_EXHAUSTED
     assert TYPE_OF_KIND["review_requested"] is WebhookEventType.REVIEW_REQUESTED

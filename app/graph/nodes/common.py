@@ -11,9 +11,10 @@ from app.domain.decision import DecisionContext
 from app.domain.scheduling.progress import TimeOption
 from app.graph.context import decision_context
 from app.graph.gate import NODE_GATE
-from app.graph.prompts import SYSTEM_PROMPT
+from app.graph.prompts import system_prompt
 from app.graph.recorder import AttemptRecord, Recorder
 from app.graph.state import GraphContext, LTAAState, Node
+from app.reasoners.structured import ReplyFormat
 
 
 def cancellable(node: Node) -> Node:
@@ -30,7 +31,14 @@ def cancellable(node: Node) -> Node:
     return checked
 
 
-def save_prompt(recorder: Recorder, task_index: int, attempt: int, tier: int, user: str) -> None:
+def save_prompt(
+    recorder: Recorder,
+    task_index: int,
+    attempt: int,
+    tier: int,
+    user: str,
+    fmt: ReplyFormat = ReplyFormat.MARKDOWN,
+) -> None:
     """Record the prompt of an attempt, unless the attempt already has a reply.
 
     A node re-executed after a crash (or LangGraph bug #8039) must not wipe a reply
@@ -44,7 +52,7 @@ def save_prompt(recorder: Recorder, task_index: int, attempt: int, tier: int, us
             task_index=task_index,
             attempt=attempt,
             tier=tier,
-            system_prompt=SYSTEM_PROMPT,
+            system_prompt=system_prompt(fmt),
             user_prompt=user,
         )
     )

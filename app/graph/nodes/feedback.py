@@ -10,8 +10,10 @@ from app.domain.decision import DecisionContext
 from app.domain.tradeoff import CLEAR_MARGIN, DECISIVE_GAP, NEGLIGIBLE_GAP
 from app.graph.nodes.common import cancellable, current_attempt
 from app.graph.nodes.validate import judge
+from app.graph.reply_schema import allowed_labels
 from app.graph.state import GraphContext, LTAAState
 from app.graph.validation import CRITERION_TITLES, WEIGHTS, Validation
+from app.reasoners.structured import ReplyFormat
 
 _FIXES = {
     "explanation": "write 2-4 sentences that name your robot and cite its S and load against "
@@ -29,10 +31,23 @@ _FIXES = {
 }
 
 
-def compose_feedback(verdict: Validation, dctx: DecisionContext, threshold: float) -> str:
+def compose_feedback(
+    verdict: Validation,
+    dctx: DecisionContext,
+    threshold: float,
+    fmt: ReplyFormat = ReplyFormat.MARKDOWN,
+) -> str:
     """First line: a one-line summary (it becomes the failure-log entry). Then one line per
     criterion that lost points, largest loss first."""
     labels = dctx.labels
+    if verdict.hard_invalid is not None and fmt.structured:
+        return (
+            f"Hard invalid (Q=0): {verdict.hard_invalid}.\n"
+            f"- Fix: reply with the one JSON object asked for, every field filled, "
+            f"`decision` one of: {', '.join(allowed_labels(dctx))}"
+            + ("; `team` one entry per unit" if dctx.team is not None else "")
+            + "."
+        )
     if verdict.hard_invalid is not None and dctx.team is not None:
         needs = ", ".join(f"{f} x{dctx.team.count(f)}" for f in dctx.team.features)
         return (
@@ -76,6 +91,8 @@ def build_feedback(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str
     verdict = ctx.verdicts.recall(state["task_index"], state["attempt"])
     if verdict is None:  # resumed after validate: its in-memory verdict did not survive
         verdict = judge(record, dctx, ctx.quality_threshold)
-    record.feedback = compose_feedback(verdict, dctx, ctx.quality_threshold)
+    record.feedback = compose_feedback(
+        verdict, dctx, ctx.quality_threshold, ctx.model_use.reply_format
+    )
     ctx.recorder.save_attempt(record)
     return {}

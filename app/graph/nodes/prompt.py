@@ -18,7 +18,8 @@ def build_prompt(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, 
     dctx = decision_context(
         ctx.problem, state, tier=0, rate_notes=ctx.rate_notes, **timing(ctx, state)
     )
-    save_prompt(ctx.recorder, state["task_index"], 1, 0, user_prompt(dctx))
+    user = user_prompt(dctx, ctx.model_use.reply_format)
+    save_prompt(ctx.recorder, state["task_index"], 1, 0, user, ctx.model_use.reply_format)
     # A task's flags are reset where the task starts, not where the previous one ended:
     # fewer writes per task (each is a checkpoint row).
     return {"attempt": 1, "tier": 0, "fallback": False}

@@ -28,7 +28,12 @@ def retry(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[str, Any]:
         ctx.problem, state, tier=tier, rate_notes=ctx.rate_notes, **timing(ctx, state)
     )
     user = retry_prompt(
-        dctx, tier, previous.feedback or "", previous.quality, ctx.quality_threshold
+        dctx,
+        tier,
+        previous.feedback or "",
+        previous.quality,
+        ctx.quality_threshold,
+        ctx.model_use.reply_format,
     )
-    save_prompt(rec, t, attempt, tier, user)
+    save_prompt(rec, t, attempt, tier, user, ctx.model_use.reply_format)
     return {"attempt": attempt, "tier": tier}

@@ -9,6 +9,7 @@ from langgraph.runtime import Runtime
 from app.graph.nodes.common import cancellable, require_attempt
 from app.graph.recorder import DecisionRecord
 from app.graph.state import GraphContext, LTAAState, next_task
+from app.reasoners.give_up import next_failing
 
 
 @cancellable
@@ -68,4 +69,11 @@ def store_and_route(state: LTAAState, runtime: Runtime[GraphContext]) -> dict[st
         following = progress.current()
     else:
         following = next_task(ctx.problem, t)  # pinned tasks are not the graph's to decide
-    return {"task_index": following, "done": following >= inst.n_tasks, "decision": None}
+    return {
+        "task_index": following,
+        "done": following >= inst.n_tasks,
+        "decision": None,
+        "failing": next_failing(
+            state.get("failing", 0), d["fallback"], ctx.model_use.give_up_after
+        ),
+    }
