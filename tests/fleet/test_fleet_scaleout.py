@@ -160,6 +160,7 @@ def test_the_holder_killed_then_stopped_sends_each_order_once(
         stopped_s = becomes_active(a, timeout=LEASE_S + SLACK_S + 30)
         assert stopped_s < LEASE_S, f"took over after a graceful stop in {stopped_s:.1f} s"
         reaches(a, run_id, TASKS)
+        print(f"[{ids}] taken over {killed_s:.2f} s after SIGKILL, {stopped_s:.2f} s after SIGTERM")
 
         assert recorder.invalid == []
         published = recorder.orders_published()
