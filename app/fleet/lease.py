@@ -17,6 +17,9 @@ expired:
   can take the lease over.
 - Release: a graceful stop frees the row at once; a standby takes it at its next try.
 
+The row is written by the first bridge that starts on the store, with `since`: now, or, on a
+store whose bridge sent orders before the row existed, when the first lineage it sent was made.
+
 On SQLite one process owns the store (app.store.lock.StoreLock proves it): `LocalLease` is
 always held and never expires, and the row only records the client id and `since`.
 """
@@ -36,9 +39,9 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.runs.factory import uses_leases
 from app.store.db import transaction
-from app.store.fleet_models import FleetBridge
+from app.store.fleet_models import FleetBridge, FleetOrder
 from app.store.leases import lease_owner_id
-from app.store.models import as_utc, utcnow
+from app.store.models import Run, as_utc, utcnow
 
 ROW = "bridge"
 PUBLISH_SHARE = 2 / 3  # of a lease, after the start of its last renewal, the holder publishes
@@ -116,7 +119,8 @@ def _prepare(sessions: sessionmaker[Session], client_id: str) -> Standing:
             with transaction(sessions) as session:
                 row = session.get(FleetBridge, ROW)
                 if row is None:
-                    row = FleetBridge(name=ROW, term=0, client_id=client_id, since=utcnow())
+                    since = _first_sent(session) or utcnow()
+                    row = FleetBridge(name=ROW, term=0, client_id=client_id, since=since)
                     session.add(row)
                     session.flush()
                 holder = row.holder if row.holder and _live(session, row) else None
@@ -124,6 +128,15 @@ def _prepare(sessions: sessionmaker[Session], client_id: str) -> Standing:
         except IntegrityError:
             continue
     raise RuntimeError("could not write the fleet bridge's row")
+
+
+def _first_sent(session: Session) -> datetime | None:
+    """A store whose bridge sent orders before it had this row (an upgrade): its fleet began
+    with the first lineage it sent, so every plan it was serving goes on being served."""
+    first = session.scalar(
+        select(func.min(Run.created_at)).join(FleetOrder, FleetOrder.lineage == Run.id)
+    )
+    return as_utc(first) if first is not None else None
 
 
 def _live(session: Session, row: FleetBridge) -> bool:

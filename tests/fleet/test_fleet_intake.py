@@ -19,6 +19,7 @@ from sqlalchemy import event, func, select
 from app.fleet import outbox
 from app.fleet.dispatch import FleetNames, dispatch
 from app.fleet.intake import Intake
+from app.fleet.lease import LocalLease
 from app.fleet.metrics import FleetMetrics
 from app.fleet.states import Refusal
 from app.fleet.vda5050 import (
@@ -399,3 +400,19 @@ def test_the_last_robot_gone_leaves_the_plan_as_it_is(
     assert any(f"robot '{last}' was the last" in m for m in caplog.messages)
     left = client.get(f"/runs/{head}").json()["assignments"]
     assert {a["robot"] for a in left if not a.get("pinned")} <= {last}
+
+
+def test_a_store_whose_bridge_sent_orders_before_its_row_goes_on_serving_them(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    """An upgrade: the fleet began with the first lineage the bridge sent (app.fleet.lease)."""
+    client, f, _, robots = fleet
+    robot = robots[0]
+    f.connection(robot, ConnectionState.ONLINE)
+    first = _orders(f.dispatch())[robot]
+    settings = client.app.state.settings  # type: ignore[attr-defined]
+    standing = LocalLease(settings=settings, sessions=f.sessions).prepare("id-upgraded")
+    f.names = replace(f.names, since=standing.since)
+    f.intake.names = f.names
+    assert f.state(robot, first, ActionStatus.FINISHED) is None
+    assert list(_orders(f.dispatch())) == [robot]

@@ -145,6 +145,8 @@ def test_the_holder_killed_then_stopped_sends_each_order_once(
         b.start()
         assert bridge(b)["active"] is False
         assert bridge(b)["holder"] == bridge(a)["this_process"]
+        page = httpx.get(f"{b.url}/console/fleet").text
+        assert "stands by" in page and bridge(a)["this_process"] in page
         online(a, len(ROBOTS))
         run_id = httpx.post(f"{a.url}/runs", json=body()).json()["id"]
         reaches(b, run_id, 12)
