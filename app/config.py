@@ -83,9 +83,15 @@ class Settings(BaseSettings):
     )
     mqtt_client_id: str | None = Field(
         None,
-        max_length=64,
-        description="The bridge's MQTT client id; default ltaa-{hostname}-{a digest of the "
-        "database URL}",
+        max_length=58,  # and "-echo": 63
+        description="The MQTT client id the active bridge connects under (its echo session: "
+        "{id}-echo); default the one the store's bridge last used, first "
+        "ltaa-{hostname}-{a digest of the database URL}",
+    )
+    # One active bridge per database (docs/fleet.md#one-bridge-per-database): a lease by the
+    # database clock, renewed every mqtt_lease_s / 4; a standby takes over within it.
+    mqtt_lease_s: float = Field(
+        10.0, gt=0, description="How long the active fleet bridge's lease lasts unrenewed"
     )
 
     # The Anthropic SDK's own variable is honoured so an existing key just works.

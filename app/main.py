@@ -81,9 +81,11 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         # Drain on shutdown: runs stop at a node boundary and are marked interrupted.
         resources.push_async_callback(run_in_threadpool, worker.close)
         # ... starting as soon as the signal arrives, before uvicorn waits on open streams.
-        resources.enter_context(drain_on_signal(partial(_begin_drain, worker)))
+        resources.enter_context(drain_on_signal(partial(_begin_drain, app, worker)))
         app.state.runs = RunsContext(sessions=sessions, worker=worker)
-        app.state.fleet = _start_fleet(settings, sessions, worker, app.state.metrics, resources)
+        app.state.fleet = await _start_fleet(
+            settings, sessions, worker, app.state.metrics, resources
+        )
         resumed = await run_in_threadpool(worker.recover)
         if resumed:
             log.info("resuming %d interrupted run(s): %s", len(resumed), ", ".join(resumed))
@@ -113,15 +115,18 @@ def _start_webhooks(
     return WebhooksContext(sessions=sessions, box=box, dispatcher=dispatcher)
 
 
-def _start_fleet(
+async def _start_fleet(
     settings: Settings,
     sessions: sessionmaker[Session],
     worker: RunWorker,
     metrics: Metrics,
     resources: AsyncExitStack,
 ) -> Bridge | None:
-    """The VDA 5050 bridge (docs/fleet.md), when a broker is configured; closed before the
-    worker (the stack unwinds in reverse), so no report arrives for a stopped worker."""
+    """The VDA 5050 bridge (docs/fleet.md), when a broker is configured: active, or standing
+    by while another process of the database is (docs/fleet.md#one-bridge-per-database).
+    Started before serving (a run made from the first request on is on the fleet); closed
+    before the worker (the stack unwinds in reverse), so no report arrives for a stopped
+    worker."""
     if settings.mqtt_url is None:
         return None
     bridge = Bridge(
@@ -130,13 +135,16 @@ def _start_fleet(
         worker=worker,
         metrics=FleetMetrics(metrics.registry),
     )
-    bridge.start()
+    await bridge.start()
     resources.push_async_callback(bridge.close)
     log.info("fleet bridge on: %s, interface %s", settings.mqtt_url, settings.mqtt_interface)
     return bridge
 
 
-def _begin_drain(worker: RunWorker) -> None:
+def _begin_drain(app: FastAPI, worker: RunWorker) -> None:
+    bridge: Bridge | None = getattr(app.state, "fleet", None)
+    if bridge is not None:  # its lease freed now: a standby takes over at once
+        bridge.stand_down()
     held = worker.begin_drain()
     log.info(
         "shutting down: running runs stop at their next node boundary; %d run(s) "

@@ -22,10 +22,11 @@ def free_port() -> int:
 
 
 @contextmanager
-def broker(*, unlimited_queues: bool = False) -> Iterator[str]:
+def broker(*, unlimited_queues: bool = False, log_to: Path | None = None) -> Iterator[str]:
     """Its URL, mqtt://127.0.0.1:{port}; stopped on exit. `unlimited_queues`: no message a
     slow subscriber has not taken yet is dropped (mosquitto keeps 1,000 a client by default),
-    so a throughput figure counts every message."""
+    so a throughput figure counts every message. `log_to`: where its log goes (its notices
+    too, e.g. a client id taken over: "already connected"); default a temporary file."""
     binary = shutil.which("mosquitto") or MOSQUITTO
     if not Path(binary).exists():
         raise RuntimeError("mosquitto is missing: apt-get install -y mosquitto")
@@ -36,7 +37,7 @@ def broker(*, unlimited_queues: bool = False) -> Iterator[str]:
         if unlimited_queues:
             lines += ["max_queued_messages 0", "max_inflight_messages 0"]
         conf.write_text("\n".join(lines) + "\n")
-        log = (Path(tmp) / "mosquitto.log").open("wb")
+        log = (log_to or Path(tmp) / "mosquitto.log").open("wb")
         proc = subprocess.Popen([binary, "-c", str(conf)], stdout=log, stderr=subprocess.STDOUT)
         try:
             deadline = time.monotonic() + 10

@@ -25,7 +25,12 @@ def simulate_command(
         str | None, typer.Option(help="Comma-separated robot names (instead of --robots)")
     ] = None,
     speed: Annotated[
-        float, typer.Option(min=0.0, help="Seconds simulated per planned second")
+        float,
+        typer.Option(
+            min=0.001,
+            help="Planned seconds a robot works through per second (600: a planned minute "
+            "in 0.1 s)",
+        ),
     ] = 1.0,
     fail_share: Annotated[float, typer.Option(min=0.0, max=1.0)] = 0.0,
     seed: Annotated[int, typer.Option()] = 0,
@@ -35,7 +40,8 @@ def simulate_command(
     state_interval_s: Annotated[float, typer.Option(min=0.05)] = 1.0,
 ) -> None:
     """Simulated robots that take orders, report state every interval and at every change,
-    fail a share of actions; stdin: `break NAME`, `offline NAME`, `quit`."""
+    fail a share of actions; stdin: `break NAME`, `offline NAME`, `quit` (its end ends the
+    commands, not the robots: SIGTERM or SIGINT stops them)."""
     chosen = (
         tuple(n.strip() for n in names.split(",") if n.strip())
         if names

@@ -16,12 +16,12 @@ root, task, robot), and its orderId is made of the same three.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import Select, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.domain.lifecycle import RunStatus
@@ -66,11 +66,14 @@ NO_ZONE = "site"  # the node of a task without a zone
 
 @dataclass(frozen=True)
 class FleetNames:
-    """How the bridge addresses robots, and which sites' runs it sends (None: every site)."""
+    """How the bridge addresses robots, and which runs it sends: the sites' (None: every
+    site) whose head was made `since` the store's fleet began (None: every one;
+    docs/fleet.md#task-to-order)."""
 
     interface: str
     manufacturer: str
     sites: frozenset[str] | None = None
+    since: datetime | None = None
 
     @classmethod
     def parse_sites(cls, text: str) -> frozenset[str] | None:
@@ -109,9 +112,18 @@ def lineage_root(session: Session, run: Run) -> str:
     return current.id
 
 
-def dispatch(*, sessions: sessionmaker[Session], names: FleetNames) -> int:
-    """Bring the orders in line with the plans; the number of messages written."""
+def dispatch(
+    *,
+    sessions: sessionmaker[Session],
+    names: FleetNames,
+    fence: Callable[[Session], bool] | None = None,
+) -> int:
+    """Bring the orders in line with the plans; the number of messages written. `fence`: a
+    check in the same transaction that this process is still the active bridge
+    (app.fleet.lease); when it fails, nothing is written."""
     with transaction(sessions) as session:
+        if fence is not None and not fence(session):
+            return 0
         online = {
             r.serial_number
             for r in session.scalars(
@@ -139,9 +151,17 @@ def dispatch(*, sessions: sessionmaker[Session], names: FleetNames) -> int:
 
 def _heads(session: Session, names: FleetNames) -> list[Run]:
     query = select(Run).where(Run.superseded_by.is_(None), Run.status.in_(DISPATCHED))
+    return list(session.scalars(on_the_fleet(query, names).order_by(Run.created_at, Run.id)))
+
+
+def on_the_fleet(query: Select[Run], names: FleetNames) -> Select[Run]:
+    """The heads among `query`'s runs whose plans go to the robots: on a fleet site, and made
+    since the store's fleet began (a plan made before goes out once it is revised)."""
     if names.sites is not None:
         query = query.where(Run.site.in_(sorted(names.sites)))
-    return list(session.scalars(query.order_by(Run.created_at, Run.id)))
+    if names.since is not None:
+        query = query.where(Run.created_at >= names.since)
+    return query
 
 
 def _dispatch_head(

@@ -8,6 +8,10 @@ session again at the next start. A fence (a message on a topic of the bridge's o
 after subscribing) arrives after all of those: one session's messages arrive in order. So the
 publisher, waiting for the fence before it sends, never sends a message twice.
 
+Its client id is the active bridge's (`{client id}-echo`, docs/fleet.md#client-ids), taken over
+with the lease: a new holder finds the session of a holder that died, with what that one
+published and did not mark. A standby never connects under it.
+
 paho-mqtt directly (aiomqtt acknowledges on receipt); its network loop runs in its own thread.
 """
 
@@ -16,6 +20,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import time
 import uuid
 
 import paho.mqtt.client as mqtt
@@ -89,3 +94,23 @@ class EchoSession:
             log.exception("fleet echo: could not mark %s", message.topic)
             return
         client.ack(message.mid, message.qos)
+
+
+def forget_session(host: str, port: int, tls: bool, identifier: str) -> None:
+    """Drop a persistent session at the broker (a clean connect under its id, then a
+    disconnect), so it stops keeping messages for a client that will not come back."""
+    client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=identifier, clean_session=True)
+    if tls:
+        client.tls_set()
+    try:
+        client.connect(host, port, keepalive=30)
+        client.loop_start()
+        for _ in range(100):  # up to 5 s for the CONNACK
+            if client.is_connected():
+                break
+            time.sleep(0.05)
+        client.disconnect()
+    except OSError:
+        log.warning("fleet echo: could not drop the session %s; the broker keeps it", identifier)
+    finally:
+        client.loop_stop()

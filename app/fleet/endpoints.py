@@ -5,6 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Request
 
 from app.fleet import service
+from app.fleet.bridge import Bridge
 from app.fleet.schemas import FleetOut, FleetRobotOut
 from app.http.deps import ClientDep, SettingsDep
 from app.http.responses import CLIENT, errors
@@ -18,10 +19,13 @@ def list_robots(
     caller: ClientDep, runs: RunsDep, settings: SettingsDep, request: Request
 ) -> FleetOut:
     """Every robot that has sent the bridge a VDA 5050 `connection`: its connection, battery,
-    FATAL error and open orders."""
-    bridge = getattr(request.app.state, "fleet", None)
+    FATAL error and open orders; and which process is the active bridge."""
+    bridge: Bridge | None = getattr(request.app.state, "fleet", None)
+    role = bridge.role() if bridge is not None else None
     return FleetOut(
         enabled=bridge is not None,
+        active=role is not None and role.active,
+        holder=role.holder if role is not None else None,
         connected=bridge is not None and bridge.connected.is_set(),
         interface=settings.mqtt_interface,
         robots=[

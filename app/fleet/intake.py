@@ -384,7 +384,7 @@ class Intake:
             sessions=self.sessions,
             worker=self.worker,
             settings=self.settings,
-            sites=self.names.sites,
+            names=self.names,
             robot=robot,
             why=why,
         )

@@ -1,7 +1,11 @@
 """A robot gone (docs/fleet.md#state-to-report): its connection OFFLINE or CONNECTIONBROKEN, or a
-FATAL error. Every lineage head that still has unfinished work for it is revised with the robot
-unavailable, through the revisions' own service, once: the revision takes the robot's tasks
-away, so the same news again finds nothing to revise."""
+FATAL error. Every lineage head on the fleet that still has unfinished work for it is revised
+with the robot unavailable, through the revisions' own service, once: the revision takes the
+robot's tasks away, so the same news again finds nothing to revise.
+
+A head whose every other robot is already gone is not revised (a revision needs a robot to
+give the tasks to): the plan stays as it is, and its orders wait for its robots to come back
+ONLINE (docs/fleet.md#no-robot-left)."""
 
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from app.config import Settings
 from app.domain.errors import DomainError
 from app.domain.lifecycle import RunStatus
-from app.fleet.dispatch import FINAL_REPORTS
+from app.fleet.dispatch import FINAL_REPORTS, FleetNames, on_the_fleet
 from app.plans.revisions import RevisionRequest, create_revision
 from app.runs.worker import RunWorker
 from app.store import decision_repository as decision_repo
@@ -23,6 +27,7 @@ from app.store.models import Run
 log = logging.getLogger("ltaa.fleet")
 
 LEFT_AS_IS = (RunStatus.FAILED, RunStatus.CANCELLED, RunStatus.BLOCKED)
+NO_ROBOT_LEFT = "no_robot_left"  # the revisions' refusal when every robot would be gone
 
 
 def revise_without(
@@ -30,13 +35,13 @@ def revise_without(
     sessions: sessionmaker[Session],
     worker: RunWorker,
     settings: Settings,
-    sites: frozenset[str] | None,
+    names: FleetNames,
     robot: str,
     why: str,
 ) -> list[str]:
     """The revisions made, by id."""
     made = []
-    for head in _heads_needing(sessions, sites, robot):
+    for head in _heads_needing(sessions, names, robot):
         request = RevisionRequest(
             changes=[{"type": "robot_unavailable", "robot": robot}],
             pin="reported",
@@ -47,22 +52,27 @@ def revise_without(
                 sessions=sessions, worker=worker, parent_id=head, request=request, settings=settings
             )
         except DomainError as exc:
-            log.warning("fleet: could not revise run %s without %s: %s", head, robot, exc)
+            if exc.code == NO_ROBOT_LEFT:
+                log.warning(
+                    "fleet: run %s keeps its plan: robot '%s' was the last it had (%s); its "
+                    "orders wait for its robots to come back ONLINE",
+                    head,
+                    robot,
+                    why,
+                )
+            else:
+                log.warning("fleet: could not revise run %s without %s: %s", head, robot, exc)
             continue
         log.info("fleet: run %s revised as %s without robot %s (%s)", head, revision.id, robot, why)
         made.append(revision.id)
     return made
 
 
-def _heads_needing(
-    sessions: sessionmaker[Session], sites: frozenset[str] | None, robot: str
-) -> list[str]:
+def _heads_needing(sessions: sessionmaker[Session], names: FleetNames, robot: str) -> list[str]:
     with sessions() as session:
         query = select(Run).where(Run.superseded_by.is_(None), Run.status.not_in(LEFT_AS_IS))
-        if sites is not None:
-            query = query.where(Run.site.in_(sorted(sites)))
         heads = []
-        for run in session.scalars(query):
+        for run in session.scalars(on_the_fleet(query, names)):
             fleet = {str(r["name"]) for r in run.request["instance_data"]["robots"]}
             if robot in fleet and _has_work(session, run, robot):
                 heads.append(run.id)

@@ -24,6 +24,19 @@ class FleetRobotOut(BaseModel):
 
 class FleetOut(BaseModel):
     enabled: bool = Field(description="Whether the bridge runs (LTAA_MQTT_URL is set)")
-    connected: bool = Field(description="Whether the bridge holds a connection to the broker")
+    active: bool = Field(
+        False,
+        description="Whether this process is the database's active bridge (one at a time; "
+        "the others stand by)",
+    )
+    holder: str | None = Field(
+        None,
+        description="The process that is the active bridge (its worker name, pid and a token); "
+        "null while none is",
+    )
+    connected: bool = Field(
+        description="Whether this process's bridge holds a connection to the broker (the "
+        "active bridge does; a standby holds none)"
+    )
     interface: str
     robots: list[FleetRobotOut]

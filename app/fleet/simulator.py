@@ -5,25 +5,31 @@ broker.
 Each robot is its own MQTT client, with a last will of `connection` CONNECTIONBROKEN (retained)
 and `connection` ONLINE (retained) once connected. It takes `order`s (the same orderId and
 orderUpdateId twice is ignored, a newer orderUpdateId replaces the order) and runs each action
-in turn: RUNNING for its `plannedDurationS` (or the default) times the speed factor, then
-FINISHED, or FAILED for the given share of actions, drawn from a seeded generator per robot.
+in turn: RUNNING for its `plannedDurationS` divided by the speed (planned seconds a robot works
+through per second: 600 makes a planned minute a tenth of a second) or, when the order plans no
+duration, the default seconds; then FINISHED, or FAILED for the given share of actions, drawn
+from a seeded generator per robot.
 `cancelOrder` fails the running action and drops the order. It publishes its `state` every
 `state_interval_s` and at every change, headerIds counting per topic, the battery draining.
 
 Commands on standard input, one a line: `break NAME` (the robot's socket is closed without a
-DISCONNECT, so the broker publishes its will), `offline NAME` (a clean OFFLINE), `quit`. Each
-event is a line on standard output (`robot-3 FINISHED t17`), for whoever waits on one.
+DISCONNECT, so the broker publishes its will), `offline NAME` (a clean OFFLINE), `quit`. The end
+of standard input ends the commands, not the robots (`... < /dev/null &` keeps them working):
+`quit`, SIGTERM or SIGINT stops them, each saying OFFLINE. Each event is a line on standard
+output (`robot-3 FINISHED t17`), for whoever waits on one.
 """
 
 from __future__ import annotations
 
 import random
+import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from types import FrameType
 from urllib.parse import urlsplit
 
 import paho.mqtt.client as mqtt
@@ -55,7 +61,7 @@ class SimulatorConfig:
     interface: str = "uagv"
     manufacturer: str = "ltaa-sim"
     names: tuple[str, ...] = ("robot-1", "robot-2", "robot-3")
-    speed: float = 1.0  # seconds simulated per second planned
+    speed: float = 1.0  # planned seconds worked through per second
     fail_share: float = 0.0
     seed: int = 0
     default_duration_s: float = 1.0
@@ -239,9 +245,13 @@ class SimulatedRobot:
             now = time.monotonic()
             if status != ActionStatus.RUNNING:
                 planned = action.parameter(PLANNED_DURATION_S)
-                seconds = float(planned) if planned is not None else self.config.default_duration_s
+                seconds = (
+                    float(planned) / self.config.speed
+                    if planned is not None
+                    else self.config.default_duration_s
+                )
                 run.states[action.action_id] = ActionStatus.RUNNING
-                run.ends_at = now + seconds * self.config.speed
+                run.ends_at = now + seconds
                 self.say(f"{self.name} RUNNING {action.action_id}")
                 return True
             if run.ends_at is not None and now >= run.ends_at:
@@ -275,8 +285,17 @@ class SimulatedRobot:
         self.say(f"{self.name} OFFLINE")
 
 
+class Stopped(Exception):
+    """SIGTERM or SIGINT: the robots say OFFLINE and the simulator ends."""
+
+
+def _stop(_signum: int, _frame: FrameType | None) -> None:
+    raise Stopped
+
+
 def simulate(config: SimulatorConfig, commands: Sequence[str] | None = None) -> None:
-    """Run until `quit` on standard input (or its end): the robots go OFFLINE then."""
+    """Run the robots, taking commands from `commands` (default: standard input) until `quit`,
+    then until SIGTERM or SIGINT: every robot goes OFFLINE then."""
     out_lock = threading.Lock()
 
     def say(line: str) -> None:
@@ -284,15 +303,33 @@ def simulate(config: SimulatorConfig, commands: Sequence[str] | None = None) -> 
             print(line, flush=True)
 
     robots = {name: SimulatedRobot(config, name, say) for name in config.names}
-    for robot in robots.values():
-        robot.start()
-    lines = commands if commands is not None else sys.stdin
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, _stop)
+    try:
+        for robot in robots.values():
+            robot.start()
+        if _obey(commands if commands is not None else sys.stdin, robots, say):
+            say("end of commands; the robots work on until SIGTERM or SIGINT")
+            threading.Event().wait()
+    except Stopped:
+        pass
+    finally:
+        for robot in robots.values():
+            if not robot.stopped.is_set():
+                robot.go_offline()
+
+
+def _obey(
+    lines: Iterable[str], robots: Mapping[str, SimulatedRobot], say: Callable[[str], None]
+) -> bool:
+    """Carry out the commands; True when they ran out without a `quit`."""
     for line in lines:
         words = line.split()
         if not words:
             continue
         if words[0] == "quit":
-            break
+            return False
         target = robots.get(words[1]) if len(words) > 1 else None
         if target is None:
             say(f"unknown command or robot: {line.strip()}")
@@ -302,6 +339,4 @@ def simulate(config: SimulatorConfig, commands: Sequence[str] | None = None) -> 
             target.go_offline()
         else:
             say(f"unknown command: {line.strip()}")
-    for robot in robots.values():
-        if not robot.stopped.is_set():
-            robot.go_offline()
+    return True

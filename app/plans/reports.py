@@ -2,7 +2,9 @@
 stands.
 
 States move forward only: started -> done | failed, done and failed are final, and the
-same report again is a no-op; a task is not done (or failed) at a time before it started.
+same report again is a no-op; a `started` after the task ended is stale, refused like any
+step back (docs/living-plans.md#execution-reports); a task is not done (or failed) at a time
+before it started.
 A report on a run that was revised is refused (the site reports to the head of the
 lineage). While the run is unfinished each accepted report is an event of its record;
 after it finished it goes to the annotation chain, so a completed run's decision and event
@@ -158,10 +160,16 @@ def _apply_updates(
             ExecutionState(row.state) if row is not None else None
         )
         if not allowed(current, update.state):
+            stale = (
+                "; a `started` sent after the task ended is stale: send each task's states "
+                "in order (the same state again is a no-op)"
+                if update.state == ExecutionState.STARTED
+                else ""
+            )
             raise ExecutionConflictError(
                 f"updates.{i}.state",
                 f"task '{update.task_id}' is {current}; execution states move forward "
-                f"only (started -> done | failed), not {current} -> {update.state}",
+                f"only (started -> done | failed), not {current} -> {update.state}{stale}",
                 code="backwards",
             )
         if current == update.state:

@@ -29,10 +29,7 @@ Leases, in detail (several API processes sharing runs on one PostgreSQL database
 from __future__ import annotations
 
 import logging
-import os
-import socket
 import threading
-import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
@@ -47,6 +44,7 @@ from app.runs.recorder import Fence, RunStop, lease_fence
 from app.store import leases
 from app.store import repository as repo
 from app.store.db import transaction
+from app.store.leases import lease_owner_id
 from app.store.lock import StoreLock
 from app.store.models import Run
 
@@ -188,12 +186,6 @@ def _claim_store(database_url: str, serving: str | None = None) -> Callable[[], 
 
 
 # -- PostgreSQL scale-out: leases ------------------------------------------------------------
-
-
-def lease_owner_id(name: str | None) -> str:
-    """Unique per process start: a restarted process must not inherit its old leases, or
-    it would skip the integrity check for runs it never ran."""
-    return f"{name or socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
 
 
 class Periodic:

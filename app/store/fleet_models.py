@@ -93,3 +93,21 @@ class FleetHeader(Base):
 
     topic: Mapped[str] = mapped_column(String(1000), primary_key=True)
     last: Mapped[int] = mapped_column(Integer)
+
+
+class FleetBridge(Base):
+    """The one active bridge of the store (docs/fleet.md#one-bridge-per-database): a lease by the
+    database clock, as a run's (app.store.leases), the MQTT client id the holder connects
+    under, and when the store's fleet began (plans older than that are not sent)."""
+
+    __tablename__ = "fleet_bridge"
+
+    name: Mapped[str] = mapped_column(String(32), primary_key=True)
+    holder: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    expires_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    # Counts the holders: each acquisition takes the next term.
+    term: Mapped[int] = mapped_column(Integer, default=0)
+    # The client id the last holder connected under (its echo session's is `{client_id}-echo`):
+    # a new holder with another id drains that session first.
+    client_id: Mapped[str] = mapped_column(String(64))
+    since: Mapped[datetime] = mapped_column(DateTime(timezone=True))

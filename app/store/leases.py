@@ -9,6 +9,9 @@ with skewed clocks agree on when a lease has expired. Claims lock rows with
 
 from __future__ import annotations
 
+import os
+import socket
+import uuid
 from collections.abc import Sequence
 from datetime import timedelta
 from typing import Any
@@ -21,6 +24,13 @@ from app.domain.lifecycle import RunStatus
 from app.store.models import Run
 
 CLAIMABLE = tuple(sorted(CLAIMABLE_STATUSES))
+
+
+def lease_owner_id(name: str | None) -> str:
+    """A lease holder's name, unique per process start: a restarted process must not inherit
+    its old leases, or it would skip the integrity check for runs it never ran (and the
+    fleet bridge's lease, app.fleet.lease, names its holders the same way)."""
+    return f"{name or socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
 
 
 def _expires(lease_s: float) -> Any:

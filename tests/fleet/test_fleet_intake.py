@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import json
 from collections.abc import Iterator
+from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
@@ -18,6 +19,7 @@ from sqlalchemy import event, func, select
 from app.fleet import outbox
 from app.fleet.dispatch import FleetNames, dispatch
 from app.fleet.intake import Intake
+from app.fleet.lease import LocalLease
 from app.fleet.metrics import FleetMetrics
 from app.fleet.states import Refusal
 from app.fleet.vda5050 import (
@@ -36,8 +38,8 @@ from app.fleet.vda5050 import (
     topic,
 )
 from app.store.fleet_models import FleetOrder, FleetRobot
-from app.store.models import ExecutionReport
-from tests.plans.test_revisions import BASELINE, completed_run, wait_status
+from app.store.models import ExecutionReport, utcnow
+from tests.plans.test_revisions import BASELINE, HEAVY_DOWN, completed_run, revise, wait_status
 from tests.plans.test_timed_team_revisions import BODY as TEAM_BODY
 from tests.plans.test_timed_team_revisions import completed
 from tests.support.vda5050_schemas import validate
@@ -351,3 +353,66 @@ def test_orders_changed_in_the_middle_of_a_state_does_not_lose_it(
     assert cleared, "the memo was never cleared mid-read: the test no longer reaches the race"
     action = order.task_actions()[0].action_id
     assert f.reports(run_id)[action] == "done"
+
+
+def test_a_plan_made_before_the_fleet_began_goes_out_once_revised(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    """docs/fleet.md#task-to-order: the store's fleet began after this run was made."""
+    client, f, run_id, robots = fleet
+    f.names = replace(f.names, since=utcnow())
+    f.intake.names = f.names
+    for robot in robots:
+        f.connection(robot, ConnectionState.ONLINE)
+    assert f.dispatch() == []
+    # A robot gone does not revise it either: it is not a plan of the fleet.
+    assert f.connection(robots[0], ConnectionState.OFFLINE) is None
+    assert client.get(f"/runs/{run_id}").json()["superseded_by"] is None
+    # Revised now, it is.
+    head = revise(
+        client,
+        run_id,
+        {**HEAVY_DOWN, "changes": [{"type": "robot_unavailable", "robot": robots[0]}]},
+    )["id"]
+    wait_status(client, head, "completed")
+    orders = _orders(f.dispatch())
+    assert sorted(orders) == robots[1:]
+    assert all(o.order_id.startswith(f"{run_id}:") for o in orders.values())
+
+
+def test_the_last_robot_gone_leaves_the_plan_as_it_is(
+    fleet: tuple[TestClient, Fleet, str, list[str]], caplog: pytest.LogCaptureFixture
+) -> None:
+    """docs/fleet.md#no-robot-left."""
+    client, f, run_id, robots = fleet
+    for robot in robots:
+        f.connection(robot, ConnectionState.ONLINE)
+    f.dispatch()
+    head = run_id
+    for robot in robots[:-1]:
+        f.connection(robot, ConnectionState.OFFLINE)
+        head = wait_status(client, head, "completed")["superseded_by"]
+        assert head is not None
+        wait_status(client, head, "completed")
+    last = robots[-1]
+    assert f.connection(last, ConnectionState.OFFLINE) is None
+    assert client.get(f"/runs/{head}").json()["superseded_by"] is None
+    assert any(f"robot '{last}' was the last" in m for m in caplog.messages)
+    left = client.get(f"/runs/{head}").json()["assignments"]
+    assert {a["robot"] for a in left if not a.get("pinned")} <= {last}
+
+
+def test_a_store_whose_bridge_sent_orders_before_its_row_goes_on_serving_them(
+    fleet: tuple[TestClient, Fleet, str, list[str]],
+) -> None:
+    """An upgrade: the fleet began with the first lineage the bridge sent (app.fleet.lease)."""
+    client, f, _, robots = fleet
+    robot = robots[0]
+    f.connection(robot, ConnectionState.ONLINE)
+    first = _orders(f.dispatch())[robot]
+    settings = client.app.state.settings  # type: ignore[attr-defined]
+    standing = LocalLease(settings=settings, sessions=f.sessions).prepare("id-upgraded")
+    f.names = replace(f.names, since=standing.since)
+    f.intake.names = f.names
+    assert f.state(robot, first, ActionStatus.FINISHED) is None
+    assert list(_orders(f.dispatch())) == [robot]

@@ -45,7 +45,7 @@ def test_states_move_forward_only_and_repeats_are_no_ops(client: TestClient) -> 
     back = report(client, run_id, (0, "started"))
     assert back.status_code == 409
     assert back.json()["detail"][0]["loc"] == ["body", "updates", 0, "state"]
-    assert "forward only" in back.text
+    assert "forward only" in back.text and "stale" in back.text
     assert report(client, run_id, (1, "done")).status_code == 409  # failed is final
     # One transaction: a refused update leaves the others unapplied.
     mixed = report(client, run_id, (2, "started"), (0, "started"))

@@ -31,14 +31,19 @@ def run(server: Server, c: httpx.Client, **body: Any) -> dict[str, Any]:
     return server.wait_for(created.json()["id"], finished)
 
 
-def report(c: httpx.Client, run_id: str, outcomes: dict[str, str]) -> None:
-    for state in ("started", None):
-        updates = [
-            {"task_id": int(t), "state": state or s, "at": "2026-12-01T08:00:00Z"}
-            if state
-            else {"task_id": int(t), "state": s, "at": "2026-12-01T09:30:00+01:00"}
+def steps(outcomes: dict[str, str]) -> list[list[dict[str, Any]]]:
+    """The two reports that say the tasks happened: each `started`, then each outcome."""
+    return [
+        [{"task_id": int(t), "state": "started", "at": "2026-12-01T08:00:00Z"} for t in outcomes],
+        [
+            {"task_id": int(t), "state": s, "at": "2026-12-01T09:30:00+01:00"}
             for t, s in outcomes.items()
-        ]
+        ],
+    ]
+
+
+def report(c: httpx.Client, run_id: str, outcomes: dict[str, str]) -> None:
+    for updates in steps(outcomes):
         answer = c.post(f"/runs/{run_id}/execution", json={"updates": updates})
         assert answer.status_code == 200, answer.text
 

@@ -1,16 +1,19 @@
 """docs/estimates.md#counting-each-report-once on PostgreSQL with two server processes: reports sent
-to either (the same report to both at once too) end up in one set of estimates, nothing counted
-twice; bad input is refused there as on SQLite, and stores nothing."""
+to either (the same report to both at once too, each step together) end up in one set of
+estimates, nothing counted twice; a stale `started` is refused; bad input is refused there as
+on SQLite, and stores nothing."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from threading import Barrier
 
+import httpx
 import pytest
 
-from tests.sites.test_sites_e2e import BASELINE, estimates, report, run
+from tests.sites.test_sites_e2e import BASELINE, estimates, report, run, steps
 from tests.support.postgres import fresh_database, query
 from tests.support.server import Server
 from tests.support.site_support import Tally, assert_matches, baseline_features, baseline_rates
@@ -43,11 +46,25 @@ def test_reports_to_either_process_make_one_set_of_estimates(
             report(ca, one["id"], to_a)
             report(cb, one["id"], to_b)
             tally.add_reports(one["assignments"], {**to_a, **to_b}, features)
-            # The same outcomes to both processes at once: one is stored, the other a no-op.
+            # The same report to both processes at once, step by step (`started`, then the
+            # outcomes): each step is stored once, its copy a no-op. A `started` sent after
+            # the task ended is stale, a 409 (docs/living-plans.md#execution-reports): a
+            # client sends each task's steps in order, so the steps are not raced here.
             both = {"6": "failed", "7": "done", "8": "failed"}
-            with ThreadPoolExecutor(2) as pool:
-                list(pool.map(lambda c: report(c, two["id"], both), (ca, cb)))
+            together = Barrier(2)
+
+            def step(c: httpx.Client, updates: list[dict[str, object]]) -> httpx.Response:
+                together.wait(timeout=30)
+                return c.post(f"/runs/{two['id']}/execution", json={"updates": updates})
+
+            for updates in steps(both):
+                with ThreadPoolExecutor(2) as pool:
+                    answers = list(pool.map(step, (ca, cb), (updates, updates)))
+                assert [r.status_code for r in answers] == [200, 200], [r.text for r in answers]
             tally.add_reports(two["assignments"], both, features)
+            stale = cb.post(f"/runs/{two['id']}/execution", json={"updates": steps(both)[0][:1]})
+            assert stale.status_code == 409
+            assert stale.json()["detail"][0]["loc"] == ["body", "updates", 0, "state"]
             seen_a, seen_b = estimates(ca, "s1"), estimates(cb, "s1")
             assert seen_a["robots"] == seen_b["robots"] and seen_a["reports"] == 9
             assert_matches(seen_a, tally, priors)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import threading
+import time
 import uuid
 from collections import Counter
 from collections.abc import Iterator
@@ -45,6 +46,7 @@ class Seen:
     topic: str
     body: dict[str, Any]
     retain: bool
+    at: float = field(default_factory=time.monotonic)  # when it arrived here
 
 
 @dataclass
