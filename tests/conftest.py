@@ -51,6 +51,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     one of those minutes-long tests could start last and the whole run would wait for it."""
 
     def rank(item: pytest.Item) -> int:
+        if item.get_closest_marker("model"):  # the real language model: the longest of all
+            return -1
         if item.get_closest_marker("slow"):  # training runs of a minute, wherever they live
             return 0
         # Minutes-long: servers killed and restarted (e2e), then a browser's (browser).

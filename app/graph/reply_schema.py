@@ -17,9 +17,9 @@ from app.domain.decision import DecisionContext
 from app.reasoners.structured import ReplySchema
 
 DECISION_SCHEMA = "allocation_decision"
-REASONING_CHARS = 300  # 2-4 short sentences
-TRADEOFF_CHARS = 200
-MEMBER_REASON_CHARS = 120  # one sentence per team member
+REASONING_CHARS = 240  # 2-4 short sentences
+TRADEOFF_CHARS = 160
+MEMBER_REASON_CHARS = 100  # one sentence per team member
 CONFIDENCE = ("High", "Medium", "Low")
 
 

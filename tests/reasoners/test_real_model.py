@@ -24,7 +24,7 @@ from app.graph.validation import DEFAULT_QUALITY_THRESHOLD
 from tests.support.model_server import ModelServer, model_file
 from tests.support.server import Server
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.model]
 
 KILLED_AT = PausePoint(1, "reason", after=False)  # task 1, before its first model call
 # Given up after two failed tasks in a row (the default is 3): each call of this model
