@@ -202,7 +202,8 @@ def _structured(ctx: DecisionContext, tier: int, feedback: str = "") -> str:
     markdown tiers, ordered for the servers' prompt caches (llama.cpp, vLLM and OpenAI reuse
     the longest prefix already computed): what is the same for every decision of a run
     first (the reply object, the rule of its mode and phase; at tier 2 the scoring guide and
-    the example), then the task's facts, then the feedback on the last answer."""
+    the example), then the task's facts, then the feedback on the last answer (and at tier 3
+    the steps of the rule with the task's numbers)."""
     stable = [structured.json_format(ctx), "\n".join(_framework(ctx))]
     allowed = ", ".join(structured.allowed_labels(ctx))
     task = "\n".join([_facts(ctx), *_situation(ctx), f"Allowed now: {allowed}.", *_steering(ctx)])
@@ -218,7 +219,7 @@ def _structured(ctx: DecisionContext, tier: int, feedback: str = "") -> str:
         if ctx.team is not None
         else (structured.step_template(ctx))
     )
-    return "\n\n".join([task, feedback, steps])
+    return "\n\n".join([*stable, task, feedback, steps])
 
 
 def _feedback_block(feedback: str, quality: float | None, threshold: float) -> str:

@@ -17,8 +17,8 @@ from app.domain.decision import DecisionContext
 from app.reasoners.structured import ReplySchema
 
 DECISION_SCHEMA = "allocation_decision"
-REASONING_CHARS = 240  # 2-4 short sentences
-TRADEOFF_CHARS = 160
+REASONING_CHARS = 200  # 2-4 short sentences
+TRADEOFF_CHARS = 120
 MEMBER_REASON_CHARS = 100  # one sentence per team member
 CONFIDENCE = ("High", "Medium", "Low")
 
